@@ -1,0 +1,242 @@
+//! CIE colour spaces derived from tristimulus values: xyY, u′v′ (CIE 1976 UCS),
+//! CIE 1976 L*a*b* and L*u*v*. Equations from CIE 15:2004, *Colorimetry*, 3rd ed.
+//!
+//! Tristimulus values are in any consistent unit (cd/m² or relative); the spaces that
+//! need a reference white take it in the same unit.
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// CIE XYZ tristimulus values.
+pub type Xyz = Vector3<f64>;
+
+/// CIE xyY: chromaticity coordinates and luminance.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Xyy {
+    pub x: f64,
+    pub y: f64,
+    #[serde(rename = "Y")]
+    pub big_y: f64,
+}
+
+/// CIE 1976 UCS chromaticity coordinates u′, v′.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct UvPrime {
+    pub u: f64,
+    pub v: f64,
+}
+
+/// CIE 1976 L*a*b*.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Lab {
+    pub l: f64,
+    pub a: f64,
+    pub b: f64,
+}
+
+/// CIE 1976 L*u*v*.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Luv {
+    pub l: f64,
+    pub u: f64,
+    pub v: f64,
+}
+
+/// ε = (6/29)³ = 216/24389: the CIE's break point between the cube-root and the
+/// linear part of L* (CIE 15:2004 eq. 8.3, written with exact fractions).
+const LAB_EPSILON: f64 = 216.0 / 24389.0;
+/// κ = (29/3)³ = 24389/27: slope of the linear part of L* (CIE 15:2004 eq. 8.3).
+const LAB_KAPPA: f64 = 24389.0 / 27.0;
+
+/// xyY from XYZ (CIE 15:2004 eq. 7.3).
+///
+/// Where X+Y+Z is not positive (a black, or a black-subtracted reading that noise
+/// pushed below zero) the chromaticity is undefined; `fallback_xy` (usually the
+/// display's white) is returned with the given Y, so callers never divide by zero.
+pub fn xyz_to_xyy(xyz: &Xyz, fallback_xy: [f64; 2]) -> Xyy {
+    let sum = xyz.x + xyz.y + xyz.z;
+    if !(sum > 0.0 && sum.is_finite()) {
+        return Xyy {
+            x: fallback_xy[0],
+            y: fallback_xy[1],
+            big_y: xyz.y,
+        };
+    }
+    Xyy {
+        x: xyz.x / sum,
+        y: xyz.y / sum,
+        big_y: xyz.y,
+    }
+}
+
+/// XYZ from xyY (CIE 15:2004 eq. 7.3, inverted). A chromaticity with y = 0 carries no
+/// luminance, so it maps to zero.
+pub fn xyy_to_xyz(xyy: &Xyy) -> Xyz {
+    if xyy.y == 0.0 {
+        return Xyz::zeros();
+    }
+    let scale = xyy.big_y / xyy.y;
+    Xyz::new(xyy.x * scale, xyy.big_y, (1.0 - xyy.x - xyy.y) * scale)
+}
+
+/// u′v′ from XYZ (CIE 15:2004 eq. 8.9): u′ = 4X / (X + 15Y + 3Z), v′ = 9Y / (X + 15Y + 3Z).
+/// `fallback` is returned where the denominator is not positive.
+pub fn xyz_to_uv_prime(xyz: &Xyz, fallback: UvPrime) -> UvPrime {
+    let d = xyz.x + 15.0 * xyz.y + 3.0 * xyz.z;
+    if !(d > 0.0 && d.is_finite()) {
+        return fallback;
+    }
+    UvPrime {
+        u: 4.0 * xyz.x / d,
+        v: 9.0 * xyz.y / d,
+    }
+}
+
+/// u′v′ from xy chromaticity (CIE 15:2004 eq. 8.10).
+pub fn xy_to_uv_prime(x: f64, y: f64) -> UvPrime {
+    let d = -2.0 * x + 12.0 * y + 3.0;
+    UvPrime {
+        u: 4.0 * x / d,
+        v: 9.0 * y / d,
+    }
+}
+
+/// f(t) of CIE 15:2004 eq. 8.4–8.5: the cube root above ε, its linear continuation below.
+fn lab_f(t: f64) -> f64 {
+    if t > LAB_EPSILON {
+        t.cbrt()
+    } else {
+        (LAB_KAPPA * t + 16.0) / 116.0
+    }
+}
+
+/// Inverse of [`lab_f`].
+fn lab_f_inverse(f: f64) -> f64 {
+    let t = f * f * f;
+    if t > LAB_EPSILON {
+        t
+    } else {
+        (116.0 * f - 16.0) / LAB_KAPPA
+    }
+}
+
+/// CIE 1976 L* of a relative luminance Y/Yn (CIE 15:2004 eq. 8.3 with eq. 8.5 below ε).
+pub fn luminance_to_lightness(y_relative: f64) -> f64 {
+    116.0 * lab_f(y_relative) - 16.0
+}
+
+/// Relative luminance Y/Yn of a CIE 1976 lightness L* (inverse of CIE 15:2004 eq. 8.3).
+pub fn lightness_to_luminance(l_star: f64) -> f64 {
+    lab_f_inverse((l_star + 16.0) / 116.0)
+}
+
+/// CIE 1976 L*a*b* from XYZ relative to the reference white `white`
+/// (CIE 15:2004 eq. 8.3–8.8).
+pub fn xyz_to_lab(xyz: &Xyz, white: &Xyz) -> Lab {
+    let fx = lab_f(xyz.x / white.x);
+    let fy = lab_f(xyz.y / white.y);
+    let fz = lab_f(xyz.z / white.z);
+    Lab {
+        l: 116.0 * fy - 16.0,
+        a: 500.0 * (fx - fy),
+        b: 200.0 * (fy - fz),
+    }
+}
+
+/// XYZ from CIE 1976 L*a*b* (inverse of CIE 15:2004 eq. 8.3–8.8).
+pub fn lab_to_xyz(lab: &Lab, white: &Xyz) -> Xyz {
+    let fy = (lab.l + 16.0) / 116.0;
+    let fx = fy + lab.a / 500.0;
+    let fz = fy - lab.b / 200.0;
+    Xyz::new(
+        white.x * lab_f_inverse(fx),
+        white.y * lab_f_inverse(fy),
+        white.z * lab_f_inverse(fz),
+    )
+}
+
+/// CIE 1976 L*u*v* from XYZ relative to `white` (CIE 15:2004 eq. 8.3 and 8.9–8.12).
+/// A colour with no u′v′ (black) has u* = v* = 0.
+pub fn xyz_to_luv(xyz: &Xyz, white: &Xyz) -> Luv {
+    let l = luminance_to_lightness(xyz.y / white.y);
+    let n = xyz_to_uv_prime(white, UvPrime { u: 0.0, v: 0.0 });
+    let uv = xyz_to_uv_prime(xyz, n);
+    Luv {
+        l,
+        u: 13.0 * l * (uv.u - n.u),
+        v: 13.0 * l * (uv.v - n.v),
+    }
+}
+
+/// Chroma and hue angle (degrees in [0, 360)) of a L*a*b* colour (CIE 15:2004 eq. 8.13–8.14).
+pub fn lab_to_lch(lab: &Lab) -> (f64, f64, f64) {
+    let c = lab.a.hypot(lab.b);
+    let mut h = lab.b.atan2(lab.a).to_degrees();
+    if h < 0.0 {
+        h += 360.0;
+    }
+    (lab.l, c, h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn d65() -> Xyz {
+        Xyz::new(95.047, 100.0, 108.883)
+    }
+
+    #[test]
+    fn white_is_l100_and_neutral() {
+        let lab = xyz_to_lab(&d65(), &d65());
+        assert!((lab.l - 100.0).abs() < 1e-12);
+        assert!(lab.a.abs() < 1e-12 && lab.b.abs() < 1e-12);
+        let luv = xyz_to_luv(&d65(), &d65());
+        assert!((luv.l - 100.0).abs() < 1e-12 && luv.u.abs() < 1e-12 && luv.v.abs() < 1e-12);
+    }
+
+    #[test]
+    fn lab_round_trip_including_the_linear_part() {
+        for xyz in [
+            Xyz::new(41.24, 21.26, 1.93),
+            Xyz::new(0.05, 0.04, 0.09),
+            Xyz::new(0.0, 0.0, 0.0),
+            Xyz::new(80.0, 90.0, 120.0),
+        ] {
+            let back = lab_to_xyz(&xyz_to_lab(&xyz, &d65()), &d65());
+            assert!((back - xyz).norm() < 1e-9, "{xyz:?} came back as {back:?}");
+        }
+    }
+
+    #[test]
+    fn lightness_is_continuous_at_the_break_point() {
+        let below = luminance_to_lightness(LAB_EPSILON * (1.0 - 1e-12));
+        let above = luminance_to_lightness(LAB_EPSILON * (1.0 + 1e-12));
+        assert!((below - above).abs() < 1e-8);
+        assert!((luminance_to_lightness(0.18) - 49.496).abs() < 1e-3);
+        assert!((lightness_to_luminance(luminance_to_lightness(0.003)) - 0.003).abs() < 1e-15);
+    }
+
+    #[test]
+    fn black_has_a_chromaticity_that_is_not_nan() {
+        let fallback = [0.3127, 0.329];
+        for xyz in [Xyz::zeros(), Xyz::new(-1e-6, 2e-7, -3e-6)] {
+            let xyy = xyz_to_xyy(&xyz, fallback);
+            assert_eq!([xyy.x, xyy.y], fallback);
+            let uv = xyz_to_uv_prime(&xyz, UvPrime { u: 0.2, v: 0.4 });
+            assert_eq!((uv.u, uv.v), (0.2, 0.4));
+        }
+        let luv = xyz_to_luv(&Xyz::zeros(), &d65());
+        assert!(luv.u.is_finite() && luv.v.is_finite());
+    }
+
+    #[test]
+    fn xyy_round_trip_and_uv_from_xy_agree() {
+        let xyz = Xyz::new(30.0, 40.0, 50.0);
+        let xyy = xyz_to_xyy(&xyz, [0.0, 0.0]);
+        assert!((xyy_to_xyz(&xyy) - xyz).norm() < 1e-12);
+        let a = xyz_to_uv_prime(&xyz, UvPrime { u: 0.0, v: 0.0 });
+        let b = xy_to_uv_prime(xyy.x, xyy.y);
+        assert!((a.u - b.u).abs() < 1e-12 && (a.v - b.v).abs() < 1e-12);
+    }
+}

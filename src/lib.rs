@@ -1,0 +1,8 @@
+//! chromacal: measure a display, fit a physical model of it, test the assumptions the
+//! model rests on, and publish the result as a monitor profile.
+//!
+//! The path from a patch to a published profile:
+//! [`calibrate::plan`] → [`calibrate::run`] (show, settle, measure, journal) →
+//! [`fit`] (model, selection, checks) → [`profile`] (native TOML, store).
+
+pub mod color;
