@@ -6,3 +6,4 @@
 //! [`fit`] (model, selection, checks) → [`profile`] (native TOML, store).
 
 pub mod color;
+pub mod model;

@@ -1,0 +1,195 @@
+//! The monitor model, forward and inverse:
+//!
+//! XYZ(d, p) = M · diag(K(p)) · E(d) + XYZ_black
+//!
+//! with M the primary matrix (Rougeron & Péroche eq. 3; its columns are the XYZ of
+//! each primary at full drive, black taken off), E the per-channel transfer laws,
+//! K the spatial gain map and XYZ_black the light at zero drive, flare included.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::spatial::{ScreenPosition, SpatialMap};
+use super::transfer::TransferLaw;
+use crate::color::Xyz;
+
+/// Drive values of R, G, B, each normalised to [0, 1].
+pub type Drive = [f64; 3];
+
+/// Channel names in model order.
+pub const CHANNELS: [&str; 3] = ["red", "green", "blue"];
+
+/// Why an XYZ could not be turned back into drive values.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InverseError {
+    #[error("the primary matrix is singular, so no drive reproduces a given XYZ")]
+    SingularMatrix,
+}
+
+/// Drive values found for a requested XYZ.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InverseResult {
+    pub drive: Drive,
+    /// Excitations before clipping to what the channels can give.
+    pub excitation: [f64; 3],
+    /// True when a channel had to be clipped: the XYZ is outside the gamut at this
+    /// position. (Mapping such colours into the gamut is the job of `crf`.)
+    pub clipped: bool,
+}
+
+/// A fitted (or simulated) monitor model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MonitorModel {
+    /// Columns: XYZ of R, G, B at full drive with black taken off, at the centre.
+    pub matrix: Matrix3<f64>,
+    /// XYZ at zero drive (the display's black plus flare).
+    pub black: Xyz,
+    /// Transfer law of R, G and B.
+    pub laws: [TransferLaw; 3],
+    #[serde(default)]
+    pub spatial: SpatialMap,
+}
+
+impl MonitorModel {
+    /// E(d): the three excitations.
+    pub fn excitations(&self, drive: Drive) -> Vector3<f64> {
+        Vector3::new(
+            self.laws[0].excitation(drive[0]),
+            self.laws[1].excitation(drive[1]),
+            self.laws[2].excitation(drive[2]),
+        )
+    }
+
+    /// XYZ of drive `d` shown at `position`.
+    pub fn forward(&self, drive: Drive, position: ScreenPosition) -> Xyz {
+        let k = self.spatial.gains(position);
+        let e = self.excitations(drive);
+        self.matrix * Vector3::new(k[0] * e[0], k[1] * e[1], k[2] * e[2]) + self.black
+    }
+
+    /// XYZ of drive `d` at the centre of the screen.
+    pub fn forward_centre(&self, drive: Drive) -> Xyz {
+        self.forward(drive, ScreenPosition::CENTRE)
+    }
+
+    /// XYZ of full white at the centre: the reference white for L*a*b*.
+    pub fn white(&self) -> Xyz {
+        self.forward_centre([1.0; 3])
+    }
+
+    /// The drive that reproduces `xyz` at `position`: E = diag(K)⁻¹ M⁻¹ (XYZ − black),
+    /// each excitation clipped to what its channel can give, then each law inverted.
+    pub fn inverse(
+        &self,
+        xyz: &Xyz,
+        position: ScreenPosition,
+    ) -> Result<InverseResult, InverseError> {
+        let inverse = self
+            .matrix
+            .try_inverse()
+            .ok_or(InverseError::SingularMatrix)?;
+        let k = self.spatial.gains(position);
+        let t = inverse * (xyz - self.black);
+        let mut excitation = [0.0; 3];
+        let mut drive = [0.0; 3];
+        let mut clipped = false;
+        for c in 0..3 {
+            excitation[c] = t[c] / k[c];
+            let top = self.laws[c].full_drive_excitation();
+            let tolerance = 1e-9 * top;
+            if excitation[c] < -tolerance || excitation[c] > top + tolerance {
+                clipped = true;
+            }
+            drive[c] = self.laws[c].drive(excitation[c].clamp(0.0, top));
+        }
+        Ok(InverseResult {
+            drive,
+            excitation,
+            clipped,
+        })
+    }
+
+    /// 2-norm condition number of the primary matrix: how much the inverse amplifies
+    /// relative errors. Near-collinear primaries make it large.
+    pub fn condition_number(&self) -> f64 {
+        matrix_condition_number(&self.matrix)
+    }
+}
+
+/// σ_max / σ_min of a 3×3 matrix (∞ when it is singular).
+pub fn matrix_condition_number(m: &Matrix3<f64>) -> f64 {
+    let s = m.singular_values();
+    let max = s.max();
+    let min = s.min();
+    if min <= 0.0 { f64::INFINITY } else { max / min }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::spatial::Surface;
+    use crate::model::transfer::{Power, TransferLaw};
+
+    fn srgb_like() -> MonitorModel {
+        MonitorModel {
+            matrix: Matrix3::new(
+                41.24, 35.76, 18.05, //
+                21.26, 71.52, 7.22, //
+                1.93, 11.92, 95.05,
+            ),
+            black: Xyz::new(0.1, 0.11, 0.12),
+            laws: [
+                TransferLaw::Power(Power { gamma: 2.2 }),
+                TransferLaw::Power(Power { gamma: 2.3 }),
+                TransferLaw::Power(Power { gamma: 2.1 }),
+            ],
+            spatial: SpatialMap::Scalar {
+                surface: Surface {
+                    degree: 2,
+                    coefficients: vec![0.0, 0.0, -0.1, 0.0, -0.1],
+                },
+            },
+        }
+    }
+
+    #[test]
+    fn forward_then_inverse_returns_the_drive() {
+        let m = srgb_like();
+        for pos in [ScreenPosition::CENTRE, ScreenPosition::new(0.1, 0.9)] {
+            for d in [[0.5, 0.2, 0.9], [0.01, 0.0, 0.3], [1.0, 1.0, 1.0]] {
+                let xyz = m.forward(d, pos);
+                let back = m.inverse(&xyz, pos).unwrap();
+                assert!(!back.clipped);
+                // A zero drive comes back as a drive whose excitation is at rounding
+                // level (1e-18 here), so compare light as well as drives.
+                let again = m.forward(back.drive, pos);
+                assert!((again - xyz).norm() < 1e-9 * xyz.norm(), "{d:?} at {pos:?}");
+                for c in 0..3 {
+                    assert!((back.drive[c] - d[c]).abs() < 1e-6, "{d:?} at {pos:?}: {back:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn colours_outside_the_gamut_are_flagged_and_clipped() {
+        let m = srgb_like();
+        let too_bright = m.white() * 1.5;
+        let r = m.inverse(&too_bright, ScreenPosition::CENTRE).unwrap();
+        assert!(r.clipped);
+        assert!(r.drive.iter().all(|d| (0.0..=1.0).contains(d)));
+        let below_black = Xyz::zeros();
+        assert!(m.inverse(&below_black, ScreenPosition::CENTRE).unwrap().clipped);
+    }
+
+    #[test]
+    fn singular_primaries_are_an_error_not_a_panic() {
+        let mut m = srgb_like();
+        m.matrix.set_column(2, &(m.matrix.column(0) * 2.0));
+        assert_eq!(
+            m.inverse(&Xyz::new(1.0, 1.0, 1.0), ScreenPosition::CENTRE),
+            Err(InverseError::SingularMatrix)
+        );
+        assert!(m.condition_number() > 1e12);
+    }
+}

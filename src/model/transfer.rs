@@ -1,0 +1,665 @@
+//! Transfer laws: how a channel's drive v ∈ [0, 1] becomes its excitation E, the
+//! fraction of the full-drive output above black. Every law here has its inverse,
+//! `drive(e)`, and every published law is monotone on [0, 1] so that inverse exists.
+//!
+//! | law | form | source |
+//! |---|---|---|
+//! | [`Power`] | E = v^γ | the usual one |
+//! | [`Cowan`] | ln E = A ln v + B ln²v | Cowan 1983 |
+//! | [`ThreeTerm`] | ln E = A ln v + B ln²v + C | Rougeron & Péroche 1998, §4.3.1 |
+//! | [`GainOffsetGamma`] | E = (a·v + (1 − a))^γ, 0 below the cut-off | Berns 1996 |
+//! | [`Table`] | monotone cubic through the measured ramp | Fritsch & Carlson 1980 |
+//!
+//! The log laws are undefined at v = 0 and, with B > 0, turn back near it: ln²v grows
+//! faster than ln v falls, so E rises again as v → 0. They therefore carry a *toe*, the
+//! smallest drive they were fitted on; below it E runs linearly to 0. A fitted curve
+//! whose turning point lies between the toe and full drive is not monotone where it is
+//! used; [`TransferLaw::monotonicity`] finds it and the fitting refuses to publish it.
+
+use serde::{Deserialize, Serialize};
+
+/// Why a law cannot be used as a monotone map from drive to excitation.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TransferError {
+    #[error("{law} turns back at drive {at:.4}: its inverse would not be unique")]
+    TurnsBack { law: &'static str, at: f64 },
+    #[error("{law} has an invalid parameter: {what}")]
+    InvalidParameter { law: &'static str, what: String },
+}
+
+/// E = v^γ.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Power {
+    pub gamma: f64,
+}
+
+impl Power {
+    pub fn excitation(&self, v: f64) -> f64 {
+        let v = v.clamp(0.0, 1.0);
+        if v == 0.0 { 0.0 } else { v.powf(self.gamma) }
+    }
+
+    pub fn drive(&self, e: f64) -> f64 {
+        e.clamp(0.0, 1.0).powf(1.0 / self.gamma)
+    }
+}
+
+/// ln E = A ln v + B ln²v + C for v ≥ toe, linear from 0 to the toe: the common core
+/// of [`Cowan`] (C = 0) and [`ThreeTerm`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LogQuadratic {
+    a: f64,
+    b: f64,
+    c: f64,
+    toe: f64,
+}
+
+impl LogQuadratic {
+    fn formula(&self, v: f64) -> f64 {
+        let u = v.ln();
+        (self.a * u + self.b * u * u + self.c).exp()
+    }
+
+    fn excitation(&self, v: f64) -> f64 {
+        let v = v.clamp(0.0, 1.0);
+        if v <= 0.0 {
+            0.0
+        } else if v < self.toe {
+            self.formula(self.toe) * v / self.toe
+        } else {
+            self.formula(v)
+        }
+    }
+
+    fn drive(&self, e: f64) -> f64 {
+        let top = self.formula(1.0);
+        if e <= 0.0 {
+            return 0.0;
+        }
+        if e >= top {
+            return 1.0;
+        }
+        let at_toe = self.formula(self.toe);
+        if e < at_toe {
+            return self.toe * e / at_toe;
+        }
+        // Solve B u² + A u − (ln e − C) = 0 for u = ln v on the rising branch, in the
+        // form that stays exact as B → 0: u = 2L / (A + √(A² + 4BL)).
+        let l = e.ln() - self.c;
+        let discriminant = self.a * self.a + 4.0 * self.b * l;
+        if discriminant < 0.0 {
+            return self.toe;
+        }
+        let u = 2.0 * l / (self.a + discriminant.sqrt());
+        u.exp().clamp(self.toe, 1.0)
+    }
+
+    /// The drive in (toe, 1) where d ln E / d ln v = A + 2B ln v changes sign, if any.
+    fn turning_point(&self) -> Option<f64> {
+        if self.b == 0.0 {
+            return (self.a <= 0.0).then_some(1.0);
+        }
+        let v = (-self.a / (2.0 * self.b)).exp();
+        let slope_at_top = self.a;
+        let slope_at_toe = self.a + 2.0 * self.b * self.toe.ln();
+        if slope_at_top <= 0.0 || slope_at_toe <= 0.0 {
+            Some(v.clamp(self.toe, 1.0))
+        } else {
+            None
+        }
+    }
+}
+
+/// Cowan's law, ln E = A ln v + B ln²v (Cowan 1983, as given in Rougeron & Péroche,
+/// §4.3.1), linear below `toe`. It passes through E(1) = 1.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Cowan {
+    pub a: f64,
+    pub b: f64,
+    /// Smallest drive the law was fitted on; E is linear in v below it.
+    pub toe: f64,
+}
+
+impl Cowan {
+    fn core(&self) -> LogQuadratic {
+        LogQuadratic {
+            a: self.a,
+            b: self.b,
+            c: 0.0,
+            toe: self.toe,
+        }
+    }
+
+    pub fn excitation(&self, v: f64) -> f64 {
+        self.core().excitation(v)
+    }
+
+    pub fn drive(&self, e: f64) -> f64 {
+        self.core().drive(e)
+    }
+}
+
+/// The three-term law, ln E = A ln v + B ln²v + C (Rougeron & Péroche, §4.3.1): Cowan's
+/// law that is not forced through the full-drive reading, E(1) = e^C.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ThreeTerm {
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+    pub toe: f64,
+}
+
+impl ThreeTerm {
+    fn core(&self) -> LogQuadratic {
+        LogQuadratic {
+            a: self.a,
+            b: self.b,
+            c: self.c,
+            toe: self.toe,
+        }
+    }
+
+    pub fn excitation(&self, v: f64) -> f64 {
+        self.core().excitation(v)
+    }
+
+    pub fn drive(&self, e: f64) -> f64 {
+        self.core().drive(e)
+    }
+}
+
+/// Gain-offset-gamma, E = (a·v + (1 − a))^γ where that base is positive, else 0
+/// (Berns 1996, the GOG model of CRTs). With the black taken off, the offset 1 − a is
+/// not positive (a ≥ 1), so light starts at the cut-off v₀ = (a − 1)/a.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GainOffsetGamma {
+    pub gain: f64,
+    pub gamma: f64,
+}
+
+impl GainOffsetGamma {
+    /// The law whose light starts at drive `cutoff` (0 ≤ cutoff < 1).
+    pub fn from_cutoff(cutoff: f64, gamma: f64) -> Self {
+        GainOffsetGamma {
+            gain: 1.0 / (1.0 - cutoff),
+            gamma,
+        }
+    }
+
+    /// v₀ = (a − 1)/a, the drive below which the channel emits nothing.
+    pub fn cutoff(&self) -> f64 {
+        (self.gain - 1.0) / self.gain
+    }
+
+    pub fn excitation(&self, v: f64) -> f64 {
+        let base = self.gain * v.clamp(0.0, 1.0) + (1.0 - self.gain);
+        if base <= 0.0 { 0.0 } else { base.powf(self.gamma) }
+    }
+
+    pub fn drive(&self, e: f64) -> f64 {
+        if e <= 0.0 {
+            return 0.0;
+        }
+        let base = e.min(1.0).powf(1.0 / self.gamma);
+        ((base - (1.0 - self.gain)) / self.gain).clamp(0.0, 1.0)
+    }
+}
+
+/// Monotone piecewise-cubic interpolation of a measured ramp (Fritsch & Carlson 1980,
+/// with the end conditions of Fritsch & Butland 1984 as in SciPy's PCHIP). The knots
+/// start at (0, 0) and their excitations never decrease, so the curve never does.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "TableKnots")]
+pub struct Table {
+    pub drive: Vec<f64>,
+    pub excitation: Vec<f64>,
+    /// Slopes at the knots, derived from the knots when the table is built.
+    #[serde(skip_serializing)]
+    slopes: Vec<f64>,
+}
+
+/// A table as written in a profile: the knots only; reading one checks it again.
+#[derive(Deserialize)]
+struct TableKnots {
+    drive: Vec<f64>,
+    excitation: Vec<f64>,
+}
+
+impl TryFrom<TableKnots> for Table {
+    type Error = TransferError;
+
+    fn try_from(knots: TableKnots) -> Result<Self, Self::Error> {
+        Table::new(knots.drive, knots.excitation)
+    }
+}
+
+impl Table {
+    /// A table law through `(drive, excitation)` knots. The knots must have increasing
+    /// drives in [0, 1] and non-decreasing excitations; a knot at (0, 0) is added when
+    /// missing.
+    pub fn new(drive: Vec<f64>, excitation: Vec<f64>) -> Result<Self, TransferError> {
+        let invalid = |what: String| TransferError::InvalidParameter {
+            law: "table",
+            what,
+        };
+        if drive.len() != excitation.len() || drive.is_empty() {
+            return Err(invalid(format!(
+                "{} drives but {} excitations",
+                drive.len(),
+                excitation.len()
+            )));
+        }
+        let (mut drive, mut excitation) = (drive, excitation);
+        if drive[0] > 0.0 {
+            drive.insert(0, 0.0);
+            excitation.insert(0, 0.0);
+        }
+        for (i, pair) in drive.windows(2).enumerate() {
+            if pair[1] <= pair[0] {
+                return Err(invalid(format!("drive {} does not increase", i + 1)));
+            }
+        }
+        for (i, pair) in excitation.windows(2).enumerate() {
+            if pair[1] < pair[0] {
+                return Err(TransferError::TurnsBack {
+                    law: "table",
+                    at: drive[i + 1],
+                });
+            }
+        }
+        if drive.iter().chain(&excitation).any(|v| !v.is_finite()) {
+            return Err(invalid("a knot is not finite".into()));
+        }
+        let slopes = pchip_slopes(&drive, &excitation);
+        Ok(Table {
+            drive,
+            excitation,
+            slopes,
+        })
+    }
+
+    fn segment(&self, v: f64) -> usize {
+        let upper = self.drive.partition_point(|d| *d <= v);
+        upper.clamp(1, self.drive.len() - 1) - 1
+    }
+
+    fn hermite(&self, k: usize, v: f64) -> f64 {
+        let (x0, x1) = (self.drive[k], self.drive[k + 1]);
+        let (y0, y1) = (self.excitation[k], self.excitation[k + 1]);
+        let h = x1 - x0;
+        let t = (v - x0) / h;
+        let (m0, m1) = (self.slopes[k], self.slopes[k + 1]);
+        let t2 = t * t;
+        let t3 = t2 * t;
+        (2.0 * t3 - 3.0 * t2 + 1.0) * y0
+            + (t3 - 2.0 * t2 + t) * h * m0
+            + (-2.0 * t3 + 3.0 * t2) * y1
+            + (t3 - t2) * h * m1
+    }
+
+    pub fn excitation(&self, v: f64) -> f64 {
+        if self.drive.len() == 1 {
+            return self.excitation[0];
+        }
+        let v = v.clamp(0.0, *self.drive.last().unwrap_or(&1.0));
+        self.hermite(self.segment(v), v)
+    }
+
+    /// The smallest drive whose excitation reaches `e`, by bisection inside the
+    /// segment that brackets it (each segment is monotone).
+    pub fn drive(&self, e: f64) -> f64 {
+        let n = self.excitation.len();
+        if n == 1 || e <= self.excitation[0] {
+            return self.drive[0];
+        }
+        if e >= self.excitation[n - 1] {
+            return self.drive[n - 1];
+        }
+        let k = self.excitation.partition_point(|x| *x < e).clamp(1, n - 1) - 1;
+        let (mut lo, mut hi) = (self.drive[k], self.drive[k + 1]);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if self.hermite(k, mid) < e {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+}
+
+/// Knot slopes of the monotone cubic (Fritsch & Carlson 1980; end slopes by the
+/// shape-preserving three-point formula of Fritsch & Butland 1984).
+fn pchip_slopes(x: &[f64], y: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    if n < 2 {
+        return vec![0.0; n];
+    }
+    let h: Vec<f64> = x.windows(2).map(|p| p[1] - p[0]).collect();
+    let delta: Vec<f64> = (0..n - 1).map(|k| (y[k + 1] - y[k]) / h[k]).collect();
+    if n == 2 {
+        return vec![delta[0]; 2];
+    }
+    let mut m = vec![0.0; n];
+    for k in 1..n - 1 {
+        if delta[k - 1] * delta[k] > 0.0 {
+            let w1 = 2.0 * h[k] + h[k - 1];
+            let w2 = h[k] + 2.0 * h[k - 1];
+            m[k] = (w1 + w2) / (w1 / delta[k - 1] + w2 / delta[k]);
+        }
+    }
+    let end = |h0: f64, h1: f64, d0: f64, d1: f64| -> f64 {
+        let s = ((2.0 * h0 + h1) * d0 - h0 * d1) / (h0 + h1);
+        if s.signum() != d0.signum() || d0 == 0.0 {
+            0.0
+        } else if d0.signum() != d1.signum() && s.abs() > 3.0 * d0.abs() {
+            3.0 * d0
+        } else {
+            s
+        }
+    };
+    m[0] = end(h[0], h[1], delta[0], delta[1]);
+    m[n - 1] = end(h[n - 2], h[n - 3], delta[n - 2], delta[n - 3]);
+    m
+}
+
+/// The kinds of law chromacal can fit, in order of increasing complexity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LawKind {
+    Power,
+    GainOffsetGamma,
+    Cowan,
+    ThreeTerm,
+    Table,
+}
+
+impl LawKind {
+    pub const ALL: [LawKind; 5] = [
+        LawKind::Power,
+        LawKind::GainOffsetGamma,
+        LawKind::Cowan,
+        LawKind::ThreeTerm,
+        LawKind::Table,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            LawKind::Power => "power",
+            LawKind::GainOffsetGamma => "gain-offset-gamma",
+            LawKind::Cowan => "cowan",
+            LawKind::ThreeTerm => "three-term",
+            LawKind::Table => "table",
+        }
+    }
+
+    /// Number of free parameters for a channel with `levels` measured drive levels
+    /// above zero: what "simplest" means when laws are compared.
+    pub fn parameter_count(self, levels: usize) -> usize {
+        match self {
+            LawKind::Power => 1,
+            LawKind::GainOffsetGamma | LawKind::Cowan => 2,
+            LawKind::ThreeTerm => 3,
+            LawKind::Table => levels,
+        }
+    }
+}
+
+impl std::fmt::Display for LawKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// One channel's transfer law.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "law", rename_all = "kebab-case")]
+pub enum TransferLaw {
+    Power(Power),
+    Cowan(Cowan),
+    ThreeTerm(ThreeTerm),
+    GainOffsetGamma(GainOffsetGamma),
+    Table(Table),
+}
+
+impl TransferLaw {
+    pub fn kind(&self) -> LawKind {
+        match self {
+            TransferLaw::Power(_) => LawKind::Power,
+            TransferLaw::Cowan(_) => LawKind::Cowan,
+            TransferLaw::ThreeTerm(_) => LawKind::ThreeTerm,
+            TransferLaw::GainOffsetGamma(_) => LawKind::GainOffsetGamma,
+            TransferLaw::Table(_) => LawKind::Table,
+        }
+    }
+
+    /// Excitation at drive `v` (clamped to [0, 1]).
+    pub fn excitation(&self, v: f64) -> f64 {
+        match self {
+            TransferLaw::Power(l) => l.excitation(v),
+            TransferLaw::Cowan(l) => l.excitation(v),
+            TransferLaw::ThreeTerm(l) => l.excitation(v),
+            TransferLaw::GainOffsetGamma(l) => l.excitation(v),
+            TransferLaw::Table(l) => l.excitation(v),
+        }
+    }
+
+    /// The drive that gives excitation `e`: the inverse of [`Self::excitation`],
+    /// clamped to [0, 1].
+    pub fn drive(&self, e: f64) -> f64 {
+        match self {
+            TransferLaw::Power(l) => l.drive(e),
+            TransferLaw::Cowan(l) => l.drive(e),
+            TransferLaw::ThreeTerm(l) => l.drive(e),
+            TransferLaw::GainOffsetGamma(l) => l.drive(e),
+            TransferLaw::Table(l) => l.drive(e),
+        }
+    }
+
+    /// Excitation at full drive: 1 for every law but the three-term one.
+    pub fn full_drive_excitation(&self) -> f64 {
+        self.excitation(1.0)
+    }
+
+    /// The parameters by name, for reports.
+    pub fn parameters(&self) -> Vec<(&'static str, f64)> {
+        match self {
+            TransferLaw::Power(l) => vec![("gamma", l.gamma)],
+            TransferLaw::Cowan(l) => vec![("A", l.a), ("B", l.b), ("toe", l.toe)],
+            TransferLaw::ThreeTerm(l) => vec![("A", l.a), ("B", l.b), ("C", l.c), ("toe", l.toe)],
+            TransferLaw::GainOffsetGamma(l) => vec![
+                ("gain", l.gain),
+                ("gamma", l.gamma),
+                ("cutoff", l.cutoff()),
+            ],
+            TransferLaw::Table(l) => vec![("knots", l.drive.len() as f64)],
+        }
+    }
+
+    /// `Ok` when the law is a strictly usable monotone map on [0, 1]; otherwise where
+    /// and why it is not.
+    pub fn monotonicity(&self) -> Result<(), TransferError> {
+        let invalid = |law: &'static str, what: &str| {
+            Err(TransferError::InvalidParameter {
+                law,
+                what: what.to_string(),
+            })
+        };
+        match self {
+            TransferLaw::Power(l) if !(l.gamma > 0.0 && l.gamma.is_finite()) => {
+                invalid("power", "gamma must be positive")
+            }
+            TransferLaw::GainOffsetGamma(l) if !(l.gamma > 0.0 && l.gamma.is_finite()) => {
+                invalid("gain-offset-gamma", "gamma must be positive")
+            }
+            TransferLaw::GainOffsetGamma(l) if !(l.gain >= 1.0 && l.gain.is_finite()) => {
+                invalid("gain-offset-gamma", "gain must be at least 1")
+            }
+            TransferLaw::Cowan(l) => log_law_monotonicity("cowan", l.core()),
+            TransferLaw::ThreeTerm(l) => log_law_monotonicity("three-term", l.core()),
+            TransferLaw::Table(l) => Table::new(l.drive.clone(), l.excitation.clone()).map(|_| ()),
+            _ => Ok(()),
+        }
+    }
+}
+
+fn log_law_monotonicity(law: &'static str, core: LogQuadratic) -> Result<(), TransferError> {
+    if !(core.toe > 0.0 && core.toe < 1.0) {
+        return Err(TransferError::InvalidParameter {
+            law,
+            what: format!("toe {} must lie in (0, 1)", core.toe),
+        });
+    }
+    if [core.a, core.b, core.c].iter().any(|p| !p.is_finite()) {
+        return Err(TransferError::InvalidParameter {
+            law,
+            what: "a parameter is not finite".into(),
+        });
+    }
+    match core.turning_point() {
+        Some(at) => Err(TransferError::TurnsBack { law, at }),
+        None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn laws() -> Vec<TransferLaw> {
+        vec![
+            TransferLaw::Power(Power { gamma: 2.2 }),
+            TransferLaw::Cowan(Cowan {
+                a: 2.3,
+                b: -0.05,
+                toe: 1.0 / 255.0,
+            }),
+            TransferLaw::ThreeTerm(ThreeTerm {
+                a: 2.1,
+                b: -0.02,
+                c: -0.01,
+                toe: 1.0 / 255.0,
+            }),
+            TransferLaw::GainOffsetGamma(GainOffsetGamma::from_cutoff(0.06, 2.4)),
+            TransferLaw::Table(
+                Table::new(
+                    vec![0.0, 0.2, 0.5, 0.8, 1.0],
+                    vec![0.0, 0.03, 0.2, 0.6, 1.0],
+                )
+                .unwrap(),
+            ),
+        ]
+    }
+
+    #[test]
+    fn every_law_inverts_and_is_monotone() {
+        for law in laws() {
+            law.monotonicity().unwrap();
+            let mut previous = -1.0;
+            for i in 0..=1000 {
+                let v = i as f64 / 1000.0;
+                let e = law.excitation(v);
+                assert!(e >= previous, "{law:?} decreases at {v}");
+                previous = e;
+                if e > 1e-9 && e < law.full_drive_excitation() {
+                    let back = law.drive(e);
+                    assert!(
+                        (law.excitation(back) - e).abs() < 1e-9,
+                        "{:?}: v {v} → e {e} → v {back}",
+                        law.kind()
+                    );
+                }
+            }
+            assert_eq!(law.excitation(0.0), 0.0);
+            assert_eq!(law.drive(0.0), 0.0);
+        }
+    }
+
+    #[test]
+    fn log_laws_are_defined_at_zero_drive() {
+        let cowan = Cowan {
+            a: 2.0,
+            b: 0.0,
+            toe: 0.01,
+        };
+        assert_eq!(cowan.excitation(0.0), 0.0);
+        assert!(cowan.excitation(0.005).is_finite());
+        assert!((cowan.excitation(0.005) - 0.5 * cowan.excitation(0.01)).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_cowan_law_that_turns_back_near_zero_is_caught() {
+        // B > 0: d ln E / d ln v = A + 2B ln v is negative below v = exp(−A/2B) = 0.0183.
+        let law = TransferLaw::Cowan(Cowan {
+            a: 2.0,
+            b: 0.25,
+            toe: 1.0 / 255.0,
+        });
+        match law.monotonicity() {
+            Err(TransferError::TurnsBack { at, .. }) => assert!((at - (-4.0f64).exp()).abs() < 1e-12),
+            other => panic!("not caught: {other:?}"),
+        }
+        // The same curve is acceptable when it is only used above its turning point.
+        let used_above = TransferLaw::Cowan(Cowan {
+            a: 2.0,
+            b: 0.25,
+            toe: 0.05,
+        });
+        assert!(used_above.monotonicity().is_ok());
+    }
+
+    #[test]
+    fn a_law_that_turns_down_below_full_drive_is_caught() {
+        // B < 0 and A < 0: the slope A + 2B ln v is negative above v = exp(−A/2B) ≈ 0.95.
+        let law = TransferLaw::ThreeTerm(ThreeTerm {
+            a: -0.1,
+            b: -1.0,
+            c: 0.0,
+            toe: 0.01,
+        });
+        assert!(matches!(law.monotonicity(), Err(TransferError::TurnsBack { .. })));
+    }
+
+    #[test]
+    fn gog_emits_nothing_below_its_cutoff() {
+        let gog = GainOffsetGamma::from_cutoff(0.1, 2.5);
+        assert!((gog.cutoff() - 0.1).abs() < 1e-12);
+        assert_eq!(gog.excitation(0.05), 0.0);
+        assert!((gog.excitation(1.0) - 1.0).abs() < 1e-12);
+        assert!((gog.drive(0.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn table_refuses_a_decreasing_ramp_and_keeps_monotone_data_exact() {
+        assert!(matches!(
+            Table::new(vec![0.5, 1.0], vec![0.3, 0.2]),
+            Err(TransferError::TurnsBack { .. })
+        ));
+        let t = Table::new(vec![0.25, 0.5, 1.0], vec![0.05, 0.2, 1.0]).unwrap();
+        assert_eq!(t.drive[0], 0.0);
+        for (d, e) in [(0.25, 0.05), (0.5, 0.2), (1.0, 1.0)] {
+            assert!((t.excitation(d) - e).abs() < 1e-12);
+        }
+        // A flat stretch inverts to its lowest drive.
+        let flat = Table::new(vec![0.3, 0.6, 1.0], vec![0.1, 0.1, 1.0]).unwrap();
+        // (The cubic meets the flat stretch with zero slope, so the bisection settles
+        // within √ε of the knot.)
+        assert!((flat.drive(0.1) - 0.3).abs() < 1e-6);
+    }
+
+    #[test]
+    fn laws_survive_a_toml_round_trip() {
+        #[derive(Serialize, Deserialize)]
+        struct Holder {
+            laws: Vec<TransferLaw>,
+        }
+        let text = toml::to_string(&Holder { laws: laws() }).unwrap();
+        let back: Holder = toml::from_str(&text).unwrap();
+        for (a, b) in laws().iter().zip(back.laws) {
+            for v in [0.0, 0.1, 0.37, 0.9, 1.0] {
+                assert_eq!(a.excitation(v), b.excitation(v));
+            }
+        }
+    }
+}
