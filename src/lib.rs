@@ -6,4 +6,9 @@
 //! [`fit`] (model, selection, checks) → [`profile`] (native TOML, store).
 
 pub mod color;
+pub mod display;
+pub mod instrument;
 pub mod model;
+pub mod numeric_csv;
+pub mod sim;
+pub mod time;

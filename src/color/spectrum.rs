@@ -124,6 +124,11 @@ impl Spectrum {
         Some(v0 + (v1 - v0) * (nm - w0) / (w1 - w0))
     }
 
+    /// A spectrum on the same wavelengths with other values (checked like [`Self::new`]).
+    pub fn with_values(&self, values: Vec<f64>) -> Result<Spectrum, SpectrumError> {
+        Spectrum::new(self.wavelengths_nm.clone(), values)
+    }
+
     /// This spectrum with every value multiplied by `factor`.
     pub fn scaled(&self, factor: f64) -> Spectrum {
         Spectrum {

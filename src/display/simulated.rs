@@ -1,0 +1,50 @@
+//! The simulated display: shows patches on a virtual monitor and settles on the
+//! virtual clock.
+
+use std::sync::{Arc, Mutex};
+
+use super::{DisplayError, Patch, PatchDisplay, ScreenContent};
+use crate::sim::monitor::VirtualMonitor;
+
+/// Drives a [`VirtualMonitor`].
+#[derive(Debug, Clone)]
+pub struct SimulatedDisplay {
+    monitor: Arc<Mutex<VirtualMonitor>>,
+    /// Seconds the display takes to settle after a change.
+    settle_s: f64,
+}
+
+impl SimulatedDisplay {
+    pub fn new(monitor: Arc<Mutex<VirtualMonitor>>, settle_s: f64) -> Self {
+        SimulatedDisplay { monitor, settle_s }
+    }
+
+    fn put(&self, content: ScreenContent) -> Result<std::sync::Arc<crate::sim::clock::VirtualClock>, DisplayError> {
+        let mut monitor = self
+            .monitor
+            .lock()
+            .map_err(|_| DisplayError::Lost("the virtual monitor's lock is poisoned".into()))?;
+        monitor.show(content);
+        Ok(monitor.clock().clone())
+    }
+}
+
+impl PatchDisplay for SimulatedDisplay {
+    fn name(&self) -> String {
+        match self.monitor.lock() {
+            Ok(m) => format!("virtual monitor '{}'", m.spec().name),
+            Err(_) => "virtual monitor".into(),
+        }
+    }
+
+    async fn show(&mut self, patch: &Patch) -> Result<(), DisplayError> {
+        let clock = self.put(patch.content())?;
+        clock.wait(self.settle_s).await;
+        Ok(())
+    }
+
+    async fn blank(&mut self) -> Result<(), DisplayError> {
+        self.put(ScreenContent::default())?;
+        Ok(())
+    }
+}

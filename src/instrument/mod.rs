@@ -1,0 +1,77 @@
+//! Measuring light: the instrument trait, what a reading is, and the instruments.
+//!
+//! A reading never hides a failure: light below the instrument's range or above it
+//! is flagged in [`ReadingStatus`], never turned into a zero.
+
+pub mod simulated;
+
+use std::future::Future;
+
+use serde::{Deserialize, Serialize};
+
+use crate::color::Xyz;
+use crate::color::spectrum::Spectrum;
+
+/// What an instrument can measure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Capability {
+    /// A light meter: luminance only (Cowan's case).
+    Luminance,
+    /// A colorimeter: XYZ.
+    Tristimulus,
+    /// A spectroradiometer: a spectrum, and XYZ from it.
+    Spectral,
+}
+
+/// How far a reading can be trusted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReadingStatus {
+    Ok,
+    /// Less light than the instrument can measure reliably; the value, if any, is
+    /// only an indication.
+    BelowRange,
+    /// More light than the instrument can take; there is no value.
+    Overload,
+}
+
+/// One measurement.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Reading {
+    /// CIE 1931 XYZ in cd/m² (for a light meter only Y is meaningful).
+    pub xyz: Option<Xyz>,
+    /// Spectral radiance, W·sr⁻¹·m⁻²·nm⁻¹, where the instrument gives one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spectrum: Option<Spectrum>,
+    pub status: ReadingStatus,
+    /// Integration time used, seconds.
+    pub integration_s: f64,
+}
+
+/// Who the instrument is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InstrumentInfo {
+    pub name: String,
+    pub serial: Option<String>,
+    pub capability: Capability,
+}
+
+/// Why a measurement failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InstrumentError {
+    #[error("the instrument did not answer within {seconds} s")]
+    Timeout { seconds: f64 },
+    #[error("the instrument is gone: {0}")]
+    Disconnected(String),
+    #[error("the instrument's reply made no sense: {0}")]
+    Protocol(String),
+}
+
+/// A light meter, colorimeter or spectroradiometer.
+pub trait Instrument {
+    fn info(&self) -> InstrumentInfo;
+
+    /// Measure what the screen shows at the instrument's spot.
+    fn measure(&mut self) -> impl Future<Output = Result<Reading, InstrumentError>> + Send;
+}

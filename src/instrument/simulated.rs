@@ -1,0 +1,308 @@
+//! The simulated instrument: reads the virtual monitor where its patch is shown, with
+//! the noise, range limits and integration times of a real one, on the virtual clock.
+//!
+//! Noise model (seeded, so runs repeat):
+//! * a gain error common to the whole reading, N(0, `gain_noise`): lamp flicker and
+//!   integration jitter, which move luminance but not chromaticity;
+//! * an independent relative error per spectral band (spectroradiometer) or per
+//!   tristimulus channel (colorimeter), N(0, `relative_noise`);
+//! * an additive floor, N(0, `noise_floor`) in cd/m² of Y, which dominates near black.
+//!
+//! The noise of a reading is drawn from the seed and the virtual time of the reading,
+//! so a run resumed from its journal at the same virtual time reads exactly what the
+//! uninterrupted run would have.
+
+use std::sync::{Arc, Mutex};
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+use super::{Capability, Instrument, InstrumentError, InstrumentInfo, Reading, ReadingStatus};
+use crate::color::Xyz;
+use crate::color::spectrum::{Observer, Spectrum, emission_to_xyz};
+use crate::sim::monitor::VirtualMonitor;
+
+/// What kind of instrument to simulate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum SimulatedKind {
+    /// A spectroradiometer (like a PR-670): spectra, XYZ from them.
+    #[default]
+    Spectral,
+    /// A colorimeter: XYZ only.
+    Tristimulus,
+}
+
+/// The simulated instrument's characteristics.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulatedInstrumentSpec {
+    pub kind: SimulatedKind,
+    /// Relative standard deviation of the gain common to a whole reading.
+    pub gain_noise: f64,
+    /// Relative standard deviation per band or channel.
+    pub relative_noise: f64,
+    /// Additive standard deviation, cd/m² of Y.
+    pub noise_floor: f64,
+    /// Below this luminance (cd/m²) readings are flagged below range.
+    pub low_light_limit: f64,
+    /// Above this luminance (cd/m²) the instrument overloads and gives no value.
+    pub overload_limit: f64,
+    /// Integration time at 10 cd/m² and above, seconds.
+    pub integration_s: f64,
+    /// Longest integration, used for dim patches, seconds.
+    pub max_integration_s: f64,
+    pub seed: u64,
+}
+
+impl Default for SimulatedInstrumentSpec {
+    fn default() -> Self {
+        SimulatedInstrumentSpec {
+            kind: SimulatedKind::Spectral,
+            gain_noise: 0.002,
+            relative_noise: 0.002,
+            noise_floor: 0.0005,
+            low_light_limit: 0.003,
+            overload_limit: 3000.0,
+            integration_s: 1.0,
+            max_integration_s: 10.0,
+            seed: 1,
+        }
+    }
+}
+
+/// Luminance at and above which the base integration time suffices.
+const FULL_SIGNAL_CD_M2: f64 = 10.0;
+
+/// A simulated colorimeter or spectroradiometer aimed at a virtual monitor.
+#[derive(Debug, Clone)]
+pub struct SimulatedInstrument {
+    monitor: Arc<Mutex<VirtualMonitor>>,
+    spec: SimulatedInstrumentSpec,
+}
+
+impl SimulatedInstrument {
+    pub fn new(monitor: Arc<Mutex<VirtualMonitor>>, spec: SimulatedInstrumentSpec) -> Self {
+        SimulatedInstrument { monitor, spec }
+    }
+
+    pub fn spec(&self) -> &SimulatedInstrumentSpec {
+        &self.spec
+    }
+
+    /// A generator for the reading taken at virtual time `t` (SplitMix64 of the seed
+    /// and the time's bits, so nearby times give unrelated streams).
+    fn rng_at(&self, t: f64) -> ChaCha8Rng {
+        let mut z = self.spec.seed ^ t.to_bits().wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ChaCha8Rng::seed_from_u64(z ^ (z >> 31))
+    }
+
+    /// Integration time for a patch of luminance `y`: longer for dim patches, as
+    /// auto-ranging instruments do.
+    fn integration_for(&self, y: f64) -> f64 {
+        let factor = if y > 0.0 {
+            (FULL_SIGNAL_CD_M2 / y).max(1.0)
+        } else {
+            f64::INFINITY
+        };
+        (self.spec.integration_s * factor).min(self.spec.max_integration_s)
+    }
+
+    fn noisy_spectrum(&self, clean: &Spectrum, rng: &mut ChaCha8Rng) -> Result<Spectrum, InstrumentError> {
+        let s = &self.spec;
+        let n: f64 = StandardNormal.sample(rng);
+        let gain = 1.0 + s.gain_noise * n;
+        // The floor per band that gives `noise_floor` in Y: σ_Y = Km σ_band Δλ √Σȳ².
+        let w = clean.wavelengths_nm();
+        let step = (w[w.len() - 1] - w[0]) / (w.len() - 1) as f64;
+        let ybar_norm = w
+            .iter()
+            .filter_map(|nm| Observer::default().cmf_at(nm.round()))
+            .map(|c| c[1] * c[1])
+            .sum::<f64>()
+            .sqrt();
+        let band_floor = s.noise_floor / (683.0 * step * ybar_norm.max(1e-12));
+        let values = clean
+            .values()
+            .iter()
+            .map(|v| {
+                let n1: f64 = StandardNormal.sample(rng);
+                let n2: f64 = StandardNormal.sample(rng);
+                v * gain + v * s.relative_noise * n1 + band_floor * n2
+            })
+            .collect();
+        clean
+            .with_values(values)
+            .map_err(|e| InstrumentError::Protocol(format!("simulated spectrum: {e}")))
+    }
+
+    fn noisy_xyz(&self, clean: &Xyz, rng: &mut ChaCha8Rng) -> Xyz {
+        let s = &self.spec;
+        let n: f64 = StandardNormal.sample(rng);
+        let gain = 1.0 + s.gain_noise * n;
+        clean.map(|v| {
+            let n1: f64 = StandardNormal.sample(rng);
+            let n2: f64 = StandardNormal.sample(rng);
+            v * gain + v * s.relative_noise * n1 + s.noise_floor * n2
+        })
+    }
+}
+
+fn simulation_error(e: impl std::fmt::Display) -> InstrumentError {
+    InstrumentError::Protocol(format!("virtual monitor: {e}"))
+}
+
+impl Instrument for SimulatedInstrument {
+    fn info(&self) -> InstrumentInfo {
+        InstrumentInfo {
+            name: match self.spec.kind {
+                SimulatedKind::Spectral => "simulated spectroradiometer".into(),
+                SimulatedKind::Tristimulus => "simulated colorimeter".into(),
+            },
+            serial: Some(format!("seed-{}", self.spec.seed)),
+            capability: match self.spec.kind {
+                SimulatedKind::Spectral => Capability::Spectral,
+                SimulatedKind::Tristimulus => Capability::Tristimulus,
+            },
+        }
+    }
+
+    async fn measure(&mut self) -> Result<Reading, InstrumentError> {
+        let disconnected =
+            |_| InstrumentError::Disconnected("the virtual monitor's lock is poisoned".into());
+        // Range the integration on what is shown, then integrate: the reading is taken
+        // at the middle of the integration, which is when its time is stamped.
+        let (clock, integration) = {
+            let monitor = self.monitor.lock().map_err(disconnected)?;
+            let y = monitor
+                .xyz_at(monitor.patch_centre())
+                .map_err(simulation_error)?
+                .y;
+            (monitor.clock().clone(), self.integration_for(y))
+        };
+        clock.wait(integration / 2.0).await;
+        let (clean, rng_time) = {
+            let monitor = self.monitor.lock().map_err(disconnected)?;
+            let spectrum = monitor
+                .radiance_at(monitor.patch_centre())
+                .map_err(simulation_error)?;
+            (spectrum, clock.now())
+        };
+        clock.wait(integration / 2.0).await;
+
+        let clean_xyz = emission_to_xyz(&clean, Observer::default()).map_err(simulation_error)?;
+        let status = if clean_xyz.y > self.spec.overload_limit {
+            ReadingStatus::Overload
+        } else if clean_xyz.y < self.spec.low_light_limit {
+            ReadingStatus::BelowRange
+        } else {
+            ReadingStatus::Ok
+        };
+        if status == ReadingStatus::Overload {
+            return Ok(Reading {
+                xyz: None,
+                spectrum: None,
+                status,
+                integration_s: integration,
+            });
+        }
+        let mut rng = self.rng_at(rng_time);
+        let (xyz, spectrum) = match self.spec.kind {
+            SimulatedKind::Spectral => {
+                let noisy = self.noisy_spectrum(&clean, &mut rng)?;
+                let xyz = emission_to_xyz(&noisy, Observer::default()).map_err(simulation_error)?;
+                (xyz, Some(noisy))
+            }
+            SimulatedKind::Tristimulus => (self.noisy_xyz(&clean_xyz, &mut rng), None),
+        };
+        Ok(Reading {
+            xyz: Some(xyz),
+            spectrum,
+            status,
+            integration_s: integration,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::clock::VirtualClock;
+    use crate::sim::monitor::centre_patch;
+    use crate::sim::presets::preset;
+
+    fn setup(spec: SimulatedInstrumentSpec) -> (Arc<Mutex<VirtualMonitor>>, SimulatedInstrument) {
+        let clock = Arc::new(VirtualClock::new(None));
+        let monitor = VirtualMonitor::new(preset("crt").unwrap(), clock).unwrap();
+        let monitor = Arc::new(Mutex::new(monitor));
+        let instrument = SimulatedInstrument::new(monitor.clone(), spec);
+        (monitor, instrument)
+    }
+
+    #[tokio::test]
+    async fn noise_has_the_stated_size() {
+        for kind in [SimulatedKind::Spectral, SimulatedKind::Tristimulus] {
+            let spec = SimulatedInstrumentSpec {
+                kind,
+                ..Default::default()
+            };
+            let (monitor, mut instrument) = setup(spec.clone());
+            monitor.lock().unwrap().show(centre_patch([1.0; 3]));
+            let truth = {
+                let m = monitor.lock().unwrap();
+                m.xyz_at(m.patch_centre()).unwrap().y
+            };
+            let n = 400;
+            let mut ys = Vec::new();
+            for _ in 0..n {
+                let r = instrument.measure().await.unwrap();
+                assert_eq!(r.status, ReadingStatus::Ok);
+                ys.push(r.xyz.unwrap().y);
+            }
+            let mean = ys.iter().sum::<f64>() / n as f64;
+            let sd = (ys.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+            // Relative noise of Y: at least the common gain noise, and not much more
+            // than gain and per-channel noise together.
+            let rel = sd / truth;
+            assert!(rel > 0.8 * spec.gain_noise && rel < 1.5 * (spec.gain_noise + spec.relative_noise),
+                "{kind:?}: relative sd {rel}");
+            assert!((mean - truth).abs() < 4.0 * sd / (n as f64).sqrt(), "{kind:?}: biased");
+        }
+    }
+
+    #[tokio::test]
+    async fn dim_and_bright_patches_are_flagged_not_zeroed() {
+        let spec = SimulatedInstrumentSpec {
+            low_light_limit: 1.0,
+            overload_limit: 50.0,
+            ..Default::default()
+        };
+        let (monitor, mut instrument) = setup(spec);
+        monitor.lock().unwrap().show(centre_patch([0.0; 3]));
+        let dim = instrument.measure().await.unwrap();
+        assert_eq!(dim.status, ReadingStatus::BelowRange);
+        assert!(dim.xyz.is_some());
+        assert!(dim.integration_s > 1.0, "dim patches integrate longer");
+        monitor.lock().unwrap().show(centre_patch([1.0; 3]));
+        let bright = instrument.measure().await.unwrap();
+        assert_eq!(bright.status, ReadingStatus::Overload);
+        assert!(bright.xyz.is_none());
+    }
+
+    #[tokio::test]
+    async fn the_same_virtual_time_gives_the_same_reading() {
+        let (monitor, mut instrument) = setup(SimulatedInstrumentSpec::default());
+        monitor.lock().unwrap().show(centre_patch([0.5; 3]));
+        let clock = monitor.lock().unwrap().clock().clone();
+        let a = instrument.measure().await.unwrap();
+        clock.set(0.0);
+        let b = instrument.measure().await.unwrap();
+        let c = instrument.measure().await.unwrap();
+        assert_eq!(a, b);
+        assert_ne!(a.xyz, c.xyz);
+    }
+}

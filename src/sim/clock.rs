@@ -1,0 +1,69 @@
+//! The virtual clock that simulated devices run on.
+//!
+//! A simulated run takes minutes of instrument time but should finish in
+//! milliseconds in a test, so simulated devices advance this clock instead of
+//! sleeping. With a real-time scale set they also sleep, scaled, so a person can
+//! watch a run at its real pace (or a test can kill one part way).
+
+use std::sync::Mutex;
+use std::time::Duration;
+
+/// Seconds of simulated time, shared by the simulated display and instrument.
+#[derive(Debug, Default)]
+pub struct VirtualClock {
+    seconds: Mutex<f64>,
+    /// Real seconds slept per simulated second; `None` runs as fast as possible.
+    realtime_scale: Option<f64>,
+}
+
+impl VirtualClock {
+    pub fn new(realtime_scale: Option<f64>) -> Self {
+        VirtualClock {
+            seconds: Mutex::new(0.0),
+            realtime_scale,
+        }
+    }
+
+    /// Simulated seconds since the clock started.
+    pub fn now(&self) -> f64 {
+        *self.seconds.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    /// Set the time, as when a run resumes from its journal.
+    pub fn set(&self, seconds: f64) {
+        *self.seconds.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = seconds;
+    }
+
+    /// Let `seconds` of simulated time pass (sleeping, scaled, in real-time mode).
+    pub async fn wait(&self, seconds: f64) {
+        if !(seconds > 0.0) {
+            return;
+        }
+        if let Some(scale) = self.realtime_scale {
+            tokio::time::sleep(Duration::from_secs_f64(seconds * scale)).await;
+        }
+        *self.seconds.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) += seconds;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn time_passes_only_when_waited_for() {
+        let clock = VirtualClock::new(None);
+        assert_eq!(clock.now(), 0.0);
+        clock.wait(2.5).await;
+        clock.wait(-1.0).await;
+        assert_eq!(clock.now(), 2.5);
+        clock.set(10.0);
+        assert_eq!(clock.now(), 10.0);
+    }
+}
+
+impl crate::time::TimeSource for VirtualClock {
+    fn now(&self) -> f64 {
+        VirtualClock::now(self)
+    }
+}
