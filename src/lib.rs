@@ -5,6 +5,10 @@
 //! [`calibrate::plan`] → [`calibrate::run`] (show, settle, measure, journal) →
 //! [`fit`] (model, selection, checks) → [`profile`] (native TOML, store).
 
+// `!(x > 0.0)` is how this crate says "x is not positive, or not a number": NaN
+// must fail every such check, which `x <= 0.0` would let through.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod color;
 pub mod display;
 pub mod instrument;

@@ -145,11 +145,17 @@ mod tests {
         let t = NumericTable::parse("wavelength_nm,R\n380, 0.1\n\n385,0.2\n", p).unwrap();
         assert_eq!(t.rows, vec![vec![380.0, 0.1], vec![385.0, 0.2]]);
         assert_eq!(t.column_index("r").unwrap(), 1);
-        assert!(matches!(t.column_index("G"), Err(CsvError::MissingColumn { .. })));
+        assert!(matches!(
+            t.column_index("G"),
+            Err(CsvError::MissingColumn { .. })
+        ));
 
         let err = NumericTable::parse("wavelength_nm,R\n380,0.1\n385,NaN\n", p).unwrap_err();
         let text = err.to_string();
-        assert!(text.contains("line 3") && text.contains("'R'") && text.contains("NaN"), "{text}");
+        assert!(
+            text.contains("line 3") && text.contains("'R'") && text.contains("NaN"),
+            "{text}"
+        );
         let err = NumericTable::parse("wavelength_nm,R\n380,inf\n", p).unwrap_err();
         assert!(matches!(err, CsvError::NotANumber { .. }));
         let err = NumericTable::parse("wavelength_nm,R\n380\n", p).unwrap_err();

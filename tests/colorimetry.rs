@@ -14,8 +14,16 @@ fn ciede2000_matches_all_34_pairs_of_sharmas_table() {
     let mut pairs = 0;
     for line in text.lines().skip(1).filter(|l| !l.trim().is_empty()) {
         let v: Vec<f64> = line.split(',').map(|x| x.trim().parse().unwrap()).collect();
-        let lab1 = Lab { l: v[1], a: v[2], b: v[3] };
-        let lab2 = Lab { l: v[4], a: v[5], b: v[6] };
+        let lab1 = Lab {
+            l: v[1],
+            a: v[2],
+            b: v[3],
+        };
+        let lab2 = Lab {
+            l: v[4],
+            a: v[5],
+            b: v[6],
+        };
         let got = delta_e_2000(&lab1, &lab2);
         assert!(
             (got - v[7]).abs() < 1e-4,
@@ -76,7 +84,11 @@ fn illuminant_white_points_and_colorchecker() {
             "F11" => Illuminant::F11,
             other => panic!("unexpected illuminant {other}"),
         };
-        let want = Xyz::new(f[3].parse().unwrap(), f[4].parse().unwrap(), f[5].parse().unwrap());
+        let want = Xyz::new(
+            f[3].parse().unwrap(),
+            f[4].parse().unwrap(),
+            f[5].parse().unwrap(),
+        );
         let got = reflectance_to_xyz(&white, illuminant, Observer::Cie1931TwoDegree).unwrap();
         assert!((got - want).norm() < 1e-4, "{}: {got:?} vs {want:?}", f[0]);
         checked += 1;

@@ -19,7 +19,10 @@ impl SimulatedDisplay {
         SimulatedDisplay { monitor, settle_s }
     }
 
-    fn put(&self, content: ScreenContent) -> Result<std::sync::Arc<crate::sim::clock::VirtualClock>, DisplayError> {
+    fn put(
+        &self,
+        content: ScreenContent,
+    ) -> Result<std::sync::Arc<crate::sim::clock::VirtualClock>, DisplayError> {
         let mut monitor = self
             .monitor
             .lock()

@@ -112,7 +112,11 @@ impl SimulatedInstrument {
         (self.spec.integration_s * factor).min(self.spec.max_integration_s)
     }
 
-    fn noisy_spectrum(&self, clean: &Spectrum, rng: &mut ChaCha8Rng) -> Result<Spectrum, InstrumentError> {
+    fn noisy_spectrum(
+        &self,
+        clean: &Spectrum,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Spectrum, InstrumentError> {
         let s = &self.spec;
         let n: f64 = StandardNormal.sample(rng);
         let gain = 1.0 + s.gain_noise * n;
@@ -268,9 +272,14 @@ mod tests {
             // Relative noise of Y: at least the common gain noise, and not much more
             // than gain and per-channel noise together.
             let rel = sd / truth;
-            assert!(rel > 0.8 * spec.gain_noise && rel < 1.5 * (spec.gain_noise + spec.relative_noise),
-                "{kind:?}: relative sd {rel}");
-            assert!((mean - truth).abs() < 4.0 * sd / (n as f64).sqrt(), "{kind:?}: biased");
+            assert!(
+                rel > 0.8 * spec.gain_noise && rel < 1.5 * (spec.gain_noise + spec.relative_noise),
+                "{kind:?}: relative sd {rel}"
+            );
+            assert!(
+                (mean - truth).abs() < 4.0 * sd / (n as f64).sqrt(),
+                "{kind:?}: biased"
+            );
         }
     }
 

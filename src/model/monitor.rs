@@ -165,7 +165,10 @@ mod tests {
                 let again = m.forward(back.drive, pos);
                 assert!((again - xyz).norm() < 1e-9 * xyz.norm(), "{d:?} at {pos:?}");
                 for c in 0..3 {
-                    assert!((back.drive[c] - d[c]).abs() < 1e-6, "{d:?} at {pos:?}: {back:?}");
+                    assert!(
+                        (back.drive[c] - d[c]).abs() < 1e-6,
+                        "{d:?} at {pos:?}: {back:?}"
+                    );
                 }
             }
         }
@@ -179,7 +182,11 @@ mod tests {
         assert!(r.clipped);
         assert!(r.drive.iter().all(|d| (0.0..=1.0).contains(d)));
         let below_black = Xyz::zeros();
-        assert!(m.inverse(&below_black, ScreenPosition::CENTRE).unwrap().clipped);
+        assert!(
+            m.inverse(&below_black, ScreenPosition::CENTRE)
+                .unwrap()
+                .clipped
+        );
     }
 
     #[test]

@@ -105,7 +105,10 @@ impl SpatialMap {
         match self {
             SpatialMap::Uniform => "uniform (no spatial map)".into(),
             SpatialMap::Scalar { surface } => {
-                format!("one gain surface for all channels, degree {}", surface.degree)
+                format!(
+                    "one gain surface for all channels, degree {}",
+                    surface.degree
+                )
             }
             SpatialMap::PerChannel { surfaces } => {
                 format!("a gain surface per channel, degree {}", surfaces[0].degree)

@@ -193,7 +193,11 @@ impl GainOffsetGamma {
 
     pub fn excitation(&self, v: f64) -> f64 {
         let base = self.gain * v.clamp(0.0, 1.0) + (1.0 - self.gain);
-        if base <= 0.0 { 0.0 } else { base.powf(self.gamma) }
+        if base <= 0.0 {
+            0.0
+        } else {
+            base.powf(self.gamma)
+        }
     }
 
     pub fn drive(&self, e: f64) -> f64 {
@@ -238,10 +242,7 @@ impl Table {
     /// drives in [0, 1] and non-decreasing excitations; a knot at (0, 0) is added when
     /// missing.
     pub fn new(drive: Vec<f64>, excitation: Vec<f64>) -> Result<Self, TransferError> {
-        let invalid = |what: String| TransferError::InvalidParameter {
-            law: "table",
-            what,
-        };
+        let invalid = |what: String| TransferError::InvalidParameter { law: "table", what };
         if drive.len() != excitation.len() || drive.is_empty() {
             return Err(invalid(format!(
                 "{} drives but {} excitations",
@@ -468,11 +469,9 @@ impl TransferLaw {
             TransferLaw::Power(l) => vec![("gamma", l.gamma)],
             TransferLaw::Cowan(l) => vec![("A", l.a), ("B", l.b), ("toe", l.toe)],
             TransferLaw::ThreeTerm(l) => vec![("A", l.a), ("B", l.b), ("C", l.c), ("toe", l.toe)],
-            TransferLaw::GainOffsetGamma(l) => vec![
-                ("gain", l.gain),
-                ("gamma", l.gamma),
-                ("cutoff", l.cutoff()),
-            ],
+            TransferLaw::GainOffsetGamma(l) => {
+                vec![("gain", l.gain), ("gamma", l.gamma), ("cutoff", l.cutoff())]
+            }
             TransferLaw::Table(l) => vec![("knots", l.drive.len() as f64)],
         }
     }
@@ -597,7 +596,9 @@ mod tests {
             toe: 1.0 / 255.0,
         });
         match law.monotonicity() {
-            Err(TransferError::TurnsBack { at, .. }) => assert!((at - (-4.0f64).exp()).abs() < 1e-12),
+            Err(TransferError::TurnsBack { at, .. }) => {
+                assert!((at - (-4.0f64).exp()).abs() < 1e-12)
+            }
             other => panic!("not caught: {other:?}"),
         }
         // The same curve is acceptable when it is only used above its turning point.
@@ -618,7 +619,10 @@ mod tests {
             c: 0.0,
             toe: 0.01,
         });
-        assert!(matches!(law.monotonicity(), Err(TransferError::TurnsBack { .. })));
+        assert!(matches!(
+            law.monotonicity(),
+            Err(TransferError::TurnsBack { .. })
+        ));
     }
 
     #[test]

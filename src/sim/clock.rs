@@ -26,12 +26,18 @@ impl VirtualClock {
 
     /// Simulated seconds since the clock started.
     pub fn now(&self) -> f64 {
-        *self.seconds.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+        *self
+            .seconds
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 
     /// Set the time, as when a run resumes from its journal.
     pub fn set(&self, seconds: f64) {
-        *self.seconds.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = seconds;
+        *self
+            .seconds
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner()) = seconds;
     }
 
     /// Let `seconds` of simulated time pass (sleeping, scaled, in real-time mode).
@@ -42,7 +48,16 @@ impl VirtualClock {
         if let Some(scale) = self.realtime_scale {
             tokio::time::sleep(Duration::from_secs_f64(seconds * scale)).await;
         }
-        *self.seconds.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) += seconds;
+        *self
+            .seconds
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner()) += seconds;
+    }
+}
+
+impl crate::time::TimeSource for VirtualClock {
+    fn now(&self) -> f64 {
+        VirtualClock::now(self)
     }
 }
 
@@ -59,11 +74,5 @@ mod tests {
         assert_eq!(clock.now(), 2.5);
         clock.set(10.0);
         assert_eq!(clock.now(), 10.0);
-    }
-}
-
-impl crate::time::TimeSource for VirtualClock {
-    fn now(&self) -> f64 {
-        VirtualClock::now(self)
     }
 }

@@ -150,7 +150,10 @@ impl MeasuredTransfer {
         let out = &self.output[c];
         let top = out[out.len() - 1];
         let v = v.clamp(self.input[0], self.input[self.input.len() - 1]);
-        let upper = self.input.partition_point(|x| *x < v).clamp(1, self.input.len() - 1);
+        let upper = self
+            .input
+            .partition_point(|x| *x < v)
+            .clamp(1, self.input.len() - 1);
         let (x0, x1) = (self.input[upper - 1], self.input[upper]);
         let (y0, y1) = (out[upper - 1], out[upper]);
         (y0 + (y1 - y0) * (v - x0) / (x1 - x0)) / top
@@ -342,8 +345,8 @@ impl VirtualMonitor {
         if f.surround_dependence != 0.0 {
             let area = self.screen.geometry.area();
             let mean = |d: Drive| self.outputs_above_black(d).iter().sum::<f64>() / 3.0;
-            let screen_mean = area * mean(self.screen.patch)
-                + (1.0 - area) * mean(self.screen.background);
+            let screen_mean =
+                area * mean(self.screen.patch) + (1.0 - area) * mean(self.screen.background);
             gain *= 1.0 - f.surround_dependence * screen_mean;
         }
         let output = self.outputs(drive);
@@ -390,10 +393,10 @@ impl VirtualMonitor {
         let zero = self.outputs([0.0; 3]);
         let mut matrix = nalgebra::Matrix3::zeros();
         let mut black = xyz_of(&self.black) + xyz_of(&self.flare);
-        for c in 0..3 {
-            let primary = xyz_of(&self.primaries[c]);
-            matrix.set_column(c, &(primary * (1.0 - zero[c])));
-            black += primary * zero[c];
+        for (c, (spectrum, offset)) in self.primaries.iter().zip(zero).enumerate() {
+            let primary = xyz_of(spectrum);
+            matrix.set_column(c, &(primary * (1.0 - offset)));
+            black += primary * offset;
         }
         let laws = match &self.spec.transfer {
             SimTransfer::Laws(laws) => laws.clone(),
@@ -450,7 +453,9 @@ mod tests {
         MonitorSpec {
             name: "test".into(),
             primaries,
-            transfer: SimTransfer::Laws([0, 1, 2].map(|_| TransferLaw::Power(Power { gamma: 2.2 }))),
+            transfer: SimTransfer::Laws(
+                [0, 1, 2].map(|_| TransferLaw::Power(Power { gamma: 2.2 })),
+            ),
             white_luminance: Some(100.0),
             black_luminance: 0.0,
             flare_luminance: 0.0,

@@ -16,7 +16,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::monitor::{Failures, MeasuredTransfer, MonitorSpec, PrimarySpectra, SimError, SimTransfer};
+use super::monitor::{
+    Failures, MeasuredTransfer, MonitorSpec, PrimarySpectra, SimError, SimTransfer,
+};
 use crate::model::transfer::{Cowan, GainOffsetGamma, TransferLaw};
 
 /// Names of the built-in virtual monitors.
@@ -53,9 +55,21 @@ pub fn preset(name: &str) -> Result<MonitorSpec, SimError> {
                 name: "lcd".into(),
                 primaries: PrimarySpectra::apple_studio_display(),
                 transfer: SimTransfer::Laws([
-                    TransferLaw::Cowan(Cowan { a: 2.30, b: 0.060, toe }),
-                    TransferLaw::Cowan(Cowan { a: 2.25, b: 0.050, toe }),
-                    TransferLaw::Cowan(Cowan { a: 2.20, b: 0.045, toe }),
+                    TransferLaw::Cowan(Cowan {
+                        a: 2.30,
+                        b: 0.060,
+                        toe,
+                    }),
+                    TransferLaw::Cowan(Cowan {
+                        a: 2.25,
+                        b: 0.050,
+                        toe,
+                    }),
+                    TransferLaw::Cowan(Cowan {
+                        a: 2.20,
+                        b: 0.045,
+                        toe,
+                    }),
                 ]),
                 white_luminance: Some(160.0),
                 black_luminance: 0.16,
@@ -213,7 +227,10 @@ mod tests {
             assert!(red.x > 0.6 && red.y < 0.36, "{name}: red at {red:?}");
             m.show(centre_patch([1.0; 3]));
             let white = m.xyz_at(m.patch_centre()).unwrap();
-            assert!((white.y - white_y).abs() / white_y < 0.01, "{name}: {white:?}");
+            assert!(
+                (white.y - white_y).abs() / white_y < 0.01,
+                "{name}: {white:?}"
+            );
         }
         assert!(preset("plasma").is_err());
     }
