@@ -9,9 +9,12 @@
 // must fail every such check, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod calibrate;
 pub mod color;
 pub mod display;
+pub mod fit;
 pub mod instrument;
+pub mod measurement;
 pub mod model;
 pub mod numeric_csv;
 pub mod sim;

@@ -1,0 +1,5 @@
+//! A calibration run: the plan, the measuring loop, the journal.
+
+pub mod journal;
+pub mod plan;
+pub mod run;

@@ -1,0 +1,67 @@
+//! Small statistics used across fitting and reporting.
+
+use serde::{Deserialize, Serialize};
+
+/// Mean, 95th percentile and maximum of a set of errors (ΔE00 unless stated).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ErrorStats {
+    pub n: usize,
+    pub mean: f64,
+    pub p95: f64,
+    pub max: f64,
+}
+
+impl ErrorStats {
+    /// `None` for an empty set.
+    pub fn of(values: &[f64]) -> Option<Self> {
+        if values.is_empty() {
+            return None;
+        }
+        Some(ErrorStats {
+            n: values.len(),
+            mean: mean(values),
+            p95: percentile(values, 95.0),
+            max: values.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        })
+    }
+}
+
+pub fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
+}
+
+/// Sample standard deviation (n − 1); 0 for fewer than two values.
+pub fn standard_deviation(values: &[f64]) -> f64 {
+    if values.len() < 2 {
+        return 0.0;
+    }
+    let m = mean(values);
+    (values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (values.len() - 1) as f64).sqrt()
+}
+
+/// The `p`-th percentile by linear interpolation between order statistics
+/// (Hyndman & Fan 1996, definition 7, as NumPy's default).
+pub fn percentile(values: &[f64], p: f64) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let rank = (p / 100.0).clamp(0.0, 1.0) * (sorted.len() - 1) as f64;
+    let lo = rank.floor() as usize;
+    let hi = rank.ceil() as usize;
+    sorted[lo] + (sorted[hi] - sorted[lo]) * (rank - lo as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_interpolate_like_numpy() {
+        let v = [1.0, 2.0, 3.0, 4.0, 5.0];
+        assert_eq!(percentile(&v, 50.0), 3.0);
+        assert!((percentile(&v, 95.0) - 4.8).abs() < 1e-12);
+        let s = ErrorStats::of(&v).unwrap();
+        assert_eq!((s.n, s.mean, s.max), (5, 3.0, 5.0));
+        assert!(ErrorStats::of(&[]).is_none());
+        assert!((standard_deviation(&[1.0, 3.0]) - 2f64.sqrt()).abs() < 1e-12);
+    }
+}
