@@ -1,0 +1,265 @@
+//! How noisy the readings are, and how the display drifted during the run: both from
+//! the repeats the plan builds in (the reference white shown through the run, and
+//! repeated blacks), so weights and corrections come from this run's own data.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use super::least_squares::fit_linear;
+use super::select::simplest_within_noise;
+use super::stats::{mean, standard_deviation};
+
+/// Relative noise assumed when the readings cannot tell (fewer than three repeats).
+pub const ASSUMED_RELATIVE_NOISE: f64 = 0.003;
+/// Noise floor assumed when fewer than two blacks were read, as a fraction of white.
+pub const ASSUMED_FLOOR_OF_WHITE: f64 = 5e-5;
+
+/// σ(Y) = √(floor² + (relative · Y)²): the standard deviation of a reading of
+/// luminance Y. Used to weight every fit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NoiseModel {
+    pub relative: f64,
+    /// Same unit as the readings.
+    pub floor: f64,
+    /// Where the numbers come from.
+    pub relative_from: String,
+    pub floor_from: String,
+}
+
+impl NoiseModel {
+    pub fn sigma(&self, y: f64) -> f64 {
+        (self.floor * self.floor + (self.relative * y).powi(2))
+            .sqrt()
+            .max(f64::MIN_POSITIVE)
+    }
+}
+
+/// Noise model from the relative noise found by the drift fit (if any) and the
+/// scatter of repeated black readings.
+pub fn estimate_noise(relative: Option<f64>, black_ys: &[f64], white_y: f64) -> NoiseModel {
+    let (relative, relative_from) = match relative {
+        Some(r) if r > 0.0 => (r, "scatter of the reference white about its drift".to_string()),
+        _ => (
+            ASSUMED_RELATIVE_NOISE,
+            format!("assumed ({ASSUMED_RELATIVE_NOISE}): too few reference repeats"),
+        ),
+    };
+    let assumed_floor = ASSUMED_FLOOR_OF_WHITE * white_y.abs();
+    let (floor, floor_from) = if black_ys.len() >= 2 {
+        let sd = standard_deviation(black_ys);
+        let black = mean(black_ys);
+        let floor = (sd * sd - (relative * black).powi(2)).max(0.0).sqrt();
+        // Two readings leave one degree of freedom; never trust a floor far below
+        // what the assumption would give.
+        let floor = floor.max(0.1 * assumed_floor);
+        (floor, format!("scatter of {} black readings", black_ys.len()))
+    } else {
+        (
+            assumed_floor,
+            format!("assumed ({ASSUMED_FLOOR_OF_WHITE} of white): fewer than two blacks"),
+        )
+    };
+    NoiseModel {
+        relative,
+        floor,
+        relative_from,
+        floor_from,
+    }
+}
+
+/// A smooth drift of the display's light over the run: a polynomial in normalised
+/// time, read as a gain relative to the end of the run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DriftModel {
+    pub t_first: f64,
+    pub t_last: f64,
+    /// Polynomial coefficients in τ = (t − t_first)/(t_last − t_first), constant first.
+    pub coefficients: Vec<f64>,
+}
+
+impl DriftModel {
+    fn level(&self, t: f64) -> f64 {
+        let span = self.t_last - self.t_first;
+        let tau = if span > 0.0 {
+            ((t - self.t_first) / span).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        self.coefficients
+            .iter()
+            .rev()
+            .fold(0.0, |acc, c| acc * tau + c)
+    }
+
+    /// Gain at time `t` relative to the end of the run: a reading at `t` is divided by
+    /// this to say what the display would have given at the end.
+    pub fn gain(&self, t: f64) -> f64 {
+        let end = self.level(self.t_last);
+        if end > 0.0 { self.level(t) / end } else { 1.0 }
+    }
+}
+
+/// What the drift analysis found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DriftReport {
+    pub references: usize,
+    /// Degree of the polynomial kept (0: no drift beyond noise).
+    pub degree: Option<usize>,
+    /// Largest departure of the fitted gain from the end-of-run value, percent.
+    pub amplitude_percent: f64,
+    pub corrected: bool,
+    /// Relative scatter of the references about the drift curve.
+    pub residual_relative_sd: Option<f64>,
+    pub note: String,
+}
+
+/// Fit the drift of the reference signal (reference luminance minus black) over time,
+/// choosing the polynomial degree by leave-one-out error (simplest within noise).
+/// Returns the model (`None` when no correction is due) and the report.
+pub fn estimate_drift(references: &[(f64, f64)], correct: bool) -> (Option<DriftModel>, DriftReport) {
+    let n = references.len();
+    let report = |degree, amplitude, corrected, sd, note: String| DriftReport {
+        references: n,
+        degree,
+        amplitude_percent: amplitude,
+        corrected,
+        residual_relative_sd: sd,
+        note,
+    };
+    if n < 3 {
+        return (
+            None,
+            report(None, 0.0, false, None, format!("{n} reference readings: too few to follow drift")),
+        );
+    }
+    let t_first = references.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+    let t_last = references.iter().map(|r| r.0).fold(f64::NEG_INFINITY, f64::max);
+    let span = (t_last - t_first).max(f64::MIN_POSITIVE);
+    let level = mean(&references.iter().map(|r| r.1).collect::<Vec<_>>());
+    if !(level > 0.0) {
+        return (
+            None,
+            report(None, 0.0, false, None, "the reference gave no light above black".into()),
+        );
+    }
+    let fit = |points: &[(f64, f64)], degree: usize| {
+        let design = DMatrix::from_fn(points.len(), degree + 1, |i, k| {
+            ((points[i].0 - t_first) / span).powi(k as i32)
+        });
+        let y: Vec<f64> = points.iter().map(|p| p.1).collect();
+        fit_linear(&design, &y, &vec![1.0; points.len()]).ok()
+    };
+    let max_degree = 3.min(n - 3);
+    let mut errors = Vec::new();
+    for degree in 0..=max_degree {
+        let mut e = Vec::with_capacity(n);
+        for held in 0..n {
+            let training: Vec<(f64, f64)> = references
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != held)
+                .map(|(_, p)| *p)
+                .collect();
+            let Some(f) = fit(&training, degree) else {
+                break;
+            };
+            let model = DriftModel {
+                t_first,
+                t_last,
+                coefficients: f.params,
+            };
+            e.push((model.level(references[held].0) - references[held].1).abs() / level);
+        }
+        errors.push((e.len() == n).then_some(e));
+    }
+    let degree = simplest_within_noise(&errors).unwrap_or(0);
+    let Some(f) = fit(references, degree) else {
+        return (None, report(None, 0.0, false, None, "the drift fit failed".into()));
+    };
+    let sd = if f.dof > 0 {
+        Some((f.chi2 / f.dof as f64).sqrt() / level)
+    } else {
+        None
+    };
+    let model = DriftModel {
+        t_first,
+        t_last,
+        coefficients: f.params,
+    };
+    let amplitude = references
+        .iter()
+        .map(|r| (model.gain(r.0) - 1.0).abs())
+        .fold(0.0, f64::max)
+        * 100.0;
+    if degree == 0 {
+        return (
+            None,
+            report(
+                Some(0),
+                0.0,
+                false,
+                sd,
+                "no drift beyond the noise of the reference readings".into(),
+            ),
+        );
+    }
+    let note = if correct {
+        format!("degree-{degree} drift of up to {amplitude:.2} %, corrected to the end of the run")
+    } else {
+        format!("degree-{degree} drift of up to {amplitude:.2} %, not corrected (switched off)")
+    };
+    (
+        correct.then_some(model),
+        report(Some(degree), amplitude, correct, sd, note),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_steady_display_needs_no_drift_model() {
+        let wiggle = [0.2, -0.5, 0.4, -0.1, 0.3, -0.4, 0.1, -0.2];
+        let refs: Vec<(f64, f64)> = wiggle
+            .iter()
+            .enumerate()
+            .map(|(i, w)| (i as f64 * 60.0, 100.0 * (1.0 + 0.002 * w)))
+            .collect();
+        let (model, report) = estimate_drift(&refs, true);
+        assert!(model.is_none(), "{report:?}");
+        assert_eq!(report.degree, Some(0));
+        let sd = report.residual_relative_sd.unwrap();
+        assert!(sd > 0.0005 && sd < 0.004, "{sd}");
+    }
+
+    #[test]
+    fn a_linear_drift_is_found_and_corrected_to_the_end() {
+        let wiggle = [0.2, -0.5, 0.4, -0.1, 0.3, -0.4, 0.1, -0.2];
+        let refs: Vec<(f64, f64)> = wiggle
+            .iter()
+            .enumerate()
+            .map(|(i, w)| {
+                let t = i as f64 * 60.0;
+                (t, 100.0 * (1.0 + 0.0001 * t) * (1.0 + 0.001 * w))
+            })
+            .collect();
+        let (model, report) = estimate_drift(&refs, true);
+        let model = model.expect("drift must be found");
+        assert!(report.degree.unwrap() >= 1);
+        // The start is about 4 % below the end.
+        assert!((model.gain(0.0) - 1.0 / 1.042).abs() < 0.003, "{}", model.gain(0.0));
+        assert!((model.gain(420.0) - 1.0).abs() < 1e-12);
+        assert!(report.amplitude_percent > 3.0 && report.amplitude_percent < 5.0);
+    }
+
+    #[test]
+    fn noise_floor_comes_from_black_repeats() {
+        let noise = estimate_noise(Some(0.002), &[0.050, 0.052, 0.048], 100.0);
+        assert!((noise.floor - 0.002).abs() < 0.0005, "{noise:?}");
+        assert!((noise.sigma(100.0) - 0.2).abs() < 0.01);
+        let assumed = estimate_noise(None, &[0.05], 100.0);
+        assert_eq!(assumed.relative, ASSUMED_RELATIVE_NOISE);
+        assert!(assumed.floor_from.starts_with("assumed"));
+    }
+}

@@ -1,0 +1,297 @@
+//! The black and the primary matrix.
+//!
+//! The black is the mean of the black readings. Each column of the primary matrix
+//! comes from *every* level of its channel's ramp, black subtracted (Rougeron &
+//! Péroche eq. 3; Brainard 1989): the readings rᵢ of one channel should all point the
+//! same way in XYZ (primary constancy), so the direction u is the principal axis of
+//! Σ wᵢ rᵢ rᵢᵀ (a weighted rank-one fit, wᵢ = 1/σᵢ²), and each reading's excitation is
+//! its length along u divided by that of full drive. The column is u times the
+//! full-drive length: dim levels sharpen the chromaticity of the primary, full drive
+//! sets its size.
+//!
+//! When full drive was not measured (the instrument overloaded), the excitations are
+//! taken relative to the brightest level measured and the transfer law, fitted with a
+//! free amplitude, extrapolates to full drive ("unpinned").
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::noise::NoiseModel;
+use crate::color::Xyz;
+use crate::instrument::ReadingStatus;
+use crate::measurement::Measurement;
+
+/// A usable reading with its drift-corrected XYZ.
+#[derive(Debug, Clone)]
+pub struct Corrected<'a> {
+    pub measurement: &'a Measurement,
+    pub xyz: Xyz,
+}
+
+/// The black level and how it was found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BlackEstimate {
+    pub xyz: Xyz,
+    pub readings: usize,
+    pub note: String,
+}
+
+/// Mean of the black readings at the standard condition. Readings flagged below range
+/// are used only when there is nothing else, and the estimate says so; with none at
+/// all the black is taken as zero, also said.
+pub fn estimate_black(blacks: &[&Measurement]) -> BlackEstimate {
+    let in_range: Vec<Xyz> = blacks.iter().filter_map(|m| m.usable_xyz()).collect();
+    if !in_range.is_empty() {
+        let xyz = in_range.iter().sum::<Xyz>() / in_range.len() as f64;
+        return BlackEstimate {
+            xyz,
+            readings: in_range.len(),
+            note: format!("mean of {} black readings", in_range.len()),
+        };
+    }
+    let indicated: Vec<Xyz> = blacks
+        .iter()
+        .filter(|m| m.reading.status == ReadingStatus::BelowRange)
+        .filter_map(|m| m.reading.xyz)
+        .filter(|x| x.iter().all(|v| v.is_finite()))
+        .collect();
+    if !indicated.is_empty() {
+        let xyz = (indicated.iter().sum::<Xyz>() / indicated.len() as f64).map(|v| v.max(0.0));
+        return BlackEstimate {
+            xyz,
+            readings: indicated.len(),
+            note: format!(
+                "black is below the instrument's range: taken from the values it indicated ({} readings), clamped at zero",
+                indicated.len()
+            ),
+        };
+    }
+    BlackEstimate {
+        xyz: Xyz::zeros(),
+        readings: 0,
+        note: "no black reading: black taken as zero".into(),
+    }
+}
+
+/// One reading of a ramp, as an excitation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RampPoint {
+    pub index: usize,
+    pub drive: f64,
+    pub excitation: f64,
+    pub sigma: f64,
+    /// The drift-corrected reading.
+    pub xyz: Xyz,
+}
+
+/// A channel's ramp reduced to a direction and excitations.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelRamp {
+    pub channel: usize,
+    /// Unit vector of the primary's XYZ.
+    pub direction: Vector3<f64>,
+    pub direction_se: Vector3<f64>,
+    /// Length along `direction` that excitation 1 stands for.
+    pub normaliser: f64,
+    pub normaliser_se: f64,
+    /// True when `normaliser` is the full-drive reading.
+    pub pinned: bool,
+    pub points: Vec<RampPoint>,
+}
+
+impl ChannelRamp {
+    /// The matrix column for a law of amplitude `amplitude` (1 when pinned).
+    pub fn column(&self, amplitude: f64) -> Xyz {
+        self.direction * self.normaliser * amplitude
+    }
+
+    /// Standard errors of the column's elements (pinned case).
+    pub fn column_se(&self) -> Xyz {
+        Vector3::from_fn(|j, _| {
+            ((self.direction[j] * self.normaliser_se).powi(2)
+                + (self.normaliser * self.direction_se[j]).powi(2))
+            .sqrt()
+        })
+    }
+
+    /// Distinct drive levels above zero, ascending.
+    pub fn levels(&self) -> Vec<f64> {
+        let mut v: Vec<f64> = self.points.iter().map(|p| p.drive).collect();
+        v.sort_by(|a, b| a.total_cmp(b));
+        v.dedup();
+        v
+    }
+
+    /// The same ramp without the readings at drive `level` (for cross-validation).
+    pub fn without_level(&self, level: f64, black: &Xyz, noise: &NoiseModel) -> Option<ChannelRamp> {
+        let kept: Vec<(usize, f64, Xyz)> = self
+            .points
+            .iter()
+            .filter(|p| p.drive != level)
+            .map(|p| (p.index, p.drive, p.xyz))
+            .collect();
+        reduce_ramp(self.channel, &kept, black, noise)
+    }
+}
+
+/// Why a channel's ramp could not be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RampError {
+    #[error("the {channel} channel has no usable ramp reading")]
+    NoReadings { channel: &'static str },
+    #[error("the {channel} channel's ramp gives no light above black")]
+    NoLight { channel: &'static str },
+}
+
+/// The ramp of `channel` from its single-channel readings at the standard condition.
+pub fn channel_ramp(
+    channel: usize,
+    readings: &[Corrected<'_>],
+    black: &Xyz,
+    noise: &NoiseModel,
+) -> Result<ChannelRamp, RampError> {
+    let name = crate::model::CHANNELS[channel];
+    let points: Vec<(usize, f64, Xyz)> = readings
+        .iter()
+        .filter(|r| {
+            let d = r.measurement.drive;
+            d[channel] > 0.0 && (0..3).all(|k| k == channel || d[k] == 0.0)
+        })
+        .map(|r| (r.measurement.index, r.measurement.drive[channel], r.xyz))
+        .collect();
+    if points.is_empty() {
+        return Err(RampError::NoReadings { channel: name });
+    }
+    reduce_ramp(channel, &points, black, noise).ok_or(RampError::NoLight { channel: name })
+}
+
+fn reduce_ramp(
+    channel: usize,
+    points: &[(usize, f64, Xyz)],
+    black: &Xyz,
+    noise: &NoiseModel,
+) -> Option<ChannelRamp> {
+    let sigma_of = |xyz: &Xyz| noise.sigma(xyz.norm());
+    let mut scatter = Matrix3::zeros();
+    for (_, _, xyz) in points {
+        let r = xyz - black;
+        let w = 1.0 / sigma_of(xyz).powi(2);
+        scatter += r * r.transpose() * w;
+    }
+    let eigen = SymmetricEigen::new(scatter);
+    let (k, _) = eigen
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))?;
+    let mut u: Vector3<f64> = eigen.eigenvectors.column(k).into_owned();
+    if u.sum() < 0.0 {
+        u = -u;
+    }
+    if !u.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let lengths: Vec<f64> = points.iter().map(|(_, _, xyz)| u.dot(&(xyz - black))).collect();
+    let weight_sum: f64 = points
+        .iter()
+        .zip(&lengths)
+        .map(|((_, _, xyz), s)| s * s / sigma_of(xyz).powi(2))
+        .sum();
+    let direction_se = Vector3::repeat(1.0 / weight_sum.max(f64::MIN_POSITIVE).sqrt());
+
+    let full: Vec<usize> = (0..points.len()).filter(|i| points[*i].1 >= 1.0).collect();
+    let (top_indices, pinned) = if full.is_empty() {
+        let top = points.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+        ((0..points.len()).filter(|i| points[*i].1 == top).collect::<Vec<_>>(), false)
+    } else {
+        (full, true)
+    };
+    let normaliser = top_indices.iter().map(|i| lengths[*i]).sum::<f64>() / top_indices.len() as f64;
+    if !(normaliser > 0.0) {
+        return None;
+    }
+    let normaliser_se = noise.sigma(normaliser) / (top_indices.len() as f64).sqrt();
+    let points = points
+        .iter()
+        .zip(&lengths)
+        .map(|((index, drive, xyz), s)| RampPoint {
+            index: *index,
+            drive: *drive,
+            excitation: s / normaliser,
+            sigma: sigma_of(xyz) / normaliser,
+            xyz: *xyz,
+        })
+        .collect();
+    Some(ChannelRamp {
+        channel,
+        direction: u,
+        direction_se,
+        normaliser,
+        normaliser_se,
+        pinned,
+        points,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noise() -> NoiseModel {
+        NoiseModel {
+            relative: 0.002,
+            floor: 0.001,
+            relative_from: String::new(),
+            floor_from: String::new(),
+        }
+    }
+
+    #[test]
+    fn direction_and_excitations_of_a_clean_ramp() {
+        let primary = Xyz::new(40.0, 21.0, 2.0);
+        let black = Xyz::new(0.1, 0.1, 0.1);
+        let points: Vec<(usize, f64, Xyz)> = [0.25, 0.5, 0.75, 1.0]
+            .iter()
+            .enumerate()
+            .map(|(i, v): (usize, &f64)| (i, *v, black + primary * v.powf(2.2)))
+            .collect();
+        let ramp = reduce_ramp(0, &points, &black, &noise()).unwrap();
+        assert!(ramp.pinned);
+        assert!((ramp.column(1.0) - primary).norm() < 1e-9);
+        for p in &ramp.points {
+            assert!((p.excitation - p.drive.powf(2.2)).abs() < 1e-12);
+        }
+        // Without full drive the brightest level normalises and the ramp is unpinned.
+        let ramp = reduce_ramp(0, &points[..3], &black, &noise()).unwrap();
+        assert!(!ramp.pinned);
+        assert!((ramp.points[2].excitation - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn black_prefers_in_range_readings_and_never_invents_values() {
+        use crate::instrument::Reading;
+        let m = |y: f64, status| Measurement {
+            index: 0,
+            role: crate::measurement::Role::Black,
+            drive: [0.0; 3],
+            codes: None,
+            position: Default::default(),
+            background: [0.0; 3],
+            time_s: None,
+            reading: Reading {
+                xyz: Some(Xyz::new(y, y, y)),
+                spectrum: None,
+                status,
+                integration_s: 1.0,
+            },
+        };
+        let a = m(0.2, ReadingStatus::Ok);
+        let b = m(-0.001, ReadingStatus::BelowRange);
+        let est = estimate_black(&[&a, &b]);
+        assert_eq!(est.xyz, Xyz::new(0.2, 0.2, 0.2));
+        let est = estimate_black(&[&b]);
+        assert_eq!(est.xyz, Xyz::zeros());
+        assert!(est.note.contains("below the instrument's range"));
+        assert!(estimate_black(&[]).note.contains("no black"));
+    }
+}

@@ -1,0 +1,61 @@
+//! "Model only what is needed": among candidates scored on the same held-out items,
+//! keep the simplest whose error is within noise of the best.
+//!
+//! Rule: candidates come in order of complexity. For each, the paired differences
+//! dᵢ = errᵢ(candidate) − errᵢ(best) over the held-out items are formed; the first
+//! candidate whose mean difference is at most one standard error of that mean is kept
+//! (the one-standard-error rule of Breiman et al. 1984, on paired differences).
+
+use super::stats::{mean, standard_deviation};
+
+/// Index of the candidate to keep. `errors[k]` holds candidate k's error on each
+/// held-out item (the same items, in the same order, for every candidate); `None`
+/// marks a candidate that could not be scored. `None` overall when no candidate was.
+pub fn simplest_within_noise(errors: &[Option<Vec<f64>>]) -> Option<usize> {
+    let best = errors
+        .iter()
+        .enumerate()
+        .filter_map(|(k, e)| e.as_ref().filter(|e| !e.is_empty()).map(|e| (k, mean(e))))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?
+        .0;
+    let best_errors = errors[best].as_ref()?;
+    for (k, candidate) in errors.iter().enumerate() {
+        let Some(candidate) = candidate else { continue };
+        if candidate.len() != best_errors.len() {
+            continue;
+        }
+        let d: Vec<f64> = candidate
+            .iter()
+            .zip(best_errors)
+            .map(|(c, b)| c - b)
+            .collect();
+        let se = standard_deviation(&d) / (d.len() as f64).sqrt();
+        if mean(&d) <= se {
+            return Some(k);
+        }
+    }
+    Some(best)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_simpler_candidate_within_noise_wins() {
+        let simple = vec![1.0, 1.2, 0.9, 1.1, 1.0];
+        let complex = vec![0.98, 1.21, 0.88, 1.12, 0.97];
+        assert_eq!(simplest_within_noise(&[Some(simple), Some(complex)]), Some(0));
+    }
+
+    #[test]
+    fn a_clearly_better_complex_candidate_wins() {
+        let simple = vec![2.0, 2.2, 1.9, 2.1, 2.0];
+        let complex = vec![0.5, 0.6, 0.4, 0.5, 0.55];
+        assert_eq!(
+            simplest_within_noise(&[Some(simple), None, Some(complex)]),
+            Some(2)
+        );
+        assert_eq!(simplest_within_noise(&[None, None]), None);
+    }
+}
