@@ -172,7 +172,7 @@ pub fn estimate_drift(references: &[(f64, f64)], correct: bool) -> (Option<Drift
         }
         errors.push((e.len() == n).then_some(e));
     }
-    let degree = simplest_within_noise(&errors).unwrap_or(0);
+    let degree = simplest_within_noise(&errors, 0.0).unwrap_or(0);
     let Some(f) = fit(references, degree) else {
         return (None, report(None, 0.0, false, None, "the drift fit failed".into()));
     };

@@ -5,3 +5,4 @@
 pub mod clock;
 pub mod monitor;
 pub mod presets;
+pub mod rig;

@@ -1,0 +1,358 @@
+//! Tests of the assumptions the monitor model rests on (Brainard 1989), each reported
+//! with its figure, the figure noise alone would give, and a verdict:
+//!
+//! * primary constancy: a channel's chromaticity (u′v′) at every level it was measured,
+//!   against full drive; and, where spectra exist, how much of the ramp's spectra one
+//!   spectral shape explains (first singular value of the normalised spectra);
+//! * additivity: each grey against the sum of its channels measured alone at the same
+//!   drive, and white against the sum of the primaries (no model involved);
+//! * spatial independence: the same patch on a black and on a white surround;
+//! * temporal stability: the drift of the reference white (see `noise`);
+//! * monotonicity: levels whose excitation falls below a dimmer level's by more than
+//!   the noise.
+//!
+//! Verdicts: within noise; beyond noise but below visibility (ΔE00 < 1 or Δu′v′ below
+//! 0.004, about one just-noticeable difference); or failed.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use super::noise::{DriftReport, NoiseModel};
+use super::primaries::{ChannelRamp, Corrected};
+use super::validate::delta_e00_xyz;
+use crate::color::Xyz;
+use crate::color::spaces::{UvPrime, xyz_to_uv_prime};
+use crate::measurement::Role;
+use crate::model::CHANNELS;
+
+/// Δu′v′ of about one just-noticeable difference.
+pub const UV_VISIBILITY: f64 = 0.004;
+/// ΔE00 below which a departure is taken as not visible.
+pub const DE00_VISIBILITY: f64 = 1.0;
+
+/// How an assumption fared.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Verdict {
+    /// The departure is within what noise explains.
+    WithinNoise,
+    /// Real, but too small to see.
+    BelowVisibility,
+    Fails,
+    /// Nothing was measured to test it.
+    NotMeasured,
+}
+
+impl Verdict {
+    fn judge(within_noise: bool, below_visibility: bool) -> Verdict {
+        if within_noise {
+            Verdict::WithinNoise
+        } else if below_visibility {
+            Verdict::BelowVisibility
+        } else {
+            Verdict::Fails
+        }
+    }
+
+    /// The worst of several verdicts (not-measured counts as nothing).
+    fn worst(verdicts: impl IntoIterator<Item = Verdict>) -> Verdict {
+        let rank = |v: &Verdict| match v {
+            Verdict::NotMeasured => 0,
+            Verdict::WithinNoise => 1,
+            Verdict::BelowVisibility => 2,
+            Verdict::Fails => 3,
+        };
+        verdicts.into_iter().max_by_key(rank).unwrap_or(Verdict::NotMeasured)
+    }
+}
+
+impl std::fmt::Display for Verdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Verdict::WithinNoise => "holds (within noise)",
+            Verdict::BelowVisibility => "departs, below visibility",
+            Verdict::Fails => "FAILS",
+            Verdict::NotMeasured => "not measured",
+        })
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelConstancy {
+    pub channel: String,
+    /// Levels bright enough for a chromaticity (≥ 50 σ above black).
+    pub levels: usize,
+    /// Largest Δu′v′ from full drive.
+    pub max_delta_uv: f64,
+    /// What noise alone would give at the dimmest level used (3σ).
+    pub noise_delta_uv: f64,
+    /// Fraction of the ramp's spectral energy in its first singular vector.
+    pub spectral_first_component: Option<f64>,
+    pub verdict: Verdict,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GreyAdditivity {
+    pub drive: f64,
+    /// ΔE00 between the grey and the sum of its channels.
+    pub delta_e00: f64,
+    /// Grey luminance over the sum of the channels' luminances, minus one, percent.
+    pub luminance_departure_percent: f64,
+    pub verdict: Verdict,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SurroundCheck {
+    pub delta_e00: f64,
+    /// Luminance on white surround over on black, minus one, percent.
+    pub luminance_change_percent: f64,
+    pub noise_percent: f64,
+    pub verdict: Verdict,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelMonotonicity {
+    pub channel: String,
+    /// Level pairs where the brighter drive gave less light by more than 3σ.
+    pub reversals_beyond_noise: usize,
+    pub verdict: Verdict,
+}
+
+/// All assumption checks.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AssumptionChecks {
+    pub primary_constancy: Vec<ChannelConstancy>,
+    pub primary_constancy_verdict: Verdict,
+    pub additivity: Vec<GreyAdditivity>,
+    pub additivity_verdict: Verdict,
+    pub spatial_independence: Option<SurroundCheck>,
+    pub spatial_independence_verdict: Verdict,
+    pub temporal_stability: DriftReport,
+    pub temporal_stability_verdict: Verdict,
+    pub monotonicity: Vec<ChannelMonotonicity>,
+    pub monotonicity_verdict: Verdict,
+}
+
+/// Mean XYZ of the readings of one drive among `readings`.
+fn mean_at<'a>(readings: impl Iterator<Item = &'a Corrected<'a>>) -> Option<(Xyz, usize)> {
+    let v: Vec<Xyz> = readings.map(|r| r.xyz).collect();
+    (!v.is_empty()).then(|| (v.iter().sum::<Xyz>() / v.len() as f64, v.len()))
+}
+
+fn primary_constancy(
+    ramps: &[ChannelRamp; 3],
+    readings: &[Corrected<'_>],
+    black: &Xyz,
+    black_spectrum: Option<&[f64]>,
+    noise: &NoiseModel,
+) -> Vec<ChannelConstancy> {
+    ramps
+        .iter()
+        .map(|ramp| {
+            let full_above = ramp.column(1.0);
+            let reference = xyz_to_uv_prime(&full_above, UvPrime { u: 0.0, v: 0.0 });
+            let mut max_delta: f64 = 0.0;
+            let mut noise_at_dimmest: f64 = 0.0;
+            let mut levels = 0;
+            for level in ramp.levels() {
+                let at: Vec<_> = ramp.points.iter().filter(|p| p.drive == level).collect();
+                let above = at.iter().map(|p| p.xyz - black).sum::<Xyz>() / at.len() as f64;
+                let sigma = noise.sigma(above.y + black.y) / (at.len() as f64).sqrt();
+                if above.y < 50.0 * sigma {
+                    continue;
+                }
+                levels += 1;
+                let uv = xyz_to_uv_prime(&above, reference);
+                max_delta = max_delta.max((uv.u - reference.u).hypot(uv.v - reference.v));
+                // Relative errors of the tristimulus values move u′v′ by about their size
+                // times the chromaticity (≈ 0.5); three standard deviations, two readings.
+                let relative = sigma / above.y.max(f64::MIN_POSITIVE);
+                noise_at_dimmest = noise_at_dimmest.max(3.0 * 0.5 * relative * 2f64.sqrt());
+            }
+            let spectral_first_component = black_spectrum.and_then(|bs| {
+                let spectra: Vec<Vec<f64>> = ramp
+                    .points
+                    .iter()
+                    .filter_map(|p| {
+                        let m = readings.iter().find(|r| r.measurement.index == p.index)?;
+                        let s = m.measurement.reading.spectrum.as_ref()?;
+                        let above: Vec<f64> = s.values().iter().zip(bs).map(|(v, b)| v - b).collect();
+                        let norm = above.iter().map(|v| v * v).sum::<f64>().sqrt();
+                        (norm > 0.0 && s.values().len() == bs.len() && p.excitation > 0.05)
+                            .then(|| above.iter().map(|v| v / norm).collect())
+                    })
+                    .collect();
+                if spectra.len() < 2 {
+                    return None;
+                }
+                let rows = spectra[0].len();
+                let m = DMatrix::from_fn(rows, spectra.len(), |i, j| spectra[j][i]);
+                let sv = m.singular_values();
+                let total: f64 = sv.iter().map(|s| s * s).sum();
+                (total > 0.0).then(|| sv.max().powi(2) / total)
+            });
+            ChannelConstancy {
+                channel: CHANNELS[ramp.channel].into(),
+                levels,
+                max_delta_uv: max_delta,
+                noise_delta_uv: noise_at_dimmest,
+                spectral_first_component,
+                verdict: if levels < 2 {
+                    Verdict::NotMeasured
+                } else {
+                    Verdict::judge(max_delta <= noise_at_dimmest.max(1e-4), max_delta < UV_VISIBILITY)
+                },
+            }
+        })
+        .collect()
+}
+
+fn additivity(
+    readings: &[Corrected<'_>],
+    black: &Xyz,
+    noise: &NoiseModel,
+    white_reference: &Xyz,
+) -> Vec<GreyAdditivity> {
+    let standard = |r: &&Corrected<'_>| r.measurement.is_standard_condition();
+    let mut levels: Vec<f64> = readings
+        .iter()
+        .filter(standard)
+        .filter(|r| matches!(r.measurement.role, Role::Grey | Role::Reference))
+        .map(|r| r.measurement.drive)
+        .filter(|d| d[0] == d[1] && d[1] == d[2] && d[0] > 0.0)
+        .map(|d| d[0])
+        .collect();
+    levels.sort_by(|a, b| a.total_cmp(b));
+    levels.dedup();
+    levels
+        .into_iter()
+        .filter_map(|level| {
+            let (grey, n_grey) = mean_at(
+                readings
+                    .iter()
+                    .filter(standard)
+                    .filter(|r| r.measurement.drive == [level; 3]),
+            )?;
+            let mut sum = *black;
+            let mut worst_n = usize::MAX;
+            for c in 0..3 {
+                let mut d = [0.0; 3];
+                d[c] = level;
+                let (channel, n) = mean_at(readings.iter().filter(standard).filter(|r| r.measurement.drive == d))?;
+                sum += channel - black;
+                worst_n = worst_n.min(n);
+            }
+            let departure = (grey.y - black.y) / (sum.y - black.y) - 1.0;
+            let de = delta_e00_xyz(&grey, &sum, white_reference);
+            // Noise of the ratio: the grey's and the three channels' relative noise.
+            let rel = |y: f64, n: usize| noise.sigma(y) / y.abs().max(f64::MIN_POSITIVE) / (n as f64).sqrt();
+            let noise_ratio = (rel(grey.y, n_grey).powi(2) + rel(sum.y, worst_n).powi(2) * 3.0).sqrt();
+            Some(GreyAdditivity {
+                drive: level,
+                delta_e00: de,
+                luminance_departure_percent: departure * 100.0,
+                verdict: Verdict::judge(departure.abs() <= 3.0 * noise_ratio, de < DE00_VISIBILITY),
+            })
+        })
+        .collect()
+}
+
+fn spatial_independence(readings: &[Corrected<'_>], noise: &NoiseModel, white: &Xyz) -> Option<SurroundCheck> {
+    let surround: Vec<&Corrected<'_>> = readings
+        .iter()
+        .filter(|r| r.measurement.role == Role::Surround)
+        .collect();
+    let on_black = mean_at(surround.iter().copied().filter(|r| r.measurement.background == [0.0; 3]))?.0;
+    let (on_white, _) = mean_at(
+        surround
+            .iter()
+            .copied()
+            .filter(|r| r.measurement.background.iter().all(|b| *b > 0.5)),
+    )?;
+    let change = on_white.y / on_black.y - 1.0;
+    let noise_percent = 3.0 * 2f64.sqrt() * noise.sigma(on_black.y) / on_black.y * 100.0;
+    let de = delta_e00_xyz(&on_white, &on_black, white);
+    Some(SurroundCheck {
+        delta_e00: de,
+        luminance_change_percent: change * 100.0,
+        noise_percent,
+        verdict: Verdict::judge((change * 100.0).abs() <= noise_percent, de < DE00_VISIBILITY),
+    })
+}
+
+fn monotonicity(ramps: &[ChannelRamp; 3]) -> Vec<ChannelMonotonicity> {
+    ramps
+        .iter()
+        .map(|ramp| {
+            let levels: Vec<(f64, f64)> = ramp
+                .levels()
+                .into_iter()
+                .map(|l| {
+                    let at: Vec<_> = ramp.points.iter().filter(|p| p.drive == l).collect();
+                    let e = at.iter().map(|p| p.excitation).sum::<f64>() / at.len() as f64;
+                    let s = (at.iter().map(|p| p.sigma * p.sigma).sum::<f64>()).sqrt() / at.len() as f64;
+                    (e, s)
+                })
+                .collect();
+            let reversals = levels
+                .windows(2)
+                .filter(|w| w[1].0 < w[0].0 - 3.0 * (w[0].1.powi(2) + w[1].1.powi(2)).sqrt())
+                .count();
+            ChannelMonotonicity {
+                channel: CHANNELS[ramp.channel].into(),
+                reversals_beyond_noise: reversals,
+                verdict: if reversals == 0 {
+                    Verdict::WithinNoise
+                } else {
+                    Verdict::Fails
+                },
+            }
+        })
+        .collect()
+}
+
+/// Run every check.
+pub fn check_assumptions(
+    readings: &[Corrected<'_>],
+    ramps: &[ChannelRamp; 3],
+    black: &Xyz,
+    noise: &NoiseModel,
+    drift: &DriftReport,
+    white_reference: &Xyz,
+) -> AssumptionChecks {
+    // The black's spectrum, for the spectral constancy test.
+    let black_spectra: Vec<&[f64]> = readings
+        .iter()
+        .filter(|r| r.measurement.role == Role::Black && r.measurement.is_standard_condition())
+        .filter_map(|r| r.measurement.reading.spectrum.as_ref().map(|s| s.values()))
+        .collect();
+    let black_spectrum: Option<Vec<f64>> = black_spectra.first().map(|first| {
+        (0..first.len())
+            .map(|i| black_spectra.iter().map(|s| s.get(i).copied().unwrap_or(0.0)).sum::<f64>() / black_spectra.len() as f64)
+            .collect()
+    });
+    let primary_constancy = primary_constancy(ramps, readings, black, black_spectrum.as_deref(), noise);
+    let additivity = additivity(readings, black, noise, white_reference);
+    let spatial_independence = spatial_independence(readings, noise, white_reference);
+    let monotonicity = monotonicity(ramps);
+    let temporal_stability_verdict = match drift.degree {
+        None => Verdict::NotMeasured,
+        Some(0) => Verdict::WithinNoise,
+        Some(_) if drift.amplitude_percent < 1.0 => Verdict::BelowVisibility,
+        Some(_) => Verdict::Fails,
+    };
+    AssumptionChecks {
+        primary_constancy_verdict: Verdict::worst(primary_constancy.iter().map(|c| c.verdict)),
+        additivity_verdict: Verdict::worst(additivity.iter().map(|c| c.verdict)),
+        spatial_independence_verdict: spatial_independence
+            .as_ref()
+            .map_or(Verdict::NotMeasured, |s| s.verdict),
+        monotonicity_verdict: Verdict::worst(monotonicity.iter().map(|c| c.verdict)),
+        primary_constancy,
+        additivity,
+        spatial_independence,
+        temporal_stability: drift.clone(),
+        temporal_stability_verdict,
+        monotonicity,
+    }
+}

@@ -1,0 +1,186 @@
+//! Which transfer law to keep: every candidate law is scored by leave-one-level-out
+//! cross-validation on the ramps (each level below full drive is left out in turn,
+//! the channel's direction, normaliser and law are fitted again without it, and the
+//! left-out readings are predicted), in ΔE00 against the display's white. The
+//! simplest law within noise of the best is kept (`select`).
+//!
+//! One law family is kept for all three channels, so the profile says one thing.
+
+use serde::{Deserialize, Serialize};
+
+use super::laws::{FittedParameter, LawFit, LawFitError, fit_law};
+use super::noise::NoiseModel;
+use super::primaries::ChannelRamp;
+use super::select::simplest_within_noise;
+use super::stats::ErrorStats;
+use super::validate::{delta_e00_xyz, noise_delta_e00};
+use crate::color::Xyz;
+use crate::model::transfer::LawKind;
+
+/// A law tried, fitted on all the data, with its cross-validated error.
+#[derive(Debug, Clone)]
+pub struct LawCandidate {
+    pub kind: LawKind,
+    /// The fit to each channel on all levels.
+    pub fits: [Result<LawFit, LawFitError>; 3],
+    /// Held-out ΔE00 of each left-out ramp reading, all channels.
+    pub cv_errors: Option<Vec<f64>>,
+    /// Why it could not be cross-validated, if it could not.
+    pub cv_note: Option<String>,
+}
+
+impl LawCandidate {
+    pub fn fitted(&self) -> bool {
+        self.fits.iter().all(|f| f.is_ok())
+    }
+}
+
+/// The outcome of choosing a law.
+#[derive(Debug, Clone)]
+pub struct LawSelection {
+    pub candidates: Vec<LawCandidate>,
+    pub chosen: LawKind,
+    pub rule: String,
+}
+
+impl LawSelection {
+    pub fn chosen_candidate(&self) -> Option<&LawCandidate> {
+        self.candidates.iter().find(|c| c.kind == self.chosen)
+    }
+}
+
+/// A law's report in a profile.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LawReport {
+    pub law: LawKind,
+    pub chosen: bool,
+    /// Leave-one-level-out ΔE00 on the ramps.
+    pub cross_validation: Option<ErrorStats>,
+    /// Parameters of R, G, B (empty for a channel the law could not fit).
+    pub parameters: [Vec<FittedParameter>; 3],
+    pub notes: Vec<String>,
+}
+
+impl LawSelection {
+    pub fn reports(&self) -> Vec<LawReport> {
+        self.candidates
+            .iter()
+            .map(|c| {
+                let mut notes = Vec::new();
+                if let Some(n) = &c.cv_note {
+                    notes.push(n.clone());
+                }
+                let parameters = [0, 1, 2].map(|ch| match &c.fits[ch] {
+                    Ok(f) => {
+                        for note in &f.notes {
+                            notes.push(format!("{}: {note}", crate::model::CHANNELS[ch]));
+                        }
+                        f.parameters.clone()
+                    }
+                    Err(e) => {
+                        notes.push(format!("{}: {e}", crate::model::CHANNELS[ch]));
+                        Vec::new()
+                    }
+                });
+                LawReport {
+                    law: c.kind,
+                    chosen: c.kind == self.chosen,
+                    cross_validation: c.cv_errors.as_deref().and_then(ErrorStats::of),
+                    parameters,
+                    notes,
+                }
+            })
+            .collect()
+    }
+}
+
+/// Cross-validated error of one law over all three channels, or why there is none.
+fn cross_validate(
+    kind: LawKind,
+    ramps: &[ChannelRamp; 3],
+    black: &Xyz,
+    white: &Xyz,
+    noise: &NoiseModel,
+    toe: f64,
+) -> Result<Vec<f64>, String> {
+    let mut errors = Vec::new();
+    for ramp in ramps {
+        let held_levels: Vec<f64> = ramp.levels().into_iter().filter(|l| *l < 1.0).collect();
+        if held_levels.is_empty() {
+            return Err("no level below full drive to hold out".into());
+        }
+        for level in held_levels {
+            let Some(training) = ramp.without_level(level, black, noise) else {
+                return Err("a training fold had no light".into());
+            };
+            let fit = fit_law(kind, &training, toe).map_err(|e| format!("a training fold: {e}"))?;
+            let column = training.column(fit.amplitude);
+            let predicted = black + column * fit.law.excitation(level);
+            for p in ramp.points.iter().filter(|p| p.drive == level) {
+                errors.push(delta_e00_xyz(&p.xyz, &predicted, white));
+            }
+        }
+    }
+    Ok(errors)
+}
+
+/// Fit every law in `kinds` to every channel, cross-validate each, and keep the
+/// simplest within noise of the best. `None` when no law fits all three channels.
+pub fn choose_law(
+    kinds: &[LawKind],
+    ramps: &[ChannelRamp; 3],
+    black: &Xyz,
+    white: &Xyz,
+    noise: &NoiseModel,
+    toe: f64,
+) -> Option<LawSelection> {
+    let mut kinds = kinds.to_vec();
+    kinds.sort();
+    kinds.dedup();
+    let candidates: Vec<LawCandidate> = kinds
+        .iter()
+        .map(|kind| {
+            let fits = [0, 1, 2].map(|c| fit_law(*kind, &ramps[c], toe));
+            let (cv_errors, cv_note) = if fits.iter().all(|f| f.is_ok()) {
+                match cross_validate(*kind, ramps, black, white, noise, toe) {
+                    Ok(e) => (Some(e), None),
+                    Err(note) => (None, Some(format!("not cross-validated: {note}"))),
+                }
+            } else {
+                (None, None)
+            };
+            LawCandidate {
+                kind: *kind,
+                fits,
+                cv_errors,
+                cv_note,
+            }
+        })
+        .collect();
+    let scores: Vec<Option<Vec<f64>>> = candidates.iter().map(|c| c.cv_errors.clone()).collect();
+    let held_xyz: Vec<Xyz> = ramps
+        .iter()
+        .flat_map(|r| r.points.iter().filter(|p| p.drive < 1.0).map(|p| p.xyz))
+        .collect();
+    let tolerance = noise_delta_e00(&held_xyz, noise, white);
+    let (chosen, rule) = match simplest_within_noise(&scores, tolerance) {
+        Some(k) => (
+            candidates[k].kind,
+            format!(
+                "simplest law whose leave-one-level-out ΔE00 exceeds the best's by no more than one standard error (paired) or than noise alone ({tolerance:.3})"
+            ),
+        ),
+        None => {
+            let simplest = candidates.iter().find(|c| c.fitted())?;
+            (
+                simplest.kind,
+                "too few levels to cross-validate: the simplest law that fits all channels".to_string(),
+            )
+        }
+    };
+    Some(LawSelection {
+        candidates,
+        chosen,
+        rule,
+    })
+}
