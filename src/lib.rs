@@ -10,12 +10,15 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod calibrate;
+pub mod cgats;
 pub mod color;
+pub mod config;
 pub mod display;
 pub mod fit;
 pub mod instrument;
 pub mod measurement;
 pub mod model;
 pub mod numeric_csv;
+pub mod profile;
 pub mod sim;
 pub mod time;

@@ -69,6 +69,8 @@ pub struct JournalHeader {
     pub config_digest: String,
     /// The config the run was started with, as TOML.
     pub config: String,
+    /// Directory the config's relative paths are taken from.
+    pub config_dir: PathBuf,
     pub display: String,
     pub instrument: InstrumentInfo,
     pub units: Units,
@@ -338,6 +340,7 @@ mod tests {
             started: "2026-11-23T12:00:00Z".into(),
             config_digest: "0".into(),
             config: String::new(),
+            config_dir: PathBuf::from("."),
             display: "test".into(),
             instrument: InstrumentInfo {
                 name: "test".into(),

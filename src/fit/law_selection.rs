@@ -1,8 +1,13 @@
-//! Which transfer law to keep: every candidate law is scored by leave-one-level-out
-//! cross-validation on the ramps (each level below full drive is left out in turn,
-//! the channel's direction, normaliser and law are fitted again without it, and the
-//! left-out readings are predicted), in ΔE00 against the display's white. The
-//! simplest law within noise of the best is kept (`select`).
+//! Which transfer law to keep. Every candidate law is scored on readings it was not
+//! fitted on, in ΔE00 against the display's white:
+//! * leave-one-level-out cross-validation on the ramps: each level below full drive is
+//!   left out in turn, the channel's direction, normaliser and law are fitted again
+//!   without it, and the left-out readings are predicted;
+//! * the greys, which no law is fitted on, predicted from all three channels.
+//!
+//! When some law cannot be cross-validated (too few levels to leave one out), all are
+//! compared on the greys alone, so the comparison stays like with like. The simplest
+//! law within noise of the best is kept (`select`).
 //!
 //! One law family is kept for all three channels, so the profile says one thing.
 
@@ -25,6 +30,10 @@ pub struct LawCandidate {
     pub fits: [Result<LawFit, LawFitError>; 3],
     /// Held-out ΔE00 of each left-out ramp reading, all channels.
     pub cv_errors: Option<Vec<f64>>,
+    /// ΔE00 of each grey, predicted from the fits on all ramp readings.
+    pub grey_errors: Option<Vec<f64>>,
+    /// The errors the law was compared on.
+    pub score: Option<Vec<f64>>,
     /// Why it could not be cross-validated, if it could not.
     pub cv_note: Option<String>,
 }
@@ -56,6 +65,8 @@ pub struct LawReport {
     pub chosen: bool,
     /// Leave-one-level-out ΔE00 on the ramps.
     pub cross_validation: Option<ErrorStats>,
+    /// ΔE00 of the greys (never fitted on).
+    pub greys: Option<ErrorStats>,
     /// Parameters of R, G, B (empty for a channel the law could not fit).
     pub parameters: [Vec<FittedParameter>; 3],
     pub notes: Vec<String>,
@@ -86,6 +97,7 @@ impl LawSelection {
                     law: c.kind,
                     chosen: c.kind == self.chosen,
                     cross_validation: c.cv_errors.as_deref().and_then(ErrorStats::of),
+                    greys: c.grey_errors.as_deref().and_then(ErrorStats::of),
                     parameters,
                     notes,
                 }
@@ -124,11 +136,37 @@ fn cross_validate(
     Ok(errors)
 }
 
-/// Fit every law in `kinds` to every channel, cross-validate each, and keep the
-/// simplest within noise of the best. `None` when no law fits all three channels.
+/// ΔE00 of each grey predicted by a candidate fitted on all ramp readings.
+fn grey_errors(
+    fits: &[Result<LawFit, LawFitError>; 3],
+    ramps: &[ChannelRamp; 3],
+    greys: &[(f64, Xyz)],
+    black: &Xyz,
+    white: &Xyz,
+) -> Option<Vec<f64>> {
+    let fits: Vec<&LawFit> = fits.iter().map(|f| f.as_ref().ok()).collect::<Option<_>>()?;
+    Some(
+        greys
+            .iter()
+            .map(|(level, measured)| {
+                let predicted = black
+                    + (0..3)
+                        .map(|c| ramps[c].column(fits[c].amplitude) * fits[c].law.excitation(*level))
+                        .sum::<Xyz>();
+                delta_e00_xyz(measured, &predicted, white)
+            })
+            .collect(),
+    )
+}
+
+/// Fit every law in `kinds` to every channel, score each on held-out readings (see the
+/// module documentation), and keep the simplest within noise of the best. `greys` are
+/// (drive level, XYZ) of grey readings below full drive. `None` when no law fits all
+/// three channels.
 pub fn choose_law(
     kinds: &[LawKind],
     ramps: &[ChannelRamp; 3],
+    greys: &[(f64, Xyz)],
     black: &Xyz,
     white: &Xyz,
     noise: &NoiseModel,
@@ -137,7 +175,7 @@ pub fn choose_law(
     let mut kinds = kinds.to_vec();
     kinds.sort();
     kinds.dedup();
-    let candidates: Vec<LawCandidate> = kinds
+    let mut candidates: Vec<LawCandidate> = kinds
         .iter()
         .map(|kind| {
             let fits = [0, 1, 2].map(|c| fit_law(*kind, &ramps[c], toe));
@@ -149,32 +187,57 @@ pub fn choose_law(
             } else {
                 (None, None)
             };
+            let grey_errors = grey_errors(&fits, ramps, greys, black, white);
             LawCandidate {
                 kind: *kind,
                 fits,
                 cv_errors,
+                grey_errors,
                 cv_note,
+                score: None,
             }
         })
         .collect();
-    let scores: Vec<Option<Vec<f64>>> = candidates.iter().map(|c| c.cv_errors.clone()).collect();
-    let held_xyz: Vec<Xyz> = ramps
-        .iter()
-        .flat_map(|r| r.points.iter().filter(|p| p.drive < 1.0).map(|p| p.xyz))
-        .collect();
-    let tolerance = noise_delta_e00(&held_xyz, noise, white);
+    let fitted: Vec<&LawCandidate> = candidates.iter().filter(|c| c.fitted()).collect();
+    let all_cross_validated = !fitted.is_empty() && fitted.iter().all(|c| c.cv_errors.is_some());
+    let (basis, mut held): (&str, Vec<Xyz>) = if all_cross_validated {
+        (
+            "leave-one-level-out ramp readings and the greys",
+            ramps
+                .iter()
+                .flat_map(|r| r.points.iter().filter(|p| p.drive < 1.0).map(|p| p.xyz))
+                .collect(),
+        )
+    } else {
+        ("the greys alone (some law could not be cross-validated)", Vec::new())
+    };
+    held.extend(greys.iter().map(|g| g.1));
+    for c in candidates.iter_mut().filter(|c| c.fitted()) {
+        c.score = if all_cross_validated {
+            let mut e = c.cv_errors.clone().unwrap_or_default();
+            e.extend(c.grey_errors.clone().unwrap_or_default());
+            Some(e)
+        } else if !greys.is_empty() {
+            c.grey_errors.clone()
+        } else {
+            None
+        };
+    }
+    let scores: Vec<Option<Vec<f64>>> = candidates.iter().map(|c| c.score.clone()).collect();
+    let tolerance = noise_delta_e00(&held, noise, white);
     let (chosen, rule) = match simplest_within_noise(&scores, tolerance) {
         Some(k) => (
             candidates[k].kind,
             format!(
-                "simplest law whose leave-one-level-out ΔE00 exceeds the best's by no more than one standard error (paired) or than noise alone ({tolerance:.3})"
+                "simplest law whose ΔE00 on {basis} exceeds the best's by no more than one standard error (paired) or than noise alone ({tolerance:.3})"
             ),
         ),
         None => {
             let simplest = candidates.iter().find(|c| c.fitted())?;
             (
                 simplest.kind,
-                "too few levels to cross-validate: the simplest law that fits all channels".to_string(),
+                "too few levels and no greys to score on: the simplest law that fits all channels"
+                    .to_string(),
             )
         }
     };

@@ -170,12 +170,22 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
         .filter_map(|m| Some((m.time_s?, m.usable_xyz()?.y - black.xyz.y)))
         .collect();
     let (drift_model, drift) = estimate_drift(&references, options.correct_drift);
+    // White's luminance sets the scale of the assumed noise floor. Without a white
+    // reading, the brightest reading of each channel stands in for its share.
+    let brightest = |c: usize| {
+        all.iter()
+            .filter(|m| m.role == Role::Ramp && m.drive[c] > 0.0)
+            .filter_map(|m| m.usable_xyz())
+            .map(|x| x.y)
+            .fold(0.0, f64::max)
+    };
     let white_y = all
         .iter()
         .filter(is_white)
         .filter_map(|m| m.usable_xyz())
         .map(|x| x.y)
-        .fold(0.0, f64::max);
+        .fold(0.0, f64::max)
+        .max(brightest(0) + brightest(1) + brightest(2));
     let black_ys: Vec<f64> = blacks.iter().filter_map(|m| m.usable_xyz()).map(|x| x.y).collect();
     let noise = estimate_noise(drift.residual_relative_sd, &black_ys, white_y.max(black.xyz.y));
 
@@ -220,9 +230,16 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
     };
 
     // 4. Laws.
+    let greys: Vec<(f64, Xyz)> = corrected
+        .iter()
+        .filter(|r| r.measurement.role == Role::Grey && r.measurement.is_standard_condition())
+        .filter(|r| r.measurement.drive[0] < 1.0)
+        .map(|r| (r.measurement.drive[0], r.xyz))
+        .collect();
     let selection = choose_law(
         &options.laws,
         &ramps,
+        &greys,
         &black.xyz,
         &white_reference,
         &noise,

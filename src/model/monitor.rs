@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::spatial::{ScreenPosition, SpatialMap};
-use super::transfer::TransferLaw;
+use super::transfer::{TransferError, TransferLaw};
 use crate::color::Xyz;
 
 /// Drive values of R, G, B, each normalised to [0, 1].
@@ -39,6 +39,7 @@ pub struct InverseResult {
 
 /// A fitted (or simulated) monitor model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(into = "ModelFile", try_from = "ModelFile")]
 pub struct MonitorModel {
     /// Columns: XYZ of R, G, B at full drive with black taken off, at the centre.
     pub matrix: Matrix3<f64>,
@@ -46,7 +47,6 @@ pub struct MonitorModel {
     pub black: Xyz,
     /// Transfer law of R, G and B.
     pub laws: [TransferLaw; 3],
-    #[serde(default)]
     pub spatial: SpatialMap,
 }
 
@@ -124,6 +124,90 @@ pub fn matrix_condition_number(m: &Matrix3<f64>) -> f64 {
     if min <= 0.0 { f64::INFINITY } else { max / min }
 }
 
+/// The model as written in a file: named primaries and laws, so a person can read
+/// it; checked when read (finite numbers, monotone laws).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelFile {
+    /// XYZ at zero drive.
+    black: [f64; 3],
+    primaries: PerChannel<[f64; 3]>,
+    laws: PerChannel<TransferLaw>,
+    #[serde(default)]
+    spatial: SpatialMap,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PerChannel<T> {
+    red: T,
+    green: T,
+    blue: T,
+}
+
+/// Why a model in a file is not usable.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelFileError {
+    #[error("model: {0} is not a finite number")]
+    NotFinite(&'static str),
+    #[error("model: the {channel} law: {source}")]
+    Law {
+        channel: &'static str,
+        source: TransferError,
+    },
+}
+
+impl From<MonitorModel> for ModelFile {
+    fn from(m: MonitorModel) -> Self {
+        let column = |c: usize| [m.matrix[(0, c)], m.matrix[(1, c)], m.matrix[(2, c)]];
+        let [red, green, blue] = m.laws;
+        ModelFile {
+            black: [m.black.x, m.black.y, m.black.z],
+            primaries: PerChannel {
+                red: column(0),
+                green: column(1),
+                blue: column(2),
+            },
+            laws: PerChannel { red, green, blue },
+            spatial: m.spatial,
+        }
+    }
+}
+
+impl TryFrom<ModelFile> for MonitorModel {
+    type Error = ModelFileError;
+
+    fn try_from(f: ModelFile) -> Result<Self, Self::Error> {
+        let finite = |v: &[f64; 3], what| {
+            if v.iter().all(|x| x.is_finite()) {
+                Ok(())
+            } else {
+                Err(ModelFileError::NotFinite(what))
+            }
+        };
+        finite(&f.black, "black")?;
+        finite(&f.primaries.red, "primaries.red")?;
+        finite(&f.primaries.green, "primaries.green")?;
+        finite(&f.primaries.blue, "primaries.blue")?;
+        let laws = [f.laws.red, f.laws.green, f.laws.blue];
+        for (law, channel) in laws.iter().zip(CHANNELS) {
+            law.monotonicity()
+                .map_err(|source| ModelFileError::Law { channel, source })?;
+        }
+        let p = &f.primaries;
+        Ok(MonitorModel {
+            matrix: Matrix3::from_columns(&[
+                Xyz::from(p.red),
+                Xyz::from(p.green),
+                Xyz::from(p.blue),
+            ]),
+            black: Xyz::from(f.black),
+            laws,
+            spatial: f.spatial,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -187,6 +271,19 @@ mod tests {
                 .unwrap()
                 .clipped
         );
+    }
+
+    #[test]
+    fn the_file_form_names_things_and_checks_them() {
+        let m = srgb_like();
+        let text = toml::to_string(&m).unwrap();
+        assert!(text.contains("[primaries]") && text.contains("[laws.red]"), "{text}");
+        let back: MonitorModel = toml::from_str(&text).unwrap();
+        assert_eq!(back, m);
+        let turning = text.replace("gamma = 2.2\n", "gamma = -1.0\n");
+        assert_ne!(turning, text);
+        let err = toml::from_str::<MonitorModel>(&turning).unwrap_err().to_string();
+        assert!(err.contains("red law"), "{err}");
     }
 
     #[test]

@@ -1,0 +1,273 @@
+//! A whole calibration, from config to published profile: plan, journal, measure,
+//! fit, validate, publish. Also resumes a run that was cut short.
+
+use std::path::{Path, PathBuf};
+use std::time::{Instant, SystemTime};
+
+use super::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, JournalHeader};
+use super::plan::{Plan, PlanError, make_plan};
+use super::run::{DEFAULT_ATTEMPTS, Progress, RunError, RunSummary, run_plan};
+use crate::config::{Config, ConfigError, LoadedConfig, PublishConfig, parse_config};
+use crate::display::PatchDisplay;
+use crate::fit::{FitError, FittedModel, fit_monitor};
+use crate::instrument::Instrument;
+use crate::measurement::Units;
+use crate::profile::store::ProfileStore;
+use crate::profile::{Profile, ProfileError, Provenance, SCHEMA_VERSION};
+use crate::sim::monitor::SimError;
+use crate::sim::rig::SimulatedRig;
+
+/// Name of the file in a run's directory that says the run ended in a profile.
+const DONE_MARKER: &str = "profile";
+
+/// Why a calibration stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrateError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("monitor: {0}")]
+    Simulation(#[from] SimError),
+    #[error("plan: {0}")]
+    Plan(#[from] PlanError),
+    #[error("journal: {0}")]
+    Journal(#[from] JournalError),
+    #[error("{source}\nEverything measured is kept in {journal}; run `chromacal calibrate --resume` to go on.")]
+    Run { source: RunError, journal: PathBuf },
+    #[error("fit: {0}")]
+    Fit(#[from] FitError),
+    #[error("profile: {0}")]
+    Profile(#[from] ProfileError),
+    #[error("profile store {path}: {source}")]
+    Store {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("no unfinished run to resume in {0}")]
+    NothingToResume(PathBuf),
+}
+
+/// How to run a calibration.
+#[derive(Debug, Clone)]
+pub struct CalibrateOptions {
+    pub state_dir: PathBuf,
+    /// Resume the newest unfinished run instead of starting one.
+    pub resume: bool,
+    /// Real seconds per simulated second (`None`: as fast as possible).
+    pub realtime_scale: Option<f64>,
+}
+
+/// What a calibration did and made.
+#[derive(Debug, Clone)]
+pub struct CalibrationOutcome {
+    pub run_id: String,
+    pub journal_path: PathBuf,
+    pub run: RunSummary,
+    pub plan: Plan,
+    pub fitted: FittedModel,
+    pub profile: Profile,
+    pub profile_path: PathBuf,
+    /// `None` when the profile became current; otherwise why not.
+    pub rejection: Option<String>,
+    /// Wall-clock seconds of the fit.
+    pub fit_seconds: f64,
+    /// Seconds the instrument spent: integration plus settling, every patch.
+    pub instrument_seconds: f64,
+    pub display: String,
+}
+
+fn now_rfc3339() -> String {
+    humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
+}
+
+fn new_run_id() -> String {
+    let stamp = humantime::format_rfc3339_seconds(SystemTime::now())
+        .to_string()
+        .replace([':', '-'], "");
+    let nanos = SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    format!("{}-{:04x}", stamp.trim_end_matches('Z'), (nanos >> 8) & 0xffff)
+}
+
+/// The newest run directory whose journal has not ended in a profile.
+pub fn unfinished_run(store: &ProfileStore) -> Option<PathBuf> {
+    let mut runs: Vec<PathBuf> = std::fs::read_dir(store.runs_dir())
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("journal.jsonl").is_file() && !p.join(DONE_MARKER).exists())
+        .collect();
+    runs.sort();
+    runs.pop()
+}
+
+/// Does the fitted profile meet the publishing limits? `None` if it does.
+pub fn publish_rejection(fitted: &FittedModel, limits: &PublishConfig) -> Option<String> {
+    match &fitted.report.held_out {
+        None => Some("no held-out patches, so the profile's error is unknown".into()),
+        Some(s) if s.mean > limits.max_mean_de00 => Some(format!(
+            "held-out mean ΔE00 {:.3} is above the limit {}",
+            s.mean, limits.max_mean_de00
+        )),
+        Some(s) if s.p95 > limits.max_p95_de00 => Some(format!(
+            "held-out 95th-percentile ΔE00 {:.3} is above the limit {}",
+            s.p95, limits.max_p95_de00
+        )),
+        Some(_) => None,
+    }
+}
+
+/// Measure every patch of the journal's plan that is missing, on any display and
+/// instrument, and fit; the simulated and the real paths both come through here.
+pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
+    journal: &mut Journal,
+    config: &Config,
+    display: &mut D,
+    instrument: &mut I,
+    clock: &dyn crate::time::TimeSource,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<(RunSummary, FittedModel, f64), CalibrateError> {
+    let run = run_plan(journal, display, instrument, clock, DEFAULT_ATTEMPTS, progress)
+        .await
+        .map_err(|source| CalibrateError::Run {
+            source,
+            journal: journal.path().to_path_buf(),
+        })?;
+    let started = Instant::now();
+    let fitted = fit_monitor(&journal.measurement_set(), &config.fit)?;
+    Ok((run, fitted, started.elapsed().as_secs_f64()))
+}
+
+/// Run (or resume) a calibration of the simulated rig described by `loaded`.
+pub async fn calibrate_simulated(
+    loaded: &LoadedConfig,
+    options: &CalibrateOptions,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<CalibrationOutcome, CalibrateError> {
+    let store = ProfileStore::new(&options.state_dir);
+    // A resumed run goes on with the config it started with.
+    let (mut journal, config, base_dir, run_id) = if options.resume {
+        let dir = unfinished_run(&store)
+            .ok_or_else(|| CalibrateError::NothingToResume(store.runs_dir()))?;
+        let (journal, recovery) = Journal::open(&dir.join("journal.jsonl"))?;
+        if let Some((line, bytes)) = recovery.dropped_tail {
+            tracing::warn!(line, bytes, "dropped a reading cut short by the interruption");
+        }
+        let config = parse_config(&journal.header().config, "the run's journal header")?;
+        let run_id = journal.header().run_id.clone();
+        let base_dir = journal.header().config_dir.clone();
+        (journal, config, base_dir, run_id)
+    } else {
+        let run_id = new_run_id();
+        let plan = make_plan(&loaded.config.plan)?;
+        let rig = rig_for(&loaded.config, &loaded.base_dir, None)?;
+        let header = JournalHeader {
+            format: JOURNAL_FORMAT.into(),
+            version: JOURNAL_VERSION,
+            run_id: run_id.clone(),
+            started: now_rfc3339(),
+            config_digest: loaded.digest(),
+            config: loaded.text.clone(),
+            config_dir: loaded.base_dir.clone(),
+            display: rig.display.name(),
+            instrument: rig.instrument.info(),
+            units: Units::Absolute,
+            plan,
+        };
+        let path = store.runs_dir().join(&run_id).join("journal.jsonl");
+        (
+            Journal::create(&path, header)?,
+            loaded.config.clone(),
+            loaded.base_dir.clone(),
+            run_id,
+        )
+    };
+
+    let mut rig = rig_for(&config, &base_dir, options.realtime_scale)?;
+    // Simulated time goes on from the last reading.
+    if let Some(end) = journal
+        .entries()
+        .iter()
+        .filter_map(|m| Some(m.time_s? + m.reading.integration_s / 2.0))
+        .reduce(f64::max)
+    {
+        rig.clock.set(end);
+    }
+    let display_name = rig.display.name();
+    let (run, fitted, fit_seconds) = measure_and_fit(
+        &mut journal,
+        &config,
+        &mut rig.display,
+        &mut rig.instrument,
+        rig.clock.as_ref(),
+        progress,
+    )
+    .await?;
+
+    let header = journal.header().clone();
+    let instrument_seconds = journal
+        .entries()
+        .iter()
+        .map(|m| m.reading.integration_s + config.display.settle_s)
+        .sum();
+    let profile = Profile {
+        schema_version: SCHEMA_VERSION,
+        id: run_id.clone(),
+        created: now_rfc3339(),
+        units: Units::Absolute,
+        model: fitted.model.clone(),
+        provenance: Provenance {
+            source: journal.path().display().to_string(),
+            display: Some(header.display.clone()),
+            instrument: Some(header.instrument.clone()),
+            config_digest: Some(header.config_digest.clone()),
+            program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
+        },
+        report: fitted.report.clone(),
+    };
+    let text = profile.to_toml()?;
+    let rejection = publish_rejection(&fitted, &config.publish);
+    let store_error = |source| CalibrateError::Store {
+        path: options.state_dir.clone(),
+        source,
+    };
+    let profile_path = if rejection.is_none() {
+        store.publish(&run_id, &text).map_err(store_error)?
+    } else {
+        store.keep(&run_id, &text).map_err(store_error)?
+    };
+    let run_dir = journal
+        .path()
+        .parent()
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    std::fs::write(run_dir.join(DONE_MARKER), profile_path.display().to_string())
+        .map_err(store_error)?;
+    Ok(CalibrationOutcome {
+        run_id,
+        journal_path: journal.path().to_path_buf(),
+        run,
+        plan: header.plan,
+        fitted,
+        profile,
+        profile_path,
+        rejection,
+        fit_seconds,
+        instrument_seconds,
+        display: display_name,
+    })
+}
+
+/// The simulated rig a config describes.
+pub fn rig_for(
+    config: &Config,
+    base_dir: &Path,
+    realtime_scale: Option<f64>,
+) -> Result<SimulatedRig, CalibrateError> {
+    let spec = config.monitor.resolve(base_dir)?;
+    let instrument = config.instrument.simulated.clone().unwrap_or_default();
+    Ok(SimulatedRig::new(
+        spec,
+        instrument,
+        config.display.settle_s,
+        realtime_scale,
+    )?)
+}

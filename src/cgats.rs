@@ -1,0 +1,381 @@
+//! Reading ArgyllCMS CGATS measurement files (`.ti3`), so profiles can be fitted to
+//! and checked against measurements made by other tools.
+//!
+//! Format (ArgyllCMS `doc/ti3_format.html`, `doc/File_Formats.html`): an identifier
+//! line, `KEYWORD "value"` lines (with or without `KEYWORD "NAME"` declarations),
+//! `BEGIN_DATA_FORMAT` field names `END_DATA_FORMAT`, `NUMBER_OF_SETS n`, and the
+//! rows between `BEGIN_DATA` and `END_DATA`. A file may hold further tables (the CAL
+//! table of the calibration loaded while measuring); only the first is read.
+//! Device values are percent (0–100); XYZ is scaled to white Y = 100 unless
+//! `NORMALIZED_TO_Y_100 "NO"`; `LUMINANCE_XYZ_CDM2` gives white in cd/m², which turns
+//! relative values into absolute ones. Spectral fields `SPEC_nnn` are read as spectra.
+
+use std::path::Path;
+
+use crate::color::Xyz;
+use crate::color::spectrum::Spectrum;
+use crate::instrument::{Reading, ReadingStatus};
+use crate::measurement::{Measurement, MeasurementSet, Role, Units};
+use crate::model::ScreenPosition;
+
+/// Why a CGATS file could not be read. Each names the file and, where it can, the line.
+#[derive(Debug, thiserror::Error)]
+pub enum CgatsError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}, line {line}: {message}")]
+    Syntax {
+        path: String,
+        line: usize,
+        message: String,
+    },
+    #[error("{path}: no field {field} (the fields are: {fields})")]
+    MissingField {
+        path: String,
+        field: String,
+        fields: String,
+    },
+    #[error("{path}, line {line}, field {field}: '{text}' is not a finite number")]
+    NotANumber {
+        path: String,
+        line: usize,
+        field: String,
+        text: String,
+    },
+    #[error("{path}: {message}")]
+    Content { path: String, message: String },
+}
+
+/// One table of a CGATS file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CgatsTable {
+    pub identifier: String,
+    pub keywords: Vec<(String, String)>,
+    pub fields: Vec<String>,
+    /// Rows with the line each came from.
+    pub rows: Vec<(usize, Vec<String>)>,
+}
+
+impl CgatsTable {
+    pub fn keyword(&self, name: &str) -> Option<&str> {
+        self.keywords
+            .iter()
+            .find(|(k, _)| k == name)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+/// Split a line into tokens; double-quoted strings are one token without the quotes.
+fn tokens(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut current = String::new();
+    let mut quoted = false;
+    let mut in_token = false;
+    for ch in line.chars() {
+        match ch {
+            '"' => {
+                quoted = !quoted;
+                in_token = true;
+            }
+            c if c.is_whitespace() && !quoted => {
+                if in_token {
+                    out.push(std::mem::take(&mut current));
+                    in_token = false;
+                }
+            }
+            c => {
+                current.push(c);
+                in_token = true;
+            }
+        }
+    }
+    if in_token {
+        out.push(current);
+    }
+    out
+}
+
+/// Parse every table of a CGATS text; `path` names it in errors.
+pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError> {
+    #[derive(PartialEq)]
+    enum State {
+        Identifier,
+        Header,
+        Format,
+        Data,
+        ArgBlock,
+    }
+    let syntax = |line: usize, message: String| CgatsError::Syntax {
+        path: path.into(),
+        line,
+        message,
+    };
+    let mut tables = Vec::new();
+    let mut table: Option<CgatsTable> = None;
+    let mut state = State::Identifier;
+    let mut expected_sets: Option<(usize, usize)> = None;
+    for (i, raw) in text.lines().enumerate() {
+        let number = i + 1;
+        let line = raw.trim_matches(|c: char| c.is_whitespace() || c == '\0');
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        match state {
+            State::Identifier => {
+                table = Some(CgatsTable {
+                    identifier: line.to_string(),
+                    keywords: Vec::new(),
+                    fields: Vec::new(),
+                    rows: Vec::new(),
+                });
+                state = State::Header;
+            }
+            State::ArgBlock => {
+                if line.starts_with("END_ARGYLL_") {
+                    state = State::Header;
+                }
+            }
+            State::Header => {
+                let t = tokens(line);
+                let Some(table) = table.as_mut() else { continue };
+                match t.first().map(String::as_str) {
+                    Some(k) if k.starts_with("BEGIN_ARGYLL_") => state = State::ArgBlock,
+                    Some("BEGIN_DATA_FORMAT") => state = State::Format,
+                    Some("BEGIN_DATA") => {
+                        if table.fields.is_empty() {
+                            return Err(syntax(number, "BEGIN_DATA before any data format".into()));
+                        }
+                        state = State::Data;
+                    }
+                    Some("NUMBER_OF_SETS") => {
+                        let n = t
+                            .get(1)
+                            .and_then(|v| v.parse().ok())
+                            .ok_or_else(|| syntax(number, "NUMBER_OF_SETS needs a count".into()))?;
+                        expected_sets = Some((n, number));
+                    }
+                    Some("KEYWORD") | Some("NUMBER_OF_FIELDS") => {}
+                    Some(k) => {
+                        let value = t.get(1).cloned().unwrap_or_default();
+                        table.keywords.push((k.to_string(), value));
+                    }
+                    None => {}
+                }
+            }
+            State::Format => {
+                if line.starts_with("END_DATA_FORMAT") {
+                    state = State::Header;
+                } else if let Some(table) = table.as_mut() {
+                    table.fields.extend(tokens(line));
+                }
+            }
+            State::Data => {
+                let Some(current) = table.as_mut() else { continue };
+                if line.starts_with("END_DATA") {
+                    if let Some((n, at)) = expected_sets
+                        && n != current.rows.len()
+                    {
+                        return Err(syntax(
+                            at,
+                            format!("NUMBER_OF_SETS says {n}, the table has {}", current.rows.len()),
+                        ));
+                    }
+                    expected_sets = None;
+                    if let Some(done) = table.take() {
+                        tables.push(done);
+                    }
+                    state = State::Identifier;
+                    continue;
+                }
+                let t = tokens(line);
+                if t.len() != current.fields.len() {
+                    return Err(syntax(
+                        number,
+                        format!("{} values where the format has {} fields", t.len(), current.fields.len()),
+                    ));
+                }
+                current.rows.push((number, t));
+            }
+        }
+    }
+    if state == State::Data {
+        return Err(syntax(text.lines().count(), "the file ends inside BEGIN_DATA (no END_DATA)".into()));
+    }
+    if tables.is_empty() {
+        return Err(CgatsError::Content {
+            path: path.into(),
+            message: "no complete table (BEGIN_DATA … END_DATA)".into(),
+        });
+    }
+    Ok(tables)
+}
+
+/// Read an ArgyllCMS `.ti3` display measurement file.
+pub fn read_ti3(path: &Path) -> Result<MeasurementSet, CgatsError> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|source| CgatsError::Io {
+        path: name.clone(),
+        source,
+    })?;
+    // Argyll writes Latin-1 in places (° and ² in names); read leniently.
+    let text = String::from_utf8_lossy(&bytes);
+    ti3_from_text(&text, &name)
+}
+
+/// A `.ti3` measurement set from its text.
+pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsError> {
+    let tables = parse_cgats(text, name)?;
+    let table = &tables[0];
+    let field = |f: &str| {
+        table
+            .fields
+            .iter()
+            .position(|x| x == f)
+            .ok_or_else(|| CgatsError::MissingField {
+                path: name.into(),
+                field: f.into(),
+                fields: table.fields.join(" "),
+            })
+    };
+    let rgb = [field("RGB_R")?, field("RGB_G")?, field("RGB_B")?];
+    let xyz = [field("XYZ_X")?, field("XYZ_Y")?, field("XYZ_Z")?];
+    let number = |line: usize, f: usize, text: &str| -> Result<f64, CgatsError> {
+        match text.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(CgatsError::NotANumber {
+                path: name.into(),
+                line,
+                field: table.fields[f].clone(),
+                text: text.into(),
+            }),
+        }
+    };
+    let normalised = table.keyword("NORMALIZED_TO_Y_100") != Some("NO");
+    let luminance = match table.keyword("LUMINANCE_XYZ_CDM2") {
+        Some(v) => {
+            let parts: Vec<f64> = v.split_whitespace().filter_map(|p| p.parse().ok()).collect();
+            match parts.as_slice() {
+                [_, y, _] if *y > 0.0 && y.is_finite() => Some(*y),
+                _ => {
+                    return Err(CgatsError::Content {
+                        path: name.into(),
+                        message: format!("LUMINANCE_XYZ_CDM2 \"{v}\" is not three numbers with Y > 0"),
+                    });
+                }
+            }
+        }
+        None => None,
+    };
+    let (scale, units) = match (normalised, luminance) {
+        (false, _) => (1.0, Units::Absolute),
+        (true, Some(y)) => (y / 100.0, Units::Absolute),
+        (true, None) => (1.0, Units::Relative),
+    };
+    // Spectral fields, with wavelengths from the SPECTRAL_* keywords or the names.
+    let spectral: Vec<(usize, f64)> = table
+        .fields
+        .iter()
+        .enumerate()
+        .filter_map(|(i, f)| Some((i, f.strip_prefix("SPEC_")?.parse::<f64>().ok()?)))
+        .collect();
+    let keyword_f64 = |k: &str| table.keyword(k).and_then(|v| v.parse::<f64>().ok());
+    let wavelengths: Vec<f64> = match (
+        keyword_f64("SPECTRAL_START_NM"),
+        keyword_f64("SPECTRAL_END_NM"),
+        keyword_f64("SPECTRAL_BANDS"),
+    ) {
+        (Some(a), Some(b), Some(n)) if n as usize == spectral.len() && n >= 2.0 => (0..spectral.len())
+            .map(|i| a + (b - a) * i as f64 / (n - 1.0))
+            .collect(),
+        _ => spectral.iter().map(|(_, w)| *w).collect(),
+    };
+    let mut measurements = Vec::with_capacity(table.rows.len());
+    for (index, (line, row)) in table.rows.iter().enumerate() {
+        let mut drive = [0.0; 3];
+        for c in 0..3 {
+            let v = number(*line, rgb[c], &row[rgb[c]])?;
+            if !(-1e-9..=100.0 + 1e-9).contains(&v) {
+                return Err(CgatsError::Content {
+                    path: name.into(),
+                    message: format!("line {line}: {} = {v} is outside 0–100", table.fields[rgb[c]]),
+                });
+            }
+            drive[c] = (v / 100.0).clamp(0.0, 1.0);
+        }
+        let mut value = Xyz::zeros();
+        for c in 0..3 {
+            value[c] = number(*line, xyz[c], &row[xyz[c]])? * scale;
+        }
+        let spectrum = if spectral.len() >= 2 {
+            let values = spectral
+                .iter()
+                .map(|(f, _)| number(*line, *f, &row[*f]).map(|v| v * scale))
+                .collect::<Result<Vec<f64>, _>>()?;
+            Spectrum::new(wavelengths.clone(), values).ok()
+        } else {
+            None
+        };
+        measurements.push(Measurement {
+            index,
+            role: Role::from_drive(drive),
+            drive,
+            codes: None,
+            position: ScreenPosition::CENTRE,
+            background: [0.0; 3],
+            time_s: None,
+            reading: Reading {
+                xyz: Some(value),
+                spectrum,
+                status: ReadingStatus::Ok,
+                integration_s: 0.0,
+            },
+        });
+    }
+    Ok(MeasurementSet {
+        source: name.into(),
+        units,
+        instrument: None,
+        display: table.keyword("DISPLAY").map(str::to_string),
+        measurements,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SMALL: &str = "CTI3\n\nKEYWORD \"NORMALIZED_TO_Y_100\"\nNORMALIZED_TO_Y_100 \"YES\"\nLUMINANCE_XYZ_CDM2 \"152.0 160.0 174.0\"\nBEGIN_ARGYLL_COLPROF_ARGS\n-v -qh\nEND_ARGYLL_COLPROF_ARGS\nNUMBER_OF_FIELDS 7\nBEGIN_DATA_FORMAT\nSAMPLE_ID RGB_R RGB_G RGB_B XYZ_X XYZ_Y XYZ_Z\nEND_DATA_FORMAT\nNUMBER_OF_SETS 3\nBEGIN_DATA\n1 100 100 100 95.0 100.0 108.0\n2 0 0 0 0.1 0.1 0.1\n\"3\" 50 0 0 8.9 4.6 0.4\nEND_DATA\nCAL\nBEGIN_DATA_FORMAT\nRGB_I RGB_R RGB_G RGB_B\nEND_DATA_FORMAT\nBEGIN_DATA\n0 0 0 0\nEND_DATA\n";
+
+    #[test]
+    fn reads_the_first_table_in_absolute_units() {
+        let set = ti3_from_text(SMALL, "small.ti3").unwrap();
+        assert_eq!(set.units, Units::Absolute);
+        assert_eq!(set.measurements.len(), 3);
+        let white = &set.measurements[0];
+        assert_eq!(white.role, Role::Grey);
+        assert!((white.reading.xyz.unwrap().y - 160.0).abs() < 1e-9);
+        assert_eq!(set.measurements[1].role, Role::Black);
+        assert_eq!(set.measurements[2].role, Role::Ramp);
+        assert_eq!(set.measurements[2].drive, [0.5, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn bad_values_name_line_and_field() {
+        let broken = SMALL.replace("8.9 4.6 0.4", "8.9 nan 0.4");
+        let err = ti3_from_text(&broken, "small.ti3").unwrap_err().to_string();
+        assert!(err.contains("line 17") && err.contains("XYZ_Y") && err.contains("nan"), "{err}");
+        let broken = SMALL.replace("8.9 4.6 0.4", "8.9 inf 0.4");
+        assert!(matches!(ti3_from_text(&broken, "x").unwrap_err(), CgatsError::NotANumber { .. }));
+        let broken = SMALL.replace("NUMBER_OF_SETS 3", "NUMBER_OF_SETS 4");
+        assert!(ti3_from_text(&broken, "x").unwrap_err().to_string().contains("NUMBER_OF_SETS says 4"));
+        let broken = SMALL.replace(" XYZ_Z\n", " XYZ_W\n");
+        assert!(matches!(ti3_from_text(&broken, "x").unwrap_err(), CgatsError::MissingField { .. }));
+        let broken = SMALL.replace("0.1 0.1 0.1", "0.1 0.1");
+        assert!(ti3_from_text(&broken, "x").unwrap_err().to_string().contains("line 16"));
+        let cut = &SMALL[..SMALL.find("END_DATA\nCAL").unwrap()];
+        assert!(ti3_from_text(cut, "x").unwrap_err().to_string().contains("no END_DATA"));
+    }
+}

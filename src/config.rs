@@ -1,0 +1,209 @@
+//! The configuration file (TOML). Unknown keys are errors, and every error names the
+//! file, line and column.
+//!
+//! `config/default.toml` is compiled into the program and used when no `--config` is
+//! given: a calibration of the simulated CRT with a simulated spectroradiometer.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::calibrate::plan::PlanConfig;
+use crate::fit::FitOptions;
+use crate::instrument::simulated::SimulatedInstrumentSpec;
+use crate::profile::toml_error_position;
+use crate::sim::presets::MonitorConfig;
+
+/// The default configuration, as shipped.
+pub const DEFAULT_CONFIG: &str = include_str!("../config/default.toml");
+
+/// Why a configuration could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}:{line}:{column}: {message}")]
+    Parse {
+        path: String,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    #[error("{path}: {message}")]
+    Invalid { path: String, message: String },
+}
+
+/// `[instrument]`: which instrument measures. Only the simulated one for now.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InstrumentConfig {
+    pub simulated: Option<SimulatedInstrumentSpec>,
+}
+
+impl Default for InstrumentConfig {
+    fn default() -> Self {
+        InstrumentConfig {
+            simulated: Some(SimulatedInstrumentSpec::default()),
+        }
+    }
+}
+
+/// `[display]`: how patches are shown.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DisplayConfig {
+    /// Seconds to wait after a patch change before measuring.
+    pub settle_s: f64,
+}
+
+impl Default for DisplayConfig {
+    fn default() -> Self {
+        DisplayConfig { settle_s: 0.2 }
+    }
+}
+
+/// `[publish]`: what a profile must achieve to replace the current one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PublishConfig {
+    /// Largest mean held-out ΔE00.
+    pub max_mean_de00: f64,
+    /// Largest 95th-percentile held-out ΔE00.
+    pub max_p95_de00: f64,
+}
+
+impl Default for PublishConfig {
+    fn default() -> Self {
+        PublishConfig {
+            max_mean_de00: 1.0,
+            max_p95_de00: 2.0,
+        }
+    }
+}
+
+/// The whole configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    #[serde(default)]
+    pub monitor: MonitorConfig,
+    #[serde(default)]
+    pub instrument: InstrumentConfig,
+    #[serde(default)]
+    pub display: DisplayConfig,
+    #[serde(default)]
+    pub plan: PlanConfig,
+    #[serde(default)]
+    pub fit: FitOptions,
+    #[serde(default)]
+    pub publish: PublishConfig,
+}
+
+/// A configuration with the text it came from.
+#[derive(Debug, Clone)]
+pub struct LoadedConfig {
+    pub config: Config,
+    pub text: String,
+    /// Where it came from ("built-in default" for the embedded one).
+    pub origin: String,
+    /// Directory relative paths in it are taken from.
+    pub base_dir: PathBuf,
+}
+
+impl LoadedConfig {
+    /// SHA-256 of the text, hex.
+    pub fn digest(&self) -> String {
+        let hash = Sha256::digest(self.text.as_bytes());
+        hash.iter().map(|b| format!("{b:02x}")).collect()
+    }
+}
+
+/// Parse configuration text; `origin` names it in errors.
+pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
+    let config: Config = toml::from_str(text).map_err(|e| {
+        let (line, column, message) = toml_error_position(text, &e);
+        ConfigError::Parse {
+            path: origin.into(),
+            line,
+            column,
+            message,
+        }
+    })?;
+    let invalid = |message: String| ConfigError::Invalid {
+        path: origin.into(),
+        message,
+    };
+    if !(config.display.settle_s >= 0.0) {
+        return Err(invalid("display.settle_s must not be negative".into()));
+    }
+    if config.fit.laws.is_empty() {
+        return Err(invalid("fit.laws must name at least one law".into()));
+    }
+    if config.instrument.simulated.is_none() {
+        return Err(invalid(
+            "instrument: only [instrument.simulated] is supported by this build".into(),
+        ));
+    }
+    Ok(config)
+}
+
+/// Load `path`, or the built-in default when `None`.
+pub fn load_config(path: Option<&Path>) -> Result<LoadedConfig, ConfigError> {
+    match path {
+        None => Ok(LoadedConfig {
+            config: parse_config(DEFAULT_CONFIG, "built-in config/default.toml")?,
+            text: DEFAULT_CONFIG.to_string(),
+            origin: "built-in config/default.toml".into(),
+            base_dir: std::env::current_dir().unwrap_or_else(|_| PathBuf::from(".")),
+        }),
+        Some(path) => {
+            let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            let origin = path.display().to_string();
+            Ok(LoadedConfig {
+                config: parse_config(&text, &origin)?,
+                text,
+                origin,
+                base_dir: path
+                    .parent()
+                    .filter(|p| !p.as_os_str().is_empty())
+                    .map_or_else(|| PathBuf::from("."), Path::to_path_buf),
+            })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_config_parses_and_builds_a_monitor() {
+        let loaded = load_config(None).unwrap();
+        assert_eq!(loaded.digest().len(), 64);
+        loaded.config.monitor.resolve(&loaded.base_dir).unwrap();
+    }
+
+    #[test]
+    fn unknown_keys_are_errors_with_line_and_column() {
+        let text = "[plan]\nbudget = 48\nbugdet = 12\n";
+        match parse_config(text, "test.toml") {
+            Err(ConfigError::Parse {
+                line, column, message, ..
+            }) => {
+                assert_eq!((line, column), (3, 1), "{message}");
+                assert!(message.contains("bugdet"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
+        let text = "[plan]\nbudget = \"many\"\n";
+        let err = parse_config(text, "test.toml").unwrap_err().to_string();
+        assert!(err.starts_with("test.toml:2:10"), "{err}");
+    }
+}

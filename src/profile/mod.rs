@@ -1,0 +1,148 @@
+//! The native monitor profile: a TOML file with a schema version, holding the model,
+//! its uncertainties and diagnostics, the held-out errors, and where it came from.
+//!
+//! The model is written with names (`primaries.red = [X, Y, Z]`, `laws.red.law =
+//! "cowan"`) so a person can read it, and checked when read back: finite numbers,
+//! monotone laws.
+
+pub mod store;
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::fit::FitReport;
+use crate::instrument::InstrumentInfo;
+use crate::measurement::Units;
+use crate::model::MonitorModel;
+
+/// Version of the profile file format. Readers refuse other versions.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// Why a profile could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}:{line}:{column}: {message}")]
+    Parse {
+        path: String,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    #[error("{path}: schema version {found}, this program reads version {SCHEMA_VERSION}")]
+    Version { path: String, found: u32 },
+    #[error("cannot write the profile as TOML: {0}")]
+    Serialize(String),
+}
+
+/// Where a profile came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Provenance {
+    /// The measurements it was fitted on (a journal or a file).
+    pub source: String,
+    pub display: Option<String>,
+    pub instrument: Option<InstrumentInfo>,
+    /// SHA-256 of the config of the run, when it came from a run.
+    pub config_digest: Option<String>,
+    pub program: String,
+}
+
+/// A monitor profile.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Profile {
+    pub schema_version: u32,
+    pub id: String,
+    /// RFC 3339.
+    pub created: String,
+    /// Units of the XYZ values in the model.
+    pub units: Units,
+    pub model: MonitorModel,
+    pub provenance: Provenance,
+    /// Uncertainties, diagnostics, assumption checks and held-out errors.
+    pub report: FitReport,
+}
+
+/// Line and column (1-based) of a byte offset in `text`.
+pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rfind('\n').map_or(before.len(), |i| before.len() - i - 1) + 1;
+    (line, column)
+}
+
+/// A TOML error as "line, column, message".
+pub fn toml_error_position(text: &str, error: &toml::de::Error) -> (usize, usize, String) {
+    let (line, column) = error
+        .span()
+        .map_or((0, 0), |span| line_column(text, span.start));
+    (line, column, error.message().to_string())
+}
+
+impl Profile {
+    pub fn from_toml(text: &str, path: &str) -> Result<Self, ProfileError> {
+        // Look at the version first so an old or new file gets a clear message.
+        #[derive(Deserialize)]
+        struct VersionOnly {
+            schema_version: Option<u32>,
+        }
+        if let Ok(v) = toml::from_str::<VersionOnly>(text)
+            && let Some(found) = v.schema_version
+            && found != SCHEMA_VERSION
+        {
+            return Err(ProfileError::Version {
+                path: path.into(),
+                found,
+            });
+        }
+        toml::from_str(text).map_err(|e| {
+            let (line, column, message) = toml_error_position(text, &e);
+            ProfileError::Parse {
+                path: path.into(),
+                line,
+                column,
+                message,
+            }
+        })
+    }
+
+    pub fn read(path: &Path) -> Result<Self, ProfileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    pub fn to_toml(&self) -> Result<String, ProfileError> {
+        toml::to_string(self).map_err(|e| ProfileError::Serialize(e.to_string()))
+    }
+
+    /// Write to `path` atomically (see [`store::write_atomic`]).
+    pub fn write(&self, path: &Path) -> Result<(), ProfileError> {
+        let text = self.to_toml()?;
+        store::write_atomic(path, text.as_bytes()).map_err(|source| ProfileError::Io {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_and_column_of_offsets() {
+        let text = "a = 1\nbb = 2\n";
+        assert_eq!(line_column(text, 0), (1, 1));
+        assert_eq!(line_column(text, 6), (2, 1));
+        assert_eq!(line_column(text, 9), (2, 4));
+    }
+}
