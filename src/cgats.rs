@@ -140,7 +140,9 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
             }
             State::Header => {
                 let t = tokens(line);
-                let Some(table) = table.as_mut() else { continue };
+                let Some(table) = table.as_mut() else {
+                    continue;
+                };
                 match t.first().map(String::as_str) {
                     Some(k) if k.starts_with("BEGIN_ARGYLL_") => state = State::ArgBlock,
                     Some("BEGIN_DATA_FORMAT") => state = State::Format,
@@ -173,14 +175,19 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
                 }
             }
             State::Data => {
-                let Some(current) = table.as_mut() else { continue };
+                let Some(current) = table.as_mut() else {
+                    continue;
+                };
                 if line.starts_with("END_DATA") {
                     if let Some((n, at)) = expected_sets
                         && n != current.rows.len()
                     {
                         return Err(syntax(
                             at,
-                            format!("NUMBER_OF_SETS says {n}, the table has {}", current.rows.len()),
+                            format!(
+                                "NUMBER_OF_SETS says {n}, the table has {}",
+                                current.rows.len()
+                            ),
                         ));
                     }
                     expected_sets = None;
@@ -194,7 +201,11 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
                 if t.len() != current.fields.len() {
                     return Err(syntax(
                         number,
-                        format!("{} values where the format has {} fields", t.len(), current.fields.len()),
+                        format!(
+                            "{} values where the format has {} fields",
+                            t.len(),
+                            current.fields.len()
+                        ),
                     ));
                 }
                 current.rows.push((number, t));
@@ -202,7 +213,10 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
         }
     }
     if state == State::Data {
-        return Err(syntax(text.lines().count(), "the file ends inside BEGIN_DATA (no END_DATA)".into()));
+        return Err(syntax(
+            text.lines().count(),
+            "the file ends inside BEGIN_DATA (no END_DATA)".into(),
+        ));
     }
     if tables.is_empty() {
         return Err(CgatsError::Content {
@@ -256,13 +270,18 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
     let normalised = table.keyword("NORMALIZED_TO_Y_100") != Some("NO");
     let luminance = match table.keyword("LUMINANCE_XYZ_CDM2") {
         Some(v) => {
-            let parts: Vec<f64> = v.split_whitespace().filter_map(|p| p.parse().ok()).collect();
+            let parts: Vec<f64> = v
+                .split_whitespace()
+                .filter_map(|p| p.parse().ok())
+                .collect();
             match parts.as_slice() {
                 [_, y, _] if *y > 0.0 && y.is_finite() => Some(*y),
                 _ => {
                     return Err(CgatsError::Content {
                         path: name.into(),
-                        message: format!("LUMINANCE_XYZ_CDM2 \"{v}\" is not three numbers with Y > 0"),
+                        message: format!(
+                            "LUMINANCE_XYZ_CDM2 \"{v}\" is not three numbers with Y > 0"
+                        ),
                     });
                 }
             }
@@ -287,7 +306,8 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
         keyword_f64("SPECTRAL_END_NM"),
         keyword_f64("SPECTRAL_BANDS"),
     ) {
-        (Some(a), Some(b), Some(n)) if n as usize == spectral.len() && n >= 2.0 => (0..spectral.len())
+        (Some(a), Some(b), Some(n)) if n as usize == spectral.len() && n >= 2.0 => (0..spectral
+            .len())
             .map(|i| a + (b - a) * i as f64 / (n - 1.0))
             .collect(),
         _ => spectral.iter().map(|(_, w)| *w).collect(),
@@ -300,7 +320,10 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
             if !(-1e-9..=100.0 + 1e-9).contains(&v) {
                 return Err(CgatsError::Content {
                     path: name.into(),
-                    message: format!("line {line}: {} = {v} is outside 0–100", table.fields[rgb[c]]),
+                    message: format!(
+                        "line {line}: {} = {v} is outside 0–100",
+                        table.fields[rgb[c]]
+                    ),
                 });
             }
             drive[c] = (v / 100.0).clamp(0.0, 1.0);
@@ -366,16 +389,40 @@ mod tests {
     fn bad_values_name_line_and_field() {
         let broken = SMALL.replace("8.9 4.6 0.4", "8.9 nan 0.4");
         let err = ti3_from_text(&broken, "small.ti3").unwrap_err().to_string();
-        assert!(err.contains("line 17") && err.contains("XYZ_Y") && err.contains("nan"), "{err}");
+        assert!(
+            err.contains("line 17") && err.contains("XYZ_Y") && err.contains("nan"),
+            "{err}"
+        );
         let broken = SMALL.replace("8.9 4.6 0.4", "8.9 inf 0.4");
-        assert!(matches!(ti3_from_text(&broken, "x").unwrap_err(), CgatsError::NotANumber { .. }));
+        assert!(matches!(
+            ti3_from_text(&broken, "x").unwrap_err(),
+            CgatsError::NotANumber { .. }
+        ));
         let broken = SMALL.replace("NUMBER_OF_SETS 3", "NUMBER_OF_SETS 4");
-        assert!(ti3_from_text(&broken, "x").unwrap_err().to_string().contains("NUMBER_OF_SETS says 4"));
+        assert!(
+            ti3_from_text(&broken, "x")
+                .unwrap_err()
+                .to_string()
+                .contains("NUMBER_OF_SETS says 4")
+        );
         let broken = SMALL.replace(" XYZ_Z\n", " XYZ_W\n");
-        assert!(matches!(ti3_from_text(&broken, "x").unwrap_err(), CgatsError::MissingField { .. }));
+        assert!(matches!(
+            ti3_from_text(&broken, "x").unwrap_err(),
+            CgatsError::MissingField { .. }
+        ));
         let broken = SMALL.replace("0.1 0.1 0.1", "0.1 0.1");
-        assert!(ti3_from_text(&broken, "x").unwrap_err().to_string().contains("line 16"));
+        assert!(
+            ti3_from_text(&broken, "x")
+                .unwrap_err()
+                .to_string()
+                .contains("line 16")
+        );
         let cut = &SMALL[..SMALL.find("END_DATA\nCAL").unwrap()];
-        assert!(ti3_from_text(cut, "x").unwrap_err().to_string().contains("no END_DATA"));
+        assert!(
+            ti3_from_text(cut, "x")
+                .unwrap_err()
+                .to_string()
+                .contains("no END_DATA")
+        );
     }
 }

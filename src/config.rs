@@ -195,7 +195,10 @@ mod tests {
         let text = "[plan]\nbudget = 48\nbugdet = 12\n";
         match parse_config(text, "test.toml") {
             Err(ConfigError::Parse {
-                line, column, message, ..
+                line,
+                column,
+                message,
+                ..
             }) => {
                 assert_eq!((line, column), (3, 1), "{message}");
                 assert!(message.contains("bugdet"), "{message}");

@@ -20,5 +20,6 @@ pub mod measurement;
 pub mod model;
 pub mod numeric_csv;
 pub mod profile;
+pub mod report;
 pub mod sim;
 pub mod time;

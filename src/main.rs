@@ -1,1 +1,652 @@
-fn main() {}
+//! The `chromacal` command.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+use chromacal::calibrate::run::Progress;
+use chromacal::calibrate::session::{CalibrateOptions, calibrate_simulated};
+use chromacal::color::spaces::{Xyz, xyz_to_luv, xyz_to_uv_prime, xyz_to_xyy};
+use chromacal::color::spectrum::{
+    Illuminant, Observer, Spectrum, emission_to_relative_xyz, emission_to_xyz, photopic_luminance,
+    reflectance_to_xyz, scotopic_luminance, white_point,
+};
+use chromacal::color::xyz_to_lab;
+use chromacal::config::load_config;
+use chromacal::fit::validate::evaluate;
+use chromacal::fit::{FitOptions, fit_monitor};
+use chromacal::measurement::{Units, read_measurements};
+use chromacal::model::transfer::LawKind;
+use chromacal::numeric_csv::NumericTable;
+use chromacal::profile::store::default_state_dir;
+use chromacal::profile::{Profile, Provenance, SCHEMA_VERSION};
+use chromacal::report;
+
+mod bench;
+
+#[derive(Parser)]
+#[command(
+    name = "chromacal",
+    version,
+    about = "Monitor calibration: measure, fit a physical model, test its assumptions, publish a profile"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a calibration (by default of the simulated CRT, no hardware needed) and
+    /// publish the profile to the state directory.
+    Calibrate {
+        /// Configuration file (TOML); the built-in config/default.toml when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Profile store and run journals [default: $STATE_DIRECTORY, else
+        /// $XDG_STATE_HOME/chromacal, else ~/.local/state/chromacal].
+        #[arg(long)]
+        state_dir: Option<PathBuf>,
+        /// Resume the newest unfinished run, measuring only what it lacks.
+        #[arg(long)]
+        resume: bool,
+        /// Take the simulated instrument's time for real (scaled by --time-scale).
+        #[arg(long)]
+        realtime: bool,
+        /// Real seconds per simulated second with --realtime.
+        #[arg(long, default_value_t = 1.0, requires = "realtime")]
+        time_scale: f64,
+        /// Print the profile's report as JSON instead of the summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Fit a profile to recorded measurements: a run journal or an ArgyllCMS .ti3.
+    Fit {
+        measurements: PathBuf,
+        /// Where to write the profile (TOML).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Take the [fit] options from this configuration file.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Candidate laws (comma-separated), instead of the config's.
+        #[arg(long, value_delimiter = ',')]
+        laws: Option<Vec<LawArg>>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Predict every measured patch from a profile and report the ΔE00.
+    Check {
+        profile: PathBuf,
+        measurements: PathBuf,
+        /// Machine-readable output with every patch's prediction.
+        #[arg(long)]
+        json: bool,
+        /// How many of the worst patches to list.
+        #[arg(long, default_value_t = 10)]
+        worst: usize,
+    },
+    /// Integrate spectra to XYZ, xyY, u′v′, L*a*b* and L*u*v*.
+    ///
+    /// The CSV's first column is `wavelength_nm`, each further column a sample. A
+    /// sample on a uniform grid of whole nanometres (1, 4, 5, 10 nm …) is summed on
+    /// its own grid, the colour-matching functions read at its wavelengths and Δλ its
+    /// step (CIE 15 weighted ordinates). Any other grid (uneven, or steps such as
+    /// 3.333 nm) is interpolated linearly onto the CMFs' 1 nm grid and summed with
+    /// Δλ = 1 nm. Sums run only where the sample, the CMFs (360–830 nm) and the
+    /// illuminant are all defined; nothing is extrapolated.
+    Spectrum {
+        file: PathBuf,
+        /// Columns are radiance spectra (the default).
+        #[arg(long, conflicts_with = "reflectance")]
+        emission: bool,
+        /// Columns are reflectance factors (0–1) under --illuminant, with Y of the
+        /// illuminant = 100.
+        #[arg(long)]
+        reflectance: bool,
+        /// Emission: scale each sample to Y = 100 instead of absolute Y = 683 Σ S ȳ Δλ.
+        #[arg(long)]
+        relative: bool,
+        /// Illuminant for --reflectance; for emission, the chromaticity of the
+        /// reference white of L*a*b* and L*u*v*.
+        #[arg(long, value_enum, default_value = "d65")]
+        illuminant: IlluminantArg,
+        /// Emission: luminance of the reference white [default: the brightest sample's].
+        #[arg(long)]
+        white_y: Option<f64>,
+        /// Standard observer: 2 (CIE 1931) or 10 (CIE 1964).
+        #[arg(long, default_value = "2", value_parser = ["2", "10"])]
+        observer: String,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Work with profiles.
+    Profile {
+        #[command(subcommand)]
+        command: ProfileCommand,
+    },
+    /// Speed against error: fit time per law against readings, and held-out ΔE00
+    /// against patch budget, on simulated monitors (and on real measured displays when
+    /// ../shared/data is present).
+    Bench {
+        /// Fewer repeats, for a quick look.
+        #[arg(long)]
+        quick: bool,
+        /// Directory of the shared reference data [default: ../shared/data].
+        #[arg(long)]
+        data: Option<PathBuf>,
+    },
+}
+
+#[derive(Subcommand)]
+enum ProfileCommand {
+    /// Print the model in words and numbers.
+    Show { profile: PathBuf },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum LawArg {
+    Power,
+    GainOffsetGamma,
+    Cowan,
+    ThreeTerm,
+    Table,
+}
+
+impl From<LawArg> for LawKind {
+    fn from(l: LawArg) -> Self {
+        match l {
+            LawArg::Power => LawKind::Power,
+            LawArg::GainOffsetGamma => LawKind::GainOffsetGamma,
+            LawArg::Cowan => LawKind::Cowan,
+            LawArg::ThreeTerm => LawKind::ThreeTerm,
+            LawArg::Table => LawKind::Table,
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum IlluminantArg {
+    A,
+    C,
+    D50,
+    D65,
+    F2,
+    F7,
+    F11,
+}
+
+impl From<IlluminantArg> for Illuminant {
+    fn from(i: IlluminantArg) -> Self {
+        match i {
+            IlluminantArg::A => Illuminant::A,
+            IlluminantArg::C => Illuminant::C,
+            IlluminantArg::D50 => Illuminant::D50,
+            IlluminantArg::D65 => Illuminant::D65,
+            IlluminantArg::F2 => Illuminant::F2,
+            IlluminantArg::F7 => Illuminant::F7,
+            IlluminantArg::F11 => Illuminant::F11,
+        }
+    }
+}
+
+/// A failure to report and the exit code to leave with.
+struct Failure {
+    message: String,
+    code: u8,
+}
+
+impl<E: std::fmt::Display> From<E> for Failure {
+    fn from(e: E) -> Self {
+        Failure {
+            message: e.to_string(),
+            code: 1,
+        }
+    }
+}
+
+/// Exit code when a profile was made but did not pass the publishing limits.
+const NOT_PUBLISHED: u8 = 3;
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("CHROMACAL_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Calibrate {
+            config,
+            state_dir,
+            resume,
+            realtime,
+            time_scale,
+            json,
+        } => calibrate(
+            config.as_deref(),
+            state_dir,
+            resume,
+            realtime.then_some(time_scale),
+            json,
+        ),
+        Command::Fit {
+            measurements,
+            output,
+            config,
+            laws,
+            json,
+        } => fit(&measurements, &output, config.as_deref(), laws, json),
+        Command::Check {
+            profile,
+            measurements,
+            json,
+            worst,
+        } => check(&profile, &measurements, json, worst),
+        Command::Spectrum {
+            file,
+            emission: _,
+            reflectance,
+            relative,
+            illuminant,
+            white_y,
+            observer,
+            json,
+        } => spectrum(
+            &file,
+            reflectance,
+            relative,
+            illuminant.into(),
+            white_y,
+            &observer,
+            json,
+        ),
+        Command::Profile {
+            command: ProfileCommand::Show { profile },
+        } => Profile::read(&profile)
+            .map(|p| print!("{}", report::describe_profile(&p)))
+            .map_err(Failure::from),
+        Command::Bench { quick, data } => bench::run(quick, data).map_err(Failure::from),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(f) => {
+            eprintln!("chromacal: {}", f.message);
+            ExitCode::from(f.code)
+        }
+    }
+}
+
+fn calibrate(
+    config: Option<&Path>,
+    state_dir: Option<PathBuf>,
+    resume: bool,
+    realtime_scale: Option<f64>,
+    json: bool,
+) -> Result<(), Failure> {
+    let loaded = load_config(config)?;
+    let options = CalibrateOptions {
+        state_dir: state_dir.unwrap_or_else(default_state_dir),
+        resume,
+        realtime_scale,
+    };
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} measuring [{bar:40}] {pos}/{len} patches  {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let mut on_progress = |p: &Progress| {
+        bar.set_length(p.total as u64);
+        bar.set_position(p.done as u64);
+        bar.set_message(match p.luminance {
+            Some(y) => format!("{:?} Y {y:.3}", p.role).to_lowercase(),
+            None => format!("{:?} {:?}", p.role, p.status).to_lowercase(),
+        });
+    };
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .build()?;
+    let outcome = runtime.block_on(calibrate_simulated(&loaded, &options, &mut on_progress));
+    bar.finish_and_clear();
+    let outcome = outcome?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&outcome.profile.report)?);
+    } else {
+        let mut out = format!(
+            "chromacal: calibrated {} with {}\n",
+            outcome.display,
+            outcome
+                .profile
+                .provenance
+                .instrument
+                .as_ref()
+                .map_or("an instrument", |i| i.name.as_str())
+        );
+        out += &format!(
+            "  patches measured: {}\n",
+            report::budget_line(&outcome.plan.budget)
+        );
+        if outcome.run.already_measured > 0 {
+            out += &format!(
+                "  resumed: {} patches were in the journal, {} measured now\n",
+                outcome.run.already_measured, outcome.run.measured_now
+            );
+        }
+        out += &format!(
+            "  simulated instrument time {} (integration and settling), fit time {}\n\n",
+            report::duration(outcome.instrument_seconds),
+            report::duration(outcome.fit_seconds)
+        );
+        out += &report::fit_summary(&outcome.fitted.report);
+        out += &format!("\njournal: {}\n", outcome.journal_path.display());
+        match &outcome.rejection {
+            None => {
+                out += &format!(
+                    "profile: {} (published as current)\n",
+                    outcome.profile_path.display()
+                )
+            }
+            Some(why) => {
+                out += &format!(
+                    "profile: {} (NOT published: {why})\n",
+                    outcome.profile_path.display()
+                )
+            }
+        }
+        print!("{out}");
+    }
+    match outcome.rejection {
+        None => Ok(()),
+        Some(why) => Err(Failure {
+            message: format!("the profile was not published: {why}"),
+            code: NOT_PUBLISHED,
+        }),
+    }
+}
+
+fn fit(
+    measurements: &Path,
+    output: &Path,
+    config: Option<&Path>,
+    laws: Option<Vec<LawArg>>,
+    json: bool,
+) -> Result<(), Failure> {
+    let mut options = match config {
+        Some(path) => load_config(Some(path))?.config.fit,
+        None => FitOptions::default(),
+    };
+    if let Some(laws) = laws {
+        options.laws = laws.into_iter().map(LawKind::from).collect();
+    }
+    let set = read_measurements(measurements)?;
+    let started = std::time::Instant::now();
+    let fitted = fit_monitor(&set, &options)?;
+    let fit_seconds = started.elapsed().as_secs_f64();
+    let id = output
+        .file_stem()
+        .map_or_else(|| "profile".into(), |s| s.to_string_lossy().into_owned());
+    let profile = Profile {
+        schema_version: SCHEMA_VERSION,
+        id,
+        created: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
+        units: set.units,
+        model: fitted.model.clone(),
+        provenance: Provenance {
+            source: measurements.display().to_string(),
+            display: set.display.clone(),
+            instrument: set.instrument.clone(),
+            config_digest: None,
+            program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
+        },
+        report: fitted.report.clone(),
+    };
+    profile.write(output)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&fitted.report)?);
+    } else {
+        let c = &fitted.report.counts;
+        print!(
+            "chromacal: fitted {} ({} readings, {} usable; {} in the fit's budgeted kinds, {} held out, {} uniformity; XYZ {})\n  fit time {}\n\n{}\nprofile: {}\n",
+            measurements.display(),
+            c.readings,
+            c.usable,
+            c.budget_readings,
+            c.held_out,
+            c.uniformity,
+            set.units,
+            report::duration(fit_seconds),
+            report::fit_summary(&fitted.report),
+            output.display()
+        );
+    }
+    Ok(())
+}
+
+fn check(
+    profile_path: &Path,
+    measurements: &Path,
+    json: bool,
+    worst: usize,
+) -> Result<(), Failure> {
+    let profile = Profile::read(profile_path)?;
+    let set = read_measurements(measurements)?;
+    let mut model = profile.model.clone();
+    let mut note = None;
+    if profile.units != set.units {
+        // Compare like with like: bring the profile to the measurements' scale.
+        if set.units == Units::Relative {
+            let y = model.white().y;
+            if y > 0.0 {
+                model = model.scaled(100.0 / y);
+            }
+        } else {
+            return Err(Failure::from(
+                "the profile is relative (white Y = 100) but the measurements are in cd/m²; \
+                 fit the profile from measurements in cd/m², or check against relative ones",
+            ));
+        }
+        note = Some(
+            "the profile is in cd/m² and the measurements relative: the profile was scaled to white Y = 100",
+        );
+    }
+    let evaluation = evaluate(
+        &model,
+        set.measurements
+            .iter()
+            .filter_map(|m| Some((m, m.usable_xyz()?))),
+    );
+    if json {
+        #[derive(serde::Serialize)]
+        struct Output<'a> {
+            profile: String,
+            measurements: String,
+            note: Option<&'a str>,
+            #[serde(flatten)]
+            evaluation: &'a chromacal::fit::validate::Evaluation,
+        }
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&Output {
+                profile: profile_path.display().to_string(),
+                measurements: measurements.display().to_string(),
+                note,
+                evaluation: &evaluation,
+            })?
+        );
+    } else {
+        println!(
+            "chromacal: {} against {} ({} usable readings of {})",
+            profile_path.display(),
+            measurements.display(),
+            evaluation.patches.len(),
+            set.measurements.len()
+        );
+        if let Some(n) = note {
+            println!("  note: {n}");
+        }
+        print!("{}", report::check_summary(&evaluation, worst));
+    }
+    Ok(())
+}
+
+#[derive(serde::Serialize)]
+struct SpectrumResult {
+    sample: String,
+    xyz: [f64; 3],
+    x: f64,
+    y: f64,
+    u_prime: f64,
+    v_prime: f64,
+    lab: [f64; 3],
+    luv: [f64; 3],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    photopic_cd_m2: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    scotopic_cd_m2: Option<f64>,
+}
+
+fn spectrum(
+    file: &Path,
+    reflectance: bool,
+    relative: bool,
+    illuminant: Illuminant,
+    white_y: Option<f64>,
+    observer: &str,
+    json: bool,
+) -> Result<(), Failure> {
+    let observer = if observer == "10" {
+        Observer::Cie1964TenDegree
+    } else {
+        Observer::Cie1931TwoDegree
+    };
+    let table = NumericTable::read(file)?;
+    if !table.header[0].eq_ignore_ascii_case("wavelength_nm") {
+        return Err(Failure::from(format!(
+            "{}: the first column must be wavelength_nm, not '{}'",
+            file.display(),
+            table.header[0]
+        )));
+    }
+    if table.header.len() < 2 {
+        return Err(Failure::from(format!(
+            "{}: no sample columns",
+            file.display()
+        )));
+    }
+    let wavelengths = table.column(0);
+    let mut results = Vec::new();
+    let mut absolute = Vec::new();
+    for (k, name) in table.header.iter().enumerate().skip(1) {
+        let sample = Spectrum::new(wavelengths.clone(), table.column(k))
+            .map_err(|e| Failure::from(format!("{}, column '{name}': {e}", file.display())))?;
+        let in_column = |e: chromacal::color::spectrum::SpectrumError| {
+            Failure::from(format!("{}, column '{name}': {e}", file.display()))
+        };
+        let xyz = if reflectance {
+            reflectance_to_xyz(&sample, illuminant, observer).map_err(in_column)?
+        } else if relative {
+            emission_to_relative_xyz(&sample, observer).map_err(in_column)?
+        } else {
+            emission_to_xyz(&sample, observer).map_err(in_column)?
+        };
+        let luminances = if !reflectance && !relative {
+            Some((
+                photopic_luminance(&sample).map_err(in_column)?,
+                scotopic_luminance(&sample).ok(),
+            ))
+        } else {
+            None
+        };
+        absolute.push(luminances);
+        results.push((name.clone(), xyz));
+    }
+    // The reference white for L*a*b* and L*u*v*.
+    let white_xyz = white_point(illuminant, observer)?;
+    let white_luminance = if reflectance || relative {
+        100.0
+    } else {
+        white_y.unwrap_or_else(|| results.iter().map(|r| r.1.y).fold(0.0, f64::max))
+    };
+    let white: Xyz = white_xyz * (white_luminance / 100.0);
+    let out: Vec<SpectrumResult> = results
+        .iter()
+        .zip(&absolute)
+        .map(|((name, xyz), lum)| {
+            let xyy = xyz_to_xyy(xyz, [0.0, 0.0]);
+            let uv = xyz_to_uv_prime(xyz, chromacal::color::UvPrime { u: 0.0, v: 0.0 });
+            let lab = xyz_to_lab(xyz, &white);
+            let luv = xyz_to_luv(xyz, &white);
+            SpectrumResult {
+                sample: name.clone(),
+                xyz: [xyz.x, xyz.y, xyz.z],
+                x: xyy.x,
+                y: xyy.y,
+                u_prime: uv.u,
+                v_prime: uv.v,
+                lab: [lab.l, lab.a, lab.b],
+                luv: [luv.l, luv.u, luv.v],
+                photopic_cd_m2: lum.map(|l| l.0),
+                scotopic_cd_m2: lum.and_then(|l| l.1),
+            }
+        })
+        .collect();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    let mode = if reflectance {
+        format!("reflectance under {illuminant:?}, Y of the illuminant = 100")
+    } else if relative {
+        "emission, each sample scaled to Y = 100".into()
+    } else {
+        "emission, absolute (Y in cd/m² for radiance in W·sr⁻¹·m⁻²·nm⁻¹)".into()
+    };
+    println!(
+        "{} ({mode}; {} observer; L*a*b*/L*u*v* against {illuminant:?} white, Y = {white_luminance:.4})",
+        file.display(),
+        observer
+    );
+    let rows: Vec<Vec<String>> = out
+        .iter()
+        .map(|r| {
+            vec![
+                r.sample.clone(),
+                format!("{:.4}", r.xyz[0]),
+                format!("{:.4}", r.xyz[1]),
+                format!("{:.4}", r.xyz[2]),
+                format!("{:.4}", r.x),
+                format!("{:.4}", r.y),
+                format!("{:.4}", r.u_prime),
+                format!("{:.4}", r.v_prime),
+                format!("{:.2}", r.lab[0]),
+                format!("{:.2}", r.lab[1]),
+                format!("{:.2}", r.lab[2]),
+                format!("{:.2}", r.luv[1]),
+                format!("{:.2}", r.luv[2]),
+            ]
+        })
+        .collect();
+    print!(
+        "{}",
+        report::table(
+            &[
+                "sample", "X", "Y", "Z", "x", "y", "u′", "v′", "L*", "a*", "b*", "u*", "v*"
+            ],
+            &rows
+        )
+    );
+    if out.iter().any(|r| r.scotopic_cd_m2.is_some()) {
+        for r in &out {
+            if let Some(s) = r.scotopic_cd_m2 {
+                println!("  {}: scotopic luminance {s:.4} scotopic cd/m²", r.sample);
+            }
+        }
+    }
+    Ok(())
+}

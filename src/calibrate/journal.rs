@@ -220,7 +220,11 @@ impl Journal {
 }
 
 /// A measurement set from a journal's header and entries.
-pub fn to_measurement_set(path: &Path, header: &JournalHeader, entries: Vec<Measurement>) -> MeasurementSet {
+pub fn to_measurement_set(
+    path: &Path,
+    header: &JournalHeader,
+    entries: Vec<Measurement>,
+) -> MeasurementSet {
     MeasurementSet {
         source: path.display().to_string(),
         units: header.units,
@@ -412,13 +416,22 @@ mod tests {
         text.push('\n');
         std::fs::write(&path, &text).unwrap();
         let err = Journal::read(&path).unwrap_err();
-        assert!(matches!(err, JournalError::BadLine { line: 3, .. }), "{err}");
+        assert!(
+            matches!(err, JournalError::BadLine { line: 3, .. }),
+            "{err}"
+        );
 
         let mut text = std::fs::read_to_string(&path).unwrap();
-        text = text.replace("{not json}\n", &(serde_json::to_string(&measurement(0, 1.0)).unwrap() + "\n"));
+        text = text.replace(
+            "{not json}\n",
+            &(serde_json::to_string(&measurement(0, 1.0)).unwrap() + "\n"),
+        );
         std::fs::write(&path, &text).unwrap();
         let err = Journal::read(&path).unwrap_err();
-        assert!(matches!(err, JournalError::Duplicate { index: 0, .. }), "{err}");
+        assert!(
+            matches!(err, JournalError::Duplicate { index: 0, .. }),
+            "{err}"
+        );
     }
 
     #[test]

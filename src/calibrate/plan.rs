@@ -260,7 +260,8 @@ pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
         };
         for i in 0..n {
             for j in 0..n {
-                let p = ScreenPosition::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                let p =
+                    ScreenPosition::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
                 // The centre is measured by the ramps and the reference already.
                 if p.is_centre() {
                     continue;
@@ -333,16 +334,25 @@ mod tests {
                 ..Default::default()
             };
             let plan = make_plan(&config).unwrap();
-            let counted: usize = [Role::Black, Role::Ramp, Role::Grey, Role::Surround, Role::Reference]
-                .iter()
-                .map(|r| count(&plan, *r))
-                .sum();
+            let counted: usize = [
+                Role::Black,
+                Role::Ramp,
+                Role::Grey,
+                Role::Surround,
+                Role::Reference,
+            ]
+            .iter()
+            .map(|r| count(&plan, *r))
+            .sum();
             assert_eq!(counted, budget, "budget {budget}: {:?}", plan.budget);
             assert_eq!(plan.budget.counted, budget);
             assert_eq!(count(&plan, Role::Verification), 24);
             assert_eq!(count(&plan, Role::Uniformity), 24);
             assert!(count(&plan, Role::Black) >= 1);
-            assert_eq!(count(&plan, Role::Ramp), 3 * plan.budget.ramp_levels_per_channel);
+            assert_eq!(
+                count(&plan, Role::Ramp),
+                3 * plan.budget.ramp_levels_per_channel
+            );
             for (i, p) in plan.patches.iter().enumerate() {
                 assert_eq!(p.index, i);
             }
@@ -399,6 +409,10 @@ mod tests {
             .collect();
         assert_eq!(cells.len(), 24 * 3);
         assert!(cells.iter().all(|p| !p.position().is_centre()));
-        assert!(cells.iter().any(|p| p.position().x < 0.2 && p.position().y < 0.2));
+        assert!(
+            cells
+                .iter()
+                .any(|p| p.position().x < 0.2 && p.position().y < 0.2)
+        );
     }
 }

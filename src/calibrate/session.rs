@@ -31,7 +31,9 @@ pub enum CalibrateError {
     Plan(#[from] PlanError),
     #[error("journal: {0}")]
     Journal(#[from] JournalError),
-    #[error("{source}\nEverything measured is kept in {journal}; run `chromacal calibrate --resume` to go on.")]
+    #[error(
+        "{source}\nEverything measured is kept in {journal}; run `chromacal calibrate --resume` to go on."
+    )]
     Run { source: RunError, journal: PathBuf },
     #[error("fit: {0}")]
     Fit(#[from] FitError),
@@ -86,7 +88,11 @@ fn new_run_id() -> String {
     let nanos = SystemTime::now()
         .duration_since(SystemTime::UNIX_EPOCH)
         .map_or(0, |d| d.subsec_nanos());
-    format!("{}-{:04x}", stamp.trim_end_matches('Z'), (nanos >> 8) & 0xffff)
+    format!(
+        "{}-{:04x}",
+        stamp.trim_end_matches('Z'),
+        (nanos >> 8) & 0xffff
+    )
 }
 
 /// The newest run directory whose journal has not ended in a profile.
@@ -126,12 +132,19 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
     clock: &dyn crate::time::TimeSource,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(RunSummary, FittedModel, f64), CalibrateError> {
-    let run = run_plan(journal, display, instrument, clock, DEFAULT_ATTEMPTS, progress)
-        .await
-        .map_err(|source| CalibrateError::Run {
-            source,
-            journal: journal.path().to_path_buf(),
-        })?;
+    let run = run_plan(
+        journal,
+        display,
+        instrument,
+        clock,
+        DEFAULT_ATTEMPTS,
+        progress,
+    )
+    .await
+    .map_err(|source| CalibrateError::Run {
+        source,
+        journal: journal.path().to_path_buf(),
+    })?;
     let started = Instant::now();
     let fitted = fit_monitor(&journal.measurement_set(), &config.fit)?;
     Ok((run, fitted, started.elapsed().as_secs_f64()))
@@ -150,7 +163,11 @@ pub async fn calibrate_simulated(
             .ok_or_else(|| CalibrateError::NothingToResume(store.runs_dir()))?;
         let (journal, recovery) = Journal::open(&dir.join("journal.jsonl"))?;
         if let Some((line, bytes)) = recovery.dropped_tail {
-            tracing::warn!(line, bytes, "dropped a reading cut short by the interruption");
+            tracing::warn!(
+                line,
+                bytes,
+                "dropped a reading cut short by the interruption"
+            );
         }
         let config = parse_config(&journal.header().config, "the run's journal header")?;
         let run_id = journal.header().run_id.clone();
@@ -239,8 +256,11 @@ pub async fn calibrate_simulated(
         .path()
         .parent()
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
-    std::fs::write(run_dir.join(DONE_MARKER), profile_path.display().to_string())
-        .map_err(store_error)?;
+    std::fs::write(
+        run_dir.join(DONE_MARKER),
+        profile_path.display().to_string(),
+    )
+    .map_err(store_error)?;
     Ok(CalibrationOutcome {
         run_id,
         journal_path: journal.path().to_path_buf(),

@@ -162,6 +162,15 @@ pub enum Observer {
     Cie1964TenDegree,
 }
 
+impl std::fmt::Display for Observer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Observer::Cie1931TwoDegree => "CIE 1931 2°",
+            Observer::Cie1964TenDegree => "CIE 1964 10°",
+        })
+    }
+}
+
 impl Observer {
     fn table(self) -> &'static [[f64; 4]] {
         match self {
@@ -327,6 +336,12 @@ pub fn reflectance_to_xyz(
     Ok(reflected * (100.0 / white.y))
 }
 
+/// XYZ of an illuminant's white (Y = 100), from its own tabulated spectrum
+/// (CIE 15:2004 eq. 7.1–7.2 with R = 1).
+pub fn white_point(illuminant: Illuminant, observer: Observer) -> Result<Xyz, SpectrumError> {
+    emission_to_relative_xyz(&illuminant.spectrum(), observer)
+}
+
 /// Photopic luminance in cd/m² of a spectral radiance: Km Σ S V Δλ (CIE 15:2004 §7.2,
 /// with the CIE 1924 V(λ)).
 pub fn photopic_luminance(sample: &Spectrum) -> Result<f64, SpectrumError> {
@@ -397,6 +412,20 @@ mod tests {
         assert!((xyz.x - 95.04297).abs() < 1e-4, "{xyz:?}");
         assert!((xyz.y - 100.0).abs() < 1e-9);
         assert!((xyz.z - 108.88005).abs() < 1e-4);
+    }
+
+    #[test]
+    fn white_points_of_illuminants() {
+        let d65 = white_point(Illuminant::D65, Observer::Cie1931TwoDegree).unwrap();
+        assert!(
+            (d65.x - 95.04).abs() < 0.02 && (d65.z - 108.88).abs() < 0.02,
+            "{d65:?}"
+        );
+        let d65_10 = white_point(Illuminant::D65, Observer::Cie1964TenDegree).unwrap();
+        assert!(
+            (d65_10.x - 94.81).abs() < 0.05 && (d65_10.z - 107.32).abs() < 0.05,
+            "{d65_10:?}"
+        );
     }
 
     #[test]

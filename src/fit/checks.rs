@@ -62,7 +62,10 @@ impl Verdict {
             Verdict::BelowVisibility => 2,
             Verdict::Fails => 3,
         };
-        verdicts.into_iter().max_by_key(rank).unwrap_or(Verdict::NotMeasured)
+        verdicts
+            .into_iter()
+            .max_by_key(rank)
+            .unwrap_or(Verdict::NotMeasured)
     }
 }
 
@@ -176,7 +179,8 @@ fn primary_constancy(
                     .filter_map(|p| {
                         let m = readings.iter().find(|r| r.measurement.index == p.index)?;
                         let s = m.measurement.reading.spectrum.as_ref()?;
-                        let above: Vec<f64> = s.values().iter().zip(bs).map(|(v, b)| v - b).collect();
+                        let above: Vec<f64> =
+                            s.values().iter().zip(bs).map(|(v, b)| v - b).collect();
                         let norm = above.iter().map(|v| v * v).sum::<f64>().sqrt();
                         (norm > 0.0 && s.values().len() == bs.len() && p.excitation > 0.05)
                             .then(|| above.iter().map(|v| v / norm).collect())
@@ -200,7 +204,10 @@ fn primary_constancy(
                 verdict: if levels < 2 {
                     Verdict::NotMeasured
                 } else {
-                    Verdict::judge(max_delta <= noise_at_dimmest.max(1e-4), max_delta < UV_VISIBILITY)
+                    Verdict::judge(
+                        max_delta <= noise_at_dimmest.max(1e-4),
+                        max_delta < UV_VISIBILITY,
+                    )
                 },
             }
         })
@@ -238,15 +245,23 @@ fn additivity(
             for c in 0..3 {
                 let mut d = [0.0; 3];
                 d[c] = level;
-                let (channel, n) = mean_at(readings.iter().filter(standard).filter(|r| r.measurement.drive == d))?;
+                let (channel, n) = mean_at(
+                    readings
+                        .iter()
+                        .filter(standard)
+                        .filter(|r| r.measurement.drive == d),
+                )?;
                 sum += channel - black;
                 worst_n = worst_n.min(n);
             }
             let departure = (grey.y - black.y) / (sum.y - black.y) - 1.0;
             let de = delta_e00_xyz(&grey, &sum, white_reference);
             // Noise of the ratio: the grey's and the three channels' relative noise.
-            let rel = |y: f64, n: usize| noise.sigma(y) / y.abs().max(f64::MIN_POSITIVE) / (n as f64).sqrt();
-            let noise_ratio = (rel(grey.y, n_grey).powi(2) + rel(sum.y, worst_n).powi(2) * 3.0).sqrt();
+            let rel = |y: f64, n: usize| {
+                noise.sigma(y) / y.abs().max(f64::MIN_POSITIVE) / (n as f64).sqrt()
+            };
+            let noise_ratio =
+                (rel(grey.y, n_grey).powi(2) + rel(sum.y, worst_n).powi(2) * 3.0).sqrt();
             Some(GreyAdditivity {
                 drive: level,
                 delta_e00: de,
@@ -257,12 +272,22 @@ fn additivity(
         .collect()
 }
 
-fn spatial_independence(readings: &[Corrected<'_>], noise: &NoiseModel, white: &Xyz) -> Option<SurroundCheck> {
+fn spatial_independence(
+    readings: &[Corrected<'_>],
+    noise: &NoiseModel,
+    white: &Xyz,
+) -> Option<SurroundCheck> {
     let surround: Vec<&Corrected<'_>> = readings
         .iter()
         .filter(|r| r.measurement.role == Role::Surround)
         .collect();
-    let on_black = mean_at(surround.iter().copied().filter(|r| r.measurement.background == [0.0; 3]))?.0;
+    let on_black = mean_at(
+        surround
+            .iter()
+            .copied()
+            .filter(|r| r.measurement.background == [0.0; 3]),
+    )?
+    .0;
     let (on_white, _) = mean_at(
         surround
             .iter()
@@ -276,7 +301,10 @@ fn spatial_independence(readings: &[Corrected<'_>], noise: &NoiseModel, white: &
         delta_e00: de,
         luminance_change_percent: change * 100.0,
         noise_percent,
-        verdict: Verdict::judge((change * 100.0).abs() <= noise_percent, de < DE00_VISIBILITY),
+        verdict: Verdict::judge(
+            (change * 100.0).abs() <= noise_percent,
+            de < DE00_VISIBILITY,
+        ),
     })
 }
 
@@ -290,7 +318,8 @@ fn monotonicity(ramps: &[ChannelRamp; 3]) -> Vec<ChannelMonotonicity> {
                 .map(|l| {
                     let at: Vec<_> = ramp.points.iter().filter(|p| p.drive == l).collect();
                     let e = at.iter().map(|p| p.excitation).sum::<f64>() / at.len() as f64;
-                    let s = (at.iter().map(|p| p.sigma * p.sigma).sum::<f64>()).sqrt() / at.len() as f64;
+                    let s = (at.iter().map(|p| p.sigma * p.sigma).sum::<f64>()).sqrt()
+                        / at.len() as f64;
                     (e, s)
                 })
                 .collect();
@@ -328,10 +357,17 @@ pub fn check_assumptions(
         .collect();
     let black_spectrum: Option<Vec<f64>> = black_spectra.first().map(|first| {
         (0..first.len())
-            .map(|i| black_spectra.iter().map(|s| s.get(i).copied().unwrap_or(0.0)).sum::<f64>() / black_spectra.len() as f64)
+            .map(|i| {
+                black_spectra
+                    .iter()
+                    .map(|s| s.get(i).copied().unwrap_or(0.0))
+                    .sum::<f64>()
+                    / black_spectra.len() as f64
+            })
             .collect()
     });
-    let primary_constancy = primary_constancy(ramps, readings, black, black_spectrum.as_deref(), noise);
+    let primary_constancy =
+        primary_constancy(ramps, readings, black, black_spectrum.as_deref(), noise);
     let additivity = additivity(readings, black, noise, white_reference);
     let spatial_independence = spatial_independence(readings, noise, white_reference);
     let monotonicity = monotonicity(ramps);

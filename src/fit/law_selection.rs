@@ -144,14 +144,19 @@ fn grey_errors(
     black: &Xyz,
     white: &Xyz,
 ) -> Option<Vec<f64>> {
-    let fits: Vec<&LawFit> = fits.iter().map(|f| f.as_ref().ok()).collect::<Option<_>>()?;
+    let fits: Vec<&LawFit> = fits
+        .iter()
+        .map(|f| f.as_ref().ok())
+        .collect::<Option<_>>()?;
     Some(
         greys
             .iter()
             .map(|(level, measured)| {
                 let predicted = black
                     + (0..3)
-                        .map(|c| ramps[c].column(fits[c].amplitude) * fits[c].law.excitation(*level))
+                        .map(|c| {
+                            ramps[c].column(fits[c].amplitude) * fits[c].law.excitation(*level)
+                        })
                         .sum::<Xyz>();
                 delta_e00_xyz(measured, &predicted, white)
             })
@@ -209,7 +214,10 @@ pub fn choose_law(
                 .collect(),
         )
     } else {
-        ("the greys alone (some law could not be cross-validated)", Vec::new())
+        (
+            "the greys alone (some law could not be cross-validated)",
+            Vec::new(),
+        )
     };
     held.extend(greys.iter().map(|g| g.1));
     for c in candidates.iter_mut().filter(|c| c.fitted()) {

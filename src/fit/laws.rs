@@ -109,7 +109,11 @@ fn clamp_exp(x: f64) -> f64 {
 
 /// Starting values for ln e = Σ θₖ·basisₖ(ln v) from the loggable points, weighted by
 /// the relative noise of each (σ of ln e ≈ σ/e).
-fn log_linear_start(points: &Points, basis: &dyn Fn(f64) -> Vec<f64>, fallback: &[f64]) -> Vec<f64> {
+fn log_linear_start(
+    points: &Points,
+    basis: &dyn Fn(f64) -> Vec<f64>,
+    fallback: &[f64],
+) -> Vec<f64> {
     let idx = points.loggable();
     let p = fallback.len();
     if idx.len() < p {
@@ -155,7 +159,11 @@ fn need_levels(law: LawKind, points: &Points, need: usize) -> Result<(), LawFitE
 
 /// Standard errors including the uncertainty of the normaliser the data were divided
 /// by: dθ/dδ = −(J̃ᵀJ̃)⁻¹ J̃ᵀ (e/σ) for a relative change δ of the normaliser.
-fn standard_errors_with_pin(fit: &LeastSquares, points: &Points, ramp: &ChannelRamp) -> Vec<Option<f64>> {
+fn standard_errors_with_pin(
+    fit: &LeastSquares,
+    points: &Points,
+    ramp: &ChannelRamp,
+) -> Vec<Option<f64>> {
     let base = fit.standard_errors();
     let (Some(cov), Some(sens)) = (&fit.covariance, &fit.sensitivity) else {
         return base;
@@ -198,8 +206,14 @@ fn fit_power(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
             g[0] = f * v.ln();
             f
         };
-        let fit = fit_curve(&curve, &points.drive, &points.excitation, &points.sigma, &start)
-            .map_err(ls_error(kind))?;
+        let fit = fit_curve(
+            &curve,
+            &points.drive,
+            &points.excitation,
+            &points.sigma,
+            &start,
+        )
+        .map_err(ls_error(kind))?;
         let ses = standard_errors_with_pin(&fit, &points, ramp);
         (fit.clone(), fit.params[0], 1.0, ses)
     } else {
@@ -211,8 +225,14 @@ fn fit_power(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
             t[1] * p
         };
         let start = [start[0], start[1].exp()];
-        let fit = fit_curve(&curve, &points.drive, &points.excitation, &points.sigma, &start)
-            .map_err(ls_error(kind))?;
+        let fit = fit_curve(
+            &curve,
+            &points.drive,
+            &points.excitation,
+            &points.sigma,
+            &start,
+        )
+        .map_err(ls_error(kind))?;
         let ses = fit.standard_errors();
         (fit.clone(), fit.params[0], fit.params[1], ses)
     };
@@ -279,15 +299,24 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         }
         let mut g = vec![0.0; start.len()];
         let chi2: f64 = (0..points.drive.len())
-            .map(|i| ((curve(&start, points.drive[i], &mut g) - points.excitation[i]) / points.sigma[i]).powi(2))
+            .map(|i| {
+                ((curve(&start, points.drive[i], &mut g) - points.excitation[i]) / points.sigma[i])
+                    .powi(2)
+            })
             .sum();
         if best.as_ref().is_none_or(|b| chi2 < b.0) {
             best = Some((chi2, start));
         }
     }
     let start = best.map(|b| b.1).unwrap_or_else(|| vec![2.2, 0.0, 1.0]);
-    let fit = fit_curve(&curve, &points.drive, &points.excitation, &points.sigma, &start)
-        .map_err(ls_error(kind))?;
+    let fit = fit_curve(
+        &curve,
+        &points.drive,
+        &points.excitation,
+        &points.sigma,
+        &start,
+    )
+    .map_err(ls_error(kind))?;
     let mut notes = Vec::new();
     let (fit, gamma, cutoff, amplitude, ses) = if fit.params[1] < 0.0 {
         // A negative cut-off means light at zero drive above the measured black: not a
@@ -298,7 +327,11 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         ));
         let power = fit_power(ramp)?;
         let gamma = power.parameters[0].value;
-        let ses: Vec<Option<f64>> = vec![power.parameters[0].standard_error, None, power.parameters.get(1).and_then(|p| p.standard_error)];
+        let ses: Vec<Option<f64>> = vec![
+            power.parameters[0].standard_error,
+            None,
+            power.parameters.get(1).and_then(|p| p.standard_error),
+        ];
         let chi2 = power.chi2;
         let dof = power.dof;
         return Ok(LawFit {
@@ -327,16 +360,30 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     })
 }
 
-fn gog_parameters(gamma: f64, cutoff: f64, amplitude: f64, ses: &[Option<f64>], pinned: bool) -> Vec<FittedParameter> {
+fn gog_parameters(
+    gamma: f64,
+    cutoff: f64,
+    amplitude: f64,
+    ses: &[Option<f64>],
+    pinned: bool,
+) -> Vec<FittedParameter> {
     let gain = 1.0 / (1.0 - cutoff);
-    let gain_se = ses.get(1).copied().flatten().map(|s| s / (1.0 - cutoff).powi(2));
+    let gain_se = ses
+        .get(1)
+        .copied()
+        .flatten()
+        .map(|s| s / (1.0 - cutoff).powi(2));
     let mut p = vec![
         parameter("gamma", gamma, ses.first().copied().flatten()),
         parameter("gain", gain, gain_se),
         parameter("cutoff", cutoff, ses.get(1).copied().flatten()),
     ];
     if !pinned {
-        p.push(parameter("amplitude", amplitude, ses.get(2).copied().flatten()));
+        p.push(parameter(
+            "amplitude",
+            amplitude,
+            ses.get(2).copied().flatten(),
+        ));
     }
     p
 }
@@ -357,7 +404,11 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
             vec![u, u * u]
         }
     };
-    let fallback: Vec<f64> = if free_scale { vec![2.2, 0.0, 0.0] } else { vec![2.2, 0.0] };
+    let fallback: Vec<f64> = if free_scale {
+        vec![2.2, 0.0, 0.0]
+    } else {
+        vec![2.2, 0.0]
+    };
     let start = log_linear_start(&points, &basis, &fallback);
     // θ = [A, B] or [A, B, C]: E = exp(A u + B u² + C), u = ln v. (For unpinned Cowan
     // C is ln of the amplitude; the law itself is stored without it.)
@@ -372,8 +423,14 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
         }
         f
     };
-    let fit = fit_curve(&curve, &points.drive, &points.excitation, &points.sigma, &start)
-        .map_err(ls_error(kind))?;
+    let fit = fit_curve(
+        &curve,
+        &points.drive,
+        &points.excitation,
+        &points.sigma,
+        &start,
+    )
+    .map_err(ls_error(kind))?;
     let ses = standard_errors_with_pin(&fit, &points, ramp);
     let build = |a: f64, b: f64, c: f64| -> (TransferLaw, f64) {
         if three {
@@ -393,7 +450,9 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
             dof: fit.dof,
             notes: Vec::new(),
         }),
-        Err(TransferError::TurnsBack { at, .. }) if fit.params[1] > 0.0 && fit.params[0] > TOE_SLOPE => {
+        Err(TransferError::TurnsBack { at, .. })
+            if fit.params[1] > 0.0 && fit.params[0] > TOE_SLOPE =>
+        {
             // Hold the slope at the toe: A + 2B ln(toe) = TOE_SLOPE, so B = (TOE_SLOPE − A) / (2 ln toe).
             let ln_toe = toe.ln();
             let db_da = -1.0 / (2.0 * ln_toe);
@@ -413,16 +472,30 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
             } else {
                 vec![fit.params[0]]
             };
-            let constrained = fit_curve(&curve, &points.drive, &points.excitation, &points.sigma, &start)
-                .map_err(ls_error(kind))?;
+            let constrained = fit_curve(
+                &curve,
+                &points.drive,
+                &points.excitation,
+                &points.sigma,
+                &start,
+            )
+            .map_err(ls_error(kind))?;
             let cses = standard_errors_with_pin(&constrained, &points, ramp);
             let a = constrained.params[0];
             let b = b_of(a);
-            let c = if free_scale { constrained.params[1] } else { 0.0 };
+            let c = if free_scale {
+                constrained.params[1]
+            } else {
+                0.0
+            };
             let (law, amplitude) = build(a, b, c);
             law.monotonicity()
                 .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
-            let full = if free_scale { vec![a, b, c] } else { vec![a, b] };
+            let full = if free_scale {
+                vec![a, b, c]
+            } else {
+                vec![a, b]
+            };
             let b_se = cses[0].map(|s| s * db_da.abs());
             let full_ses = if free_scale {
                 vec![cses[0], b_se, cses[1]]
@@ -444,7 +517,12 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
     }
 }
 
-fn log_parameters(kind: LawKind, params: &[f64], ses: &[Option<f64>], pinned: bool) -> Vec<FittedParameter> {
+fn log_parameters(
+    kind: LawKind,
+    params: &[f64],
+    ses: &[Option<f64>],
+    pinned: bool,
+) -> Vec<FittedParameter> {
     let mut p = vec![
         parameter("A", params[0], ses[0]),
         parameter("B", params[1], ses[1]),
@@ -507,7 +585,8 @@ fn fit_table(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         .count();
     // Excitation never falls below zero (black subtracted noise can push it there).
     let monotone: Vec<f64> = monotone.into_iter().map(|e| e.max(0.0)).collect();
-    let table = Table::new(drive.clone(), monotone).map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
+    let table = Table::new(drive.clone(), monotone)
+        .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
     let mut notes = Vec::new();
     if pooled > 0 {
         notes.push(format!(
@@ -567,7 +646,11 @@ mod tests {
     fn check(fit: &LawFit, name: &str, truth: f64) {
         let p = fit.parameters.iter().find(|p| p.name == name).unwrap();
         let se = p.standard_error.unwrap();
-        assert!((p.value - truth).abs() < 3.0 * se, "{name}: {} ± {se}, truth {truth}", p.value);
+        assert!(
+            (p.value - truth).abs() < 3.0 * se,
+            "{name}: {} ± {se}, truth {truth}",
+            p.value
+        );
     }
 
     #[test]
@@ -579,7 +662,11 @@ mod tests {
         check(&fit, "gamma", 2.4);
         check(&fit, "cutoff", 0.05);
 
-        let truth_cowan = Cowan { a: 2.3, b: 0.05, toe };
+        let truth_cowan = Cowan {
+            a: 2.3,
+            b: 0.05,
+            toe,
+        };
         let r = ramp(&levels(), |v| truth_cowan.excitation(v), &WIGGLE, true);
         let fit = fit_law(LawKind::Cowan, &r, toe).unwrap();
         check(&fit, "A", 2.3);
@@ -594,12 +681,21 @@ mod tests {
 
     #[test]
     fn without_full_drive_the_amplitude_is_extrapolated() {
-        let r = ramp(&levels()[..10], |v| (v / (10.0 / 12.0)).powf(2.2) * 1.0, &WIGGLE, false);
+        let r = ramp(
+            &levels()[..10],
+            |v| (v / (10.0 / 12.0)).powf(2.2) * 1.0,
+            &WIGGLE,
+            false,
+        );
         // Excitations are relative to the top level measured (10/12): the law must
         // find that full drive is (12/10)^2.2 times brighter.
         let fit = fit_law(LawKind::Power, &r, 1.0 / 255.0).unwrap();
         let expected = (12.0f64 / 10.0).powf(2.2);
-        assert!((fit.amplitude - expected).abs() / expected < 0.01, "{}", fit.amplitude);
+        assert!(
+            (fit.amplitude - expected).abs() / expected < 0.01,
+            "{}",
+            fit.amplitude
+        );
         assert!(matches!(
             fit_law(LawKind::Table, &r, 1.0 / 255.0),
             Err(LawFitError::NeedsFullDrive { .. })
@@ -616,10 +712,19 @@ mod tests {
         // an unconstrained Cowan fit wants B large enough to turn back above the toe.
         let toe = 1.0 / 255.0;
         let lv = [0.02, 0.04, 0.08, 0.15, 0.3, 0.5, 0.75, 1.0];
-        let r = ramp(&lv, |v| v.powf(2.2) + 0.02 * (1.0 - v).powi(6) * (v < 1.0) as i32 as f64, &WIGGLE, true);
+        let r = ramp(
+            &lv,
+            |v| v.powf(2.2) + 0.02 * (1.0 - v).powi(6) * (v < 1.0) as i32 as f64,
+            &WIGGLE,
+            true,
+        );
         let fit = fit_law(LawKind::Cowan, &r, toe).unwrap();
         fit.law.monotonicity().unwrap();
-        assert!(fit.notes.iter().any(|n| n.contains("turned back")), "{:?}", fit.notes);
+        assert!(
+            fit.notes.iter().any(|n| n.contains("turned back")),
+            "{:?}",
+            fit.notes
+        );
     }
 
     #[test]
@@ -628,7 +733,11 @@ mod tests {
         assert!(fit_law(LawKind::Power, &r, 1.0 / 255.0).is_ok());
         assert!(matches!(
             fit_law(LawKind::Cowan, &r, 1.0 / 255.0),
-            Err(LawFitError::TooFewLevels { need: 2, have: 1, .. })
+            Err(LawFitError::TooFewLevels {
+                need: 2,
+                have: 1,
+                ..
+            })
         ));
         // One level below full drive: gamma exact through it, no standard error.
         let fit = fit_law(LawKind::Power, &r, 1.0 / 255.0).unwrap();
@@ -637,11 +746,22 @@ mod tests {
 
     #[test]
     fn pava_pools_violations_and_leaves_monotone_data_alone() {
-        assert_eq!(isotonic_regression(&[1.0, 2.0, 3.0], &[1.0; 3]), vec![1.0, 2.0, 3.0]);
-        assert_eq!(isotonic_regression(&[1.0, 3.0, 2.0], &[1.0; 3]), vec![1.0, 2.5, 2.5]);
+        assert_eq!(
+            isotonic_regression(&[1.0, 2.0, 3.0], &[1.0; 3]),
+            vec![1.0, 2.0, 3.0]
+        );
+        assert_eq!(
+            isotonic_regression(&[1.0, 3.0, 2.0], &[1.0; 3]),
+            vec![1.0, 2.5, 2.5]
+        );
         let weighted = isotonic_regression(&[1.0, 3.0, 2.0], &[1.0, 1.0, 3.0]);
         assert!((weighted[1] - 2.25).abs() < 1e-12 && weighted[1] == weighted[2]);
-        let r = ramp(&[0.25, 0.5, 0.6, 1.0], |v| if v == 0.6 { 0.17 } else { v.powf(2.2) }, &[0.0], true);
+        let r = ramp(
+            &[0.25, 0.5, 0.6, 1.0],
+            |v| if v == 0.6 { 0.17 } else { v.powf(2.2) },
+            &[0.0],
+            true,
+        );
         let fit = fit_law(LawKind::Table, &r, 1.0 / 255.0).unwrap();
         assert!(fit.notes[0].contains("pooled"));
         fit.law.monotonicity().unwrap();

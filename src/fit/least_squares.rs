@@ -116,13 +116,17 @@ pub fn fit_curve(
         });
     }
     let problem = Problem { curve, x, y, sigma };
-    let condition = ArmijoCondition::new(1e-4)
-        .map_err(|e| LeastSquaresError::NoConvergence(e.to_string()))?;
+    let condition =
+        ArmijoCondition::new(1e-4).map_err(|e| LeastSquaresError::NoConvergence(e.to_string()))?;
     let solver = GaussNewtonLS::new(BacktrackingLineSearch::new(condition))
         .with_tolerance(1e-12)
         .map_err(|e| LeastSquaresError::NoConvergence(e.to_string()))?;
     let result = Executor::new(problem, solver)
-        .configure(|state| state.param(DVector::from_column_slice(start)).max_iters(100))
+        .configure(|state| {
+            state
+                .param(DVector::from_column_slice(start))
+                .max_iters(100)
+        })
         .run()
         .map_err(|e| LeastSquaresError::NoConvergence(e.to_string()))?;
     let state = result.state();
@@ -212,7 +216,9 @@ mod tests {
     fn recovers_a_power_law_and_its_uncertainty() {
         // y = x^2.4 with 1 % noise drawn from a fixed pattern.
         let x: Vec<f64> = (1..=12).map(|i| i as f64 / 12.0).collect();
-        let wiggle = [0.3, -0.8, 1.1, -0.2, 0.5, -1.4, 0.9, 0.1, -0.6, 1.2, -0.9, 0.4];
+        let wiggle = [
+            0.3, -0.8, 1.1, -0.2, 0.5, -1.4, 0.9, 0.1, -0.6, 1.2, -0.9, 0.4,
+        ];
         let y: Vec<f64> = x
             .iter()
             .zip(wiggle)

@@ -147,7 +147,9 @@ fn code_step(set: &MeasurementSet) -> f64 {
     set.measurements
         .iter()
         .find_map(|m| m.codes)
-        .map_or(1.0 / 255.0, |c| 1.0 / crate::display::Codes::max(c.bit_depth) as f64)
+        .map_or(1.0 / 255.0, |c| {
+            1.0 / crate::display::Codes::max(c.bit_depth) as f64
+        })
 }
 
 /// Fit the monitor model to `set`.
@@ -156,13 +158,16 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
     let standard = |m: &&crate::measurement::Measurement| m.is_standard_condition();
 
     // 1. Black.
-    let blacks: Vec<_> = all.iter().filter(|m| m.role == Role::Black).filter(standard).collect();
+    let blacks: Vec<_> = all
+        .iter()
+        .filter(|m| m.role == Role::Black)
+        .filter(standard)
+        .collect();
     let black = estimate_black(&blacks);
 
     // 2. Drift from the reference white, then the noise model.
-    let is_white = |m: &&crate::measurement::Measurement| {
-        m.drive == [1.0; 3] && m.is_standard_condition()
-    };
+    let is_white =
+        |m: &&crate::measurement::Measurement| m.drive == [1.0; 3] && m.is_standard_condition();
     let references: Vec<(f64, f64)> = all
         .iter()
         .filter(|m| m.role == Role::Reference)
@@ -186,8 +191,16 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
         .map(|x| x.y)
         .fold(0.0, f64::max)
         .max(brightest(0) + brightest(1) + brightest(2));
-    let black_ys: Vec<f64> = blacks.iter().filter_map(|m| m.usable_xyz()).map(|x| x.y).collect();
-    let noise = estimate_noise(drift.residual_relative_sd, &black_ys, white_y.max(black.xyz.y));
+    let black_ys: Vec<f64> = blacks
+        .iter()
+        .filter_map(|m| m.usable_xyz())
+        .map(|x| x.y)
+        .collect();
+    let noise = estimate_noise(
+        drift.residual_relative_sd,
+        &black_ys,
+        white_y.max(black.xyz.y),
+    );
 
     let corrected: Vec<Corrected<'_>> = all
         .iter()
@@ -305,7 +318,14 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
         .filter(|r| matches!(r.measurement.role, Role::Verification | Role::Mixture))
         .collect();
     let evaluation = evaluate(&model, held.iter().map(|r| (r.measurement, r.xyz)));
-    let checks = check_assumptions(&corrected, &ramps, &black.xyz, &noise, &drift, &white_reference);
+    let checks = check_assumptions(
+        &corrected,
+        &ramps,
+        &black.xyz,
+        &noise,
+        &drift,
+        &white_reference,
+    );
 
     let primaries = ramps
         .iter()

@@ -38,7 +38,10 @@ impl NoiseModel {
 /// scatter of repeated black readings.
 pub fn estimate_noise(relative: Option<f64>, black_ys: &[f64], white_y: f64) -> NoiseModel {
     let (relative, relative_from) = match relative {
-        Some(r) if r > 0.0 => (r, "scatter of the reference white about its drift".to_string()),
+        Some(r) if r > 0.0 => (
+            r,
+            "scatter of the reference white about its drift".to_string(),
+        ),
         _ => (
             ASSUMED_RELATIVE_NOISE,
             format!("assumed ({ASSUMED_RELATIVE_NOISE}): too few reference repeats"),
@@ -52,7 +55,10 @@ pub fn estimate_noise(relative: Option<f64>, black_ys: &[f64], white_y: f64) -> 
         // Two readings leave one degree of freedom; never trust a floor far below
         // what the assumption would give.
         let floor = floor.max(0.1 * assumed_floor);
-        (floor, format!("scatter of {} black readings", black_ys.len()))
+        (
+            floor,
+            format!("scatter of {} black readings", black_ys.len()),
+        )
     } else {
         (
             assumed_floor,
@@ -116,7 +122,10 @@ pub struct DriftReport {
 /// Fit the drift of the reference signal (reference luminance minus black) over time,
 /// choosing the polynomial degree by leave-one-out error (simplest within noise).
 /// Returns the model (`None` when no correction is due) and the report.
-pub fn estimate_drift(references: &[(f64, f64)], correct: bool) -> (Option<DriftModel>, DriftReport) {
+pub fn estimate_drift(
+    references: &[(f64, f64)],
+    correct: bool,
+) -> (Option<DriftModel>, DriftReport) {
     let n = references.len();
     let report = |degree, amplitude, corrected, sd, note: String| DriftReport {
         references: n,
@@ -129,17 +138,32 @@ pub fn estimate_drift(references: &[(f64, f64)], correct: bool) -> (Option<Drift
     if n < 3 {
         return (
             None,
-            report(None, 0.0, false, None, format!("{n} reference readings: too few to follow drift")),
+            report(
+                None,
+                0.0,
+                false,
+                None,
+                format!("{n} reference readings: too few to follow drift"),
+            ),
         );
     }
     let t_first = references.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
-    let t_last = references.iter().map(|r| r.0).fold(f64::NEG_INFINITY, f64::max);
+    let t_last = references
+        .iter()
+        .map(|r| r.0)
+        .fold(f64::NEG_INFINITY, f64::max);
     let span = (t_last - t_first).max(f64::MIN_POSITIVE);
     let level = mean(&references.iter().map(|r| r.1).collect::<Vec<_>>());
     if !(level > 0.0) {
         return (
             None,
-            report(None, 0.0, false, None, "the reference gave no light above black".into()),
+            report(
+                None,
+                0.0,
+                false,
+                None,
+                "the reference gave no light above black".into(),
+            ),
         );
     }
     let fit = |points: &[(f64, f64)], degree: usize| {
@@ -174,7 +198,10 @@ pub fn estimate_drift(references: &[(f64, f64)], correct: bool) -> (Option<Drift
     }
     let degree = simplest_within_noise(&errors, 0.0).unwrap_or(0);
     let Some(f) = fit(references, degree) else {
-        return (None, report(None, 0.0, false, None, "the drift fit failed".into()));
+        return (
+            None,
+            report(None, 0.0, false, None, "the drift fit failed".into()),
+        );
     };
     let sd = if f.dof > 0 {
         Some((f.chi2 / f.dof as f64).sqrt() / level)
@@ -248,7 +275,11 @@ mod tests {
         let model = model.expect("drift must be found");
         assert!(report.degree.unwrap() >= 1);
         // The start is about 4 % below the end.
-        assert!((model.gain(0.0) - 1.0 / 1.042).abs() < 0.003, "{}", model.gain(0.0));
+        assert!(
+            (model.gain(0.0) - 1.0 / 1.042).abs() < 0.003,
+            "{}",
+            model.gain(0.0)
+        );
         assert!((model.gain(420.0) - 1.0).abs() < 1e-12);
         assert!(report.amplitude_percent > 3.0 && report.amplitude_percent < 5.0);
     }

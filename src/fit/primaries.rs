@@ -123,7 +123,12 @@ impl ChannelRamp {
     }
 
     /// The same ramp without the readings at drive `level` (for cross-validation).
-    pub fn without_level(&self, level: f64, black: &Xyz, noise: &NoiseModel) -> Option<ChannelRamp> {
+    pub fn without_level(
+        &self,
+        level: f64,
+        black: &Xyz,
+        noise: &NoiseModel,
+    ) -> Option<ChannelRamp> {
         let kept: Vec<(usize, f64, Xyz)> = self
             .points
             .iter()
@@ -191,7 +196,10 @@ fn reduce_ramp(
     if !u.iter().all(|v| v.is_finite()) {
         return None;
     }
-    let lengths: Vec<f64> = points.iter().map(|(_, _, xyz)| u.dot(&(xyz - black))).collect();
+    let lengths: Vec<f64> = points
+        .iter()
+        .map(|(_, _, xyz)| u.dot(&(xyz - black)))
+        .collect();
     let weight_sum: f64 = points
         .iter()
         .zip(&lengths)
@@ -202,11 +210,17 @@ fn reduce_ramp(
     let full: Vec<usize> = (0..points.len()).filter(|i| points[*i].1 >= 1.0).collect();
     let (top_indices, pinned) = if full.is_empty() {
         let top = points.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
-        ((0..points.len()).filter(|i| points[*i].1 == top).collect::<Vec<_>>(), false)
+        (
+            (0..points.len())
+                .filter(|i| points[*i].1 == top)
+                .collect::<Vec<_>>(),
+            false,
+        )
     } else {
         (full, true)
     };
-    let normaliser = top_indices.iter().map(|i| lengths[*i]).sum::<f64>() / top_indices.len() as f64;
+    let normaliser =
+        top_indices.iter().map(|i| lengths[*i]).sum::<f64>() / top_indices.len() as f64;
     if !(normaliser > 0.0) {
         return None;
     }

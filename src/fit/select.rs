@@ -48,11 +48,20 @@ mod tests {
     fn a_simpler_candidate_within_noise_wins() {
         let simple = vec![1.0, 1.2, 0.9, 1.1, 1.0];
         let complex = vec![0.98, 1.21, 0.88, 1.12, 0.97];
-        assert_eq!(simplest_within_noise(&[Some(simple.clone()), Some(complex.clone())], 0.0), Some(0));
+        assert_eq!(
+            simplest_within_noise(&[Some(simple.clone()), Some(complex.clone())], 0.0),
+            Some(0)
+        );
         // Consistently but invisibly worse: kept only with a noise tolerance.
         let worse: Vec<f64> = complex.iter().map(|c| c + 0.01).collect();
-        assert_eq!(simplest_within_noise(&[Some(worse.clone()), Some(complex.clone())], 0.0), Some(1));
-        assert_eq!(simplest_within_noise(&[Some(worse), Some(complex)], 0.05), Some(0));
+        assert_eq!(
+            simplest_within_noise(&[Some(worse.clone()), Some(complex.clone())], 0.0),
+            Some(1)
+        );
+        assert_eq!(
+            simplest_within_noise(&[Some(worse), Some(complex)], 0.05),
+            Some(0)
+        );
     }
 
     #[test]

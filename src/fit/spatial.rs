@@ -67,7 +67,11 @@ struct GainPoint<'a> {
     sigma: f64,
 }
 
-fn gain_points<'a>(base: &MonitorModel, grid: &'a [Corrected<'a>], noise: &NoiseModel) -> Vec<GainPoint<'a>> {
+fn gain_points<'a>(
+    base: &MonitorModel,
+    grid: &'a [Corrected<'a>],
+    noise: &NoiseModel,
+) -> Vec<GainPoint<'a>> {
     grid.iter()
         .filter_map(|r| {
             let m = r.measurement;
@@ -95,7 +99,9 @@ fn fit_surface(points: &[&GainPoint<'_>], degree: u32) -> Option<Surface> {
     if positions.len() <= terms {
         return None;
     }
-    let design = DMatrix::from_fn(points.len(), terms, |i, k| surface_basis(points[i].position, degree)[k]);
+    let design = DMatrix::from_fn(points.len(), terms, |i, k| {
+        surface_basis(points[i].position, degree)[k]
+    });
     let y: Vec<f64> = points.iter().map(|p| p.gain - 1.0).collect();
     let s: Vec<f64> = points.iter().map(|p| p.sigma).collect();
     let fit = fit_linear(&design, &y, &s).ok()?;
@@ -108,7 +114,10 @@ fn fit_surface(points: &[&GainPoint<'_>], degree: u32) -> Option<Surface> {
 fn distinct_positions(positions: impl Iterator<Item = ScreenPosition>) -> Vec<ScreenPosition> {
     let mut out: Vec<ScreenPosition> = Vec::new();
     for p in positions {
-        if !out.iter().any(|q| (q.x - p.x).abs() < 1e-9 && (q.y - p.y).abs() < 1e-9) {
+        if !out
+            .iter()
+            .any(|q| (q.x - p.x).abs() < 1e-9 && (q.y - p.y).abs() < 1e-9)
+        {
             out.push(p);
         }
     }
@@ -122,7 +131,11 @@ fn fit_shape(shape: Shape, points: &[&GainPoint<'_>]) -> Option<SpatialMap> {
         Shape::PerChannel(d) => {
             let per: Vec<Surface> = (0..3)
                 .map(|c| {
-                    let own: Vec<&GainPoint<'_>> = points.iter().copied().filter(|p| p.channel == Some(c)).collect();
+                    let own: Vec<&GainPoint<'_>> = points
+                        .iter()
+                        .copied()
+                        .filter(|p| p.channel == Some(c))
+                        .collect();
                     fit_surface(&own, d)
                 })
                 .collect::<Option<Vec<_>>>()?;
@@ -153,7 +166,9 @@ pub fn choose_spatial_map(
         let mut errors = Vec::new();
         let mut note = None;
         for held in &positions {
-            let at = |p: &&GainPoint<'_>| (p.position.x - held.x).abs() < 1e-9 && (p.position.y - held.y).abs() < 1e-9;
+            let at = |p: &&GainPoint<'_>| {
+                (p.position.x - held.x).abs() < 1e-9 && (p.position.y - held.y).abs() < 1e-9
+            };
             let training: Vec<&GainPoint<'_>> = all.iter().copied().filter(|p| !at(p)).collect();
             let Some(map) = fit_shape(*shape, &training) else {
                 note = Some("the grid has too few positions for it".to_string());

@@ -109,6 +109,16 @@ impl MonitorModel {
         })
     }
 
+    /// The same display with all light scaled by `factor` (to compare a profile in
+    /// cd/m² with measurements relative to white, say).
+    pub fn scaled(&self, factor: f64) -> MonitorModel {
+        MonitorModel {
+            matrix: self.matrix * factor,
+            black: self.black * factor,
+            ..self.clone()
+        }
+    }
+
     /// 2-norm condition number of the primary matrix: how much the inverse amplifies
     /// relative errors. Near-collinear primaries make it large.
     pub fn condition_number(&self) -> f64 {
@@ -277,12 +287,17 @@ mod tests {
     fn the_file_form_names_things_and_checks_them() {
         let m = srgb_like();
         let text = toml::to_string(&m).unwrap();
-        assert!(text.contains("[primaries]") && text.contains("[laws.red]"), "{text}");
+        assert!(
+            text.contains("[primaries]") && text.contains("[laws.red]"),
+            "{text}"
+        );
         let back: MonitorModel = toml::from_str(&text).unwrap();
         assert_eq!(back, m);
         let turning = text.replace("gamma = 2.2\n", "gamma = -1.0\n");
         assert_ne!(turning, text);
-        let err = toml::from_str::<MonitorModel>(&turning).unwrap_err().to_string();
+        let err = toml::from_str::<MonitorModel>(&turning)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("red law"), "{err}");
     }
 

@@ -17,7 +17,10 @@ use crate::calibrate::journal::sync_directory;
 /// never a mix: write a temporary file in the same directory, fsync it, rename it over
 /// `path`, fsync the directory.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     fs::create_dir_all(dir)?;
     let name = path
         .file_name()
@@ -108,8 +111,14 @@ mod tests {
         store.publish("b", "second").unwrap();
         store.keep("c", "rejected").unwrap();
         assert_eq!(fs::read_to_string(store.current_path()).unwrap(), "second");
-        assert_eq!(fs::read_to_string(store.profile_path("a")).unwrap(), "first");
-        assert_eq!(fs::read_to_string(store.profile_path("c")).unwrap(), "rejected");
+        assert_eq!(
+            fs::read_to_string(store.profile_path("a")).unwrap(),
+            "first"
+        );
+        assert_eq!(
+            fs::read_to_string(store.profile_path("c")).unwrap(),
+            "rejected"
+        );
         let leftovers: Vec<_> = fs::read_dir(dir.path())
             .unwrap()
             .filter_map(|e| e.ok())

@@ -1,0 +1,298 @@
+//! `chromacal bench`: speed against error, as tables.
+//!
+//! 1. Fit time of each law against the number of readings per channel.
+//! 2. Held-out ΔE00 (the verification patches, never fitted on) against the patch
+//!    budget, for each law forced and for the law chosen by cross-validation, on each
+//!    simulated monitor: the two presets, and, when the shared reference data are
+//!    there, virtual monitors whose primaries are real measured spectra and whose
+//!    transfer is a real measured table (ISETBio CRT, LCD and OLED).
+//!
+//! Every simulated run uses realistic noise (0.2 % gain, 0.2 % per band, 0.0005 cd/m²
+//! floor) and is repeated over seeds; the table gives the mean over seeds.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use chromacal::calibrate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalHeader};
+use chromacal::calibrate::plan::make_plan;
+use chromacal::calibrate::run::run_plan;
+use chromacal::calibrate::session::rig_for;
+use chromacal::config::{Config, parse_config};
+use chromacal::display::PatchDisplay;
+use chromacal::fit::laws::fit_law;
+use chromacal::fit::primaries::{ChannelRamp, RampPoint};
+use chromacal::fit::{FitOptions, fit_monitor};
+use chromacal::instrument::Instrument;
+use chromacal::measurement::{MeasurementSet, Units};
+use chromacal::model::transfer::{GainOffsetGamma, LawKind};
+use chromacal::report::table;
+
+/// A virtual monitor to measure, as a `[monitor]` config section.
+struct Monitor {
+    name: String,
+    section: String,
+}
+
+fn monitors(data: &Path) -> Vec<Monitor> {
+    let mut list = vec![
+        Monitor {
+            name: "preset crt".into(),
+            section: "preset = \"crt\"".into(),
+        },
+        Monitor {
+            name: "preset lcd".into(),
+            section: "preset = \"lcd\"".into(),
+        },
+    ];
+    for (name, stem, white, black, falloff) in [
+        (
+            "ISETBio CRT-Dell",
+            "isetbio_crt_dell",
+            "100.0",
+            "0.02",
+            "0.15",
+        ),
+        ("ISETBio LCD-Dell", "isetbio_lcd_dell", "", "0.0", "0.05"),
+        (
+            "ISETBio OLED-Sony",
+            "isetbio_oled_sony",
+            "",
+            "0.0005",
+            "0.02",
+        ),
+    ] {
+        let spd = data.join(format!("displays/spd/{stem}_spd.csv"));
+        let gamma = data.join(format!("displays/gamma/{stem}_gamma.csv"));
+        if spd.is_file() && gamma.is_file() {
+            let white = if white.is_empty() {
+                String::new()
+            } else {
+                format!("white_luminance = {white}\n")
+            };
+            list.push(Monitor {
+                name: name.into(),
+                section: format!(
+                    "primaries_csv = \"{}\"\ntransfer_csv = \"{}\"\n{white}black_luminance = {black}\nflare_luminance = 0.05\nfalloff = {falloff}",
+                    spd.display(),
+                    gamma.display()
+                ),
+            });
+        }
+    }
+    list
+}
+
+fn config_for(monitor: &Monitor, budget: usize, seed: u64) -> Result<Config, String> {
+    let text = format!(
+        "[monitor]\n{}\n[instrument.simulated]\nseed = {seed}\n[plan]\nbudget = {budget}\nseed = {seed}\n",
+        monitor.section
+    );
+    parse_config(&text, &monitor.name).map_err(|e| e.to_string())
+}
+
+/// Measure a simulated run into a journal under `dir` and return its measurements.
+fn simulate(config: &Config, dir: &Path, tag: &str) -> Result<MeasurementSet, String> {
+    let mut rig = rig_for(config, Path::new("."), None).map_err(|e| e.to_string())?;
+    let plan = make_plan(&config.plan).map_err(|e| e.to_string())?;
+    let header = JournalHeader {
+        format: JOURNAL_FORMAT.into(),
+        version: JOURNAL_VERSION,
+        run_id: tag.into(),
+        started: String::new(),
+        config_digest: String::new(),
+        config: String::new(),
+        config_dir: PathBuf::from("."),
+        display: rig.display.name(),
+        instrument: rig.instrument.info(),
+        units: Units::Absolute,
+        plan,
+    };
+    let path = dir.join(format!("{tag}.jsonl"));
+    let _ = std::fs::remove_file(&path);
+    let mut journal = Journal::create(&path, header).map_err(|e| e.to_string())?;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .build()
+        .map_err(|e| e.to_string())?;
+    runtime
+        .block_on(run_plan(
+            &mut journal,
+            &mut rig.display,
+            &mut rig.instrument,
+            rig.clock.as_ref(),
+            3,
+            &mut |_| {},
+        ))
+        .map_err(|e| e.to_string())?;
+    let set = journal.measurement_set();
+    let _ = std::fs::remove_file(&path);
+    Ok(set)
+}
+
+/// A synthetic ramp of `n` levels with 0.3 % noise, for timing the law fits alone.
+fn synthetic_ramp(n: usize) -> ChannelRamp {
+    let truth = GainOffsetGamma::from_cutoff(0.04, 2.4);
+    let points = (1..=n)
+        .map(|k| {
+            let v = k as f64 / n as f64;
+            let e = truth.excitation(v);
+            let sigma = (1e-5f64.powi(2) + (0.003 * e).powi(2)).sqrt();
+            let wiggle = ((k * 7919) % 13) as f64 / 6.0 - 1.0;
+            RampPoint {
+                index: k,
+                drive: v,
+                excitation: e + sigma * wiggle,
+                sigma,
+                xyz: Default::default(),
+            }
+        })
+        .collect();
+    ChannelRamp {
+        channel: 0,
+        direction: nalgebra::Vector3::new(0.8, 0.5, 0.3).normalize(),
+        direction_se: Default::default(),
+        normaliser: 50.0,
+        normaliser_se: 0.05,
+        pinned: true,
+        points,
+    }
+}
+
+pub fn run(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
+    let data = data.unwrap_or_else(|| PathBuf::from("../shared/data"));
+    let repeats = if quick { 5 } else { 30 };
+    let seeds: Vec<u64> = if quick {
+        vec![1, 2]
+    } else {
+        vec![1, 2, 3, 4, 5]
+    };
+
+    // 1. Fit time per law against readings.
+    println!(
+        "fit time per channel, microseconds (median of {repeats}), against readings per channel:"
+    );
+    let sizes = [6usize, 12, 24, 48, 96];
+    let mut rows = Vec::new();
+    for kind in LawKind::ALL {
+        let mut row = vec![kind.name().to_string()];
+        for n in sizes {
+            let ramp = synthetic_ramp(n);
+            let mut times: Vec<f64> = (0..repeats)
+                .map(|_| {
+                    let t = Instant::now();
+                    let _ = fit_law(kind, &ramp, 1.0 / 255.0);
+                    t.elapsed().as_secs_f64() * 1e6
+                })
+                .collect();
+            times.sort_by(|a, b| a.total_cmp(b));
+            row.push(format!("{:.0}", times[times.len() / 2]));
+        }
+        rows.push(row);
+    }
+    let headers: Vec<String> = std::iter::once("law".to_string())
+        .chain(sizes.iter().map(|n| format!("n={n}")))
+        .collect();
+    let header_refs: Vec<&str> = headers.iter().map(String::as_str).collect();
+    print!("{}", table(&header_refs, &rows));
+
+    // 2. Held-out ΔE00 against budget.
+    let dir = std::env::temp_dir().join(format!("chromacal-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let budgets = [12usize, 24, 48, 96];
+    let mut choices: Vec<(String, Vec<LawKind>)> = LawKind::ALL
+        .iter()
+        .map(|k| (k.name().to_string(), vec![*k]))
+        .collect();
+    choices.push(("chosen by CV".into(), LawKind::ALL.to_vec()));
+    for monitor in monitors(&data) {
+        println!(
+            "\n{}: held-out ΔE00 on 24 verification patches, mean / p95 (mean over {} seeds), and fit time, against counted patches:",
+            monitor.name,
+            seeds.len()
+        );
+        let mut rows: Vec<Vec<String>> = choices.iter().map(|c| vec![c.0.clone()]).collect();
+        let mut chosen_names = Vec::new();
+        let mut instrument_time = Vec::new();
+        for budget in budgets {
+            let mut sets = Vec::new();
+            for seed in &seeds {
+                let config = config_for(&monitor, budget, *seed)?;
+                let tag = format!("{}-{budget}-{seed}", monitor.name.replace(' ', "_"));
+                let set = simulate(&config, &dir, &tag)?;
+                sets.push(set);
+            }
+            let seconds: f64 = sets[0]
+                .measurements
+                .iter()
+                .map(|m| m.reading.integration_s + 0.2)
+                .sum();
+            instrument_time.push(seconds);
+            let mut picked = Vec::new();
+            for (k, (_, laws)) in choices.iter().enumerate() {
+                let options = FitOptions {
+                    laws: laws.clone(),
+                    ..FitOptions::default()
+                };
+                let mut means = Vec::new();
+                let mut p95s = Vec::new();
+                let mut micros = Vec::new();
+                for set in &sets {
+                    let t = Instant::now();
+                    if let Ok(f) = fit_monitor(set, &options) {
+                        micros.push(t.elapsed().as_secs_f64() * 1e3);
+                        if let Some(s) = f.report.held_out {
+                            means.push(s.mean);
+                            p95s.push(s.p95);
+                        }
+                        if laws.len() > 1 {
+                            picked.extend(f.report.chosen_law());
+                        }
+                    }
+                }
+                let cell = if means.len() == sets.len() {
+                    let m = means.iter().sum::<f64>() / means.len() as f64;
+                    let p = p95s.iter().sum::<f64>() / p95s.len() as f64;
+                    let ms = micros.iter().sum::<f64>() / micros.len() as f64;
+                    format!("{m:.3} / {p:.3}  {ms:.0} ms")
+                } else {
+                    format!("fails ({}/{})", sets.len() - means.len(), sets.len())
+                };
+                rows[k].push(cell);
+            }
+            picked.sort();
+            picked.dedup();
+            chosen_names.push(
+                picked
+                    .iter()
+                    .map(|k| k.name())
+                    .collect::<Vec<_>>()
+                    .join("+"),
+            );
+        }
+        let headers: Vec<String> = std::iter::once("law".to_string())
+            .chain(budgets.iter().map(|b| format!("{b} patches")))
+            .collect();
+        let header_refs: Vec<&str> = headers.iter().map(String::as_str).collect();
+        print!("{}", table(&header_refs, &rows));
+        println!(
+            "  chosen: {}",
+            budgets
+                .iter()
+                .zip(&chosen_names)
+                .map(|(b, c)| format!("{b}: {c}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        println!(
+            "  instrument time per run (all patches incl. held-out and grid): {}",
+            budgets
+                .iter()
+                .zip(&instrument_time)
+                .map(|(b, t)| format!("{b}: {}", chromacal::report::duration(*t)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}

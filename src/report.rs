@@ -1,0 +1,428 @@
+//! Plain-text reports for people: the summary after a calibration or a fit, the
+//! description of a profile, the result of a check.
+
+use std::fmt::Write as _;
+
+use crate::calibrate::plan::BudgetBreakdown;
+use crate::color::spaces::xyz_to_xyy;
+use crate::fit::FitReport;
+use crate::fit::checks::Verdict;
+use crate::fit::stats::ErrorStats;
+use crate::fit::validate::Evaluation;
+use crate::model::spatial::SpatialMap;
+use crate::model::{CHANNELS, MonitorModel};
+use crate::profile::Profile;
+
+/// Columns aligned: the first to the left, the others to the right.
+pub fn table(headers: &[&str], rows: &[Vec<String>]) -> String {
+    let columns = headers.len();
+    let mut widths: Vec<usize> = headers.iter().map(|h| h.chars().count()).collect();
+    for row in rows {
+        for (i, cell) in row.iter().enumerate().take(columns) {
+            widths[i] = widths[i].max(cell.chars().count());
+        }
+    }
+    let line = |cells: Vec<&str>| -> String {
+        let mut out = String::from("  ");
+        for (i, cell) in cells.iter().enumerate() {
+            let pad = widths[i].saturating_sub(cell.chars().count());
+            if i == 0 {
+                out.push_str(cell);
+                out.push_str(&" ".repeat(pad));
+            } else {
+                out.push_str("  ");
+                out.push_str(&" ".repeat(pad));
+                out.push_str(cell);
+            }
+        }
+        out.trim_end().to_string() + "\n"
+    };
+    let mut out = line(headers.to_vec());
+    for row in rows {
+        out.push_str(&line(row.iter().map(String::as_str).collect()));
+    }
+    out
+}
+
+fn stats_cells(s: Option<ErrorStats>) -> Vec<String> {
+    match s {
+        Some(s) => vec![
+            format!("{:.3}", s.mean),
+            format!("{:.3}", s.p95),
+            format!("{:.3}", s.max),
+        ],
+        None => vec!["–".into(), "–".into(), "–".into()],
+    }
+}
+
+/// "mean 0.043  p95 0.085  max 0.100 (24 patches)".
+pub fn stats_line(s: &ErrorStats) -> String {
+    format!(
+        "mean {:.3}  p95 {:.3}  max {:.3}  ({} patches)",
+        s.mean, s.p95, s.max, s.n
+    )
+}
+
+/// Seconds as "5 min 02 s" or "1.8 s".
+pub fn duration(seconds: f64) -> String {
+    if seconds >= 60.0 {
+        let s = seconds.round() as u64;
+        if s >= 3600 {
+            format!("{} h {:02} min", s / 3600, (s % 3600) / 60)
+        } else {
+            format!("{} min {:02} s", s / 60, s % 60)
+        }
+    } else if seconds >= 1.0 {
+        format!("{seconds:.1} s")
+    } else {
+        format!("{:.1} ms", seconds * 1000.0)
+    }
+}
+
+/// The budget line: what counts as measured.
+pub fn budget_line(b: &BudgetBreakdown) -> String {
+    format!(
+        "{} counted ({} black, {} levels × 3 ramps, {} grey, {} surround, {} reference) + {} held out + {} uniformity = {} patches",
+        b.counted,
+        b.black,
+        b.ramp_levels_per_channel,
+        b.grey,
+        b.surround,
+        b.reference,
+        b.verification,
+        b.uniformity,
+        b.counted + b.verification + b.uniformity
+    )
+}
+
+/// The part of a summary that any fit has: laws tried, spatial map, held-out error,
+/// assumptions.
+pub fn fit_summary(report: &FitReport) -> String {
+    let mut out = String::new();
+    let rows: Vec<Vec<String>> = report
+        .laws
+        .iter()
+        .map(|l| {
+            let mut row = vec![format!(
+                "{}{}",
+                l.law,
+                if l.chosen { "  ← chosen" } else { "" }
+            )];
+            row.extend(stats_cells(l.cross_validation));
+            row.extend(stats_cells(l.greys).into_iter().take(1));
+            row
+        })
+        .collect();
+    let _ = writeln!(
+        out,
+        "transfer laws (ΔE00 on readings each was not fitted on):"
+    );
+    out.push_str(&table(
+        &["law", "CV mean", "CV p95", "CV max", "greys mean"],
+        &rows,
+    ));
+    let _ = writeln!(out, "  rule: {}", report.law_rule);
+    for l in &report.laws {
+        for n in &l.notes {
+            let _ = writeln!(out, "  note ({}): {n}", l.law);
+        }
+    }
+    if report.spatial.positions > 0 {
+        let rows: Vec<Vec<String>> = report
+            .spatial
+            .candidates
+            .iter()
+            .map(|c| {
+                let mut row = vec![format!(
+                    "{}{}",
+                    c.name,
+                    if c.chosen { "  ← chosen" } else { "" }
+                )];
+                row.extend(stats_cells(c.cross_validation));
+                row
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "\nspatial map ({} grid positions, up to {:.1} % less light than the centre; leave-one-position-out ΔE00):",
+            report.spatial.positions,
+            report.spatial.largest_falloff_percent.unwrap_or(0.0)
+        );
+        out.push_str(&table(&["map", "mean", "p95", "max"], &rows));
+    }
+    let _ = writeln!(out);
+    match &report.held_out {
+        Some(s) => {
+            let _ = writeln!(out, "held-out ΔE00 (patches in no fit): {}", stats_line(s));
+        }
+        None => {
+            let _ = writeln!(
+                out,
+                "held-out ΔE00: no held-out patches in these measurements"
+            );
+        }
+    }
+    let c = &report.checks;
+    let verdicts = [
+        ("primary constancy", c.primary_constancy_verdict),
+        ("additivity", c.additivity_verdict),
+        ("spatial independence", c.spatial_independence_verdict),
+        ("temporal stability", c.temporal_stability_verdict),
+        ("monotonicity", c.monotonicity_verdict),
+    ];
+    let _ = writeln!(out, "\nassumptions:");
+    for (name, verdict) in verdicts {
+        let figure = match name {
+            "primary constancy" => c
+                .primary_constancy
+                .iter()
+                .map(|p| format!("{} Δu′v′ {:.4}", p.channel, p.max_delta_uv))
+                .collect::<Vec<_>>()
+                .join(", "),
+            "additivity" => c
+                .additivity
+                .iter()
+                .map(|a| format!("{:.2}: {:+.2} %", a.drive, a.luminance_departure_percent))
+                .collect::<Vec<_>>()
+                .join(", "),
+            "spatial independence" => c
+                .spatial_independence
+                .as_ref()
+                .map(|s| {
+                    format!(
+                        "white surround {:+.2} % (noise {:.2} %)",
+                        s.luminance_change_percent, s.noise_percent
+                    )
+                })
+                .unwrap_or_default(),
+            "temporal stability" => c.temporal_stability.note.clone(),
+            _ => c
+                .monotonicity
+                .iter()
+                .map(|m| format!("{} {} reversal(s)", m.channel, m.reversals_beyond_noise))
+                .collect::<Vec<_>>()
+                .join(", "),
+        };
+        let mark = if verdict == Verdict::Fails { "!" } else { " " };
+        let verdict = verdict.to_string();
+        let _ = writeln!(out, " {mark}{name:<22} {verdict:<26} {figure}");
+    }
+    let _ = writeln!(
+        out,
+        "  primary matrix condition number {:.2}; noise {:.2} % + {:.2e} (relative from {}, floor from {})",
+        report.condition_number,
+        report.noise.relative * 100.0,
+        report.noise.floor,
+        report.noise.relative_from,
+        report.noise.floor_from
+    );
+    out
+}
+
+/// The model in words and numbers.
+pub fn describe_model(model: &MonitorModel, units: &str) -> String {
+    let mut out = String::new();
+    let white = model.white();
+    let w = xyz_to_xyy(&white, [0.0, 0.0]);
+    let b = xyz_to_xyy(&model.black, [w.x, w.y]);
+    let _ = writeln!(
+        out,
+        "XYZ(d, p) = K(p) · M · E(d) + black   (XYZ in {units})\n"
+    );
+    let _ = writeln!(out, "white  Y {:.4}  x {:.4}  y {:.4}", white.y, w.x, w.y);
+    let _ = writeln!(
+        out,
+        "black  Y {:.5}  x {:.4}  y {:.4}   contrast {:.0}:1",
+        model.black.y,
+        b.x,
+        b.y,
+        if model.black.y > 0.0 {
+            white.y / model.black.y
+        } else {
+            f64::INFINITY
+        }
+    );
+    let rows: Vec<Vec<String>> = (0..3)
+        .map(|c| {
+            let col = model.matrix.column(c).into_owned();
+            let xyy = xyz_to_xyy(&col, [0.0, 0.0]);
+            vec![
+                CHANNELS[c].to_string(),
+                format!("{:.4}", col.x),
+                format!("{:.4}", col.y),
+                format!("{:.4}", col.z),
+                format!("{:.4}", xyy.x),
+                format!("{:.4}", xyy.y),
+            ]
+        })
+        .collect();
+    let _ = writeln!(
+        out,
+        "\nprimary matrix M (columns: XYZ of each primary at full drive, black taken off):"
+    );
+    out.push_str(&table(&["primary", "X", "Y", "Z", "x", "y"], &rows));
+    let _ = writeln!(out, "  condition number {:.2}", model.condition_number());
+    let _ = writeln!(out, "\ntransfer laws E(v):");
+    for (c, law) in model.laws.iter().enumerate() {
+        let params = law
+            .parameters()
+            .iter()
+            .map(|(n, v)| format!("{n} = {v:.5}"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let _ = writeln!(
+            out,
+            "  {:<6} {:<18} {params}   (E at drive 0.5: {:.4})",
+            CHANNELS[c],
+            law.kind().name(),
+            law.excitation(0.5)
+        );
+    }
+    let _ = writeln!(out, "\nspatial map: {}", model.spatial.describe());
+    if !matches!(model.spatial, SpatialMap::Uniform) {
+        let corners = [
+            (0.1, 0.1),
+            (0.9, 0.1),
+            (0.1, 0.9),
+            (0.9, 0.9),
+            (0.5, 0.1),
+            (0.1, 0.5),
+        ];
+        let gains = corners
+            .iter()
+            .map(|(x, y)| {
+                let g = model
+                    .spatial
+                    .gains(crate::model::ScreenPosition::new(*x, *y));
+                format!("({x:.1}, {y:.1}): {:.3}", g[1])
+            })
+            .collect::<Vec<_>>()
+            .join("  ");
+        let _ = writeln!(out, "  gain K at {gains}");
+    }
+    out
+}
+
+/// `chromacal profile show`.
+pub fn describe_profile(profile: &Profile) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "profile {}  (schema {}, created {})",
+        profile.id, profile.schema_version, profile.created
+    );
+    let p = &profile.provenance;
+    let _ = writeln!(out, "measured from {}", p.source);
+    if let Some(d) = &p.display {
+        let _ = writeln!(out, "display: {d}");
+    }
+    if let Some(i) = &p.instrument {
+        let _ = writeln!(out, "instrument: {} ({:?})", i.name, i.capability);
+    }
+    let _ = writeln!(out, "made by {}\n", p.program);
+    out.push_str(&describe_model(&profile.model, &profile.units.to_string()));
+    let _ = writeln!(out, "\nprimaries with standard errors:");
+    for pr in &profile.report.primaries {
+        let _ = writeln!(
+            out,
+            "  {:<6} X {:.4} ± {:.4}  Y {:.4} ± {:.4}  Z {:.4} ± {:.4}{}",
+            pr.channel,
+            pr.xyz.x,
+            pr.standard_error.x,
+            pr.xyz.y,
+            pr.standard_error.y,
+            pr.xyz.z,
+            pr.standard_error.z,
+            if pr.full_drive_measured {
+                ""
+            } else {
+                "  (full drive extrapolated)"
+            }
+        );
+    }
+    if let Some(chosen) = profile.report.laws.iter().find(|l| l.chosen) {
+        let _ = writeln!(out, "law parameters with standard errors ({}):", chosen.law);
+        for (c, params) in chosen.parameters.iter().enumerate() {
+            let text = params
+                .iter()
+                .map(|p| match p.standard_error {
+                    Some(se) => format!("{} = {:.5} ± {:.5}", p.name, p.value, se),
+                    None => format!("{} = {:.5}", p.name, p.value),
+                })
+                .collect::<Vec<_>>()
+                .join(", ");
+            let _ = writeln!(out, "  {:<6} {text}", CHANNELS[c]);
+        }
+    }
+    let _ = writeln!(out);
+    out.push_str(&fit_summary(&profile.report));
+    out
+}
+
+/// `chromacal check`: the errors and the worst patches.
+pub fn check_summary(evaluation: &Evaluation, worst: usize) -> String {
+    let mut out = String::new();
+    match &evaluation.stats {
+        Some(s) => {
+            let _ = writeln!(out, "ΔE00 of the profile's predictions: {}", stats_line(s));
+        }
+        None => {
+            let _ = writeln!(out, "no usable readings to check");
+            return out;
+        }
+    }
+    let rows: Vec<Vec<String>> = evaluation
+        .worst(worst)
+        .iter()
+        .map(|p| {
+            vec![
+                p.index.to_string(),
+                format!("{:?}", p.role).to_lowercase(),
+                format!("{:.3} {:.3} {:.3}", p.drive[0], p.drive[1], p.drive[2]),
+                format!(
+                    "{:.4} {:.4} {:.4}",
+                    p.measured.x, p.measured.y, p.measured.z
+                ),
+                format!(
+                    "{:.4} {:.4} {:.4}",
+                    p.predicted.x, p.predicted.y, p.predicted.z
+                ),
+                format!("{:.3}", p.delta_e00),
+            ]
+        })
+        .collect();
+    let _ = writeln!(out, "\nworst patches:");
+    out.push_str(&table(
+        &[
+            "patch",
+            "role",
+            "drive R G B",
+            "measured X Y Z",
+            "predicted X Y Z",
+            "ΔE00",
+        ],
+        &rows,
+    ));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tables_align_and_durations_read_well() {
+        let t = table(
+            &["a", "bb"],
+            &[
+                vec!["xxx".into(), "1".into()],
+                vec!["y".into(), "22".into()],
+            ],
+        );
+        assert_eq!(t, "  a    bb\n  xxx   1\n  y    22\n");
+        assert_eq!(duration(302.0), "5 min 02 s");
+        assert_eq!(duration(1.84), "1.8 s");
+        assert_eq!(duration(0.0051), "5.1 ms");
+        assert_eq!(duration(7300.0), "2 h 01 min");
+    }
+}
