@@ -13,17 +13,12 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use chromacal::calibrate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalHeader};
-use chromacal::calibrate::plan::make_plan;
-use chromacal::calibrate::run::run_plan;
-use chromacal::calibrate::session::rig_for;
+use chromacal::calibrate::session::measure_simulated;
 use chromacal::config::{Config, parse_config};
-use chromacal::display::PatchDisplay;
 use chromacal::fit::laws::fit_law;
 use chromacal::fit::primaries::{ChannelRamp, RampPoint};
 use chromacal::fit::{FitOptions, fit_monitor};
-use chromacal::instrument::Instrument;
-use chromacal::measurement::{MeasurementSet, Units};
+use chromacal::measurement::MeasurementSet;
 use chromacal::model::transfer::{GainOffsetGamma, LawKind};
 use chromacal::report::table;
 
@@ -92,38 +87,10 @@ fn config_for(monitor: &Monitor, budget: usize, seed: u64) -> Result<Config, Str
 
 /// Measure a simulated run into a journal under `dir` and return its measurements.
 fn simulate(config: &Config, dir: &Path, tag: &str) -> Result<MeasurementSet, String> {
-    let mut rig = rig_for(config, Path::new("."), None).map_err(|e| e.to_string())?;
-    let plan = make_plan(&config.plan).map_err(|e| e.to_string())?;
-    let header = JournalHeader {
-        format: JOURNAL_FORMAT.into(),
-        version: JOURNAL_VERSION,
-        run_id: tag.into(),
-        started: String::new(),
-        config_digest: String::new(),
-        config: String::new(),
-        config_dir: PathBuf::from("."),
-        display: rig.display.name(),
-        instrument: rig.instrument.info(),
-        units: Units::Absolute,
-        plan,
-    };
     let path = dir.join(format!("{tag}.jsonl"));
     let _ = std::fs::remove_file(&path);
-    let mut journal = Journal::create(&path, header).map_err(|e| e.to_string())?;
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_time()
-        .build()
-        .map_err(|e| e.to_string())?;
-    runtime
-        .block_on(run_plan(
-            &mut journal,
-            &mut rig.display,
-            &mut rig.instrument,
-            rig.clock.as_ref(),
-            3,
-            &mut |_| {},
-        ))
-        .map_err(|e| e.to_string())?;
+    let journal =
+        measure_simulated(config, "", Path::new("."), &path).map_err(|e| e.to_string())?;
     let set = journal.measurement_set();
     let _ = std::fs::remove_file(&path);
     Ok(set)

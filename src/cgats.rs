@@ -366,6 +366,57 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
     })
 }
 
+/// A `.ti3` text of the usable readings taken at the centre on a black surround (the
+/// only condition the format can describe). Absolute sets are written normalised to
+/// white Y = 100 with `LUMINANCE_XYZ_CDM2`, as ArgyllCMS writes display files.
+pub fn to_ti3(set: &MeasurementSet) -> String {
+    let rows: Vec<(&Measurement, Xyz)> = set
+        .measurements
+        .iter()
+        .filter(|m| m.is_standard_condition())
+        .filter_map(|m| Some((m, m.usable_xyz()?)))
+        .collect();
+    let whites: Vec<Xyz> = rows
+        .iter()
+        .filter(|(m, _)| m.drive == [1.0; 3])
+        .map(|r| r.1)
+        .collect();
+    let white = (!whites.is_empty()).then(|| whites.iter().sum::<Xyz>() / whites.len() as f64);
+    let (scale, luminance) = match (set.units, white) {
+        (Units::Absolute, Some(w)) if w.y > 0.0 => (100.0 / w.y, Some(w)),
+        _ => (1.0, None),
+    };
+    let mut out =
+        String::from("CTI3\n\nDESCRIPTOR \"Argyll Calibration Target chart information 3\"\n");
+    out += &format!("ORIGINATOR \"chromacal {}\"\n", env!("CARGO_PKG_VERSION"));
+    out += "DEVICE_CLASS \"DISPLAY\"\nCOLOR_REP \"RGB_XYZ\"\n";
+    match luminance {
+        Some(w) => {
+            out += &format!("LUMINANCE_XYZ_CDM2 \"{:.6} {:.6} {:.6}\"\n", w.x, w.y, w.z);
+            out += "NORMALIZED_TO_Y_100 \"YES\"\n";
+        }
+        None if set.units == Units::Absolute => out += "NORMALIZED_TO_Y_100 \"NO\"\n",
+        None => out += "NORMALIZED_TO_Y_100 \"YES\"\n",
+    }
+    out += "\nNUMBER_OF_FIELDS 7\nBEGIN_DATA_FORMAT\nSAMPLE_ID RGB_R RGB_G RGB_B XYZ_X XYZ_Y XYZ_Z\nEND_DATA_FORMAT\n\n";
+    out += &format!("NUMBER_OF_SETS {}\nBEGIN_DATA\n", rows.len());
+    for (i, (m, xyz)) in rows.iter().enumerate() {
+        let v = xyz * scale;
+        out += &format!(
+            "{} {:.4} {:.4} {:.4} {:.6} {:.6} {:.6}\n",
+            i + 1,
+            m.drive[0] * 100.0,
+            m.drive[1] * 100.0,
+            m.drive[2] * 100.0,
+            v.x,
+            v.y,
+            v.z
+        );
+    }
+    out += "END_DATA\n";
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -383,6 +434,17 @@ mod tests {
         assert_eq!(set.measurements[1].role, Role::Black);
         assert_eq!(set.measurements[2].role, Role::Ramp);
         assert_eq!(set.measurements[2].drive, [0.5, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn what_is_written_reads_back() {
+        let set = ti3_from_text(SMALL, "small.ti3").unwrap();
+        let again = ti3_from_text(&to_ti3(&set), "again.ti3").unwrap();
+        assert_eq!(again.units, Units::Absolute);
+        for (a, b) in set.measurements.iter().zip(&again.measurements) {
+            assert_eq!(a.drive, b.drive);
+            assert!((a.reading.xyz.unwrap() - b.reading.xyz.unwrap()).norm() < 1e-4);
+        }
     }
 
     #[test]

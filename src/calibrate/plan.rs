@@ -109,12 +109,19 @@ pub struct Plan {
 }
 
 /// Drive levels for `n` ramp steps, evenly spaced in CIE L* of a nominal
-/// E = v^2.2 channel, the top one at full drive, as distinct codes.
+/// E = v^2.2 channel from L* = 50/n to full drive, as distinct codes.
 pub fn ramp_levels(n: usize, bit_depth: u32) -> Vec<u32> {
     let max = Codes::max(bit_depth);
+    // L* from half a step above black to 100: the dimmest level sits low enough to
+    // pin down the toe of the curve, where dark colours are most sensitive.
+    let lowest = 50.0 / n as f64;
     let mut codes: Vec<u32> = (1..=n)
         .map(|k| {
-            let l_star = 100.0 * k as f64 / n as f64;
+            let l_star = if n == 1 {
+                100.0
+            } else {
+                lowest + (100.0 - lowest) * (k - 1) as f64 / (n - 1) as f64
+            };
             let v = lightness_to_luminance(l_star).powf(1.0 / NOMINAL_GAMMA);
             ((v * max as f64).round() as u32).max(1)
         })

@@ -276,6 +276,55 @@ pub async fn calibrate_simulated(
     })
 }
 
+/// Measure the plan of `config` on its simulated rig into a new journal at
+/// `journal_path`, without fitting or publishing: for fixtures, tests and benchmarks.
+pub fn measure_simulated(
+    config: &Config,
+    config_text: &str,
+    base_dir: &Path,
+    journal_path: &Path,
+) -> Result<Journal, CalibrateError> {
+    let mut rig = rig_for(config, base_dir, None)?;
+    let header = JournalHeader {
+        format: JOURNAL_FORMAT.into(),
+        version: JOURNAL_VERSION,
+        run_id: journal_path
+            .parent()
+            .and_then(|p| p.file_name())
+            .map_or_else(|| "simulated".into(), |n| n.to_string_lossy().into_owned()),
+        started: now_rfc3339(),
+        config_digest: String::new(),
+        config: config_text.to_string(),
+        config_dir: base_dir.to_path_buf(),
+        display: rig.display.name(),
+        instrument: rig.instrument.info(),
+        units: Units::Absolute,
+        plan: make_plan(&config.plan)?,
+    };
+    let mut journal = Journal::create(journal_path, header)?;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .build()
+        .map_err(|source| CalibrateError::Store {
+            path: journal_path.to_path_buf(),
+            source,
+        })?;
+    runtime
+        .block_on(run_plan(
+            &mut journal,
+            &mut rig.display,
+            &mut rig.instrument,
+            rig.clock.as_ref(),
+            DEFAULT_ATTEMPTS,
+            &mut |_| {},
+        ))
+        .map_err(|source| CalibrateError::Run {
+            source,
+            journal: journal_path.to_path_buf(),
+        })?;
+    Ok(journal)
+}
+
 /// The simulated rig a config describes.
 pub fn rig_for(
     config: &Config,

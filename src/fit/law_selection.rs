@@ -241,10 +241,29 @@ pub fn choose_law(
             ),
         ),
         None => {
-            let simplest = candidates.iter().find(|c| c.fitted())?;
+            // Nothing to score on: Akaike's criterion, χ² + 2k summed over the channels
+            // (Akaike 1974), with the run's own noise model behind χ²; the simplest
+            // law within 2 of the lowest (Burnham & Anderson 2002) is kept.
+            let aic: Vec<Option<f64>> = candidates
+                .iter()
+                .map(|c| {
+                    c.fits
+                        .iter()
+                        .map(|f| {
+                            f.as_ref()
+                                .ok()
+                                .map(|f| f.chi2 + 2.0 * f.free_parameters as f64)
+                        })
+                        .sum()
+                })
+                .collect();
+            let best = aic.iter().flatten().copied().fold(f64::INFINITY, f64::min);
+            let k = aic
+                .iter()
+                .position(|a| a.is_some_and(|a| a <= best + 2.0))?;
             (
-                simplest.kind,
-                "too few levels and no greys to score on: the simplest law that fits all channels"
+                candidates[k].kind,
+                "too few levels to cross-validate and no greys: the simplest law within 2 of the lowest Akaike criterion (χ² + 2k)"
                     .to_string(),
             )
         }

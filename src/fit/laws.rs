@@ -44,6 +44,8 @@ pub struct LawFit {
     pub parameters: Vec<FittedParameter>,
     pub chi2: f64,
     pub dof: usize,
+    /// Number of parameters fitted (levels, for the table).
+    pub free_parameters: usize,
     pub notes: Vec<String>,
 }
 
@@ -249,6 +251,7 @@ fn fit_power(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         parameters,
         chi2: fit.chi2,
         dof: fit.dof,
+        free_parameters: fit.params.len(),
         notes: Vec::new(),
     })
 }
@@ -340,6 +343,7 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
             parameters: gog_parameters(gamma, 0.0, power.amplitude, &ses, pinned),
             chi2,
             dof,
+            free_parameters: power.free_parameters,
             notes,
         });
     } else {
@@ -356,6 +360,7 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         parameters: gog_parameters(gamma, cutoff, amplitude, &ses, pinned),
         chi2: fit.chi2,
         dof: fit.dof,
+        free_parameters: fit.params.len(),
         notes,
     })
 }
@@ -448,6 +453,7 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
             parameters: log_parameters(kind, &fit.params, &ses, pinned),
             chi2: fit.chi2,
             dof: fit.dof,
+            free_parameters: fit.params.len(),
             notes: Vec::new(),
         }),
         Err(TransferError::TurnsBack { at, .. })
@@ -508,6 +514,7 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
                 parameters: log_parameters(kind, &full, &full_ses, pinned),
                 chi2: constrained.chi2,
                 dof: constrained.dof,
+                free_parameters: constrained.params.len(),
                 notes: vec![format!(
                     "the unconstrained fit turned back at drive {at:.4} (B > 0); refitted with the slope at the toe held at {TOE_SLOPE}"
                 )],
@@ -599,6 +606,7 @@ fn fit_table(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         parameters: vec![parameter("knots", drive.len() as f64, None)],
         chi2: 0.0,
         dof: 0,
+        free_parameters: drive.len(),
         notes,
     })
 }

@@ -28,3 +28,19 @@ pub fn shared_table(relative: &str) -> Vec<Vec<f64>> {
         .map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect())
         .collect()
 }
+
+/// A file under the project's `fixtures/`.
+pub fn fixture(relative: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(relative)
+}
+
+/// The simulated LCD with its own seeds, as the fixtures use it.
+pub const LCD_CONFIG: &str =
+    "[monitor]\npreset = \"lcd\"\n[instrument.simulated]\nseed = 11\n[plan]\nseed = 11\n";
+
+/// Path of the built `chromacal` binary.
+pub fn chromacal() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_chromacal"))
+}
