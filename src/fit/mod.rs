@@ -197,7 +197,7 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
         .map(|x| x.y)
         .collect();
     let noise = estimate_noise(
-        drift.residual_relative_sd,
+        drift.residual_relative_sd.map(|s| (s, drift.residual_dof)),
         &black_ys,
         white_y.max(black.xyz.y),
     );

@@ -9,8 +9,13 @@ use super::least_squares::fit_linear;
 use super::select::simplest_within_noise;
 use super::stats::{mean, standard_deviation};
 
-/// Relative noise assumed when the readings cannot tell (fewer than three repeats).
+/// Relative noise assumed when the readings cannot tell (fewer than three repeats),
+/// and the prior the measured value is shrunk towards.
 pub const ASSUMED_RELATIVE_NOISE: f64 = 0.003;
+/// Weight of [`ASSUMED_RELATIVE_NOISE`] in degrees of freedom. A handful of reference
+/// readings can, by chance, scatter ten times less than the instrument's real noise;
+/// pooling them with a prior worth two readings keeps the uncertainties honest.
+pub const PRIOR_DEGREES_OF_FREEDOM: f64 = 2.0;
 /// Noise floor assumed when fewer than two blacks were read, as a fraction of white.
 pub const ASSUMED_FLOOR_OF_WHITE: f64 = 5e-5;
 
@@ -34,14 +39,31 @@ impl NoiseModel {
     }
 }
 
-/// Noise model from the relative noise found by the drift fit (if any) and the
-/// scatter of repeated black readings.
-pub fn estimate_noise(relative: Option<f64>, black_ys: &[f64], white_y: f64) -> NoiseModel {
+/// Noise model from the relative scatter of the reference white about its drift
+/// (with its degrees of freedom), if known, and the scatter of repeated blacks.
+///
+/// The relative noise is the pooled variance of the measured scatter and the prior:
+/// σ² = (ν s² + ν₀ σ₀²) / (ν + ν₀), with σ₀ = [`ASSUMED_RELATIVE_NOISE`] and
+/// ν₀ = [`PRIOR_DEGREES_OF_FREEDOM`].
+pub fn estimate_noise(
+    relative: Option<(f64, usize)>,
+    black_ys: &[f64],
+    white_y: f64,
+) -> NoiseModel {
     let (relative, relative_from) = match relative {
-        Some(r) if r > 0.0 => (
-            r,
-            "scatter of the reference white about its drift".to_string(),
-        ),
+        Some((s, dof)) if s > 0.0 && dof > 0 => {
+            let nu = dof as f64;
+            let pooled = ((nu * s * s
+                + PRIOR_DEGREES_OF_FREEDOM * ASSUMED_RELATIVE_NOISE * ASSUMED_RELATIVE_NOISE)
+                / (nu + PRIOR_DEGREES_OF_FREEDOM))
+                .sqrt();
+            (
+                pooled,
+                format!(
+                    "scatter of the reference white about its drift ({s:.5}, {dof} degrees of freedom) pooled with a prior of {ASSUMED_RELATIVE_NOISE}"
+                ),
+            )
+        }
         _ => (
             ASSUMED_RELATIVE_NOISE,
             format!("assumed ({ASSUMED_RELATIVE_NOISE}): too few reference repeats"),
@@ -114,8 +136,10 @@ pub struct DriftReport {
     /// Largest departure of the fitted gain from the end-of-run value, percent.
     pub amplitude_percent: f64,
     pub corrected: bool,
-    /// Relative scatter of the references about the drift curve.
+    /// Relative scatter of the references about the drift curve, from their
+    /// leave-one-out prediction errors, and its degrees of freedom.
     pub residual_relative_sd: Option<f64>,
+    pub residual_dof: usize,
     pub note: String,
 }
 
@@ -127,12 +151,13 @@ pub fn estimate_drift(
     correct: bool,
 ) -> (Option<DriftModel>, DriftReport) {
     let n = references.len();
-    let report = |degree, amplitude, corrected, sd, note: String| DriftReport {
+    let report = |degree: Option<usize>, amplitude, corrected, sd, note: String| DriftReport {
         references: n,
         degree,
         amplitude_percent: amplitude,
         corrected,
         residual_relative_sd: sd,
+        residual_dof: degree.map_or(0, |d| n.saturating_sub(d + 1)),
         note,
     };
     if n < 3 {
@@ -203,11 +228,12 @@ pub fn estimate_drift(
             report(None, 0.0, false, None, "the drift fit failed".into()),
         );
     };
-    let sd = if f.dof > 0 {
-        Some((f.chi2 / f.dof as f64).sqrt() / level)
-    } else {
-        None
-    };
+    // Leave-one-out errors are honest even when the polynomial nearly interpolates
+    // the few references; their variance is σ²(1 + p/n) for p coefficients.
+    let sd = errors[degree].as_ref().map(|e| {
+        let rms = (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+        rms / (1.0 + (degree + 1) as f64 / n as f64).sqrt()
+    });
     let model = DriftModel {
         t_first,
         t_last,
@@ -286,9 +312,12 @@ mod tests {
 
     #[test]
     fn noise_floor_comes_from_black_repeats() {
-        let noise = estimate_noise(Some(0.002), &[0.050, 0.052, 0.048], 100.0);
+        let noise = estimate_noise(Some((0.002, 1000)), &[0.050, 0.052, 0.048], 100.0);
         assert!((noise.floor - 0.002).abs() < 0.0005, "{noise:?}");
         assert!((noise.sigma(100.0) - 0.2).abs() < 0.01);
+        // Three references that happen to agree closely do not make a quiet instrument.
+        let lucky = estimate_noise(Some((0.0002, 2)), &[0.05, 0.05], 100.0);
+        assert!(lucky.relative > 0.002, "{lucky:?}");
         let assumed = estimate_noise(None, &[0.05], 100.0);
         assert_eq!(assumed.relative, ASSUMED_RELATIVE_NOISE);
         assert!(assumed.floor_from.starts_with("assumed"));

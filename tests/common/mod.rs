@@ -44,3 +44,36 @@ pub const LCD_CONFIG: &str =
 pub fn chromacal() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_chromacal"))
 }
+
+/// Simulate the run a config describes (relative paths from `base_dir`), and return
+/// its measurements with the virtual monitor's true model.
+pub fn simulate(
+    config_text: &str,
+    base_dir: &std::path::Path,
+) -> (
+    chromacal::measurement::MeasurementSet,
+    chromacal::model::MonitorModel,
+) {
+    let config = chromacal::config::parse_config(config_text, "test config").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let journal = chromacal::calibrate::session::measure_simulated(
+        &config,
+        config_text,
+        base_dir,
+        &dir.path().join("journal.jsonl"),
+    )
+    .unwrap();
+    let rig = chromacal::calibrate::session::rig_for(&config, base_dir, None).unwrap();
+    let truth = rig.monitor.lock().unwrap().true_model();
+    (journal.measurement_set(), truth)
+}
+
+/// A `[monitor]` section for an ISETBio display of ../shared/data: real measured
+/// primary spectra and a real measured transfer table.
+pub fn isetbio_monitor(stem: &str, extra: &str) -> String {
+    format!(
+        "[monitor]\nprimaries_csv = \"{}\"\ntransfer_csv = \"{}\"\n{extra}\n",
+        shared_path(&format!("displays/spd/{stem}_spd.csv")).display(),
+        shared_path(&format!("displays/gamma/{stem}_gamma.csv")).display()
+    )
+}
