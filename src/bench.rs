@@ -13,7 +13,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use chromacal::calibrate::session::measure_simulated;
+use chromacal::calibrate::session::{block_on, measure_simulated};
 use chromacal::config::{Config, parse_config};
 use chromacal::fit::laws::fit_law;
 use chromacal::fit::primaries::{ChannelRamp, RampPoint};
@@ -89,8 +89,9 @@ fn config_for(monitor: &Monitor, budget: usize, seed: u64) -> Result<Config, Str
 fn simulate(config: &Config, dir: &Path, tag: &str) -> Result<MeasurementSet, String> {
     let path = dir.join(format!("{tag}.jsonl"));
     let _ = std::fs::remove_file(&path);
-    let journal =
-        measure_simulated(config, "", Path::new("."), &path).map_err(|e| e.to_string())?;
+    let journal = block_on(measure_simulated(config, "", Path::new("."), &path))
+        .map_err(|e| e.to_string())?
+        .map_err(|e| e.to_string())?;
     let set = journal.measurement_set();
     let _ = std::fs::remove_file(&path);
     Ok(set)

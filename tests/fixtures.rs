@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use chromacal::calibrate::journal::Journal;
-use chromacal::calibrate::session::measure_simulated;
+use chromacal::calibrate::session::{block_on, measure_simulated};
 use chromacal::cgats::to_ti3;
 use chromacal::config::{DEFAULT_CONFIG, parse_config};
 
@@ -25,7 +25,9 @@ fn generate(dir: &Path) {
     let crt = parse_config(DEFAULT_CONFIG, "default").unwrap();
     let path = journals.join("crt-default.jsonl");
     let _ = std::fs::remove_file(&path);
-    let journal = measure_simulated(&crt, DEFAULT_CONFIG, here, &path).unwrap();
+    let journal = block_on(measure_simulated(&crt, DEFAULT_CONFIG, here, &path))
+        .unwrap()
+        .unwrap();
     std::fs::write(
         ti3.join("crt-default.ti3"),
         to_ti3(&journal.measurement_set()),
@@ -35,7 +37,9 @@ fn generate(dir: &Path) {
     let lcd = parse_config(LCD_CONFIG, "lcd").unwrap();
     let path = journals.join("lcd-interrupted.jsonl");
     let _ = std::fs::remove_file(&path);
-    measure_simulated(&lcd, LCD_CONFIG, here, &path).unwrap();
+    block_on(measure_simulated(&lcd, LCD_CONFIG, here, &path))
+        .unwrap()
+        .unwrap();
     // Keep the header and the first readings, and end in a line cut short, as a
     // run killed while writing leaves it.
     let text = std::fs::read_to_string(&path).unwrap();
@@ -49,7 +53,9 @@ fn generate(dir: &Path) {
     let lcd2 = parse_config(&lcd2_text, "lcd2").unwrap();
     let path = dir.join("lcd-seed12.jsonl");
     let _ = std::fs::remove_file(&path);
-    let journal = measure_simulated(&lcd2, &lcd2_text, here, &path).unwrap();
+    let journal = block_on(measure_simulated(&lcd2, &lcd2_text, here, &path))
+        .unwrap()
+        .unwrap();
     std::fs::write(
         ti3.join("lcd-seed12.ti3"),
         to_ti3(&journal.measurement_set()),

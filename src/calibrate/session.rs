@@ -278,7 +278,7 @@ pub async fn calibrate_simulated(
 
 /// Measure the plan of `config` on its simulated rig into a new journal at
 /// `journal_path`, without fitting or publishing: for fixtures, tests and benchmarks.
-pub fn measure_simulated(
+pub async fn measure_simulated(
     config: &Config,
     config_text: &str,
     base_dir: &Path,
@@ -302,27 +302,29 @@ pub fn measure_simulated(
         plan: make_plan(&config.plan)?,
     };
     let mut journal = Journal::create(journal_path, header)?;
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_time()
-        .build()
-        .map_err(|source| CalibrateError::Store {
-            path: journal_path.to_path_buf(),
-            source,
-        })?;
-    runtime
-        .block_on(run_plan(
-            &mut journal,
-            &mut rig.display,
-            &mut rig.instrument,
-            rig.clock.as_ref(),
-            DEFAULT_ATTEMPTS,
-            &mut |_| {},
-        ))
-        .map_err(|source| CalibrateError::Run {
-            source,
-            journal: journal_path.to_path_buf(),
-        })?;
+    run_plan(
+        &mut journal,
+        &mut rig.display,
+        &mut rig.instrument,
+        rig.clock.as_ref(),
+        DEFAULT_ATTEMPTS,
+        &mut |_| {},
+    )
+    .await
+    .map_err(|source| CalibrateError::Run {
+        source,
+        journal: journal_path.to_path_buf(),
+    })?;
     Ok(journal)
+}
+
+/// Run a future to completion on a single-threaded runtime: for the synchronous
+/// callers of the simulated rig (benchmarks, tests, tools).
+pub fn block_on<F: std::future::Future>(future: F) -> std::io::Result<F::Output> {
+    Ok(tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .build()?
+        .block_on(future))
 }
 
 /// The simulated rig a config describes.

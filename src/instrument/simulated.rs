@@ -92,10 +92,12 @@ impl SimulatedInstrument {
         &self.spec
     }
 
-    /// A generator for the reading taken at virtual time `t` (SplitMix64 of the seed
-    /// and the time's bits, so nearby times give unrelated streams).
+    /// A generator for the reading taken at virtual time `t`: SplitMix64 of the seed
+    /// and the time in whole microseconds, so nearby times give unrelated streams and
+    /// a time restored from a journal (with its rounding) gives the same one.
     fn rng_at(&self, t: f64) -> ChaCha8Rng {
-        let mut z = self.spec.seed ^ t.to_bits().wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let micros = (t * 1e6).round() as u64;
+        let mut z = self.spec.seed ^ micros.wrapping_mul(0x9E37_79B9_7F4A_7C15);
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         ChaCha8Rng::seed_from_u64(z ^ (z >> 31))

@@ -56,13 +56,15 @@ pub fn simulate(
 ) {
     let config = chromacal::config::parse_config(config_text, "test config").unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let journal = chromacal::calibrate::session::measure_simulated(
-        &config,
-        config_text,
-        base_dir,
-        &dir.path().join("journal.jsonl"),
-    )
-    .unwrap();
+    let journal =
+        chromacal::calibrate::session::block_on(chromacal::calibrate::session::measure_simulated(
+            &config,
+            config_text,
+            base_dir,
+            &dir.path().join("journal.jsonl"),
+        ))
+        .unwrap()
+        .unwrap();
     let rig = chromacal::calibrate::session::rig_for(&config, base_dir, None).unwrap();
     let truth = rig.monitor.lock().unwrap().true_model();
     (journal.measurement_set(), truth)
