@@ -95,7 +95,8 @@ pub enum FalloffConfig {
 }
 
 /// The `[monitor]` section: a preset, changed by whatever else is given, or a monitor
-/// built from files when no preset is named.
+/// built from files when `primaries_csv` is given without a preset. With neither, the
+/// first preset (`crt`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MonitorConfig {
@@ -169,12 +170,20 @@ impl MonitorConfig {
                 falloff: [0.0; 3],
                 failures: Failures::default(),
             },
-            (None, _, _) => {
+            (None, Some(_), None) => {
                 return Err(SimError::BadSpec {
                     name: "monitor".into(),
-                    what: "name a preset, or give primaries_csv and one of transfer_csv or laws"
+                    what: "a monitor built from primaries_csv also needs transfer_csv or laws"
                         .into(),
                 });
+            }
+            // Nothing named: the default preset, changed by whatever else is given.
+            (None, None, transfer) => {
+                let mut spec = preset(PRESET_NAMES[0])?;
+                if let Some(t) = transfer {
+                    spec.transfer = t;
+                }
+                spec
             }
         };
         if self.white_luminance.is_some() {

@@ -1,0 +1,247 @@
+//! The `chromacal` command, run as a user runs it.
+
+use std::path::Path;
+
+use chromacal::color::spectrum::{Illuminant, Observer, Spectrum, emission_to_xyz, reflectance_to_xyz};
+use chromacal::model::transfer::LawKind;
+use chromacal::profile::Profile;
+
+mod common;
+use common::{chromacal, fixture, shared_path, shared_table};
+
+fn run(args: &[&str]) -> (bool, String, String) {
+    let out = chromacal().args(args).output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn calibrate_runs_the_default_simulation_and_publishes_a_profile() {
+    let state = tempfile::tempdir().unwrap();
+    let (ok, stdout, stderr) = run(&["calibrate", "--state-dir", path(state.path())]);
+    assert!(ok, "{stderr}");
+    for expected in [
+        "patches measured: 48 counted",
+        "simulated instrument time",
+        "fit time",
+        "transfer laws",
+        "← chosen",
+        "held-out ΔE00",
+        "primary constancy",
+        "published as current",
+    ] {
+        assert!(stdout.contains(expected), "missing '{expected}' in:\n{stdout}");
+    }
+    let profile = Profile::read(&state.path().join("current.toml")).unwrap();
+    assert_eq!(profile.report.chosen_law(), Some(LawKind::GainOffsetGamma));
+    let held = profile.report.held_out.unwrap();
+    assert!(held.mean <= 0.5 && held.p95 <= 1.0, "{held:?}");
+    assert_eq!(held.n, 24);
+    // A second run publishes a second profile; both stay in the store.
+    let (ok, _, _) = run(&["calibrate", "--state-dir", path(state.path())]);
+    assert!(ok);
+    assert_eq!(std::fs::read_dir(state.path().join("profiles")).unwrap().count(), 2);
+}
+
+#[test]
+fn calibrate_json_and_a_profile_that_fails_the_limits() {
+    let state = tempfile::tempdir().unwrap();
+    let config = state.path().join("strict.toml");
+    std::fs::write(&config, "[publish]\nmax_mean_de00 = 0.001\n").unwrap();
+    let out = chromacal()
+        .args(["calibrate", "--json", "--config", path(&config), "--state-dir", path(state.path())])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(3), "a profile over the limits is not published");
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(report["held_out"]["mean"].as_f64().unwrap() > 0.001);
+    assert!(!state.path().join("current.toml").exists());
+    assert_eq!(std::fs::read_dir(state.path().join("profiles")).unwrap().count(), 1);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not published"));
+}
+
+#[test]
+fn config_errors_name_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("typo.toml");
+    std::fs::write(&config, "[plan]\nbudget = 48\nbugdet = 12\n").unwrap();
+    let (ok, _, stderr) = run(&["calibrate", "--config", path(&config), "--state-dir", path(dir.path())]);
+    assert!(!ok);
+    assert!(stderr.contains("typo.toml:3:1") && stderr.contains("bugdet"), "{stderr}");
+    std::fs::write(&config, "[monitor]\npreset = \"plasma\"\n").unwrap();
+    let (ok, _, stderr) = run(&["calibrate", "--config", path(&config), "--state-dir", path(dir.path())]);
+    assert!(!ok);
+    assert!(stderr.contains("plasma") && stderr.contains("crt, lcd"), "{stderr}");
+}
+
+#[test]
+fn fit_and_check_a_journal_and_a_ti3() {
+    let dir = tempfile::tempdir().unwrap();
+    let from_journal = dir.path().join("crt.toml");
+    let (ok, stdout, stderr) = run(&[
+        "fit",
+        fixture("journals/crt-default.jsonl").to_str().unwrap(),
+        "-o",
+        path(&from_journal),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("held-out ΔE00") && stdout.contains("transfer laws"), "{stdout}");
+    let profile = Profile::read(&from_journal).unwrap();
+    assert_eq!(profile.report.chosen_law(), Some(LawKind::GainOffsetGamma));
+
+    let from_ti3 = dir.path().join("crt-ti3.toml");
+    let (ok, _, stderr) = run(&[
+        "fit",
+        fixture("ti3/crt-default.ti3").to_str().unwrap(),
+        "-o",
+        path(&from_ti3),
+        "--laws",
+        "power,cowan",
+    ]);
+    assert!(ok, "{stderr}");
+    let ti3_profile = Profile::read(&from_ti3).unwrap();
+    let laws: Vec<LawKind> = ti3_profile.report.laws.iter().map(|l| l.law).collect();
+    assert_eq!(laws, vec![LawKind::Power, LawKind::Cowan]);
+
+    // The journal's profile predicts the .ti3 readings of the same run well...
+    let out = chromacal()
+        .args(["check", path(&from_journal), fixture("ti3/crt-default.ti3").to_str().unwrap(), "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let check: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let patches = check["patches"].as_array().unwrap();
+    // Every reading at the centre on a black surround: 96 less the 24 grid positions
+    // and the patch on a white surround.
+    assert_eq!(patches.len(), 71);
+    assert!(patches.iter().all(|p| p["predicted"].as_array().unwrap().len() == 3));
+    assert!(check["stats"]["mean"].as_f64().unwrap() < 0.3, "{}", check["stats"]);
+    // The .ti3 carries LUMINANCE_XYZ_CDM2, so both are in cd/m² and nothing is scaled.
+    assert!(check["note"].is_null());
+
+    // ...and a different display badly: check tells them apart.
+    let (ok, stdout, _) = run(&["check", path(&from_journal), fixture("ti3/lcd-seed12.ti3").to_str().unwrap()]);
+    assert!(ok);
+    let mean: f64 = stdout
+        .split("mean ")
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .unwrap();
+    assert!(mean > 2.0, "{stdout}");
+    assert!(stdout.contains("worst patches"));
+
+    let (ok, stdout, _) = run(&["profile", "show", path(&from_journal)]);
+    assert!(ok);
+    for expected in ["primary matrix", "gain-offset-gamma", "± ", "spatial map", "condition number"] {
+        assert!(stdout.contains(expected), "missing '{expected}':\n{stdout}");
+    }
+}
+
+#[test]
+fn bad_measurement_files_get_errors_that_name_the_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(fixture("ti3/crt-default.ti3")).unwrap();
+    let broken = dir.path().join("broken.ti3");
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let row = lines.iter().position(|l| l.starts_with("5 ")).unwrap();
+    let mut fields: Vec<String> = lines[row].split(' ').map(str::to_string).collect();
+    fields[5] = "NaN".into();
+    lines[row] = fields.join(" ");
+    std::fs::write(&broken, lines.join("\n")).unwrap();
+    let (ok, _, stderr) = run(&["fit", path(&broken), "-o", path(&dir.path().join("p.toml"))]);
+    assert!(!ok);
+    assert!(
+        stderr.contains(&format!("line {}", row + 1)) && stderr.contains("XYZ_Y") && stderr.contains("NaN"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("p.toml").exists());
+
+    let bad_profile = dir.path().join("bad.toml");
+    std::fs::write(&bad_profile, "schema_version = 99\n").unwrap();
+    let (ok, _, stderr) = run(&["profile", "show", path(&bad_profile)]);
+    assert!(!ok && stderr.contains("schema version 99"), "{stderr}");
+    let (ok, _, stderr) = run(&["check", path(&dir.path().join("missing.toml")), path(&broken)]);
+    assert!(!ok && stderr.contains("missing.toml"), "{stderr}");
+}
+
+/// `spectrum` against sums computed here from the CIE tables in ../shared/data.
+#[test]
+fn spectrum_integrates_emission_and_reflectance() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("spectra.csv");
+    // Two 5 nm radiance spectra in W·sr⁻¹·m⁻²·nm⁻¹.
+    let mut text = String::from("wavelength_nm,flat,ramp\n");
+    for i in 0..=80 {
+        let w = 380 + 5 * i;
+        text += &format!("{w},0.001,{}\n", 0.00002 * i as f64);
+    }
+    std::fs::write(&csv, &text).unwrap();
+    let out = chromacal().args(["spectrum", path(&csv), "--json"]).output().unwrap();
+    assert!(out.status.success());
+    let result: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // Y = 683 Σ S ȳ Δλ from the CIE 1931 5 nm table.
+    let cmf = shared_table("cie/cie1931_2deg_xyz_cmf_5nm.csv");
+    let y: f64 = cmf
+        .iter()
+        .filter(|r| (380.0..=780.0).contains(&r[0]))
+        .map(|r| 683.0 * 0.001 * r[2] * 5.0)
+        .sum();
+    let got = result[0]["xyz"][1].as_f64().unwrap();
+    assert!((got - y).abs() < 1e-9 * y, "{got} vs {y}");
+    assert_eq!(result[1]["sample"], "ramp");
+    assert!(result[0]["photopic_cd_m2"].as_f64().unwrap() > 0.0);
+
+    let out = chromacal().args(["spectrum", path(&csv), "--json", "--relative", "--observer", "10"]).output().unwrap();
+    let relative: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((relative[0]["xyz"][1].as_f64().unwrap() - 100.0).abs() < 1e-9);
+    assert_ne!(relative[0]["x"], result[0]["x"], "the 10° observer differs");
+
+    // Reflectance: the ColorChecker under D65 matches the library call.
+    let checker = shared_path("colorchecker/colorchecker_n_ohta_5nm.csv");
+    let out = chromacal()
+        .args(["spectrum", checker.to_str().unwrap(), "--reflectance", "--illuminant", "d65", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let result: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(result.as_array().unwrap().len(), 24);
+    let table = shared_table("colorchecker/colorchecker_n_ohta_5nm.csv");
+    let dark_skin = Spectrum::new(table.iter().map(|r| r[0]).collect(), table.iter().map(|r| r[1]).collect()).unwrap();
+    let xyz = reflectance_to_xyz(&dark_skin, Illuminant::D65, Observer::Cie1931TwoDegree).unwrap();
+    assert!((result[0]["xyz"][0].as_f64().unwrap() - xyz.x).abs() < 1e-9);
+    // Neutral 5 is neutral against the D65 white.
+    let neutral = &result[21]["lab"];
+    assert!(neutral[1].as_f64().unwrap().abs() < 0.3 && neutral[2].as_f64().unwrap().abs() < 0.3, "{neutral}");
+
+    // An uneven 3.333 nm grid is resampled, and gives the same answer as 1 nm.
+    let fine = Spectrum::new((380..=730).map(f64::from).collect(), vec![0.001; 351]).unwrap();
+    let uneven_csv = dir.path().join("uneven.csv");
+    let mut text = String::from("wavelength_nm,flat\n");
+    for i in 0..106 {
+        text += &format!("{},0.001\n", 380.0 + i as f64 * 350.0 / 105.0);
+    }
+    std::fs::write(&uneven_csv, text).unwrap();
+    let out = chromacal().args(["spectrum", path(&uneven_csv), "--json"]).output().unwrap();
+    let uneven: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let expected = emission_to_xyz(&fine, Observer::Cie1931TwoDegree).unwrap();
+    assert!((uneven[0]["xyz"][1].as_f64().unwrap() - expected.y).abs() < 1e-9 * expected.y);
+
+    // Errors name the file and the column.
+    std::fs::write(&csv, "nm,a\n400,1\n500,2\n").unwrap();
+    let (ok, _, stderr) = run(&["spectrum", path(&csv)]);
+    assert!(!ok && stderr.contains("wavelength_nm"), "{stderr}");
+    std::fs::write(&csv, "wavelength_nm,a\n400,1\n400,2\n").unwrap();
+    let (ok, _, stderr) = run(&["spectrum", path(&csv)]);
+    assert!(!ok && stderr.contains("column 'a'") && stderr.contains("increase"), "{stderr}");
+    // Help says how spectra meet the CMF grid.
+    let (_, help, _) = run(&["spectrum", "--help"]);
+    assert!(help.contains("1 nm grid") && help.contains("weighted ordinates"), "{help}");
+}
