@@ -2,7 +2,9 @@
 
 use std::path::Path;
 
-use chromacal::color::spectrum::{Illuminant, Observer, Spectrum, emission_to_xyz, reflectance_to_xyz};
+use chromacal::color::spectrum::{
+    Illuminant, Observer, Spectrum, emission_to_xyz, reflectance_to_xyz,
+};
 use chromacal::model::transfer::LawKind;
 use chromacal::profile::Profile;
 
@@ -37,7 +39,10 @@ fn calibrate_runs_the_default_simulation_and_publishes_a_profile() {
         "primary constancy",
         "published as current",
     ] {
-        assert!(stdout.contains(expected), "missing '{expected}' in:\n{stdout}");
+        assert!(
+            stdout.contains(expected),
+            "missing '{expected}' in:\n{stdout}"
+        );
     }
     let profile = Profile::read(&state.path().join("current.toml")).unwrap();
     assert_eq!(profile.report.chosen_law(), Some(LawKind::GainOffsetGamma));
@@ -47,7 +52,12 @@ fn calibrate_runs_the_default_simulation_and_publishes_a_profile() {
     // A second run publishes a second profile; both stay in the store.
     let (ok, _, _) = run(&["calibrate", "--state-dir", path(state.path())]);
     assert!(ok);
-    assert_eq!(std::fs::read_dir(state.path().join("profiles")).unwrap().count(), 2);
+    assert_eq!(
+        std::fs::read_dir(state.path().join("profiles"))
+            .unwrap()
+            .count(),
+        2
+    );
 }
 
 #[test]
@@ -56,14 +66,30 @@ fn calibrate_json_and_a_profile_that_fails_the_limits() {
     let config = state.path().join("strict.toml");
     std::fs::write(&config, "[publish]\nmax_mean_de00 = 0.001\n").unwrap();
     let out = chromacal()
-        .args(["calibrate", "--json", "--config", path(&config), "--state-dir", path(state.path())])
+        .args([
+            "calibrate",
+            "--json",
+            "--config",
+            path(&config),
+            "--state-dir",
+            path(state.path()),
+        ])
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(3), "a profile over the limits is not published");
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "a profile over the limits is not published"
+    );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(report["held_out"]["mean"].as_f64().unwrap() > 0.001);
     assert!(!state.path().join("current.toml").exists());
-    assert_eq!(std::fs::read_dir(state.path().join("profiles")).unwrap().count(), 1);
+    assert_eq!(
+        std::fs::read_dir(state.path().join("profiles"))
+            .unwrap()
+            .count(),
+        1
+    );
     assert!(String::from_utf8_lossy(&out.stderr).contains("not published"));
 }
 
@@ -72,13 +98,31 @@ fn config_errors_name_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("typo.toml");
     std::fs::write(&config, "[plan]\nbudget = 48\nbugdet = 12\n").unwrap();
-    let (ok, _, stderr) = run(&["calibrate", "--config", path(&config), "--state-dir", path(dir.path())]);
+    let (ok, _, stderr) = run(&[
+        "calibrate",
+        "--config",
+        path(&config),
+        "--state-dir",
+        path(dir.path()),
+    ]);
     assert!(!ok);
-    assert!(stderr.contains("typo.toml:3:1") && stderr.contains("bugdet"), "{stderr}");
+    assert!(
+        stderr.contains("typo.toml:3:1") && stderr.contains("bugdet"),
+        "{stderr}"
+    );
     std::fs::write(&config, "[monitor]\npreset = \"plasma\"\n").unwrap();
-    let (ok, _, stderr) = run(&["calibrate", "--config", path(&config), "--state-dir", path(dir.path())]);
+    let (ok, _, stderr) = run(&[
+        "calibrate",
+        "--config",
+        path(&config),
+        "--state-dir",
+        path(dir.path()),
+    ]);
     assert!(!ok);
-    assert!(stderr.contains("plasma") && stderr.contains("crt, lcd"), "{stderr}");
+    assert!(
+        stderr.contains("plasma") && stderr.contains("crt, lcd"),
+        "{stderr}"
+    );
 }
 
 #[test]
@@ -92,7 +136,10 @@ fn fit_and_check_a_journal_and_a_ti3() {
         path(&from_journal),
     ]);
     assert!(ok, "{stderr}");
-    assert!(stdout.contains("held-out ΔE00") && stdout.contains("transfer laws"), "{stdout}");
+    assert!(
+        stdout.contains("held-out ΔE00") && stdout.contains("transfer laws"),
+        "{stdout}"
+    );
     let profile = Profile::read(&from_journal).unwrap();
     assert_eq!(profile.report.chosen_law(), Some(LawKind::GainOffsetGamma));
 
@@ -112,7 +159,12 @@ fn fit_and_check_a_journal_and_a_ti3() {
 
     // The journal's profile predicts the .ti3 readings of the same run well...
     let out = chromacal()
-        .args(["check", path(&from_journal), fixture("ti3/crt-default.ti3").to_str().unwrap(), "--json"])
+        .args([
+            "check",
+            path(&from_journal),
+            fixture("ti3/crt-default.ti3").to_str().unwrap(),
+            "--json",
+        ])
         .output()
         .unwrap();
     assert!(out.status.success());
@@ -121,13 +173,25 @@ fn fit_and_check_a_journal_and_a_ti3() {
     // Every reading at the centre on a black surround: 96 less the 24 grid positions
     // and the patch on a white surround.
     assert_eq!(patches.len(), 71);
-    assert!(patches.iter().all(|p| p["predicted"].as_array().unwrap().len() == 3));
-    assert!(check["stats"]["mean"].as_f64().unwrap() < 0.3, "{}", check["stats"]);
+    assert!(
+        patches
+            .iter()
+            .all(|p| p["predicted"].as_array().unwrap().len() == 3)
+    );
+    assert!(
+        check["stats"]["mean"].as_f64().unwrap() < 0.3,
+        "{}",
+        check["stats"]
+    );
     // The .ti3 carries LUMINANCE_XYZ_CDM2, so both are in cd/m² and nothing is scaled.
     assert!(check["note"].is_null());
 
     // ...and a different display badly: check tells them apart.
-    let (ok, stdout, _) = run(&["check", path(&from_journal), fixture("ti3/lcd-seed12.ti3").to_str().unwrap()]);
+    let (ok, stdout, _) = run(&[
+        "check",
+        path(&from_journal),
+        fixture("ti3/lcd-seed12.ti3").to_str().unwrap(),
+    ]);
     assert!(ok);
     let mean: f64 = stdout
         .split("mean ")
@@ -140,7 +204,13 @@ fn fit_and_check_a_journal_and_a_ti3() {
 
     let (ok, stdout, _) = run(&["profile", "show", path(&from_journal)]);
     assert!(ok);
-    for expected in ["primary matrix", "gain-offset-gamma", "± ", "spatial map", "condition number"] {
+    for expected in [
+        "primary matrix",
+        "gain-offset-gamma",
+        "± ",
+        "spatial map",
+        "condition number",
+    ] {
         assert!(stdout.contains(expected), "missing '{expected}':\n{stdout}");
     }
 }
@@ -159,7 +229,9 @@ fn bad_measurement_files_get_errors_that_name_the_place() {
     let (ok, _, stderr) = run(&["fit", path(&broken), "-o", path(&dir.path().join("p.toml"))]);
     assert!(!ok);
     assert!(
-        stderr.contains(&format!("line {}", row + 1)) && stderr.contains("XYZ_Y") && stderr.contains("NaN"),
+        stderr.contains(&format!("line {}", row + 1))
+            && stderr.contains("XYZ_Y")
+            && stderr.contains("NaN"),
         "{stderr}"
     );
     assert!(!dir.path().join("p.toml").exists());
@@ -168,7 +240,11 @@ fn bad_measurement_files_get_errors_that_name_the_place() {
     std::fs::write(&bad_profile, "schema_version = 99\n").unwrap();
     let (ok, _, stderr) = run(&["profile", "show", path(&bad_profile)]);
     assert!(!ok && stderr.contains("schema version 99"), "{stderr}");
-    let (ok, _, stderr) = run(&["check", path(&dir.path().join("missing.toml")), path(&broken)]);
+    let (ok, _, stderr) = run(&[
+        "check",
+        path(&dir.path().join("missing.toml")),
+        path(&broken),
+    ]);
     assert!(!ok && stderr.contains("missing.toml"), "{stderr}");
 }
 
@@ -184,7 +260,10 @@ fn spectrum_integrates_emission_and_reflectance() {
         text += &format!("{w},0.001,{}\n", 0.00002 * i as f64);
     }
     std::fs::write(&csv, &text).unwrap();
-    let out = chromacal().args(["spectrum", path(&csv), "--json"]).output().unwrap();
+    let out = chromacal()
+        .args(["spectrum", path(&csv), "--json"])
+        .output()
+        .unwrap();
     assert!(out.status.success());
     let result: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     // Y = 683 Σ S ȳ Δλ from the CIE 1931 5 nm table.
@@ -199,7 +278,17 @@ fn spectrum_integrates_emission_and_reflectance() {
     assert_eq!(result[1]["sample"], "ramp");
     assert!(result[0]["photopic_cd_m2"].as_f64().unwrap() > 0.0);
 
-    let out = chromacal().args(["spectrum", path(&csv), "--json", "--relative", "--observer", "10"]).output().unwrap();
+    let out = chromacal()
+        .args([
+            "spectrum",
+            path(&csv),
+            "--json",
+            "--relative",
+            "--observer",
+            "10",
+        ])
+        .output()
+        .unwrap();
     let relative: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!((relative[0]["xyz"][1].as_f64().unwrap() - 100.0).abs() < 1e-9);
     assert_ne!(relative[0]["x"], result[0]["x"], "the 10° observer differs");
@@ -207,19 +296,33 @@ fn spectrum_integrates_emission_and_reflectance() {
     // Reflectance: the ColorChecker under D65 matches the library call.
     let checker = shared_path("colorchecker/colorchecker_n_ohta_5nm.csv");
     let out = chromacal()
-        .args(["spectrum", checker.to_str().unwrap(), "--reflectance", "--illuminant", "d65", "--json"])
+        .args([
+            "spectrum",
+            checker.to_str().unwrap(),
+            "--reflectance",
+            "--illuminant",
+            "d65",
+            "--json",
+        ])
         .output()
         .unwrap();
     assert!(out.status.success());
     let result: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(result.as_array().unwrap().len(), 24);
     let table = shared_table("colorchecker/colorchecker_n_ohta_5nm.csv");
-    let dark_skin = Spectrum::new(table.iter().map(|r| r[0]).collect(), table.iter().map(|r| r[1]).collect()).unwrap();
+    let dark_skin = Spectrum::new(
+        table.iter().map(|r| r[0]).collect(),
+        table.iter().map(|r| r[1]).collect(),
+    )
+    .unwrap();
     let xyz = reflectance_to_xyz(&dark_skin, Illuminant::D65, Observer::Cie1931TwoDegree).unwrap();
     assert!((result[0]["xyz"][0].as_f64().unwrap() - xyz.x).abs() < 1e-9);
     // Neutral 5 is neutral against the D65 white.
     let neutral = &result[21]["lab"];
-    assert!(neutral[1].as_f64().unwrap().abs() < 0.3 && neutral[2].as_f64().unwrap().abs() < 0.3, "{neutral}");
+    assert!(
+        neutral[1].as_f64().unwrap().abs() < 0.3 && neutral[2].as_f64().unwrap().abs() < 0.3,
+        "{neutral}"
+    );
 
     // An uneven 3.333 nm grid is resampled, and gives the same answer as 1 nm.
     let fine = Spectrum::new((380..=730).map(f64::from).collect(), vec![0.001; 351]).unwrap();
@@ -229,7 +332,10 @@ fn spectrum_integrates_emission_and_reflectance() {
         text += &format!("{},0.001\n", 380.0 + i as f64 * 350.0 / 105.0);
     }
     std::fs::write(&uneven_csv, text).unwrap();
-    let out = chromacal().args(["spectrum", path(&uneven_csv), "--json"]).output().unwrap();
+    let out = chromacal()
+        .args(["spectrum", path(&uneven_csv), "--json"])
+        .output()
+        .unwrap();
     let uneven: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let expected = emission_to_xyz(&fine, Observer::Cie1931TwoDegree).unwrap();
     assert!((uneven[0]["xyz"][1].as_f64().unwrap() - expected.y).abs() < 1e-9 * expected.y);
@@ -240,8 +346,14 @@ fn spectrum_integrates_emission_and_reflectance() {
     assert!(!ok && stderr.contains("wavelength_nm"), "{stderr}");
     std::fs::write(&csv, "wavelength_nm,a\n400,1\n400,2\n").unwrap();
     let (ok, _, stderr) = run(&["spectrum", path(&csv)]);
-    assert!(!ok && stderr.contains("column 'a'") && stderr.contains("increase"), "{stderr}");
+    assert!(
+        !ok && stderr.contains("column 'a'") && stderr.contains("increase"),
+        "{stderr}"
+    );
     // Help says how spectra meet the CMF grid.
     let (_, help, _) = run(&["spectrum", "--help"]);
-    assert!(help.contains("1 nm grid") && help.contains("weighted ordinates"), "{help}");
+    assert!(
+        help.contains("1 nm grid") && help.contains("weighted ordinates"),
+        "{help}"
+    );
 }
