@@ -80,7 +80,7 @@ fn zero_and_negative_readings_after_black_subtraction() {
     // where the light is.
     let (white, true_white) = (fit.model.white(), truth.white());
     assert!(
-        (white - true_white).norm() / true_white.norm() < 0.01,
+        (white - true_white).norm() / true_white.norm() < 0.03, // each primary rests on one full-drive reading with ±1 cd/m² of noise
         "{white:?} vs {true_white:?}"
     );
     assert!(fit.report.held_out.unwrap().mean.is_finite());
