@@ -1,0 +1,81 @@
+//! Fitting real measurements of real displays (../shared/data/measurements, public
+//! data of ArgyllCMS users and Psychtoolbox), scored on patches held out of the fit.
+
+use chromacal::cgats::read_ti3;
+use chromacal::fit::checks::Verdict;
+use chromacal::fit::validate::evaluate;
+use chromacal::fit::{FitOptions, fit_monitor};
+
+mod common;
+use common::shared_path;
+
+fn measurements(name: &str) -> chromacal::measurement::MeasurementSet {
+    read_ti3(&shared_path(&format!("measurements/{name}"))).unwrap()
+}
+
+#[test]
+fn dell_lcd_predicts_831_held_out_mixtures() {
+    let set = measurements("dell_u2713hm_i1d3_912.ti3");
+    let fit = fit_monitor(&set, &FitOptions::default()).unwrap();
+    let held = fit.report.held_out.unwrap();
+    eprintln!("Dell U2713HM: {held:?}, law {:?}", fit.report.chosen_law());
+    assert_eq!(held.n, 831);
+    assert!(held.mean < 0.3 && held.p95 < 0.6, "{held:?}");
+    assert_ne!(fit.report.checks.additivity_verdict, Verdict::Fails);
+}
+
+#[test]
+fn colormunki_sets_with_two_levels_per_channel() {
+    let macbook = fit_monitor(
+        &measurements("macbookpro15_2014_colormunki_spectral_57.ti3"),
+        &FitOptions::default(),
+    )
+    .unwrap();
+    let held = macbook.report.held_out.unwrap();
+    eprintln!("MacBook Pro 15: {held:?}");
+    assert!(held.mean < 0.75, "{held:?}");
+    // The spectra in the file feed the spectral constancy test.
+    assert!(
+        macbook
+            .report
+            .checks
+            .primary_constancy
+            .iter()
+            .all(|c| c.spectral_first_component.is_some())
+    );
+
+    // The Samsung TN panel is not additive: the check says so, and the error shows it.
+    let samsung = fit_monitor(
+        &measurements("samsung_s24a350h_colormunki_spectral_57.ti3"),
+        &FitOptions::default(),
+    )
+    .unwrap();
+    let held = samsung.report.held_out.unwrap();
+    eprintln!(
+        "Samsung S24A350H: {held:?}, additivity {:?}",
+        samsung.report.checks.additivity
+    );
+    assert_eq!(samsung.report.checks.additivity_verdict, Verdict::Fails);
+    assert!(held.mean < 1.6, "{held:?}");
+}
+
+#[test]
+fn psychtoolbox_calibrations_predict_their_test_splits() {
+    for (name, max_mean) in [("sony_pvm2541_oled", 0.8), ("apple17_crt", 1.2)] {
+        let train = measurements(&format!("psychtoolbox/split/ptb_{name}_train.ti3"));
+        let test = measurements(&format!("psychtoolbox/split/ptb_{name}_test.ti3"));
+        let fit = fit_monitor(&train, &FitOptions::default()).unwrap();
+        let evaluation = evaluate(
+            &fit.model,
+            test.measurements
+                .iter()
+                .filter_map(|m| Some((m, m.usable_xyz()?))),
+        );
+        let stats = evaluation.stats.unwrap();
+        eprintln!(
+            "{name}: test split {stats:?}, law {:?}",
+            fit.report.chosen_law()
+        );
+        assert!(stats.mean < max_mean, "{name}: {stats:?}");
+    }
+}
