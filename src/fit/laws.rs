@@ -14,7 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::least_squares::{LeastSquares, LeastSquaresError, fit_curve, fit_linear};
+use super::least_squares::{Curve, LeastSquares, LeastSquaresError, fit_curve, fit_linear};
 use super::primaries::ChannelRamp;
 use crate::model::transfer::{
     Cowan, GainOffsetGamma, LawKind, Power, Table, ThreeTerm, TransferError, TransferLaw,
@@ -97,6 +97,17 @@ impl Points {
         v.len()
     }
 
+    /// Fit `curve` to these points from `start`, errors named for `law`.
+    fn fit(
+        &self,
+        law: LawKind,
+        curve: Curve<'_>,
+        start: &[f64],
+    ) -> Result<LeastSquares, LawFitError> {
+        fit_curve(curve, &self.drive, &self.excitation, &self.sigma, start)
+            .map_err(|source| LawFitError::LeastSquares { law, source })
+    }
+
     /// Points bright enough (5σ) to take a logarithm of.
     fn loggable(&self) -> Vec<usize> {
         (0..self.drive.len())
@@ -145,10 +156,6 @@ pub fn fit_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
         LawKind::Power => fit_power(ramp),
         LawKind::GainOffsetGamma => fit_gog(ramp),
     }
-}
-
-fn ls_error(law: LawKind) -> impl Fn(LeastSquaresError) -> LawFitError {
-    move |source| LawFitError::LeastSquares { law, source }
 }
 
 fn need_levels(law: LawKind, points: &Points, need: usize) -> Result<(), LawFitError> {
@@ -208,14 +215,7 @@ fn fit_power(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
             g[0] = f * v.ln();
             f
         };
-        let fit = fit_curve(
-            &curve,
-            &points.drive,
-            &points.excitation,
-            &points.sigma,
-            &start,
-        )
-        .map_err(ls_error(kind))?;
+        let fit = points.fit(kind, &curve, &start)?;
         let ses = standard_errors_with_pin(&fit, &points, ramp);
         (fit.clone(), fit.params[0], 1.0, ses)
     } else {
@@ -227,14 +227,7 @@ fn fit_power(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
             t[1] * p
         };
         let start = [start[0], start[1].exp()];
-        let fit = fit_curve(
-            &curve,
-            &points.drive,
-            &points.excitation,
-            &points.sigma,
-            &start,
-        )
-        .map_err(ls_error(kind))?;
+        let fit = points.fit(kind, &curve, &start)?;
         let ses = fit.standard_errors();
         (fit.clone(), fit.params[0], fit.params[1], ses)
     };
@@ -312,14 +305,7 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         }
     }
     let start = best.map(|b| b.1).unwrap_or_else(|| vec![2.2, 0.0, 1.0]);
-    let fit = fit_curve(
-        &curve,
-        &points.drive,
-        &points.excitation,
-        &points.sigma,
-        &start,
-    )
-    .map_err(ls_error(kind))?;
+    let fit = points.fit(kind, &curve, &start)?;
     let mut notes = Vec::new();
     let (fit, gamma, cutoff, amplitude, ses) = if fit.params[1] < 0.0 {
         // A negative cut-off means light at zero drive above the measured black: not a
@@ -428,14 +414,7 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
         }
         f
     };
-    let fit = fit_curve(
-        &curve,
-        &points.drive,
-        &points.excitation,
-        &points.sigma,
-        &start,
-    )
-    .map_err(ls_error(kind))?;
+    let fit = points.fit(kind, &curve, &start)?;
     let ses = standard_errors_with_pin(&fit, &points, ramp);
     let build = |a: f64, b: f64, c: f64| -> (TransferLaw, f64) {
         if three {
@@ -478,14 +457,7 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
             } else {
                 vec![fit.params[0]]
             };
-            let constrained = fit_curve(
-                &curve,
-                &points.drive,
-                &points.excitation,
-                &points.sigma,
-                &start,
-            )
-            .map_err(ls_error(kind))?;
+            let constrained = points.fit(kind, &curve, &start)?;
             let cses = standard_errors_with_pin(&constrained, &points, ramp);
             let a = constrained.params[0];
             let b = b_of(a);

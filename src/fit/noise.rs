@@ -160,17 +160,9 @@ pub fn estimate_drift(
         residual_dof: degree.map_or(0, |d| n.saturating_sub(d + 1)),
         note,
     };
+    let not_followed = |note: String| (None, report(None, 0.0, false, None, note));
     if n < 3 {
-        return (
-            None,
-            report(
-                None,
-                0.0,
-                false,
-                None,
-                format!("{n} reference readings: too few to follow drift"),
-            ),
-        );
+        return not_followed(format!("{n} reference readings: too few to follow drift"));
     }
     let t_first = references.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
     let t_last = references
@@ -180,16 +172,7 @@ pub fn estimate_drift(
     let span = (t_last - t_first).max(f64::MIN_POSITIVE);
     let level = mean(&references.iter().map(|r| r.1).collect::<Vec<_>>());
     if !(level > 0.0) {
-        return (
-            None,
-            report(
-                None,
-                0.0,
-                false,
-                None,
-                "the reference gave no light above black".into(),
-            ),
-        );
+        return not_followed("the reference gave no light above black".into());
     }
     let fit = |points: &[(f64, f64)], degree: usize| {
         let design = DMatrix::from_fn(points.len(), degree + 1, |i, k| {
@@ -223,10 +206,7 @@ pub fn estimate_drift(
     }
     let degree = simplest_within_noise(&errors, 0.0).unwrap_or(0);
     let Some(f) = fit(references, degree) else {
-        return (
-            None,
-            report(None, 0.0, false, None, "the drift fit failed".into()),
-        );
+        return not_followed("the drift fit failed".into());
     };
     // Leave-one-out errors are honest even when the polynomial nearly interpolates
     // the few references; their variance is σ²(1 + p/n) for p coefficients.
