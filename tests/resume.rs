@@ -102,7 +102,7 @@ async fn an_interrupted_journal_resumes_to_the_uninterrupted_readings() {
 #[test]
 fn a_killed_process_resumes_with_nothing_twice_and_nothing_lost() {
     let state = tempfile::tempdir().unwrap();
-    // 5 simulated minutes at 0.002 real seconds each: about 0.6 s of real time.
+    // 5 simulated minutes at 0.01 real seconds each: about 3 s of real time.
     let mut child = chromacal()
         .args([
             "calibrate",

@@ -4,6 +4,7 @@
 use std::sync::{Arc, Mutex};
 
 use super::{DisplayError, Patch, PatchDisplay, ScreenContent};
+use crate::sim::clock::VirtualClock;
 use crate::sim::monitor::VirtualMonitor;
 
 /// Drives a [`VirtualMonitor`].
@@ -19,10 +20,8 @@ impl SimulatedDisplay {
         SimulatedDisplay { monitor, settle_s }
     }
 
-    fn put(
-        &self,
-        content: ScreenContent,
-    ) -> Result<std::sync::Arc<crate::sim::clock::VirtualClock>, DisplayError> {
+    /// Put `content` on the monitor; returns the monitor's clock to settle on.
+    fn put(&self, content: ScreenContent) -> Result<Arc<VirtualClock>, DisplayError> {
         let mut monitor = self
             .monitor
             .lock()
