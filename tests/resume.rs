@@ -108,7 +108,7 @@ fn a_killed_process_resumes_with_nothing_twice_and_nothing_lost() {
             "calibrate",
             "--realtime",
             "--time-scale",
-            "0.002",
+            "0.01",
             "--state-dir",
         ])
         .arg(state.path())
