@@ -354,6 +354,7 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
                 spectrum,
                 status: ReadingStatus::Ok,
                 integration_s: 0.0,
+                ..Default::default()
             },
         });
     }

@@ -370,6 +370,7 @@ mod tests {
                 spectrum: None,
                 status: ReadingStatus::Ok,
                 integration_s: 1.0,
+                ..Default::default()
             },
         }
     }

@@ -297,6 +297,7 @@ mod tests {
                 spectrum: None,
                 status,
                 integration_s: 1.0,
+                ..Default::default()
             },
         };
         let a = m(0.2, ReadingStatus::Ok);

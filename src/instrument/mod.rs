@@ -25,9 +25,10 @@ pub enum Capability {
 }
 
 /// How far a reading can be trusted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum ReadingStatus {
+    #[default]
     Ok,
     /// Less light than the instrument can measure reliably; the value, if any, is
     /// only an indication.
@@ -37,16 +38,32 @@ pub enum ReadingStatus {
 }
 
 /// One measurement.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Reading {
-    /// CIE 1931 XYZ in cd/m² (for a light meter only Y is meaningful).
+    /// CIE 1931 XYZ in cd/m²; `None` from a light meter and on overload.
     pub xyz: Option<Xyz>,
+    /// Luminance in cd/m² from a light meter, which gives nothing else.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub luminance: Option<f64>,
     /// Spectral radiance, W·sr⁻¹·m⁻²·nm⁻¹, where the instrument gives one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub spectrum: Option<Spectrum>,
     pub status: ReadingStatus,
     /// Integration time used, seconds.
     pub integration_s: f64,
+    /// The instrument's own quality or status code, as it sent it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device_code: Option<String>,
+    /// The reply the reading was parsed from, with control bytes escaped.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub raw: Option<String>,
+}
+
+impl Reading {
+    /// Luminance Y in cd/m², from XYZ or from a light meter.
+    pub fn luminance(&self) -> Option<f64> {
+        self.xyz.map(|x| x.y).or(self.luminance)
+    }
 }
 
 /// Who the instrument is.

@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 use super::{Capability, Instrument, InstrumentError, InstrumentInfo, Reading, ReadingStatus};
 use crate::color::Xyz;
 use crate::color::spectrum::{Observer, Spectrum, emission_to_xyz};
+use crate::sim::clock::VirtualClock;
 use crate::sim::monitor::VirtualMonitor;
 
 /// What kind of instrument to simulate.
@@ -178,29 +179,60 @@ impl Instrument for SimulatedInstrument {
     }
 
     async fn measure(&mut self) -> Result<Reading, InstrumentError> {
-        let disconnected =
-            |_| InstrumentError::Disconnected("the virtual monitor's lock is poisoned".into());
         // Range the integration on what is shown, then integrate: the reading is taken
         // at the middle of the integration, which is when its time is stamped.
-        let (clock, integration) = {
-            let monitor = self.monitor.lock().map_err(disconnected)?;
-            let y = monitor
-                .xyz_at(monitor.patch_centre())
-                .map_err(simulation_error)?
-                .y;
-            (monitor.clock().clone(), self.integration_for(y))
-        };
+        let (clock, integration) = self.range()?;
         clock.wait(integration / 2.0).await;
-        let (clean, rng_time) = {
-            let monitor = self.monitor.lock().map_err(disconnected)?;
-            let spectrum = monitor
-                .radiance_at(monitor.patch_centre())
-                .map_err(simulation_error)?;
-            (spectrum, clock.now())
-        };
+        let (clean, time) = self.capture(&clock)?;
         clock.wait(integration / 2.0).await;
+        self.finish(&clean, time, integration)
+    }
+}
 
-        let clean_xyz = emission_to_xyz(&clean, Observer::default()).map_err(simulation_error)?;
+impl SimulatedInstrument {
+    /// The same measurement as [`Instrument::measure`], for callers that are not async
+    /// (the emulators): the virtual clock advances, nothing sleeps.
+    pub fn measure_now(&mut self) -> Result<Reading, InstrumentError> {
+        let (clock, integration) = self.range()?;
+        clock.advance(integration / 2.0);
+        let (clean, time) = self.capture(&clock)?;
+        clock.advance(integration / 2.0);
+        self.finish(&clean, time, integration)
+    }
+
+    fn monitor(&self) -> Result<std::sync::MutexGuard<'_, VirtualMonitor>, InstrumentError> {
+        self.monitor.lock().map_err(|_| {
+            InstrumentError::Disconnected("the virtual monitor's lock is poisoned".into())
+        })
+    }
+
+    /// The clock, and the integration time for what the screen shows now.
+    fn range(&self) -> Result<(Arc<VirtualClock>, f64), InstrumentError> {
+        let monitor = self.monitor()?;
+        let y = monitor
+            .xyz_at(monitor.patch_centre())
+            .map_err(simulation_error)?
+            .y;
+        Ok((monitor.clock().clone(), self.integration_for(y)))
+    }
+
+    /// The clean radiance at the patch now, and the time.
+    fn capture(&self, clock: &VirtualClock) -> Result<(Spectrum, f64), InstrumentError> {
+        let monitor = self.monitor()?;
+        let spectrum = monitor
+            .radiance_at(monitor.patch_centre())
+            .map_err(simulation_error)?;
+        Ok((spectrum, clock.now()))
+    }
+
+    /// The reading an instrument makes of `clean`, taken at `time`: range flags and noise.
+    fn finish(
+        &self,
+        clean: &Spectrum,
+        time: f64,
+        integration: f64,
+    ) -> Result<Reading, InstrumentError> {
+        let clean_xyz = emission_to_xyz(clean, Observer::default()).map_err(simulation_error)?;
         let status = if clean_xyz.y > self.spec.overload_limit {
             ReadingStatus::Overload
         } else if clean_xyz.y < self.spec.low_light_limit {
@@ -210,16 +242,15 @@ impl Instrument for SimulatedInstrument {
         };
         if status == ReadingStatus::Overload {
             return Ok(Reading {
-                xyz: None,
-                spectrum: None,
                 status,
                 integration_s: integration,
+                ..Default::default()
             });
         }
-        let mut rng = self.rng_at(rng_time);
+        let mut rng = self.rng_at(time);
         let (xyz, spectrum) = match self.spec.kind {
             SimulatedKind::Spectral => {
-                let noisy = self.noisy_spectrum(&clean, &mut rng)?;
+                let noisy = self.noisy_spectrum(clean, &mut rng)?;
                 let xyz = emission_to_xyz(&noisy, Observer::default()).map_err(simulation_error)?;
                 (xyz, Some(noisy))
             }
@@ -230,6 +261,7 @@ impl Instrument for SimulatedInstrument {
             spectrum,
             status,
             integration_s: integration,
+            ..Default::default()
         })
     }
 }
