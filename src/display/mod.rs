@@ -3,6 +3,7 @@
 //! A sink resolves `show` once the patch is on the screen and settled, so the run
 //! measures straight after it returns.
 
+pub mod emulator_link;
 pub mod simulated;
 
 use std::future::Future;

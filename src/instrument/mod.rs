@@ -3,7 +3,14 @@
 //! A reading never hides a failure: light below the instrument's range or above it
 //! is flagged in [`ReadingStatus`], never turned into a zero.
 
+pub mod devices;
+pub mod driver;
+pub mod emulator;
+pub mod pr6xx;
+pub mod serial;
 pub mod simulated;
+pub mod transcript;
+pub mod transport;
 
 use std::future::Future;
 
@@ -83,6 +90,8 @@ pub enum InstrumentError {
     Disconnected(String),
     #[error("the instrument's reply made no sense: {0}")]
     Protocol(String),
+    #[error("the instrument reports error {code}: {meaning}")]
+    Device { code: String, meaning: String },
 }
 
 /// A light meter, colorimeter or spectroradiometer.

@@ -79,3 +79,39 @@ pub fn isetbio_monitor(stem: &str, extra: &str) -> String {
         shared_path(&format!("displays/gamma/{stem}_gamma.csv")).display()
     )
 }
+
+/// A virtual monitor of a preset on its own clock, showing `drive` at the centre.
+pub fn virtual_monitor(
+    preset: &str,
+    drive: [f64; 3],
+) -> std::sync::Arc<std::sync::Mutex<chromacal::sim::monitor::VirtualMonitor>> {
+    let clock = std::sync::Arc::new(chromacal::sim::clock::VirtualClock::new(None));
+    let mut monitor = chromacal::sim::monitor::VirtualMonitor::new(
+        chromacal::sim::presets::preset(preset).unwrap(),
+        clock,
+    )
+    .unwrap();
+    monitor.show(chromacal::sim::monitor::centre_patch(drive));
+    std::sync::Arc::new(std::sync::Mutex::new(monitor))
+}
+
+/// The true XYZ the monitor shows at its patch now.
+pub fn true_xyz(
+    monitor: &std::sync::Arc<std::sync::Mutex<chromacal::sim::monitor::VirtualMonitor>>,
+) -> chromacal::color::Xyz {
+    let m = monitor.lock().unwrap();
+    m.xyz_at(m.patch_centre()).unwrap()
+}
+
+/// A meter on `monitor` with the default simulated instrument and these faults.
+pub fn meter(
+    monitor: &std::sync::Arc<std::sync::Mutex<chromacal::sim::monitor::VirtualMonitor>>,
+    faults: &chromacal::instrument::emulator::faults::FaultSpec,
+) -> chromacal::instrument::emulator::Meter {
+    chromacal::instrument::emulator::Meter::new(
+        monitor.clone(),
+        chromacal::instrument::simulated::SimulatedInstrumentSpec::default(),
+        faults.device(),
+        faults.seed,
+    )
+}

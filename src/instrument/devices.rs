@@ -1,0 +1,113 @@
+//! The instruments chromacal drives, by name: their port settings, drivers and
+//! emulators.
+
+use serde::{Deserialize, Serialize};
+
+use super::driver::{DriverOptions, Protocol, SerialInstrument};
+use super::emulator::{DeviceModel, Meter};
+use super::pr6xx;
+use super::serial::{SerialSettings, SerialTransport};
+use super::transport::{Link, Transport};
+use super::{Capability, InstrumentError};
+
+/// A kind of instrument.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DeviceKind {
+    Pr655,
+    Pr670,
+}
+
+impl DeviceKind {
+    pub const ALL: [DeviceKind; 2] = [DeviceKind::Pr655, DeviceKind::Pr670];
+
+    /// The name used on the command line and in configs.
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceKind::Pr655 => "pr655",
+            DeviceKind::Pr670 => "pr670",
+        }
+    }
+
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let wanted = text.trim().to_ascii_lowercase().replace(['-', '_'], "");
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name() == wanted)
+            .ok_or_else(|| {
+                format!(
+                    "unknown instrument '{text}' (known: {})",
+                    Self::ALL.map(|k| k.name()).join(", ")
+                )
+            })
+    }
+
+    pub fn capability(self) -> Capability {
+        match self {
+            DeviceKind::Pr655 | DeviceKind::Pr670 => Capability::Spectral,
+        }
+    }
+
+    /// Line settings the instrument uses.
+    pub fn settings(self) -> SerialSettings {
+        match self {
+            DeviceKind::Pr655 | DeviceKind::Pr670 => SerialSettings::eight_n_one(9600),
+        }
+    }
+
+    /// The driver's protocol over `link`.
+    pub fn protocol(self, link: Link, options: &DriverOptions) -> Box<dyn Protocol> {
+        match self {
+            DeviceKind::Pr655 => Box::new(pr6xx::driver::Pr6xx::new(
+                link,
+                pr6xx::protocol::Model::Pr655,
+                options.sync,
+            )),
+            DeviceKind::Pr670 => Box::new(pr6xx::driver::Pr6xx::new(
+                link,
+                pr6xx::protocol::Model::Pr670,
+                options.sync,
+            )),
+        }
+    }
+
+    /// An emulated device of this kind, measuring with `meter`.
+    pub fn emulator(self, meter: Meter) -> Box<dyn DeviceModel> {
+        match self {
+            DeviceKind::Pr655 => Box::new(pr6xx::emulator::Pr6xxEmulator::new(
+                pr6xx::protocol::Model::Pr655,
+                meter,
+            )),
+            DeviceKind::Pr670 => Box::new(pr6xx::emulator::Pr6xxEmulator::new(
+                pr6xx::protocol::Model::Pr670,
+                meter,
+            )),
+        }
+    }
+
+    /// Connect to an instrument of this kind over `transport`.
+    pub fn connect(
+        self,
+        transport: Box<dyn Transport>,
+        options: DriverOptions,
+    ) -> Result<SerialInstrument, InstrumentError> {
+        let link = Link::new(transport, options.timing_scale);
+        SerialInstrument::connect(self.protocol(link, &options), options)
+    }
+
+    /// Connect to an instrument of this kind on the serial port at `path`.
+    pub fn open(
+        self,
+        path: &str,
+        options: DriverOptions,
+    ) -> Result<SerialInstrument, InstrumentError> {
+        let transport = SerialTransport::open(path, self.settings())?;
+        self.connect(Box::new(transport), options)
+    }
+}
+
+impl std::fmt::Display for DeviceKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}

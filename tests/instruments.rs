@@ -1,0 +1,74 @@
+//! Every driver against its emulator: in-process on virtual time, and over a real
+//! pseudo-terminal in (scaled) real time.
+
+use chromacal::instrument::ReadingStatus;
+use chromacal::instrument::devices::DeviceKind;
+use chromacal::instrument::driver::DriverOptions;
+use chromacal::instrument::emulator::faults::FaultSpec;
+use chromacal::instrument::emulator::memory::MemoryTransport;
+use chromacal::instrument::emulator::pty::{PtyEmulator, PtyOptions};
+
+mod common;
+use common::{meter, true_xyz, virtual_monitor};
+
+fn memory(
+    kind: DeviceKind,
+    drive: [f64; 3],
+    faults: FaultSpec,
+) -> (
+    chromacal::instrument::driver::SerialInstrument,
+    chromacal::color::Xyz,
+) {
+    let monitor = virtual_monitor("crt", drive);
+    let truth = true_xyz(&monitor);
+    let device = kind.emulator(meter(&monitor, &faults));
+    let transport = MemoryTransport::new(device, faults, kind.settings().baud);
+    let instrument = kind
+        .connect(Box::new(transport), DriverOptions::default())
+        .unwrap();
+    (instrument, truth)
+}
+
+#[test]
+fn each_driver_measures_its_emulator_in_process() {
+    for kind in DeviceKind::ALL {
+        let (mut instrument, truth) = memory(kind, [1.0, 1.0, 1.0], FaultSpec::default());
+        let reading = instrument.measure().unwrap();
+        assert_eq!(reading.status, ReadingStatus::Ok, "{kind}");
+        let xyz = reading.xyz.unwrap();
+        assert!(
+            (xyz - truth).norm() / truth.norm() < 0.02,
+            "{kind}: {xyz:?} vs {truth:?}"
+        );
+        assert!(instrument.info().serial.is_some());
+    }
+}
+
+#[test]
+fn each_driver_measures_its_emulator_over_a_pty() {
+    for kind in DeviceKind::ALL {
+        let monitor = virtual_monitor("lcd", [0.2, 0.6, 0.9]);
+        let truth = true_xyz(&monitor);
+        let emulator = PtyEmulator::spawn(
+            kind.emulator(meter(&monitor, &FaultSpec::default())),
+            PtyOptions {
+                time_scale: 0.01,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let options = DriverOptions {
+            timing_scale: 0.01,
+            ..Default::default()
+        };
+        let mut instrument = kind.open(emulator.path(), options).unwrap();
+        for _ in 0..2 {
+            let reading = instrument.measure().unwrap();
+            let xyz = reading.xyz.unwrap();
+            assert!(
+                (xyz - truth).norm() / truth.norm() < 0.02,
+                "{kind}: {xyz:?} vs {truth:?}"
+            );
+        }
+    }
+}
