@@ -137,9 +137,8 @@ impl SerialInstrument {
                 Err(e) => {
                     tracing::warn!(attempt, error = %e, "measurement failed");
                     last = Some(e);
-                    match self.protocol.resync() {
-                        Err(InstrumentError::Disconnected(why)) => self.reconnect(&why)?,
-                        _ => {}
+                    if let Err(InstrumentError::Disconnected(why)) = self.protocol.resync() {
+                        self.reconnect(&why)?;
                     }
                 }
             }
