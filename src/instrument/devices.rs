@@ -5,10 +5,10 @@ use serde::{Deserialize, Serialize};
 
 use super::driver::{DriverOptions, Protocol, SerialInstrument};
 use super::emulator::{DeviceModel, Meter};
-use super::pr6xx;
 use super::serial::{SerialSettings, SerialTransport};
 use super::transport::{Link, Transport};
 use super::{Capability, InstrumentError};
+use super::{klein, minolta, pr6xx};
 
 /// A kind of instrument.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -16,16 +16,31 @@ use super::{Capability, InstrumentError};
 pub enum DeviceKind {
     Pr655,
     Pr670,
+    Ls100,
+    Ls110,
+    Cs100a,
+    K10a,
 }
 
 impl DeviceKind {
-    pub const ALL: [DeviceKind; 2] = [DeviceKind::Pr655, DeviceKind::Pr670];
+    pub const ALL: [DeviceKind; 6] = [
+        DeviceKind::Pr655,
+        DeviceKind::Pr670,
+        DeviceKind::Ls100,
+        DeviceKind::Ls110,
+        DeviceKind::Cs100a,
+        DeviceKind::K10a,
+    ];
 
     /// The name used on the command line and in configs.
     pub fn name(self) -> &'static str {
         match self {
             DeviceKind::Pr655 => "pr655",
             DeviceKind::Pr670 => "pr670",
+            DeviceKind::Ls100 => "ls100",
+            DeviceKind::Ls110 => "ls110",
+            DeviceKind::Cs100a => "cs100a",
+            DeviceKind::K10a => "k10a",
         }
     }
 
@@ -45,19 +60,38 @@ impl DeviceKind {
     pub fn capability(self) -> Capability {
         match self {
             DeviceKind::Pr655 | DeviceKind::Pr670 => Capability::Spectral,
+            DeviceKind::Ls100 | DeviceKind::Ls110 => Capability::Luminance,
+            DeviceKind::Cs100a | DeviceKind::K10a => Capability::Tristimulus,
         }
     }
 
     /// Line settings the instrument uses.
     pub fn settings(self) -> SerialSettings {
         match self {
-            DeviceKind::Pr655 | DeviceKind::Pr670 => SerialSettings::eight_n_one(9600),
+            DeviceKind::Pr655 | DeviceKind::Pr670 | DeviceKind::K10a => {
+                SerialSettings::eight_n_one(9600)
+            }
+            DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a => {
+                SerialSettings::seven_e_two(4800)
+            }
+        }
+    }
+
+    fn minolta_model(self) -> minolta::protocol::Model {
+        match self {
+            DeviceKind::Ls110 => minolta::protocol::Model::Ls110,
+            DeviceKind::Cs100a => minolta::protocol::Model::Cs100a,
+            _ => minolta::protocol::Model::Ls100,
         }
     }
 
     /// The driver's protocol over `link`.
     pub fn protocol(self, link: Link, options: &DriverOptions) -> Box<dyn Protocol> {
         match self {
+            DeviceKind::K10a => Box::new(klein::driver::KleinK10::new(link)),
+            DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a => {
+                Box::new(minolta::driver::Minolta::new(link, self.minolta_model()))
+            }
             DeviceKind::Pr655 => Box::new(pr6xx::driver::Pr6xx::new(
                 link,
                 pr6xx::protocol::Model::Pr655,
@@ -74,6 +108,10 @@ impl DeviceKind {
     /// An emulated device of this kind, measuring with `meter`.
     pub fn emulator(self, meter: Meter) -> Box<dyn DeviceModel> {
         match self {
+            DeviceKind::K10a => Box::new(klein::emulator::K10Emulator::new(meter)),
+            DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a => Box::new(
+                minolta::emulator::MinoltaEmulator::new(self.minolta_model(), meter, true),
+            ),
             DeviceKind::Pr655 => Box::new(pr6xx::emulator::Pr6xxEmulator::new(
                 pr6xx::protocol::Model::Pr655,
                 meter,

@@ -6,6 +6,8 @@
 pub mod devices;
 pub mod driver;
 pub mod emulator;
+pub mod klein;
+pub mod minolta;
 pub mod pr6xx;
 pub mod serial;
 pub mod simulated;

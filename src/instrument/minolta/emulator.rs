@@ -1,0 +1,114 @@
+//! Emulated Konica Minolta LS-100 / LS-110 / CS-100A: silent unless switched on with F
+//! held (an option, on by default); `MDS,nn` and `CLE` answered `OK00`; `MES` answered
+//! in the fixed-width reply (28 bytes for the CS-100A); and the meter's sulk: when the
+//! first `MES` after power-on is too dark it leaves remote mode and answers nothing
+//! more until switched off and on.
+
+use super::protocol::{Model, chromaticity_field, field};
+use crate::color::spaces::xyz_to_xyy;
+use crate::instrument::emulator::{DeviceModel, Measured, Meter, Scheduled};
+
+/// Luminance below which a first measurement makes the meter sulk (cd/m²).
+pub const SULK_BELOW_CD_M2: f64 = 0.5;
+
+pub struct MinoltaEmulator {
+    model: Model,
+    meter: Meter,
+    remote: bool,
+    measured_once: bool,
+    input: Vec<u8>,
+}
+
+impl MinoltaEmulator {
+    /// `remote`: the meter was switched on with F held.
+    pub fn new(model: Model, meter: Meter, remote: bool) -> Self {
+        MinoltaEmulator {
+            model,
+            meter,
+            remote,
+            measured_once: false,
+            input: Vec::new(),
+        }
+    }
+
+    fn measurement(&mut self) -> Vec<Scheduled> {
+        let measured = self.meter.measure(false);
+        let delay = measured.integration_s() + 0.1;
+        let (status, y, chroma) = match &measured {
+            Measured::Ok(r) => ("OK00", r.luminance().unwrap_or(0.0), r.xyz),
+            Measured::LowLight(r) if self.model.has_chromaticity() => {
+                ("OK13", r.luminance().unwrap_or(0.0), r.xyz)
+            }
+            // The luminance meters have no low-light code: they read (next to) nothing.
+            Measured::LowLight(_) => ("OK00", 0.0, None),
+            Measured::Overload { .. } | Measured::SyncFailed { .. } => {
+                let reply = if self.model.has_chromaticity() {
+                    format!(
+                        "OK12,{},{},{}\r\n",
+                        field(-999999.0),
+                        chromaticity_field(0.0),
+                        chromaticity_field(0.0)
+                    )
+                } else {
+                    "ER10\r\n".to_string()
+                };
+                return vec![Scheduled::after(delay, reply)];
+            }
+        };
+        if !self.measured_once {
+            self.measured_once = true;
+            if y < SULK_BELOW_CD_M2 {
+                self.remote = false;
+                return Vec::new();
+            }
+        }
+        let reply = if self.model.has_chromaticity() {
+            let xyy = xyz_to_xyy(&chroma.unwrap_or_default(), [0.0, 0.0]);
+            format!(
+                "{status},{},{},{}\r\n",
+                field(y),
+                chromaticity_field(xyy.x),
+                chromaticity_field(xyy.y)
+            )
+        } else {
+            format!("{status},{}\r\n", field(y))
+        };
+        vec![Scheduled::after(delay, reply)]
+    }
+
+    fn command(&mut self, line: &str) -> Vec<Scheduled> {
+        let upper = line.to_ascii_uppercase();
+        if upper == "MES" {
+            self.measurement()
+        } else if upper.starts_with("MDS,") || upper == "CLE" {
+            vec![Scheduled::after(0.1, "OK00\r\n")]
+        } else {
+            vec![Scheduled::after(0.1, "ER00\r\n")]
+        }
+    }
+}
+
+impl DeviceModel for MinoltaEmulator {
+    fn name(&self) -> &'static str {
+        self.model.name()
+    }
+
+    fn receive(&mut self, bytes: &[u8], _now: f64, _baud: u32) -> Vec<Scheduled> {
+        let mut out = Vec::new();
+        for &b in bytes {
+            if !self.remote {
+                continue;
+            }
+            if b == b'\r' || b == b'\n' {
+                let line = String::from_utf8_lossy(&self.input).trim().to_string();
+                self.input.clear();
+                if !line.is_empty() {
+                    out.extend(self.command(&line));
+                }
+            } else if self.input.len() < 256 {
+                self.input.push(b & 0x7f);
+            }
+        }
+        out
+    }
+}
