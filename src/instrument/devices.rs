@@ -8,7 +8,7 @@ use super::emulator::{DeviceModel, Meter};
 use super::serial::{SerialSettings, SerialTransport};
 use super::transport::{Link, Transport};
 use super::{Capability, InstrumentError};
-use super::{klein, minolta, pr6xx};
+use super::{jeti, klein, minolta, pr6xx};
 
 /// A kind of instrument.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -20,16 +20,18 @@ pub enum DeviceKind {
     Ls110,
     Cs100a,
     K10a,
+    Specbos1211,
 }
 
 impl DeviceKind {
-    pub const ALL: [DeviceKind; 6] = [
+    pub const ALL: [DeviceKind; 7] = [
         DeviceKind::Pr655,
         DeviceKind::Pr670,
         DeviceKind::Ls100,
         DeviceKind::Ls110,
         DeviceKind::Cs100a,
         DeviceKind::K10a,
+        DeviceKind::Specbos1211,
     ];
 
     /// The name used on the command line and in configs.
@@ -41,6 +43,7 @@ impl DeviceKind {
             DeviceKind::Ls110 => "ls110",
             DeviceKind::Cs100a => "cs100a",
             DeviceKind::K10a => "k10a",
+            DeviceKind::Specbos1211 => "specbos1211",
         }
     }
 
@@ -59,7 +62,7 @@ impl DeviceKind {
 
     pub fn capability(self) -> Capability {
         match self {
-            DeviceKind::Pr655 | DeviceKind::Pr670 => Capability::Spectral,
+            DeviceKind::Pr655 | DeviceKind::Pr670 | DeviceKind::Specbos1211 => Capability::Spectral,
             DeviceKind::Ls100 | DeviceKind::Ls110 => Capability::Luminance,
             DeviceKind::Cs100a | DeviceKind::K10a => Capability::Tristimulus,
         }
@@ -71,6 +74,7 @@ impl DeviceKind {
             DeviceKind::Pr655 | DeviceKind::Pr670 | DeviceKind::K10a => {
                 SerialSettings::eight_n_one(9600)
             }
+            DeviceKind::Specbos1211 => SerialSettings::eight_n_one(921_600),
             DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a => {
                 SerialSettings::seven_e_two(4800)
             }
@@ -89,6 +93,7 @@ impl DeviceKind {
     pub fn protocol(self, link: Link, options: &DriverOptions) -> Box<dyn Protocol> {
         match self {
             DeviceKind::K10a => Box::new(klein::driver::KleinK10::new(link)),
+            DeviceKind::Specbos1211 => Box::new(jeti::driver::Specbos::new(link, options.sync)),
             DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a => {
                 Box::new(minolta::driver::Minolta::new(link, self.minolta_model()))
             }
@@ -109,6 +114,10 @@ impl DeviceKind {
     pub fn emulator(self, meter: Meter) -> Box<dyn DeviceModel> {
         match self {
             DeviceKind::K10a => Box::new(klein::emulator::K10Emulator::new(meter)),
+            // Set to 115200 so that a driver has to probe past its first guess.
+            DeviceKind::Specbos1211 => {
+                Box::new(jeti::emulator::SpecbosEmulator::new(meter, 115_200))
+            }
             DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a => Box::new(
                 minolta::emulator::MinoltaEmulator::new(self.minolta_model(), meter, true),
             ),

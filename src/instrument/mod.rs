@@ -6,6 +6,7 @@
 pub mod devices;
 pub mod driver;
 pub mod emulator;
+pub mod jeti;
 pub mod klein;
 pub mod minolta;
 pub mod pr6xx;

@@ -116,6 +116,13 @@ impl Meter {
         }
     }
 
+    /// Whether an attempt to lock to the display's refresh fails (for instruments that
+    /// measure the refresh in a command of its own).
+    pub fn sync_fails(&mut self) -> bool {
+        let draw: f64 = self.rng.random();
+        draw < self.faults.sync_failure
+    }
+
     /// Measure what the screen shows, `synced` to its refresh or not.
     pub fn measure(&mut self, synced: bool) -> Measured {
         let reading = match self.instrument.measure_now() {
