@@ -8,12 +8,13 @@ use super::emulator::{DeviceModel, Meter};
 use super::serial::{SerialSettings, SerialTransport};
 use super::transport::{Link, Transport};
 use super::{Capability, InstrumentError};
-use super::{jeti, klein, minolta, pr6xx};
+use super::{colorcal, jeti, klein, minolta, pr6xx, pr650};
 
 /// A kind of instrument.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DeviceKind {
+    Pr650,
     Pr655,
     Pr670,
     Ls100,
@@ -21,10 +22,12 @@ pub enum DeviceKind {
     Cs100a,
     K10a,
     Specbos1211,
+    ColorCal2,
 }
 
 impl DeviceKind {
-    pub const ALL: [DeviceKind; 7] = [
+    pub const ALL: [DeviceKind; 9] = [
+        DeviceKind::Pr650,
         DeviceKind::Pr655,
         DeviceKind::Pr670,
         DeviceKind::Ls100,
@@ -32,11 +35,13 @@ impl DeviceKind {
         DeviceKind::Cs100a,
         DeviceKind::K10a,
         DeviceKind::Specbos1211,
+        DeviceKind::ColorCal2,
     ];
 
     /// The name used on the command line and in configs.
     pub fn name(self) -> &'static str {
         match self {
+            DeviceKind::Pr650 => "pr650",
             DeviceKind::Pr655 => "pr655",
             DeviceKind::Pr670 => "pr670",
             DeviceKind::Ls100 => "ls100",
@@ -44,6 +49,7 @@ impl DeviceKind {
             DeviceKind::Cs100a => "cs100a",
             DeviceKind::K10a => "k10a",
             DeviceKind::Specbos1211 => "specbos1211",
+            DeviceKind::ColorCal2 => "colorcal2",
         }
     }
 
@@ -62,18 +68,24 @@ impl DeviceKind {
 
     pub fn capability(self) -> Capability {
         match self {
-            DeviceKind::Pr655 | DeviceKind::Pr670 | DeviceKind::Specbos1211 => Capability::Spectral,
+            DeviceKind::Pr650 | DeviceKind::Pr655 | DeviceKind::Pr670 | DeviceKind::Specbos1211 => {
+                Capability::Spectral
+            }
             DeviceKind::Ls100 | DeviceKind::Ls110 => Capability::Luminance,
-            DeviceKind::Cs100a | DeviceKind::K10a => Capability::Tristimulus,
+            DeviceKind::Cs100a | DeviceKind::K10a | DeviceKind::ColorCal2 => {
+                Capability::Tristimulus
+            }
         }
     }
 
     /// Line settings the instrument uses.
     pub fn settings(self) -> SerialSettings {
         match self {
-            DeviceKind::Pr655 | DeviceKind::Pr670 | DeviceKind::K10a => {
+            DeviceKind::Pr650 | DeviceKind::Pr655 | DeviceKind::Pr670 | DeviceKind::K10a => {
                 SerialSettings::eight_n_one(9600)
             }
+            // Any rate works over its USB port; PsychoPy uses 115200.
+            DeviceKind::ColorCal2 => SerialSettings::eight_n_one(115_200),
             DeviceKind::Specbos1211 => SerialSettings::eight_n_one(921_600),
             DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a => {
                 SerialSettings::seven_e_two(4800)
@@ -92,6 +104,8 @@ impl DeviceKind {
     /// The driver's protocol over `link`.
     pub fn protocol(self, link: Link, options: &DriverOptions) -> Box<dyn Protocol> {
         match self {
+            DeviceKind::Pr650 => Box::new(pr650::driver::Pr650::new(link, options.sync)),
+            DeviceKind::ColorCal2 => Box::new(colorcal::driver::ColorCal::new(link)),
             DeviceKind::K10a => Box::new(klein::driver::KleinK10::new(link)),
             DeviceKind::Specbos1211 => Box::new(jeti::driver::Specbos::new(link, options.sync)),
             DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a => {
@@ -113,6 +127,13 @@ impl DeviceKind {
     /// An emulated device of this kind, measuring with `meter`.
     pub fn emulator(self, meter: Meter) -> Box<dyn DeviceModel> {
         match self {
+            DeviceKind::Pr650 => Box::new(pr650::emulator::Pr650Emulator::new(
+                meter,
+                pr650::protocol::ARMING_WINDOW_S,
+            )),
+            DeviceKind::ColorCal2 => {
+                Box::new(colorcal::emulator::ColorCalEmulator::new(meter, 877))
+            }
             DeviceKind::K10a => Box::new(klein::emulator::K10Emulator::new(meter)),
             // Set to 115200 so that a driver has to probe past its first guess.
             DeviceKind::Specbos1211 => {

@@ -3,12 +3,14 @@
 //! A reading never hides a failure: light below the instrument's range or above it
 //! is flagged in [`ReadingStatus`], never turned into a zero.
 
+pub mod colorcal;
 pub mod devices;
 pub mod driver;
 pub mod emulator;
 pub mod jeti;
 pub mod klein;
 pub mod minolta;
+pub mod pr650;
 pub mod pr6xx;
 pub mod serial;
 pub mod simulated;
