@@ -68,9 +68,10 @@ pub trait Protocol: Send {
     /// One measurement of what is on the screen, with the protocol's own handling of
     /// range and sync codes.
     fn measure_once(&mut self) -> Result<Reading, InstrumentError>;
-    /// After a timeout or a garbled reply: back to a state where commands work.
+    /// After a timeout or a garbled reply: back to a state where commands work. By
+    /// default the line is drained ([`Link::drain`]).
     fn resync(&mut self) -> Result<(), InstrumentError> {
-        self.link().clear().map_err(InstrumentError::from)
+        self.link().drain().map_err(InstrumentError::from)
     }
     /// Leave remote control (best effort).
     fn disconnect(&mut self) {}

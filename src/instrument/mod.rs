@@ -78,6 +78,43 @@ impl Reading {
     }
 }
 
+/// Check that a spectrum an instrument sent belongs with the XYZ it sent: the grid is
+/// the one expected (`first_nm`, `step_nm`, `count`) and the spectrum's own XYZ agrees
+/// with the instrument's within 5 % (plus 0.01 cd/m²). A reply that came late, from an
+/// earlier command, fails this check instead of passing for a measurement.
+pub fn check_spectrum(
+    spectrum: &Spectrum,
+    xyz: &Xyz,
+    first_nm: f64,
+    step_nm: f64,
+    count: usize,
+) -> Result<(), InstrumentError> {
+    let w = spectrum.wavelengths_nm();
+    if w.len() != count
+        || w.iter()
+            .enumerate()
+            .any(|(i, nm)| (nm - (first_nm + step_nm * i as f64)).abs() > 1e-6)
+    {
+        return Err(InstrumentError::Protocol(format!(
+            "the spectrum is not on the {first_nm} nm + {step_nm} nm × {count} grid"
+        )));
+    }
+    let own = crate::color::spectrum::emission_to_xyz(
+        spectrum,
+        crate::color::spectrum::Observer::default(),
+    )
+    .map_err(|e| InstrumentError::Protocol(format!("spectrum: {e}")))?;
+    for k in 0..3 {
+        if (own[k] - xyz[k]).abs() > 0.05 * xyz[k].abs() + 0.01 {
+            return Err(InstrumentError::Protocol(format!(
+                "the spectrum (XYZ {:.4}, {:.4}, {:.4}) does not match the XYZ sent with it ({:.4}, {:.4}, {:.4})",
+                own.x, own.y, own.z, xyz.x, xyz.y, xyz.z
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Who the instrument is.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InstrumentInfo {

@@ -56,6 +56,9 @@ pub fn escape(bytes: &[u8]) -> String {
     out
 }
 
+/// How long [`Link::drain`] waits for a late reply to start (protocol seconds).
+pub const DRAIN_WAIT_S: f64 = 6.0;
+
 /// A transport with a read buffer and framings. Every timeout given to it is in the
 /// protocol's seconds and multiplied by `timing_scale` (1 for real devices).
 pub struct Link {
@@ -101,6 +104,18 @@ impl Link {
             self.transport.write(&[*b])?;
         }
         Ok(())
+    }
+
+    /// After a reply went missing or came garbled: wait for the line to be quiet (up to
+    /// [`DRAIN_WAIT_S`] for a straggler to start, then until 0.5 s pass with nothing),
+    /// and drop everything. A reply that comes after its timeout is thus thrown away
+    /// rather than read as the answer to the next command.
+    pub fn drain(&mut self) -> Result<(), TransportError> {
+        match self.read_until_silence(DRAIN_WAIT_S, 0.5) {
+            Ok(_) | Err(TransportError::Timeout { .. }) => {}
+            Err(e) => return Err(e),
+        }
+        self.clear()
     }
 
     /// Drop buffered and pending input, so a new command does not read an old reply.

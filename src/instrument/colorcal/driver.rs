@@ -77,8 +77,8 @@ impl Protocol for ColorCal {
                     row + 1
                 )));
             }
-            for c in 0..3 {
-                self.matrix[(row, c)] = minolta_to_float(v[c].round() as i64);
+            for (c, value) in v.iter().enumerate() {
+                self.matrix[(row, c)] = minolta_to_float(value.round() as i64);
             }
         }
         if build < FACTORY_CALIBRATED_BUILD {

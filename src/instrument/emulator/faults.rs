@@ -22,8 +22,11 @@ pub struct FaultSpec {
     pub low_light: f64,
     pub overload: f64,
     pub sync_failure: f64,
-    /// How late a late reply is, in device seconds (past every protocol's timeout).
+    /// How much later than due a late reply comes, in device seconds: past the short
+    /// timeouts of settings and queries, inside the drivers' drain window.
     pub late_s: f64,
+    /// Link faults start after this many replies (so a session can connect first).
+    pub start_after: u64,
     pub seed: u64,
 }
 
@@ -38,7 +41,8 @@ impl Default for FaultSpec {
             low_light: 0.0,
             overload: 0.0,
             sync_failure: 0.0,
-            late_s: 400.0,
+            late_s: 4.0,
+            start_after: 0,
             seed: 1,
         }
     }
@@ -66,13 +70,17 @@ impl FaultSpec {
                 "overload" => &mut spec.overload,
                 "sync_failure" => &mut spec.sync_failure,
                 "late_s" => &mut spec.late_s,
+                "start_after" => {
+                    spec.start_after = number as u64;
+                    continue;
+                }
                 "seed" => {
                     spec.seed = number as u64;
                     continue;
                 }
                 other => {
                     return Err(format!(
-                        "unknown fault '{other}' (known: no_reply, late, garbage, truncated, vanish, low_light, overload, sync_failure, late_s, seed)"
+                        "unknown fault '{other}' (known: no_reply, late, garbage, truncated, vanish, low_light, overload, sync_failure, late_s, start_after, seed)"
                     ));
                 }
             };
@@ -110,6 +118,7 @@ pub enum LinkAction {
 pub struct FaultInjector {
     spec: FaultSpec,
     rng: ChaCha8Rng,
+    replies: u64,
 }
 
 impl FaultInjector {
@@ -117,6 +126,7 @@ impl FaultInjector {
         FaultInjector {
             spec,
             rng: ChaCha8Rng::seed_from_u64(spec.seed),
+            replies: 0,
         }
     }
 
@@ -127,6 +137,10 @@ impl FaultInjector {
     /// The reply as the link delivers it.
     pub fn apply(&mut self, reply: Scheduled) -> Vec<LinkAction> {
         let s = self.spec;
+        self.replies += 1;
+        if self.replies <= s.start_after {
+            return vec![LinkAction::Send(reply)];
+        }
         let draw: f64 = self.rng.random();
         let mut edge = 0.0;
         let mut hit = |rate: f64| {

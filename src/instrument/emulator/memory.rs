@@ -2,6 +2,9 @@
 //! that run a driver through thousands of fault schedules in a second. Timeouts cost
 //! nothing, yet happen exactly as they would on the wire.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
 use super::faults::{FaultInjector, FaultSpec, LinkAction};
 use super::{DeviceModel, Scheduled};
 use crate::instrument::transport::{Transport, TransportError};
@@ -22,6 +25,26 @@ pub struct MemoryTransport {
     baud: u32,
     /// Bytes written by the host, in order (for tests that check pacing or content).
     pub written: Vec<(f64, Vec<u8>)>,
+    controls: MemoryControls,
+}
+
+/// Handles a test keeps after the transport moves into a driver: the virtual time, and
+/// a switch for the link faults.
+#[derive(Debug, Clone)]
+pub struct MemoryControls {
+    time_bits: Arc<AtomicU64>,
+    faults_on: Arc<AtomicBool>,
+}
+
+impl MemoryControls {
+    /// Virtual seconds since the transport was made.
+    pub fn now(&self) -> f64 {
+        f64::from_bits(self.time_bits.load(Ordering::Relaxed))
+    }
+
+    pub fn set_faults(&self, on: bool) {
+        self.faults_on.store(on, Ordering::Relaxed);
+    }
 }
 
 impl MemoryTransport {
@@ -34,14 +57,32 @@ impl MemoryTransport {
             vanished: false,
             baud,
             written: Vec::new(),
+            controls: MemoryControls {
+                time_bits: Arc::new(AtomicU64::new(0f64.to_bits())),
+                faults_on: Arc::new(AtomicBool::new(true)),
+            },
         }
     }
 
+    pub fn controls(&self) -> MemoryControls {
+        self.controls.clone()
+    }
+
+    fn advance_to(&mut self, t: f64) {
+        self.now = t;
+        self.controls
+            .time_bits
+            .store(t.to_bits(), Ordering::Relaxed);
+    }
+
     fn schedule(&mut self, at: f64, reply: Scheduled) {
-        for action in self
-            .faults
-            .apply(Scheduled::after(reply.delay, reply.bytes))
-        {
+        let actions = if self.controls.faults_on.load(Ordering::Relaxed) {
+            self.faults
+                .apply(Scheduled::after(reply.delay, reply.bytes))
+        } else {
+            vec![LinkAction::Send(reply)]
+        };
+        for action in actions {
             match action {
                 LinkAction::Send(s) => self.push(at + s.delay, Delivery::Bytes(s.bytes)),
                 LinkAction::Vanish { delay, partial } => {
@@ -88,7 +129,7 @@ impl Transport for MemoryTransport {
         match self.queue.first() {
             Some((at, _)) if *at <= horizon => {
                 let (at, what) = self.queue.remove(0);
-                self.now = self.now.max(at);
+                self.advance_to(self.now.max(at));
                 match what {
                     Delivery::Bytes(b) => Ok(b),
                     Delivery::Vanish => {
@@ -101,7 +142,7 @@ impl Transport for MemoryTransport {
                 }
             }
             _ => {
-                self.now = horizon;
+                self.advance_to(horizon);
                 Err(TransportError::Timeout {
                     waited: timeout,
                     got: Vec::new(),
@@ -133,7 +174,7 @@ impl Transport for MemoryTransport {
     }
 
     fn sleep(&mut self, seconds: f64) {
-        self.now += seconds.max(0.0);
+        self.advance_to(self.now + seconds.max(0.0));
     }
 
     fn now(&self) -> f64 {

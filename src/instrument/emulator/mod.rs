@@ -100,6 +100,7 @@ pub struct Meter {
     instrument: SimulatedInstrument,
     faults: DeviceFaults,
     rng: ChaCha8Rng,
+    faults_on: Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl Meter {
@@ -113,6 +114,21 @@ impl Meter {
             instrument: SimulatedInstrument::new(monitor, spec),
             faults,
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_FA17),
+            faults_on: Arc::new(std::sync::atomic::AtomicBool::new(true)),
+        }
+    }
+
+    /// A switch for the device faults (on at first), kept by tests that want a clean
+    /// start before the faults begin.
+    pub fn fault_switch(&self) -> Arc<std::sync::atomic::AtomicBool> {
+        self.faults_on.clone()
+    }
+
+    fn faults(&self) -> DeviceFaults {
+        if self.faults_on.load(std::sync::atomic::Ordering::Relaxed) {
+            self.faults
+        } else {
+            DeviceFaults::default()
         }
     }
 
@@ -120,7 +136,7 @@ impl Meter {
     /// measure the refresh in a command of its own).
     pub fn sync_fails(&mut self) -> bool {
         let draw: f64 = self.rng.random();
-        draw < self.faults.sync_failure
+        draw < self.faults().sync_failure
     }
 
     /// Measure what the screen shows, `synced` to its refresh or not.
@@ -133,7 +149,7 @@ impl Meter {
         };
         let integration_s = reading.integration_s;
         let draw: f64 = self.rng.random();
-        let f = self.faults;
+        let f = self.faults();
         if synced && draw < f.sync_failure {
             return Measured::SyncFailed { integration_s };
         }

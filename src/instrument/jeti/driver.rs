@@ -22,7 +22,9 @@ use crate::color::Xyz;
 use crate::color::spectrum::Spectrum;
 use crate::instrument::driver::Protocol;
 use crate::instrument::transport::{Link, escape};
-use crate::instrument::{Capability, InstrumentError, InstrumentInfo, Reading, ReadingStatus};
+use crate::instrument::{
+    Capability, InstrumentError, InstrumentInfo, Reading, ReadingStatus, check_spectrum,
+};
 
 const FETCH_TRIES: usize = 5;
 
@@ -274,6 +276,7 @@ impl Protocol for Specbos {
         outcome?;
         let xyz = self.fetch_xyz()?;
         let spectrum = self.fetch_spectrum()?;
+        check_spectrum(&spectrum, &xyz, WAVELENGTH_START as f64, 1.0, bands())?;
         Ok(Reading {
             xyz: Some(xyz),
             spectrum: Some(spectrum),
@@ -282,11 +285,5 @@ impl Protocol for Specbos {
             raw: Some(format!("X:\t{}\rY:\t{}\rZ:\t{}\r", xyz.x, xyz.y, xyz.z)),
             ..Default::default()
         })
-    }
-
-    fn resync(&mut self) -> Result<(), InstrumentError> {
-        let _ = self.link.read_until_silence(0.5, 0.2);
-        self.link.clear()?;
-        Ok(())
     }
 }

@@ -13,7 +13,7 @@ use super::protocol::{
 };
 use crate::color::Xyz;
 use crate::instrument::driver::Protocol;
-use crate::instrument::transport::{Link, TransportError, escape};
+use crate::instrument::transport::{Link, escape};
 use crate::instrument::{Capability, InstrumentError, InstrumentInfo, Reading, ReadingStatus};
 
 /// Range errors measured again before they are reported.
@@ -171,11 +171,6 @@ impl Protocol for KleinK10 {
     fn resync(&mut self) -> Result<(), InstrumentError> {
         // Stop a flicker stream if one is running, then drop what is pending.
         let _ = self.link.send(b"N5\r");
-        match self.link.read_until_silence(0.5, 0.2) {
-            Ok(_) | Err(TransportError::Timeout { .. }) => {}
-            Err(e) => return Err(e.into()),
-        }
-        self.link.clear()?;
-        Ok(())
+        self.link.drain().map_err(InstrumentError::from)
     }
 }

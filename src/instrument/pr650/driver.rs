@@ -17,8 +17,10 @@ use super::protocol::{
 use crate::color::Xyz;
 use crate::color::spectrum::Spectrum;
 use crate::instrument::driver::Protocol;
-use crate::instrument::transport::{Link, TransportError};
-use crate::instrument::{Capability, InstrumentError, InstrumentInfo, Reading, ReadingStatus};
+use crate::instrument::transport::Link;
+use crate::instrument::{
+    Capability, InstrumentError, InstrumentInfo, Reading, ReadingStatus, check_spectrum,
+};
 
 pub struct Pr650 {
     link: Link,
@@ -153,20 +155,13 @@ impl Protocol for Pr650 {
             }
         };
         let (_, spectrum) = self.spectrum()?;
+        let xyz = Xyz::new(xyz[0], xyz[1], xyz[2]);
+        check_spectrum(&spectrum, &xyz, 380.0, 4.0, 101)?;
         Ok(Reading {
-            xyz: Some(Xyz::new(xyz[0], xyz[1], xyz[2])),
+            xyz: Some(xyz),
             spectrum: Some(spectrum),
             status,
             ..base
         })
-    }
-
-    fn resync(&mut self) -> Result<(), InstrumentError> {
-        match self.link.read_until_silence(0.5, 0.2) {
-            Ok(_) | Err(TransportError::Timeout { .. }) => {}
-            Err(e) => return Err(e.into()),
-        }
-        self.link.clear()?;
-        Ok(())
     }
 }

@@ -18,7 +18,9 @@ use crate::color::Xyz;
 use crate::color::spectrum::Spectrum;
 use crate::instrument::driver::Protocol;
 use crate::instrument::transport::{Link, escape};
-use crate::instrument::{Capability, InstrumentError, InstrumentInfo, Reading, ReadingStatus};
+use crate::instrument::{
+    Capability, InstrumentError, InstrumentInfo, Reading, ReadingStatus, check_spectrum,
+};
 
 /// A PR-655 or PR-670 on a link.
 pub struct Pr6xx {
@@ -161,21 +163,22 @@ impl Protocol for Pr6xx {
                 "D2 after a good M5 reports status {status}"
             )));
         }
+        let xyz = Xyz::new(xyz[0], xyz[1], xyz[2]);
+        check_spectrum(
+            &spectrum,
+            &xyz,
+            380.0,
+            self.model.step_nm(),
+            self.model.rows(),
+        )?;
         Ok(Reading {
-            xyz: Some(Xyz::new(xyz[0], xyz[1], xyz[2])),
+            xyz: Some(xyz),
             spectrum: Some(spectrum),
             status: ReadingStatus::Ok,
             device_code: Some(code.to_string()),
             raw: Some(format!("{header}\\r\\n…\\r\\n{d2}")),
             ..Default::default()
         })
-    }
-
-    fn resync(&mut self) -> Result<(), InstrumentError> {
-        // Let whatever the instrument is still sending run out, then start clean.
-        let _ = self.link.read_until_silence(0.5, 0.3);
-        self.link.clear()?;
-        Ok(())
     }
 
     fn disconnect(&mut self) {
