@@ -7,10 +7,11 @@
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 
 use crate::calibrate::plan::PlanConfig;
 use crate::fit::FitOptions;
+use crate::instrument::devices::DeviceKind;
+use crate::instrument::driver::DriverOptions;
 use crate::instrument::simulated::SimulatedInstrumentSpec;
 use crate::profile::toml_error_position;
 use crate::sim::presets::MonitorConfig;
@@ -37,17 +38,33 @@ pub enum ConfigError {
     Invalid { path: String, message: String },
 }
 
-/// `[instrument]`: which instrument measures. Only the simulated one for now.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// `[instrument]`: which instrument measures: a serial one (`driver` and `port`), or
+/// else the simulated one (`[instrument.simulated]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct InstrumentConfig {
+    /// The simulated instrument (used when no `driver` is given).
     pub simulated: Option<SimulatedInstrumentSpec>,
+    /// A serial instrument: pr650, pr655, pr670, k10a, specbos1211, ls100, ls110,
+    /// cs100a, colorcal2.
+    pub driver: Option<String>,
+    /// Its port, e.g. `/dev/ttyACM0`.
+    pub port: Option<String>,
+    #[serde(default)]
+    pub options: DriverOptions,
+    /// A 3×3 matrix applied to a colorimeter's XYZ (rows), from a calibration against a
+    /// reference instrument.
+    pub correction: Option<[[f64; 3]; 3]>,
 }
 
-impl Default for InstrumentConfig {
-    fn default() -> Self {
-        InstrumentConfig {
-            simulated: Some(SimulatedInstrumentSpec::default()),
+impl InstrumentConfig {
+    /// The serial instrument this section names, if it names one.
+    pub fn serial(&self) -> Result<Option<(DeviceKind, String)>, String> {
+        match (&self.driver, &self.port) {
+            (None, None) => Ok(None),
+            (Some(d), Some(p)) => Ok(Some((DeviceKind::parse(d)?, p.clone()))),
+            (Some(_), None) => Err("instrument.driver needs instrument.port".into()),
+            (None, Some(_)) => Err("instrument.port needs instrument.driver".into()),
         }
     }
 }
@@ -58,11 +75,17 @@ impl Default for InstrumentConfig {
 pub struct DisplayConfig {
     /// Seconds to wait after a patch change before measuring.
     pub settle_s: f64,
+    /// The screen socket of an emulator (`chromacal emulate`) whose virtual monitor
+    /// shows the patches; without it the in-process virtual monitor does.
+    pub screen: Option<PathBuf>,
 }
 
 impl Default for DisplayConfig {
     fn default() -> Self {
-        DisplayConfig { settle_s: 0.2 }
+        DisplayConfig {
+            settle_s: 0.2,
+            screen: None,
+        }
     }
 }
 
@@ -117,8 +140,7 @@ pub struct LoadedConfig {
 impl LoadedConfig {
     /// SHA-256 of the text, hex.
     pub fn digest(&self) -> String {
-        let hash = Sha256::digest(self.text.as_bytes());
-        hash.iter().map(|b| format!("{b:02x}")).collect()
+        crate::calibrate::session::digest(&self.text)
     }
 }
 
@@ -143,9 +165,17 @@ pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
     if config.fit.laws.is_empty() {
         return Err(invalid("fit.laws must name at least one law".into()));
     }
-    if config.instrument.simulated.is_none() {
+    let serial = config.instrument.serial().map_err(invalid)?;
+    if serial.is_some() && config.instrument.simulated.is_some() {
         return Err(invalid(
-            "instrument: only [instrument.simulated] is supported by this build".into(),
+            "instrument: give either [instrument.simulated] or a driver and port, not both".into(),
+        ));
+    }
+    if let Some(m) = config.instrument.correction
+        && m.iter().flatten().any(|v| !v.is_finite())
+    {
+        return Err(invalid(
+            "instrument.correction has a value that is not a number".into(),
         ));
     }
     Ok(config)

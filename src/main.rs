@@ -5,8 +5,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 
+use chromacal::calibrate::devices::Overrides;
 use chromacal::calibrate::run::Progress;
-use chromacal::calibrate::session::{CalibrateOptions, calibrate_simulated};
+use chromacal::calibrate::session::{CalibrateOptions, calibrate as calibrate_session};
 use chromacal::color::spaces::{Xyz, xyz_to_luv, xyz_to_uv_prime, xyz_to_xyy};
 use chromacal::color::spectrum::{
     Illuminant, Observer, Spectrum, emission_to_relative_xyz, emission_to_xyz, photopic_luminance,
@@ -16,6 +17,8 @@ use chromacal::color::xyz_to_lab;
 use chromacal::config::load_config;
 use chromacal::fit::validate::evaluate;
 use chromacal::fit::{FitOptions, fit_monitor};
+use chromacal::instrument::devices::DeviceKind;
+use chromacal::instrument::driver::DriverOptions;
 use chromacal::measurement::{Units, read_measurements};
 use chromacal::model::transfer::LawKind;
 use chromacal::numeric_csv::NumericTable;
@@ -24,6 +27,7 @@ use chromacal::profile::{Profile, Provenance, SCHEMA_VERSION};
 use chromacal::report;
 
 mod bench;
+mod emulate;
 
 #[derive(Parser)]
 #[command(
@@ -60,6 +64,8 @@ enum Command {
         /// Print the profile's report as JSON instead of the summary.
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        devices: DeviceArgs,
     },
     /// Fit a profile to recorded measurements: a run journal or an ArgyllCMS .ti3.
     Fit {
@@ -121,6 +127,56 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Emulate a serial instrument on a pseudo-terminal: prints the device path to open
+    /// and the screen socket to show patches on, then answers as the instrument would,
+    /// measuring a virtual monitor, until stopped.
+    Emulate {
+        /// pr650, pr655, pr670, k10a, specbos1211, ls100, ls110, cs100a, colorcal2.
+        #[arg(long)]
+        instrument: String,
+        /// Virtual monitor preset (crt, lcd) [default: the config's monitor].
+        #[arg(long)]
+        monitor: Option<String>,
+        /// Take [monitor] and [instrument.simulated] (noise, seed) from this config.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Faults to inject, e.g. "no_reply=0.05,garbage=0.02,low_light=0.1,seed=7".
+        #[arg(long, default_value = "")]
+        faults: String,
+        /// Record the session, byte for byte, to this transcript file.
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Real seconds per instrument second (0.01 answers a hundred times faster).
+        #[arg(long, default_value_t = 1.0)]
+        time_scale: f64,
+        /// Where to put the screen socket [default: a file in the temporary directory].
+        #[arg(long)]
+        screen: Option<PathBuf>,
+        /// Emulate a Minolta meter that was switched on without F held (not in remote mode).
+        #[arg(long)]
+        not_remote: bool,
+    },
+    /// Measure what the display shows now with a serial instrument.
+    Measure {
+        /// KIND:PORT, e.g. pr670:/dev/ttyACM0.
+        #[arg(long)]
+        instrument: String,
+        #[arg(long, default_value_t = 1)]
+        count: usize,
+        /// Multiplies the protocol's timeouts (for emulators run faster than real time).
+        #[arg(long, default_value_t = 1.0)]
+        timing_scale: f64,
+        #[arg(long)]
+        json: bool,
+    },
+    /// List serial ports and identify the instruments on them.
+    Instruments {
+        /// Also probe this port (pseudo-terminals are not listed by the system).
+        #[arg(long)]
+        port: Vec<String>,
+        #[arg(long)]
+        json: bool,
+    },
     /// Work with profiles.
     Profile {
         #[command(subcommand)]
@@ -137,6 +193,46 @@ enum Command {
         #[arg(long)]
         data: Option<PathBuf>,
     },
+}
+
+/// Which instrument and display a calibration uses, when not the config's.
+#[derive(clap::Args, Default)]
+struct DeviceArgs {
+    /// A serial instrument as KIND:PORT, e.g. pr670:/dev/ttyACM0 (see `chromacal instruments`).
+    #[arg(long)]
+    instrument: Option<String>,
+    /// The screen socket of `chromacal emulate`, whose virtual monitor shows the patches.
+    #[arg(long)]
+    screen: Option<PathBuf>,
+    /// Multiplies the instrument protocol's timeouts (for emulators run faster than real time).
+    #[arg(long)]
+    timing_scale: Option<f64>,
+}
+
+impl DeviceArgs {
+    fn overrides(&self) -> Result<Overrides, Failure> {
+        Ok(Overrides {
+            instrument: match &self.instrument {
+                Some(spec) => Some(parse_instrument(spec)?),
+                None => None,
+            },
+            screen: self.screen.clone(),
+            timing_scale: self.timing_scale,
+        })
+    }
+}
+
+/// KIND:PORT.
+fn parse_instrument(spec: &str) -> Result<(DeviceKind, String), Failure> {
+    let (kind, port) = spec.split_once(':').ok_or_else(|| {
+        Failure::from(format!(
+            "--instrument wants KIND:PORT, e.g. pr670:/dev/ttyACM0, not '{spec}'"
+        ))
+    })?;
+    Ok((
+        DeviceKind::parse(kind).map_err(Failure::from)?,
+        port.to_string(),
+    ))
 }
 
 #[derive(Subcommand)]
@@ -226,13 +322,44 @@ fn main() -> ExitCode {
             realtime,
             time_scale,
             json,
-        } => calibrate(
-            config.as_deref(),
-            state_dir,
-            resume,
-            realtime.then_some(time_scale),
+            devices,
+        } => devices.overrides().and_then(|overrides| {
+            calibrate(
+                config.as_deref(),
+                state_dir,
+                resume,
+                realtime.then_some(time_scale),
+                json,
+                overrides,
+            )
+        }),
+        Command::Emulate {
+            instrument,
+            monitor,
+            config,
+            faults,
+            record,
+            time_scale,
+            screen,
+            not_remote,
+        } => emulate::run(emulate::EmulateArgs {
+            instrument,
+            monitor,
+            config,
+            faults,
+            record,
+            time_scale,
+            screen,
+            not_remote,
+        })
+        .map_err(Failure::from),
+        Command::Measure {
+            instrument,
+            count,
+            timing_scale,
             json,
-        ),
+        } => measure(&instrument, count, timing_scale, json),
+        Command::Instruments { port, json } => instruments(&port, json),
         Command::Fit {
             measurements,
             output,
@@ -286,12 +413,14 @@ fn calibrate(
     resume: bool,
     realtime_scale: Option<f64>,
     json: bool,
+    overrides: Overrides,
 ) -> Result<(), Failure> {
     let loaded = load_config(config)?;
     let options = CalibrateOptions {
         state_dir: state_dir.unwrap_or_else(default_state_dir),
         resume,
         realtime_scale,
+        overrides,
     };
     let bar = indicatif::ProgressBar::new(0);
     bar.set_style(
@@ -312,7 +441,7 @@ fn calibrate(
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_time()
         .build()?;
-    let outcome = runtime.block_on(calibrate_simulated(&loaded, &options, &mut on_progress));
+    let outcome = runtime.block_on(calibrate_session(&loaded, &options, &mut on_progress));
     bar.finish_and_clear();
     let outcome = outcome?;
     if json {
@@ -491,6 +620,89 @@ fn check(
             println!("  note: {n}");
         }
         print!("{}", report::check_summary(&evaluation, worst));
+    }
+    Ok(())
+}
+
+fn measure(spec: &str, count: usize, timing_scale: f64, json: bool) -> Result<(), Failure> {
+    let (kind, port) = parse_instrument(spec)?;
+    let options = DriverOptions {
+        timing_scale,
+        ..DriverOptions::default()
+    };
+    let mut instrument = kind.open(&port, options)?;
+    let info = instrument.info().clone();
+    if !json {
+        println!(
+            "{} (serial {}) on {port}",
+            info.name,
+            info.serial.as_deref().unwrap_or("unknown")
+        );
+    }
+    let mut readings = Vec::new();
+    for _ in 0..count.max(1) {
+        let reading = instrument.measure()?;
+        if !json {
+            let status = format!("{:?}", reading.status).to_lowercase();
+            match (reading.xyz, reading.luminance()) {
+                (Some(xyz), _) => {
+                    let xyy = xyz_to_xyy(&xyz, [0.0, 0.0]);
+                    println!(
+                        "  XYZ {:.4} {:.4} {:.4}  x {:.4} y {:.4}  [{status}, code {}]",
+                        xyz.x,
+                        xyz.y,
+                        xyz.z,
+                        xyy.x,
+                        xyy.y,
+                        reading.device_code.as_deref().unwrap_or("-")
+                    )
+                }
+                (None, Some(y)) => println!(
+                    "  Y {y:.4} cd/m²  [{status}, code {}]",
+                    reading.device_code.as_deref().unwrap_or("-")
+                ),
+                (None, None) => println!(
+                    "  no value  [{status}, code {}]",
+                    reading.device_code.as_deref().unwrap_or("-")
+                ),
+            }
+        }
+        readings.push(reading);
+    }
+    instrument.close();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&readings)?);
+    }
+    Ok(())
+}
+
+fn instruments(extra: &[String], json: bool) -> Result<(), Failure> {
+    use chromacal::instrument::scan::{PortFinding, candidate_ports, scan};
+    let ports = candidate_ports(extra);
+    let findings = scan(&ports);
+    if json {
+        let rows: Vec<serde_json::Value> = findings
+            .iter()
+            .map(|(port, f)| match f {
+                PortFinding::Found { kind, identity } => serde_json::json!({"port": port, "instrument": kind.name(), "identity": identity}),
+                PortFinding::Silent => serde_json::json!({"port": port, "instrument": null}),
+                PortFinding::Unopenable(why) => serde_json::json!({"port": port, "error": why}),
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    if findings.is_empty() {
+        println!("no serial ports found (pseudo-terminals must be named with --port)");
+    }
+    for (port, finding) in findings {
+        match finding {
+            PortFinding::Found { kind, identity } => {
+                println!("{port}: {identity}  (--instrument {kind}:{port})")
+            }
+            PortFinding::Silent => println!("{port}: no known instrument answered"),
+            PortFinding::Unopenable(why) => println!("{port}: cannot open: {why}"),
+        }
     }
     Ok(())
 }

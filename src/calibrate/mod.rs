@@ -1,5 +1,6 @@
 //! A calibration run: the plan, the measuring loop, the journal.
 
+pub mod devices;
 pub mod journal;
 pub mod plan;
 pub mod run;

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
 
+use super::devices::{DevicesError, Overrides, open_devices};
 use super::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, JournalHeader};
 use super::plan::{Plan, PlanError, make_plan};
 use super::run::{DEFAULT_ATTEMPTS, Progress, RunError, RunSummary, run_plan};
@@ -46,6 +47,10 @@ pub enum CalibrateError {
     },
     #[error("no unfinished run to resume in {0}")]
     NothingToResume(PathBuf),
+    #[error(transparent)]
+    Devices(#[from] DevicesError),
+    #[error("cannot write the config: {0}")]
+    Serialize(String),
 }
 
 /// How to run a calibration.
@@ -56,6 +61,17 @@ pub struct CalibrateOptions {
     pub resume: bool,
     /// Real seconds per simulated second (`None`: as fast as possible).
     pub realtime_scale: Option<f64>,
+    /// Command-line settings that win over the config's.
+    pub overrides: Overrides,
+}
+
+/// SHA-256 of a text, hex.
+pub fn digest(text: &str) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(text.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// What a calibration did and made.
@@ -150,15 +166,15 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
     Ok((run, fitted, started.elapsed().as_secs_f64()))
 }
 
-/// Run (or resume) a calibration of the simulated rig described by `loaded`.
-pub async fn calibrate_simulated(
+/// Run (or resume) the calibration `loaded` describes, with `options.overrides`.
+pub async fn calibrate(
     loaded: &LoadedConfig,
     options: &CalibrateOptions,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<CalibrationOutcome, CalibrateError> {
     let store = ProfileStore::new(&options.state_dir);
-    // A resumed run goes on with the config it started with.
-    let (mut journal, config, base_dir, run_id) = if options.resume {
+    // A resumed run goes on with the config it started with (and the overrides).
+    let (mut journal, config, base_dir, run_id, mut devices) = if options.resume {
         let dir = unfinished_run(&store)
             .ok_or_else(|| CalibrateError::NothingToResume(store.runs_dir()))?;
         let (journal, recovery) = Journal::open(&dir.join("journal.jsonl"))?;
@@ -169,56 +185,66 @@ pub async fn calibrate_simulated(
                 "dropped a reading cut short by the interruption"
             );
         }
-        let config = parse_config(&journal.header().config, "the run's journal header")?;
+        let mut config = parse_config(&journal.header().config, "the run's journal header")?;
+        options.overrides.apply(&mut config);
         let run_id = journal.header().run_id.clone();
         let base_dir = journal.header().config_dir.clone();
-        (journal, config, base_dir, run_id)
+        let devices = open_devices(&config, &base_dir, options.realtime_scale).await?;
+        (journal, config, base_dir, run_id, devices)
     } else {
+        let mut config = loaded.config.clone();
+        options.overrides.apply(&mut config);
+        let text =
+            toml::to_string(&config).map_err(|e| CalibrateError::Serialize(e.to_string()))?;
         let run_id = new_run_id();
-        let plan = make_plan(&loaded.config.plan)?;
-        let rig = rig_for(&loaded.config, &loaded.base_dir, None)?;
+        let plan = make_plan(&config.plan)?;
+        let devices = open_devices(&config, &loaded.base_dir, options.realtime_scale).await?;
         let header = JournalHeader {
             format: JOURNAL_FORMAT.into(),
             version: JOURNAL_VERSION,
             run_id: run_id.clone(),
             started: now_rfc3339(),
-            config_digest: loaded.digest(),
-            config: loaded.text.clone(),
+            config_digest: digest(&text),
+            config: text,
             config_dir: loaded.base_dir.clone(),
-            display: rig.display.name(),
-            instrument: rig.instrument.info(),
+            display: devices.display.name(),
+            instrument: devices.instrument.info(),
             units: Units::Absolute,
             plan,
         };
         let path = store.runs_dir().join(&run_id).join("journal.jsonl");
         (
             Journal::create(&path, header)?,
-            loaded.config.clone(),
+            config,
             loaded.base_dir.clone(),
             run_id,
+            devices,
         )
     };
+    let _ = &base_dir;
 
-    let mut rig = rig_for(&config, &base_dir, options.realtime_scale)?;
     // Simulated time goes on from the last reading.
-    if let Some(end) = journal
-        .entries()
-        .iter()
-        .filter_map(|m| Some(m.time_s? + m.reading.integration_s / 2.0))
-        .reduce(f64::max)
+    if let Some(clock) = &devices.virtual_clock
+        && let Some(end) = journal
+            .entries()
+            .iter()
+            .filter_map(|m| Some(m.time_s? + m.reading.integration_s / 2.0))
+            .reduce(f64::max)
     {
-        rig.clock.set(end);
+        clock.set(end);
     }
-    let display_name = rig.display.name();
-    let (run, fitted, fit_seconds) = measure_and_fit(
+    let display_name = devices.display.name();
+    let measured = measure_and_fit(
         &mut journal,
         &config,
-        &mut rig.display,
-        &mut rig.instrument,
-        rig.clock.as_ref(),
+        &mut devices.display,
+        &mut devices.instrument,
+        devices.clock.as_ref(),
         progress,
     )
-    .await?;
+    .await;
+    devices.instrument.close();
+    let (run, fitted, fit_seconds) = measured?;
 
     let header = journal.header().clone();
     let instrument_seconds = journal

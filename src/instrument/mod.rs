@@ -12,6 +12,7 @@ pub mod klein;
 pub mod minolta;
 pub mod pr650;
 pub mod pr6xx;
+pub mod scan;
 pub mod serial;
 pub mod simulated;
 pub mod transcript;

@@ -1,0 +1,85 @@
+//! `chromacal emulate`: an emulated serial instrument on a pseudo-terminal, measuring a
+//! virtual monitor whose screen other processes set through a socket.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+use chromacal::config::load_config;
+use chromacal::instrument::devices::DeviceKind;
+use chromacal::instrument::emulator::Meter;
+use chromacal::instrument::emulator::faults::FaultSpec;
+use chromacal::instrument::emulator::pty::{PtyEmulator, PtyOptions};
+use chromacal::instrument::emulator::screen::serve_screen;
+use chromacal::instrument::minolta;
+use chromacal::sim::clock::VirtualClock;
+use chromacal::sim::monitor::VirtualMonitor;
+
+pub struct EmulateArgs {
+    pub instrument: String,
+    pub monitor: Option<String>,
+    pub config: Option<PathBuf>,
+    pub faults: String,
+    pub record: Option<PathBuf>,
+    pub time_scale: f64,
+    pub screen: Option<PathBuf>,
+    pub not_remote: bool,
+}
+
+pub fn run(args: EmulateArgs) -> Result<(), String> {
+    let kind = DeviceKind::parse(&args.instrument)?;
+    let loaded = load_config(args.config.as_deref()).map_err(|e| e.to_string())?;
+    let mut monitor_config = loaded.config.monitor.clone();
+    if let Some(preset) = &args.monitor {
+        monitor_config.preset = Some(preset.clone());
+    }
+    let spec = monitor_config
+        .resolve(&loaded.base_dir)
+        .map_err(|e| e.to_string())?;
+    let faults = FaultSpec::parse(&args.faults)?;
+    let clock = Arc::new(VirtualClock::new(None));
+    let monitor = Arc::new(Mutex::new(
+        VirtualMonitor::new(spec, clock).map_err(|e| e.to_string())?,
+    ));
+    let simulated = loaded
+        .config
+        .instrument
+        .simulated
+        .clone()
+        .unwrap_or_default();
+    let meter = Meter::new(monitor.clone(), simulated, faults.device(), faults.seed);
+    let device = match kind {
+        DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a if args.not_remote => {
+            let model = match kind {
+                DeviceKind::Ls110 => minolta::protocol::Model::Ls110,
+                DeviceKind::Cs100a => minolta::protocol::Model::Cs100a,
+                _ => minolta::protocol::Model::Ls100,
+            };
+            Box::new(minolta::emulator::MinoltaEmulator::new(model, meter, false))
+        }
+        _ => kind.emulator(meter),
+    };
+    let screen = args.screen.unwrap_or_else(|| {
+        std::env::temp_dir().join(format!(
+            "chromacal-emulate-{}-{}.sock",
+            kind,
+            std::process::id()
+        ))
+    });
+    let screen =
+        serve_screen(&screen, monitor).map_err(|e| format!("{}: {e}", screen.display()))?;
+    let emulator = PtyEmulator::spawn(
+        device,
+        PtyOptions {
+            time_scale: args.time_scale,
+            faults,
+            record: args.record,
+        },
+    )
+    .map_err(|e| format!("cannot open a pseudo-terminal: {e}"))?;
+    println!("device {}", emulator.path());
+    println!("screen {}", screen.display());
+    let _ = std::io::stdout().flush();
+    emulator.wait();
+    Err(format!("the emulated {kind} vanished (an injected fault)"))
+}
