@@ -6,7 +6,7 @@ use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use chromacal::calibrate::journal::Journal;
-use chromacal::calibrate::session::{CalibrateOptions, calibrate_simulated, measure_simulated};
+use chromacal::calibrate::session::{CalibrateOptions, calibrate, measure_simulated};
 use chromacal::config::{load_config, parse_config};
 use chromacal::profile::Profile;
 
@@ -45,8 +45,9 @@ async fn an_interrupted_journal_resumes_to_the_uninterrupted_readings() {
         state_dir: state.path().to_path_buf(),
         resume: true,
         realtime_scale: None,
+        overrides: Default::default(),
     };
-    let outcome = calibrate_simulated(&loaded, &options, &mut |_| {})
+    let outcome = calibrate(&loaded, &options, &mut |_| {})
         .await
         .unwrap();
     assert_eq!(outcome.run.already_measured, 40);
@@ -93,7 +94,7 @@ async fn an_interrupted_journal_resumes_to_the_uninterrupted_readings() {
     let current = Profile::read(&state.path().join("current.toml")).unwrap();
     assert_eq!(current.provenance.source, journal.display().to_string());
     // Nothing left to resume.
-    let again = calibrate_simulated(&loaded, &options, &mut |_| {}).await;
+    let again = calibrate(&loaded, &options, &mut |_| {}).await;
     assert!(again.is_err());
 }
 
