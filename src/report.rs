@@ -151,6 +151,9 @@ pub fn fit_summary(report: &FitReport) -> String {
         out.push_str(&table(&["map", "mean", "p95", "max"], &rows));
     }
     let _ = writeln!(out);
+    if let Some(note) = &report.luminance_only {
+        let _ = writeln!(out, "NOTE: {note}\n");
+    }
     match &report.held_out {
         Some(s) => {
             let _ = writeln!(out, "held-out ΔE00 (patches in no fit): {}", stats_line(s));

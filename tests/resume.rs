@@ -47,9 +47,7 @@ async fn an_interrupted_journal_resumes_to_the_uninterrupted_readings() {
         realtime_scale: None,
         overrides: Default::default(),
     };
-    let outcome = calibrate(&loaded, &options, &mut |_| {})
-        .await
-        .unwrap();
+    let outcome = calibrate(&loaded, &options, &mut |_| {}).await.unwrap();
     assert_eq!(outcome.run.already_measured, 40);
     assert_eq!(outcome.run.measured_now, 96 - 40);
     assert_complete_and_unique(&journal);

@@ -17,6 +17,7 @@ pub mod checks;
 pub mod law_selection;
 pub mod laws;
 pub mod least_squares;
+pub mod light_meter;
 pub mod noise;
 pub mod primaries;
 pub mod select;
@@ -57,6 +58,11 @@ pub struct FitOptions {
     pub correct_drift: bool,
     /// Refuse a primary matrix whose condition number is above this.
     pub max_condition_number: f64,
+    /// CIE 1931 x, y of the red, green and blue primaries, for a luminance meter
+    /// (Cowan's method: the manufacturer's figures).
+    pub primaries_xy: Option<[[f64; 2]; 3]>,
+    /// x, y given to black with a luminance meter [default: D65, 0.3127, 0.3290].
+    pub white_xy: Option<[f64; 2]>,
 }
 
 impl Default for FitOptions {
@@ -65,6 +71,8 @@ impl Default for FitOptions {
             laws: LawKind::ALL.to_vec(),
             correct_drift: true,
             max_condition_number: DEFAULT_MAX_CONDITION_NUMBER,
+            primaries_xy: None,
+            white_xy: None,
         }
     }
 }
@@ -78,6 +86,10 @@ pub enum FitError {
     Ramp(#[from] RampError),
     #[error("no transfer law could be fitted to all three channels: {0}")]
     NoLaw(String),
+    #[error(
+        "these readings are luminance only (a light meter): give the primaries' chromaticities in [fit] primaries_xy = [[xr, yr], [xg, yg], [xb, yb]] (the manufacturer's figures)"
+    )]
+    NeedChromaticities,
     #[error(
         "the primaries are nearly collinear (condition number {condition:.3e}, limit {limit:.0e}): an inverse model would amplify measurement noise that much, so no profile is made; check that each channel was measured, or raise fit.max_condition_number knowingly"
     )]
@@ -127,6 +139,9 @@ pub struct FitReport {
     pub held_out: Option<ErrorStats>,
     pub held_out_patches: Vec<PatchError>,
     pub counts: Counts,
+    /// Set when the instrument measured luminance only: what that means for the figures.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub luminance_only: Option<String>,
 }
 
 impl FitReport {
@@ -154,6 +169,32 @@ fn code_step(set: &MeasurementSet) -> f64 {
 
 /// Fit the monitor model to `set`.
 pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedModel, FitError> {
+    if !light_meter::is_luminance_only(set) {
+        return fit_measurements(set, options);
+    }
+    let primaries = options.primaries_xy.ok_or(FitError::NeedChromaticities)?;
+    let white = options.white_xy.unwrap_or([0.3127, 0.3290]);
+    let first = fit_measurements(
+        &light_meter::synthesize(set, &primaries, white, None),
+        options,
+    )?;
+    let mut second = fit_measurements(
+        &light_meter::synthesize(set, &primaries, white, Some(&first.model)),
+        options,
+    )?;
+    second.report.luminance_only = Some(format!(
+        "measured with a luminance meter: the primaries' chromaticities are the configured ({:.4}, {:.4}), ({:.4}, {:.4}), ({:.4}, {:.4}), not measured; only luminance was fitted, and the ΔE00 figures compare luminance only",
+        primaries[0][0],
+        primaries[0][1],
+        primaries[1][0],
+        primaries[1][1],
+        primaries[2][0],
+        primaries[2][1]
+    ));
+    Ok(second)
+}
+
+fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<FittedModel, FitError> {
     let all = &set.measurements;
     let standard = |m: &&crate::measurement::Measurement| m.is_standard_condition();
 
@@ -374,6 +415,7 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
             held_out: evaluation.stats,
             held_out_patches: evaluation.patches,
             counts,
+            luminance_only: None,
         },
         model,
     })

@@ -56,6 +56,9 @@ pub fn escape(bytes: &[u8]) -> String {
     out
 }
 
+/// Shortest timeout or silence a sped-up link waits (s of its own time).
+pub const MIN_WAIT_S: f64 = 0.05;
+
 /// How long [`Link::drain`] waits for a late reply to start (protocol seconds).
 pub const DRAIN_WAIT_S: f64 = 6.0;
 
@@ -84,9 +87,20 @@ impl Link {
         self.transport.describe()
     }
 
-    /// A protocol duration in this link's time.
+    /// A protocol duration in this link's time (pauses and pacing).
     pub fn scaled(&self, seconds: f64) -> f64 {
         seconds * self.timing_scale
+    }
+
+    /// A protocol timeout in this link's time: scaled, but never under
+    /// [`MIN_WAIT_S`], because the operating system alone can take a few milliseconds
+    /// to pass bytes through a pseudo-terminal.
+    pub fn wait(&self, seconds: f64) -> f64 {
+        if self.timing_scale < 1.0 {
+            (seconds * self.timing_scale).max(MIN_WAIT_S.min(seconds))
+        } else {
+            seconds * self.timing_scale
+        }
     }
 
     pub fn send(&mut self, bytes: &[u8]) -> Result<(), TransportError> {
@@ -147,7 +161,7 @@ impl Link {
         timeout: f64,
         frame_end: impl Fn(&[u8]) -> Option<usize>,
     ) -> Result<Vec<u8>, TransportError> {
-        let limit = self.scaled(timeout);
+        let limit = self.wait(timeout);
         let deadline = self.transport.now() + limit;
         loop {
             if let Some(end) = frame_end(&self.buffer) {
@@ -206,7 +220,7 @@ impl Link {
     /// then take bytes until none arrive for `gap` protocol seconds.
     pub fn read_until_silence(&mut self, first: f64, gap: f64) -> Result<Vec<u8>, TransportError> {
         if self.buffer.is_empty() {
-            let start = self.scaled(first);
+            let start = self.wait(first);
             match self.transport.read(start) {
                 Ok(bytes) => self.buffer.extend_from_slice(&bytes),
                 Err(TransportError::Timeout { .. }) => {
@@ -218,7 +232,7 @@ impl Link {
                 Err(e) => return Err(e),
             }
         }
-        let quiet = self.scaled(gap);
+        let quiet = self.wait(gap);
         loop {
             match self.transport.read(quiet) {
                 Ok(bytes) => self.buffer.extend_from_slice(&bytes),
@@ -323,6 +337,9 @@ mod tests {
         assert_eq!(l.read_exact(2, 100.0).unwrap(), b"N5");
         let mut l = link(&[(1.5, b"N5")], 0.01);
         assert!(l.read_exact(2, 100.0).is_err());
+        // A sped-up 0.5 s timeout still waits the 50 ms a pseudo-terminal may need.
+        let mut l = link(&[(0.04, b"P0")], 0.001);
+        assert_eq!(l.read_exact(2, 0.5).unwrap(), b"P0");
     }
 
     #[test]

@@ -18,25 +18,39 @@ use crate::instrument::{Capability, InstrumentError, InstrumentInfo, Reading, Re
 pub struct Minolta {
     link: Link,
     model: Model,
+    /// The meter has answered at least once.
+    answered: bool,
 }
 
 impl Minolta {
     pub fn new(link: Link, model: Model) -> Self {
-        Minolta { link, model }
+        Minolta {
+            link,
+            model,
+            answered: false,
+        }
     }
 
     fn command(&mut self, text: &str) -> Result<String, InstrumentError> {
         self.link.clear()?;
         self.link.send(format!("{text}\r\n").as_bytes())?;
+        let answered = self.answered;
+        let name = self.model.name();
         let line = self.link.read_line(EOL, REPLY_TIMEOUT_S).map_err(|e| match e {
             crate::instrument::transport::TransportError::Timeout { got, .. } if got.is_empty() => {
-                InstrumentError::Protocol(format!(
-                    "the {} does not answer {text}: it must be switched on with F held to accept remote commands, and it stops answering after a first reading that is too dark",
-                    self.model.name()
-                ))
+                if answered {
+                    InstrumentError::Protocol(format!(
+                        "the {name} stopped answering ({text}): it does so when its first reading after switching on is too dark, until it is switched off and on again (with F held)"
+                    ))
+                } else {
+                    InstrumentError::Protocol(format!(
+                        "the {name} does not answer {text}: it accepts remote commands only when switched on with F held"
+                    ))
+                }
             }
             other => other.into(),
         })?;
+        self.answered = true;
         Ok(String::from_utf8_lossy(&line).to_string())
     }
 }

@@ -8,6 +8,9 @@ use super::protocol::{Model, chromaticity_field, field};
 use crate::color::spaces::xyz_to_xyy;
 use crate::instrument::emulator::{DeviceModel, Measured, Meter, Scheduled};
 
+/// Seconds from `MES` to its reply.
+const RESPONSE_S: f64 = 0.5;
+
 /// Luminance below which a first measurement makes the meter sulk (cd/m²).
 pub const SULK_BELOW_CD_M2: f64 = 0.5;
 
@@ -33,7 +36,9 @@ impl MinoltaEmulator {
 
     fn measurement(&mut self) -> Vec<Scheduled> {
         let measured = self.meter.measure(false);
-        let delay = measured.integration_s() + 0.1;
+        // The meters answer within their response time (FAST 100 ms, SLOW 400 ms),
+        // whatever the light.
+        let delay = RESPONSE_S;
         let (status, y, chroma) = match &measured {
             Measured::Ok(r) => ("OK00", r.luminance().unwrap_or(0.0), r.xyz),
             Measured::LowLight(r) if self.model.has_chromaticity() => {

@@ -1,0 +1,140 @@
+//! `chromacal calibrate --instrument KIND:/dev/pts/N` against `chromacal emulate`, for
+//! every instrument: real serial bytes through a real pseudo-terminal, patches through
+//! the emulator's screen socket. The profile must be the one the in-process simulated
+//! instrument gives, within noise.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Stdio};
+
+use chromacal::color::spaces::xyz_to_xyy;
+use chromacal::instrument::devices::DeviceKind;
+use chromacal::profile::Profile;
+
+mod common;
+use common::chromacal;
+
+/// An emulator process, killed when dropped.
+struct Emulator {
+    child: Child,
+    device: String,
+    screen: String,
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+pub const TIME_SCALE: &str = "0.002";
+
+fn emulate(kind: DeviceKind) -> Emulator {
+    let mut child = chromacal()
+        .args([
+            "emulate",
+            "--instrument",
+            kind.name(),
+            "--time-scale",
+            TIME_SCALE,
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let device = lines
+        .next()
+        .unwrap()
+        .unwrap()
+        .trim_start_matches("device ")
+        .to_string();
+    let screen = lines
+        .next()
+        .unwrap()
+        .unwrap()
+        .trim_start_matches("screen ")
+        .to_string();
+    Emulator {
+        child,
+        device,
+        screen,
+    }
+}
+
+/// The Brainard CRT phosphors of the `crt` preset, as a manufacturer would give them.
+const CRT_PRIMARIES: &str =
+    "[fit]\nprimaries_xy = [[0.6190, 0.3440], [0.2765, 0.6050], [0.1513, 0.0611]]\n";
+
+#[test]
+fn every_instrument_calibrates_through_its_emulator_like_the_simulated_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    std::fs::write(&config, CRT_PRIMARIES).unwrap();
+    let reference_state = dir.path().join("reference");
+    let out = chromacal()
+        .args(["calibrate", "--config"])
+        .arg(&config)
+        .arg("--state-dir")
+        .arg(&reference_state)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let reference = Profile::read(&reference_state.join("current.toml")).unwrap();
+
+    for kind in DeviceKind::ALL {
+        let emulator = emulate(kind);
+        let state = dir.path().join(kind.name());
+        let out = chromacal()
+            .args(["calibrate", "--config"])
+            .arg(&config)
+            .arg("--instrument")
+            .arg(format!("{}:{}", kind.name(), emulator.device))
+            .args([
+                "--screen",
+                &emulator.screen,
+                "--timing-scale",
+                TIME_SCALE,
+                "--state-dir",
+            ])
+            .arg(&state)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{kind}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let profile = Profile::read(&state.join("current.toml")).unwrap();
+        let name = profile.provenance.instrument.as_ref().unwrap().name.clone();
+        assert!(!name.contains("simulated"), "{kind}: measured with {name}");
+        let (white, reference_white) = (profile.model.white(), reference.model.white());
+        assert!(
+            (white - reference_white).norm() / reference_white.norm() < 0.015,
+            "{kind}: white {white:?} vs {reference_white:?}"
+        );
+        for c in 0..3 {
+            let a = xyz_to_xyy(&profile.model.matrix.column(c).into_owned(), [0.0, 0.0]);
+            let b = xyz_to_xyy(&reference.model.matrix.column(c).into_owned(), [0.0, 0.0]);
+            assert!(
+                (a.x - b.x).abs() < 0.005 && (a.y - b.y).abs() < 0.005,
+                "{kind}: primary {c} at {a:?} vs {b:?}"
+            );
+        }
+        let held = profile.report.held_out.unwrap();
+        assert!(held.mean < 0.5, "{kind}: {held:?}");
+        assert_eq!(
+            profile.report.luminance_only.is_some(),
+            matches!(kind, DeviceKind::Ls100 | DeviceKind::Ls110),
+            "{kind}"
+        );
+        eprintln!(
+            "{kind}: held-out {held:?}, law {:?}",
+            profile.report.chosen_law()
+        );
+    }
+}
