@@ -35,11 +35,17 @@ fn record(kind: DeviceKind, dir: &Path) {
         ..Default::default()
     };
     let mut instrument = kind.open(emulator.path(), options).unwrap();
-    let readings: Vec<Reading> = (0..MEASUREMENTS).map(|_| instrument.measure().unwrap()).collect();
+    let readings: Vec<Reading> = (0..MEASUREMENTS)
+        .map(|_| instrument.measure().unwrap())
+        .collect();
     // Let the last reply reach the recorder before the emulator stops.
     std::thread::sleep(std::time::Duration::from_millis(50));
     drop(emulator);
-    std::fs::write(dir.join("readings.json"), serde_json::to_string_pretty(&readings).unwrap()).unwrap();
+    std::fs::write(
+        dir.join("readings.json"),
+        serde_json::to_string_pretty(&readings).unwrap(),
+    )
+    .unwrap();
 }
 
 #[test]
@@ -54,14 +60,17 @@ fn each_driver_replays_its_recorded_session_byte_for_byte() {
         assert!(events.iter().any(|e| e.dir == Direction::Device), "{kind}");
         assert!(!header.instrument.is_empty());
         let expected: Vec<Reading> =
-            serde_json::from_str(&std::fs::read_to_string(dir.join("readings.json")).unwrap()).unwrap();
+            serde_json::from_str(&std::fs::read_to_string(dir.join("readings.json")).unwrap())
+                .unwrap();
 
         let replay = ReplayTransport::open(&dir.join("session.jsonl")).unwrap();
         let mut instrument = kind
             .connect(Box::new(replay), DriverOptions::default())
             .unwrap_or_else(|e| panic!("{kind}: {e}"));
         for (i, want) in expected.iter().enumerate() {
-            let mut got = instrument.measure().unwrap_or_else(|e| panic!("{kind} reading {i}: {e}"));
+            let mut got = instrument
+                .measure()
+                .unwrap_or_else(|e| panic!("{kind} reading {i}: {e}"));
             // The time a measurement took is the replay's, not the recording's.
             got.integration_s = want.integration_s;
             assert_eq!(&got, want, "{kind} reading {i}");
@@ -75,7 +84,13 @@ fn a_driver_that_writes_other_bytes_is_caught_by_the_replay() {
     // The PR-670's session replayed to the PR-650 driver diverges at once.
     let replay = ReplayTransport::open(&replay_path).unwrap();
     let err = DeviceKind::Pr650
-        .connect(Box::new(replay), DriverOptions { attempts: 1, ..Default::default() })
+        .connect(
+            Box::new(replay),
+            DriverOptions {
+                attempts: 1,
+                ..Default::default()
+            },
+        )
         .err()
         .expect("a PR-650 driver cannot follow a PR-670 session");
     assert!(err.to_string().contains("replay diverged"), "{err}");

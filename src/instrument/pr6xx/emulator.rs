@@ -210,7 +210,13 @@ impl DeviceModel for Pr6xxEmulator {
                     self.remote = false;
                     self.photo_answered = false;
                 }
-                _ => self.input.push(b),
+                _ => {
+                    self.input.push(b);
+                    // A PHOTO sent in remote mode is not a command: no reply, forgotten.
+                    if self.input.ends_with(b"PHOTO") {
+                        self.input.clear();
+                    }
+                }
             }
         }
         out

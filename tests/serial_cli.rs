@@ -1,0 +1,352 @@
+//! The instrument commands as a user runs them: `emulate` (with faults and a
+//! recording), `instruments` (scanning ports with a bound), a run that loses its
+//! instrument keeping its journal and resuming, the correction matrix, and the light
+//! meter's need for chromaticities.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Stdio};
+use std::time::Instant;
+
+use chromacal::calibrate::devices::open_devices;
+use chromacal::calibrate::journal::Journal;
+use chromacal::config::parse_config;
+use chromacal::fit::{FitError, FitOptions, fit_monitor};
+use chromacal::instrument::Instrument;
+use chromacal::instrument::transcript::{Direction, read_transcript};
+use chromacal::profile::Profile;
+
+mod common;
+use common::chromacal;
+
+struct Emulator {
+    child: Child,
+    device: String,
+    screen: String,
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn emulate(args: &[&str]) -> Emulator {
+    let mut child = chromacal()
+        .arg("emulate")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let device = lines
+        .next()
+        .unwrap()
+        .unwrap()
+        .trim_start_matches("device ")
+        .to_string();
+    let screen = lines
+        .next()
+        .unwrap()
+        .unwrap()
+        .trim_start_matches("screen ")
+        .to_string();
+    Emulator {
+        child,
+        device,
+        screen,
+    }
+}
+
+#[test]
+fn emulate_records_a_byte_exact_transcript_and_measure_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("k10.jsonl");
+    let emulator = emulate(&[
+        "--instrument",
+        "k10a",
+        "--time-scale",
+        "0.01",
+        "--record",
+        record.to_str().unwrap(),
+    ]);
+    let out = chromacal()
+        .args([
+            "measure",
+            "--instrument",
+            &format!("k10a:{}", emulator.device),
+            "--timing-scale",
+            "0.01",
+            "--count",
+            "2",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let readings: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(readings.as_array().unwrap().len(), 2);
+    assert_eq!(readings[0]["device_code"], "0");
+    drop(emulator);
+    let (header, events) = read_transcript(&record).unwrap();
+    assert_eq!(header.instrument, "K-10A");
+    let host: Vec<u8> = events
+        .iter()
+        .filter(|e| e.dir == Direction::Host)
+        .flat_map(|e| e.bytes().unwrap())
+        .collect();
+    assert!(
+        host.starts_with(b"P0\r"),
+        "{}",
+        String::from_utf8_lossy(&host)
+    );
+    // The emulator's screen is black: at that light the driver averages 20 readings
+    // for each measurement, as Argyll does.
+    let per_measurement = chromacal::instrument::klein::driver::readings_to_average(0.1);
+    assert_eq!(
+        host.windows(3).filter(|w| w == b"N5\r").count(),
+        2 * per_measurement
+    );
+    assert!(
+        events
+            .iter()
+            .filter(|e| e.dir == Direction::Device)
+            .all(|e| e.text.ends_with("<0>"))
+    );
+
+    let bad = chromacal()
+        .args(["emulate", "--instrument", "k10a", "--faults", "nonsense=1"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown fault"));
+    let bad = chromacal()
+        .args(["emulate", "--instrument", "pr999"])
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown instrument"));
+}
+
+#[test]
+fn instruments_identifies_each_emulator_and_bounds_a_silent_port() {
+    let kinds = [
+        "pr650",
+        "pr670",
+        "k10a",
+        "specbos1211",
+        "ls100",
+        "colorcal2",
+    ];
+    let emulators: Vec<Emulator> = kinds
+        .iter()
+        .map(|k| emulate(&["--instrument", k, "--time-scale", "0.05"]))
+        .collect();
+    let silent = emulate(&["--instrument", "ls100", "--not-remote"]);
+    let mut command = chromacal();
+    command.args(["instruments", "--json"]);
+    for e in emulators.iter().chain(std::iter::once(&silent)) {
+        command.args(["--port", &e.device]);
+    }
+    let started = Instant::now();
+    let out = command.output().unwrap();
+    let took = started.elapsed().as_secs_f64();
+    assert!(out.status.success());
+    let rows: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+    let found = |port: &str| rows.iter().find(|r| r["port"] == port).cloned().unwrap();
+    for (kind, e) in kinds.iter().zip(&emulators) {
+        assert_eq!(
+            found(&e.device)["instrument"],
+            *kind,
+            "{kind}: {:?}",
+            found(&e.device)
+        );
+    }
+    assert!(found(&silent.device)["instrument"].is_null());
+    // Ports are probed in parallel, each within its budget.
+    assert!(
+        took < chromacal::instrument::scan::PORT_BUDGET_S + 4.0,
+        "the scan took {took:.1} s"
+    );
+}
+
+#[test]
+fn a_run_that_loses_its_instrument_keeps_its_journal_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    // The emulated PR-670 vanishes after 80 replies, in the middle of the run.
+    let dying = emulate(&[
+        "--instrument",
+        "pr670",
+        "--time-scale",
+        "0.002",
+        "--faults",
+        "vanish=1,start_after=80",
+    ]);
+    let out = chromacal()
+        .args([
+            "calibrate",
+            "--instrument",
+            &format!("pr670:{}", dying.device),
+            "--screen",
+            &dying.screen,
+        ])
+        .args([
+            "--timing-scale",
+            "0.002",
+            "--state-dir",
+            dir.path().to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("reconnection attempts failed") && stderr.contains("--resume"),
+        "{stderr}"
+    );
+    let journal_path = std::fs::read_dir(dir.path().join("runs"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path()
+        .join("journal.jsonl");
+    let before = Journal::read(&journal_path).unwrap().1.len();
+    assert!(
+        before > 10 && before < 96,
+        "{before} readings before the loss"
+    );
+
+    // The instrument comes back (on a new port): the run goes on where it stopped.
+    let back = emulate(&["--instrument", "pr670", "--time-scale", "0.002"]);
+    let out = chromacal()
+        .args([
+            "calibrate",
+            "--resume",
+            "--instrument",
+            &format!("pr670:{}", back.device),
+            "--screen",
+            &back.screen,
+        ])
+        .args([
+            "--timing-scale",
+            "0.002",
+            "--state-dir",
+            dir.path().to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (_, entries, _) = Journal::read(&journal_path).unwrap();
+    let mut indices: Vec<usize> = entries.iter().map(|m| m.index).collect();
+    indices.sort();
+    indices.dedup();
+    assert_eq!(indices.len(), 96);
+    assert_eq!(entries.len(), 96, "nothing measured twice");
+    let profile = Profile::read(&dir.path().join("current.toml")).unwrap();
+    assert!(profile.report.held_out.unwrap().mean < 0.5);
+}
+
+#[tokio::test]
+async fn a_correction_matrix_applies_to_colorimeters_only() {
+    let k10 = emulate(&["--instrument", "k10a", "--time-scale", "0.01"]);
+    let config_for = |driver: &str, device: &str, screen: &str| {
+        parse_config(
+            &format!(
+                "[instrument]\ndriver = \"{driver}\"\nport = \"{device}\"\ncorrection = [[1.1, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.9]]\n[instrument.options]\ntiming_scale = 0.01\n[display]\nscreen = \"{screen}\"\n"
+            ),
+            "test",
+        )
+        .unwrap()
+    };
+    let config = config_for("k10a", &k10.device, &k10.screen);
+    let mut corrected = open_devices(&config, std::path::Path::new("."), None)
+        .await
+        .unwrap();
+    let a = corrected.instrument.measure().await.unwrap().xyz.unwrap();
+    corrected.instrument.close();
+    drop(corrected);
+    let mut plain_config = config.clone();
+    plain_config.instrument.correction = None;
+    let mut plain = open_devices(&plain_config, std::path::Path::new("."), None)
+        .await
+        .unwrap();
+    let b = plain.instrument.measure().await.unwrap().xyz.unwrap();
+    assert!(
+        (a.x / b.x - 1.1).abs() < 0.01
+            && (a.y / b.y - 1.0).abs() < 0.01
+            && (a.z / b.z - 0.9).abs() < 0.01,
+        "{a:?} vs {b:?}"
+    );
+
+    let pr = emulate(&["--instrument", "pr670", "--time-scale", "0.01"]);
+    let spectral = config_for("pr670", &pr.device, &pr.screen);
+    let err = open_devices(&spectral, std::path::Path::new("."), None)
+        .await
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("for colorimeters"), "{err}");
+}
+
+#[test]
+fn a_light_meter_run_needs_the_primaries_chromaticities() {
+    let dir = tempfile::tempdir().unwrap();
+    let ls = emulate(&["--instrument", "ls100", "--time-scale", "0.002"]);
+    let out = chromacal()
+        .args([
+            "calibrate",
+            "--instrument",
+            &format!("ls100:{}", ls.device),
+            "--screen",
+            &ls.screen,
+        ])
+        .args([
+            "--timing-scale",
+            "0.002",
+            "--state-dir",
+            dir.path().to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("primaries_xy"));
+    // The journal is there, so the readings can be fitted once the figures are known.
+    let journal = std::fs::read_dir(dir.path().join("runs"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path()
+        .join("journal.jsonl");
+    let set = chromacal::measurement::read_measurements(&journal).unwrap();
+    assert!(matches!(
+        fit_monitor(&set, &FitOptions::default()),
+        Err(FitError::NeedChromaticities)
+    ));
+    let options = FitOptions {
+        primaries_xy: Some([[0.619, 0.344], [0.2765, 0.605], [0.1513, 0.0611]]),
+        ..FitOptions::default()
+    };
+    let fit = fit_monitor(&set, &options).unwrap();
+    assert!(
+        fit.report
+            .luminance_only
+            .as_deref()
+            .unwrap()
+            .contains("luminance only")
+    );
+    let red = fit.report.primaries[0].chromaticity;
+    assert!(
+        (red[0] - 0.619).abs() < 1e-3 && (red[1] - 0.344).abs() < 1e-3,
+        "{red:?}"
+    );
+}
