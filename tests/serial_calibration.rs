@@ -3,64 +3,14 @@
 //! the emulator's screen socket. The profile must be the one the in-process simulated
 //! instrument gives, within noise.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
-
 use chromacal::color::spaces::xyz_to_xyy;
 use chromacal::instrument::devices::DeviceKind;
 use chromacal::profile::Profile;
 
 mod common;
-use common::chromacal;
+use common::{chromacal, emulate};
 
-/// An emulator process, killed when dropped.
-struct Emulator {
-    child: Child,
-    device: String,
-    screen: String,
-}
-
-impl Drop for Emulator {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-pub const TIME_SCALE: &str = "0.002";
-
-fn emulate(kind: DeviceKind) -> Emulator {
-    let mut child = chromacal()
-        .args([
-            "emulate",
-            "--instrument",
-            kind.name(),
-            "--time-scale",
-            TIME_SCALE,
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let device = lines
-        .next()
-        .unwrap()
-        .unwrap()
-        .trim_start_matches("device ")
-        .to_string();
-    let screen = lines
-        .next()
-        .unwrap()
-        .unwrap()
-        .trim_start_matches("screen ")
-        .to_string();
-    Emulator {
-        child,
-        device,
-        screen,
-    }
-}
+const TIME_SCALE: &str = "0.002";
 
 /// The Brainard CRT phosphors of the `crt` preset, as a manufacturer would give them.
 const CRT_PRIMARIES: &str =
@@ -87,7 +37,7 @@ fn every_instrument_calibrates_through_its_emulator_like_the_simulated_one() {
     let reference = Profile::read(&reference_state.join("current.toml")).unwrap();
 
     for kind in DeviceKind::ALL {
-        let emulator = emulate(kind);
+        let emulator = emulate(&["--instrument", kind.name(), "--time-scale", TIME_SCALE]);
         let state = dir.path().join(kind.name());
         let out = chromacal()
             .args(["calibrate", "--config"])

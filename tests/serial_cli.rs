@@ -3,8 +3,6 @@
 //! instrument keeping its journal and resuming, the correction matrix, and the light
 //! meter's need for chromaticities.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
 use std::time::Instant;
 
 use chromacal::calibrate::devices::open_devices;
@@ -16,48 +14,7 @@ use chromacal::instrument::transcript::{Direction, read_transcript};
 use chromacal::profile::Profile;
 
 mod common;
-use common::chromacal;
-
-struct Emulator {
-    child: Child,
-    device: String,
-    screen: String,
-}
-
-impl Drop for Emulator {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn emulate(args: &[&str]) -> Emulator {
-    let mut child = chromacal()
-        .arg("emulate")
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let device = lines
-        .next()
-        .unwrap()
-        .unwrap()
-        .trim_start_matches("device ")
-        .to_string();
-    let screen = lines
-        .next()
-        .unwrap()
-        .unwrap()
-        .trim_start_matches("screen ")
-        .to_string();
-    Emulator {
-        child,
-        device,
-        screen,
-    }
-}
+use common::{Emulator, chromacal, emulate};
 
 #[test]
 fn emulate_records_a_byte_exact_transcript_and_measure_reads_it() {

@@ -115,3 +115,48 @@ pub fn meter(
         faults.seed,
     )
 }
+
+/// A `chromacal emulate` process, killed when dropped.
+pub struct Emulator {
+    pub child: std::process::Child,
+    pub device: String,
+    pub screen: String,
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Start `chromacal emulate` with `args`; returns once it has printed its device and
+/// screen.
+pub fn emulate(args: &[&str]) -> Emulator {
+    use std::io::BufRead;
+    let mut child = chromacal()
+        .arg("emulate")
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    let device = lines
+        .next()
+        .unwrap()
+        .unwrap()
+        .trim_start_matches("device ")
+        .to_string();
+    let screen = lines
+        .next()
+        .unwrap()
+        .unwrap()
+        .trim_start_matches("screen ")
+        .to_string();
+    Emulator {
+        child,
+        device,
+        screen,
+    }
+}

@@ -6,14 +6,14 @@ use nalgebra::Matrix3;
 
 use super::protocol::{float_to_minolta, frame};
 use crate::color::Xyz;
-use crate::instrument::emulator::{DeviceModel, Measured, Meter, Scheduled};
+use crate::instrument::emulator::{CommandLines, DeviceModel, Measured, Meter, Scheduled};
 
 pub struct ColorCalEmulator {
     meter: Meter,
     /// The device's calibration matrix: XYZ = matrix · raw.
     matrix: Matrix3<f64>,
     build: u32,
-    input: Vec<u8>,
+    input: CommandLines,
 }
 
 impl ColorCalEmulator {
@@ -26,7 +26,7 @@ impl ColorCalEmulator {
                 1.063, -0.0347, 0.012, 0.021, 0.9871, -0.0093, -0.004, 0.0188, 1.0412,
             ),
             build,
-            input: Vec::new(),
+            input: CommandLines::default(),
         }
     }
 
@@ -100,18 +100,7 @@ impl DeviceModel for ColorCalEmulator {
     }
 
     fn receive(&mut self, bytes: &[u8], _now: f64, _baud: u32) -> Vec<Scheduled> {
-        let mut out = Vec::new();
-        for &b in bytes {
-            if b == b'\r' || b == b'\n' {
-                let line = String::from_utf8_lossy(&self.input).trim().to_string();
-                self.input.clear();
-                if !line.is_empty() {
-                    out.extend(self.command(&line));
-                }
-            } else if self.input.len() < 64 {
-                self.input.push(b);
-            }
-        }
-        out
+        let lines = self.input.push(bytes);
+        lines.iter().flat_map(|l| self.command(l)).collect()
     }
 }

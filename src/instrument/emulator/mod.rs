@@ -168,6 +168,39 @@ impl Meter {
     }
 }
 
+/// Bytes from the host gathered into commands ended by CR, LF or CR LF, at any pace
+/// and in any chunks; empty lines are dropped and overlong input is cut.
+#[derive(Debug, Default)]
+pub struct CommandLines {
+    pending: Vec<u8>,
+}
+
+impl CommandLines {
+    /// Longest command kept.
+    const LIMIT: usize = 256;
+
+    /// The complete commands in `bytes` (trimmed); an unfinished one is kept.
+    pub fn push(&mut self, bytes: &[u8]) -> Vec<String> {
+        let mut lines = Vec::new();
+        for &b in bytes {
+            if b == b'\r' || b == b'\n' {
+                let line = String::from_utf8_lossy(&self.pending).trim().to_string();
+                self.pending.clear();
+                if !line.is_empty() {
+                    lines.push(line);
+                }
+            } else if self.pending.len() < Self::LIMIT {
+                self.pending.push(b);
+            }
+        }
+        lines
+    }
+
+    pub fn clear(&mut self) {
+        self.pending.clear();
+    }
+}
+
 /// A number in a fixed format, as instruments print them: `d.ddde±dd` with `digits`
 /// exponent digits.
 pub fn scientific(value: f64, mantissa_digits: usize, exponent_digits: usize) -> String {

@@ -7,7 +7,7 @@
 use super::protocol::{ACK, BEL, ENQ, NAK, WAVELENGTH_END, WAVELENGTH_START};
 use crate::color::spaces::xyz_to_xyy;
 use crate::instrument::Reading;
-use crate::instrument::emulator::{DeviceModel, Measured, Meter, Scheduled};
+use crate::instrument::emulator::{CommandLines, DeviceModel, Measured, Meter, Scheduled};
 
 /// Fixed overhead of a measurement on a 1211 (s).
 const OVERHEAD_S: f64 = 3.6;
@@ -15,7 +15,7 @@ const OVERHEAD_S: f64 = 3.6;
 pub struct SpecbosEmulator {
     meter: Meter,
     baud: u32,
-    input: Vec<u8>,
+    input: CommandLines,
     last_error: u32,
     last: Option<Reading>,
     cycle_mode: bool,
@@ -30,7 +30,7 @@ impl SpecbosEmulator {
         SpecbosEmulator {
             meter,
             baud,
-            input: Vec::new(),
+            input: CommandLines::default(),
             last_error: 0,
             last: None,
             cycle_mode: false,
@@ -193,18 +193,7 @@ impl DeviceModel for SpecbosEmulator {
             let noise: Vec<u8> = bytes.iter().map(|b| b.rotate_left(3) ^ 0xA5).collect();
             return vec![Scheduled::after(0.01, noise)];
         }
-        let mut out = Vec::new();
-        for &b in bytes {
-            if b == b'\r' || b == b'\n' {
-                let line = String::from_utf8_lossy(&self.input).trim().to_string();
-                self.input.clear();
-                if !line.is_empty() {
-                    out.extend(self.command(&line));
-                }
-            } else if self.input.len() < 256 {
-                self.input.push(b);
-            }
-        }
-        out
+        let lines = self.input.push(bytes);
+        lines.iter().flat_map(|l| self.command(l)).collect()
     }
 }

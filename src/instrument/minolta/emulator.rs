@@ -6,7 +6,7 @@
 
 use super::protocol::{Model, chromaticity_field, field};
 use crate::color::spaces::xyz_to_xyy;
-use crate::instrument::emulator::{DeviceModel, Measured, Meter, Scheduled};
+use crate::instrument::emulator::{CommandLines, DeviceModel, Measured, Meter, Scheduled};
 
 /// Seconds from `MES` to its reply.
 const RESPONSE_S: f64 = 0.5;
@@ -19,7 +19,7 @@ pub struct MinoltaEmulator {
     meter: Meter,
     remote: bool,
     measured_once: bool,
-    input: Vec<u8>,
+    input: CommandLines,
 }
 
 impl MinoltaEmulator {
@@ -30,7 +30,7 @@ impl MinoltaEmulator {
             meter,
             remote,
             measured_once: false,
-            input: Vec::new(),
+            input: CommandLines::default(),
         }
     }
 
@@ -99,20 +99,15 @@ impl DeviceModel for MinoltaEmulator {
     }
 
     fn receive(&mut self, bytes: &[u8], _now: f64, _baud: u32) -> Vec<Scheduled> {
+        // Seven data bits on the wire.
+        let seven: Vec<u8> = bytes.iter().map(|b| b & 0x7f).collect();
         let mut out = Vec::new();
-        for &b in bytes {
+        for line in self.input.push(&seven) {
+            // Silent unless in remote mode (which a dark first reading ends).
             if !self.remote {
-                continue;
+                break;
             }
-            if b == b'\r' || b == b'\n' {
-                let line = String::from_utf8_lossy(&self.input).trim().to_string();
-                self.input.clear();
-                if !line.is_empty() {
-                    out.extend(self.command(&line));
-                }
-            } else if self.input.len() < 256 {
-                self.input.push(b & 0x7f);
-            }
+            out.extend(self.command(&line));
         }
         out
     }
