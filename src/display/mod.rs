@@ -4,7 +4,9 @@
 //! measures straight after it returns.
 
 pub mod emulator_link;
+pub mod resolve;
 pub mod simulated;
+pub mod web;
 
 use std::future::Future;
 
@@ -117,6 +119,8 @@ impl Patch {
 pub enum DisplayError {
     #[error("the display is gone: {0}")]
     Lost(String),
+    #[error("the display cannot show this patch: {0}")]
+    Unsupported(String),
 }
 
 /// Something that puts patches on the screen being measured.
