@@ -9,6 +9,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::calibrate::plan::PlanConfig;
+use crate::calibrate::run::Stability;
+use crate::display::resolve::ResolveConfig;
+use crate::display::web::WebConfig;
 use crate::fit::FitOptions;
 use crate::instrument::devices::DeviceKind;
 use crate::instrument::driver::DriverOptions;
@@ -69,23 +72,87 @@ impl InstrumentConfig {
     }
 }
 
+/// Where patches go.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sink {
+    /// The in-process virtual monitor (with the simulated instrument).
+    Simulated,
+    /// The virtual monitor of `chromacal emulate`, through its screen socket.
+    Emulator,
+    /// A network pattern generator speaking the Resolve protocol (`[display.resolve]`).
+    Resolve,
+    /// A browser showing chromacal's patch page (`[display.web]`).
+    Web,
+}
+
+impl Sink {
+    pub fn name(self) -> &'static str {
+        match self {
+            Sink::Simulated => "simulated",
+            Sink::Emulator => "emulator",
+            Sink::Resolve => "resolve",
+            Sink::Web => "web",
+        }
+    }
+
+    pub fn parse(text: &str) -> Result<Sink, String> {
+        match text {
+            "simulated" => Ok(Sink::Simulated),
+            "emulator" => Ok(Sink::Emulator),
+            "resolve" => Ok(Sink::Resolve),
+            "web" => Ok(Sink::Web),
+            _ => Err(format!(
+                "unknown display '{text}': simulated, emulator, resolve or web"
+            )),
+        }
+    }
+}
+
 /// `[display]`: how patches are shown.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DisplayConfig {
-    /// Seconds to wait after a patch change before measuring.
+    /// Where patches go. Unset: the emulator's screen when `screen` is given, else the
+    /// in-process virtual monitor.
+    pub sink: Option<Sink>,
+    /// Seconds to wait after a patch is on the screen (acknowledged by the web page,
+    /// sent to a generator) before measuring.
     pub settle_s: f64,
     /// The screen socket of an emulator (`chromacal emulate`) whose virtual monitor
-    /// shows the patches; without it the in-process virtual monitor does.
+    /// shows the patches.
     pub screen: Option<PathBuf>,
+    /// Re-read each patch until two readings agree.
+    pub stability: Option<Stability>,
+    /// Ask on the terminal to aim the instrument whenever the patch moves (uniformity
+    /// grid), for instruments that cannot see the whole screen.
+    pub prompt_positions: bool,
+    pub resolve: ResolveConfig,
+    pub web: WebConfig,
 }
 
 impl Default for DisplayConfig {
     fn default() -> Self {
         DisplayConfig {
+            sink: None,
             settle_s: 0.2,
             screen: None,
+            stability: None,
+            prompt_positions: false,
+            resolve: ResolveConfig::default(),
+            web: WebConfig::default(),
         }
+    }
+}
+
+impl DisplayConfig {
+    /// The sink in use: the configured one, or the one `screen` implies.
+    pub fn sink(&self) -> Sink {
+        self.sink.unwrap_or(if self.screen.is_some() {
+            Sink::Emulator
+        } else {
+            Sink::Simulated
+        })
     }
 }
 
@@ -155,30 +222,74 @@ pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
             message,
         }
     })?;
-    let invalid = |message: String| ConfigError::Invalid {
+    check_config(&config).map_err(|message| ConfigError::Invalid {
         path: origin.into(),
         message,
-    };
+    })?;
+    Ok(config)
+}
+
+/// Check what the types cannot: ranges, and that the instrument, display and plan go
+/// together. Run again after command-line overrides.
+pub fn check_config(config: &Config) -> Result<(), String> {
     if !(config.display.settle_s >= 0.0) {
-        return Err(invalid("display.settle_s must not be negative".into()));
+        return Err("display.settle_s must not be negative".into());
     }
     if config.fit.laws.is_empty() {
-        return Err(invalid("fit.laws must name at least one law".into()));
+        return Err("fit.laws must name at least one law".into());
     }
-    let serial = config.instrument.serial().map_err(invalid)?;
-    if serial.is_some() && config.instrument.simulated.is_some() {
-        return Err(invalid(
-            "instrument: give either [instrument.simulated] or a driver and port, not both".into(),
+    let serial = config.instrument.serial()?;
+    let sink = config.display.sink();
+    match (sink, serial.is_some()) {
+        (Sink::Simulated, true) => {
+            return Err(
+                "a serial instrument needs a display it can measure: set display.sink to resolve or web (or give an emulator's screen)".into());
+        }
+        (Sink::Resolve | Sink::Web | Sink::Emulator, false) => {
+            return Err(format!(
+                "display.sink = \"{}\" needs a serial instrument (instrument.driver and port): the simulated instrument can only measure the in-process virtual monitor",
+                sink.name()
+            ));
+        }
+        _ => {}
+    }
+    if sink == Sink::Emulator && config.display.screen.is_none() {
+        return Err("display.sink = \"emulator\" needs display.screen".into());
+    }
+    if sink == Sink::Web && config.plan.bit_depth != 8 {
+        return Err(format!(
+            "the web patch page paints 8 bits per channel: set plan.bit_depth = 8, not {}",
+            config.plan.bit_depth
         ));
+    }
+    if sink == Sink::Resolve
+        && config.display.resolve.flavour == crate::display::resolve::Flavour::Ls
+        && config.plan.bit_depth != 8
+    {
+        return Err(format!(
+            "the LightSpace flavour sends 8-bit colours: set plan.bit_depth = 8, not {}, or use flavour = \"cm\"",
+            config.plan.bit_depth
+        ));
+    }
+    if let Some(s) = config.display.stability
+        && !(s.tolerance >= 0.0 && s.floor >= 0.0 && s.max_reads >= 2)
+    {
+        return Err(
+            "display.stability needs tolerance and floor not negative and max_reads at least 2"
+                .into(),
+        );
+    }
+    if serial.is_some() && config.instrument.simulated.is_some() {
+        return Err(
+            "instrument: give either [instrument.simulated] or a driver and port, not both".into(),
+        );
     }
     if let Some(m) = config.instrument.correction
         && m.iter().flatten().any(|v| !v.is_finite())
     {
-        return Err(invalid(
-            "instrument.correction has a value that is not a number".into(),
-        ));
+        return Err("instrument.correction has a value that is not a number".into());
     }
-    Ok(config)
+    Ok(())
 }
 
 /// Load `path`, or the built-in default when `None`.

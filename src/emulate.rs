@@ -1,11 +1,14 @@
 //! `chromacal emulate`: an emulated serial instrument on a pseudo-terminal, measuring a
-//! virtual monitor whose screen other processes set through a socket.
+//! virtual monitor whose screen other processes set through a socket, or that shows
+//! what chromacal's Resolve server sends it (`--resolve`).
 
 use std::io::Write;
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 
 use chromacal::config::load_config;
+use chromacal::display::resolve::{ClientOptions, run_client};
 use chromacal::instrument::devices::DeviceKind;
 use chromacal::instrument::emulator::Meter;
 use chromacal::instrument::emulator::faults::FaultSpec;
@@ -24,6 +27,9 @@ pub struct EmulateArgs {
     pub time_scale: f64,
     pub screen: Option<PathBuf>,
     pub not_remote: bool,
+    pub resolve: Option<String>,
+    pub resolve_drop_after: Option<usize>,
+    pub video_levels: bool,
 }
 
 pub fn run(args: EmulateArgs) -> Result<(), String> {
@@ -67,7 +73,18 @@ pub fn run(args: EmulateArgs) -> Result<(), String> {
         ))
     });
     let screen =
-        serve_screen(&screen, monitor).map_err(|e| format!("{}: {e}", screen.display()))?;
+        serve_screen(&screen, monitor.clone()).map_err(|e| format!("{}: {e}", screen.display()))?;
+    if let Some(address) = &args.resolve {
+        let options = ClientOptions {
+            settle_s: loaded.config.display.settle_s,
+            video_levels: args.video_levels,
+            drop_after: args.resolve_drop_after,
+            ..ClientOptions::default()
+        };
+        let address = address.clone();
+        let stop = Arc::new(AtomicBool::new(false));
+        std::thread::spawn(move || run_client(&address, monitor, options, stop));
+    }
     let emulator = PtyEmulator::spawn(
         device,
         PtyOptions {
@@ -79,6 +96,9 @@ pub fn run(args: EmulateArgs) -> Result<(), String> {
     .map_err(|e| format!("cannot open a pseudo-terminal: {e}"))?;
     println!("device {}", emulator.path());
     println!("screen {}", screen.display());
+    if let Some(address) = &args.resolve {
+        println!("resolve {address}");
+    }
     let _ = std::io::stdout().flush();
     emulator.wait();
     Err(format!("the emulated {kind} vanished (an injected fault)"))

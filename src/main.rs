@@ -14,12 +14,13 @@ use chromacal::color::spectrum::{
     reflectance_to_xyz, scotopic_luminance, white_point,
 };
 use chromacal::color::xyz_to_lab;
-use chromacal::config::load_config;
+use chromacal::config::{Sink, load_config};
 use chromacal::fit::validate::evaluate;
 use chromacal::fit::{FitOptions, fit_monitor};
 use chromacal::instrument::devices::DeviceKind;
 use chromacal::instrument::driver::DriverOptions;
 use chromacal::measurement::{Units, read_measurements};
+use chromacal::model::ScreenPosition;
 use chromacal::model::transfer::LawKind;
 use chromacal::numeric_csv::NumericTable;
 use chromacal::profile::store::default_state_dir;
@@ -155,6 +156,17 @@ enum Command {
         /// Emulate a Minolta meter that was switched on without F held (not in remote mode).
         #[arg(long)]
         not_remote: bool,
+        /// Also be a Resolve pattern generator: connect to chromacal's Resolve server at
+        /// ADDR and show what it sends on the virtual monitor (reconnecting when the
+        /// connection drops).
+        #[arg(long, value_name = "ADDR")]
+        resolve: Option<String>,
+        /// A fault for tests: drop the generator's connection once, after N patterns.
+        #[arg(long, value_name = "N", requires = "resolve")]
+        resolve_drop_after: Option<usize>,
+        /// The generator reads video levels (16–235) rather than full range.
+        #[arg(long, requires = "resolve")]
+        video_levels: bool,
     },
     /// Measure what the display shows now with a serial instrument.
     Measure {
@@ -207,6 +219,16 @@ struct DeviceArgs {
     /// Multiplies the instrument protocol's timeouts (for emulators run faster than real time).
     #[arg(long)]
     timing_scale: Option<f64>,
+    /// Where patches go: resolve (a pattern generator connects to chromacal), web (a
+    /// browser opens chromacal's patch page), emulator or simulated.
+    #[arg(long, value_name = "SINK")]
+    display: Option<String>,
+    /// Address the Resolve server or the web page listens on, e.g. 127.0.0.1:20002.
+    #[arg(long, value_name = "ADDR")]
+    listen: Option<String>,
+    /// Ask on the terminal to aim the instrument each time the patch moves.
+    #[arg(long)]
+    prompt_positions: bool,
 }
 
 impl DeviceArgs {
@@ -218,6 +240,12 @@ impl DeviceArgs {
             },
             screen: self.screen.clone(),
             timing_scale: self.timing_scale,
+            sink: match &self.display {
+                Some(text) => Some(Sink::parse(text).map_err(Failure::from)?),
+                None => None,
+            },
+            listen: self.listen.clone(),
+            prompt_positions: self.prompt_positions,
         })
     }
 }
@@ -342,6 +370,9 @@ fn main() -> ExitCode {
             time_scale,
             screen,
             not_remote,
+            resolve,
+            resolve_drop_after,
+            video_levels,
         } => emulate::run(emulate::EmulateArgs {
             instrument,
             monitor,
@@ -351,6 +382,9 @@ fn main() -> ExitCode {
             time_scale,
             screen,
             not_remote,
+            resolve,
+            resolve_drop_after,
+            video_levels,
         })
         .map_err(Failure::from),
         Command::Measure {
@@ -438,10 +472,17 @@ fn calibrate(
             None => format!("{:?} {:?}", p.role, p.status).to_lowercase(),
         });
     };
+    announce_display(&loaded, &options);
+    let mut ask = |position: ScreenPosition| aim_prompt(&bar, position);
     let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_time()
+        .enable_all()
         .build()?;
-    let outcome = runtime.block_on(calibrate_session(&loaded, &options, &mut on_progress));
+    let outcome = runtime.block_on(calibrate_session(
+        &loaded,
+        &options,
+        &mut on_progress,
+        Some(&mut ask),
+    ));
     bar.finish_and_clear();
     let outcome = outcome?;
     if json {
@@ -461,6 +502,12 @@ fn calibrate(
             "  patches measured: {}\n",
             report::budget_line(&outcome.plan.budget)
         );
+        if outcome.run.extra_reads > 0 || outcome.run.unsettled > 0 {
+            out += &format!(
+                "  stability check: {} extra readings; {} patches never agreed (last reading kept)\n",
+                outcome.run.extra_reads, outcome.run.unsettled
+            );
+        }
         if outcome.run.already_measured > 0 {
             out += &format!(
                 "  resumed: {} patches were in the journal, {} measured now\n",
@@ -497,6 +544,39 @@ fn calibrate(
             code: NOT_PUBLISHED,
         }),
     }
+}
+
+/// Tell the user where the patches will be, for the sinks that wait for a peer.
+fn announce_display(loaded: &chromacal::config::LoadedConfig, options: &CalibrateOptions) {
+    let mut config = loaded.config.clone();
+    options.overrides.apply(&mut config);
+    match config.display.sink() {
+        Sink::Web => eprintln!(
+            "chromacal: open http://{}/ full-screen on the display to measure (e.g. chromium --kiosk)",
+            config.display.web.address
+        ),
+        Sink::Resolve => eprintln!(
+            "chromacal: waiting for a Resolve pattern generator to connect to {}",
+            config.display.resolve.address
+        ),
+        Sink::Simulated | Sink::Emulator => {}
+    }
+}
+
+/// Ask on the terminal to aim the instrument at `position`; Enter goes on.
+fn aim_prompt(bar: &indicatif::ProgressBar, position: ScreenPosition) -> Result<(), String> {
+    bar.suspend(|| {
+        eprintln!(
+            "chromacal: aim the instrument at the patch now shown at ({:.3}, {:.3}) (fractions of the screen's width and height from the top left), then press Enter",
+            position.x, position.y
+        );
+        let mut line = String::new();
+        match std::io::stdin().read_line(&mut line) {
+            Ok(0) => Err("the terminal closed while waiting for the instrument to be aimed".into()),
+            Ok(_) => Ok(()),
+            Err(e) => Err(format!("cannot read the terminal: {e}")),
+        }
+    })
 }
 
 fn fit(

@@ -47,7 +47,9 @@ async fn an_interrupted_journal_resumes_to_the_uninterrupted_readings() {
         realtime_scale: None,
         overrides: Default::default(),
     };
-    let outcome = calibrate(&loaded, &options, &mut |_| {}).await.unwrap();
+    let outcome = calibrate(&loaded, &options, &mut |_| {}, None)
+        .await
+        .unwrap();
     assert_eq!(outcome.run.already_measured, 40);
     assert_eq!(outcome.run.measured_now, 96 - 40);
     assert_complete_and_unique(&journal);
@@ -92,7 +94,7 @@ async fn an_interrupted_journal_resumes_to_the_uninterrupted_readings() {
     let current = Profile::read(&state.path().join("current.toml")).unwrap();
     assert_eq!(current.provenance.source, journal.display().to_string());
     // Nothing left to resume.
-    let again = calibrate(&loaded, &options, &mut |_| {}).await;
+    let again = calibrate(&loaded, &options, &mut |_| {}, None).await;
     assert!(again.is_err());
 }
 

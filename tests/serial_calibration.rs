@@ -3,18 +3,13 @@
 //! the emulator's screen socket. The profile must be the one the in-process simulated
 //! instrument gives, within noise.
 
-use chromacal::color::spaces::xyz_to_xyy;
 use chromacal::instrument::devices::DeviceKind;
 use chromacal::profile::Profile;
 
 mod common;
-use common::{chromacal, emulate};
+use common::{CRT_PRIMARIES, chromacal, emulate};
 
 const TIME_SCALE: &str = "0.002";
-
-/// The Brainard CRT phosphors of the `crt` preset, as a manufacturer would give them.
-const CRT_PRIMARIES: &str =
-    "[fit]\nprimaries_xy = [[0.6190, 0.3440], [0.2765, 0.6050], [0.1513, 0.0611]]\n";
 
 #[test]
 fn every_instrument_calibrates_through_its_emulator_like_the_simulated_one() {
@@ -62,19 +57,7 @@ fn every_instrument_calibrates_through_its_emulator_like_the_simulated_one() {
         let profile = Profile::read(&state.join("current.toml")).unwrap();
         let name = profile.provenance.instrument.as_ref().unwrap().name.clone();
         assert!(!name.contains("simulated"), "{kind}: measured with {name}");
-        let (white, reference_white) = (profile.model.white(), reference.model.white());
-        assert!(
-            (white - reference_white).norm() / reference_white.norm() < 0.015,
-            "{kind}: white {white:?} vs {reference_white:?}"
-        );
-        for c in 0..3 {
-            let a = xyz_to_xyy(&profile.model.matrix.column(c).into_owned(), [0.0, 0.0]);
-            let b = xyz_to_xyy(&reference.model.matrix.column(c).into_owned(), [0.0, 0.0]);
-            assert!(
-                (a.x - b.x).abs() < 0.005 && (a.y - b.y).abs() < 0.005,
-                "{kind}: primary {c} at {a:?} vs {b:?}"
-            );
-        }
+        common::assert_same_model(kind.name(), &profile, &reference);
         let held = profile.report.held_out.unwrap();
         assert!(held.mean < 0.5, "{kind}: {held:?}");
         assert_eq!(

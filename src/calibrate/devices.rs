@@ -1,14 +1,17 @@
 //! The display and instrument a run uses, chosen from the config: the simulated rig, or
-//! a serial instrument with the screen of an emulator (`chromacal emulate`) as display.
+//! a serial instrument with a patch display: a Resolve pattern generator, the web patch
+//! page, or the screen of an emulator (`chromacal emulate`).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use nalgebra::Matrix3;
 
-use crate::config::Config;
+use crate::config::{Config, Sink};
 use crate::display::emulator_link::EmulatorScreen;
+use crate::display::resolve::ResolveDisplay;
 use crate::display::simulated::SimulatedDisplay;
+use crate::display::web::WebDisplay;
 use crate::display::{DisplayError, Patch, PatchDisplay};
 use crate::instrument::devices::DeviceKind;
 use crate::instrument::driver::AsyncSerialInstrument;
@@ -38,6 +41,10 @@ pub struct Overrides {
     pub instrument: Option<(DeviceKind, String)>,
     pub screen: Option<PathBuf>,
     pub timing_scale: Option<f64>,
+    pub sink: Option<Sink>,
+    /// Where the Resolve server or the web page listens.
+    pub listen: Option<String>,
+    pub prompt_positions: bool,
 }
 
 impl Overrides {
@@ -53,6 +60,18 @@ impl Overrides {
         if let Some(scale) = self.timing_scale {
             config.instrument.options.timing_scale = scale;
         }
+        if let Some(sink) = self.sink {
+            config.display.sink = Some(sink);
+        }
+        if let Some(address) = &self.listen {
+            match config.display.sink() {
+                Sink::Web => config.display.web.address = address.clone(),
+                _ => config.display.resolve.address = address.clone(),
+            }
+        }
+        if self.prompt_positions {
+            config.display.prompt_positions = true;
+        }
     }
 }
 
@@ -60,6 +79,8 @@ impl Overrides {
 pub enum RunDisplay {
     Simulated(SimulatedDisplay),
     Emulator(EmulatorScreen),
+    Resolve(ResolveDisplay),
+    Web(WebDisplay),
 }
 
 impl PatchDisplay for RunDisplay {
@@ -67,6 +88,8 @@ impl PatchDisplay for RunDisplay {
         match self {
             RunDisplay::Simulated(d) => d.name(),
             RunDisplay::Emulator(d) => d.name(),
+            RunDisplay::Resolve(d) => d.name(),
+            RunDisplay::Web(d) => d.name(),
         }
     }
 
@@ -74,6 +97,8 @@ impl PatchDisplay for RunDisplay {
         match self {
             RunDisplay::Simulated(d) => d.show(patch).await,
             RunDisplay::Emulator(d) => d.show(patch).await,
+            RunDisplay::Resolve(d) => d.show(patch).await,
+            RunDisplay::Web(d) => d.show(patch).await,
         }
     }
 
@@ -81,6 +106,8 @@ impl PatchDisplay for RunDisplay {
         match self {
             RunDisplay::Simulated(d) => d.blank().await,
             RunDisplay::Emulator(d) => d.blank().await,
+            RunDisplay::Resolve(d) => d.blank().await,
+            RunDisplay::Web(d) => d.blank().await,
         }
     }
 }
@@ -158,11 +185,6 @@ pub async fn open_devices(
             virtual_clock: Some(rig.clock),
         });
     };
-    let Some(screen) = &config.display.screen else {
-        return Err(DevicesError::Config(format!(
-            "the {kind} needs a display to measure: give --screen (or display.screen), the socket `chromacal emulate` prints; patch displays for real screens come with the display issue"
-        )));
-    };
     let correction = match config.instrument.correction {
         Some(rows) if kind.capability() == Capability::Spectral => {
             let _ = rows;
@@ -177,16 +199,31 @@ pub async fn open_devices(
     let instrument = tokio::task::spawn_blocking(move || kind.open(&port, options))
         .await
         .map_err(|e| DevicesError::Config(format!("the driver's thread failed: {e}")))??;
-    let display = EmulatorScreen::connect(
-        &if screen.is_absolute() {
-            screen.clone()
-        } else {
-            base_dir.join(screen)
-        },
-        config.display.settle_s,
-    )?;
+    let settle_s = config.display.settle_s;
+    let display = match (config.display.sink(), &config.display.screen) {
+        (Sink::Resolve, _) => RunDisplay::Resolve(
+            ResolveDisplay::bind(config.display.resolve.clone(), settle_s).await?,
+        ),
+        (Sink::Web, _) => {
+            RunDisplay::Web(WebDisplay::bind(config.display.web.clone(), settle_s).await?)
+        }
+        (Sink::Emulator, Some(screen)) => RunDisplay::Emulator(EmulatorScreen::connect(
+            &if screen.is_absolute() {
+                screen.clone()
+            } else {
+                base_dir.join(screen)
+            },
+            settle_s,
+        )?),
+        (sink, _) => {
+            return Err(DevicesError::Config(format!(
+                "the {kind} needs a display it can measure, not '{}': set display.sink (--display) to resolve or web, or give an emulator's --screen",
+                sink.name()
+            )));
+        }
+    };
     Ok(Devices {
-        display: RunDisplay::Emulator(display),
+        display,
         instrument: RunInstrument::Serial {
             instrument: AsyncSerialInstrument::new(instrument),
             correction,

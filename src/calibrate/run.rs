@@ -2,14 +2,82 @@
 //! let it settle, measure it, and append the reading to the journal (durably) before
 //! the next patch. Killed at any point, a run loses at most the reading under way.
 
+use serde::{Deserialize, Serialize};
+
 use super::journal::{Journal, JournalError};
 use crate::display::{DisplayError, PatchDisplay};
-use crate::instrument::{Instrument, InstrumentError, ReadingStatus};
+use crate::instrument::{Instrument, InstrumentError, Reading, ReadingStatus};
 use crate::measurement::{Measurement, Role};
+use crate::model::ScreenPosition;
 use crate::time::TimeSource;
 
 /// Attempts per patch before a run gives up on an instrument error.
 pub const DEFAULT_ATTEMPTS: usize = 3;
+
+/// `[display.stability]`: after the settle time, read again until two readings in a
+/// row agree, for displays whose settle time is not known well enough (slow LCD
+/// response, CRT persistence, a generator whose frame latency varies). The second
+/// reading of the agreeing pair is kept.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Stability {
+    /// Relative agreement asked of each of X, Y, Z (each relative to itself: a blue
+    /// patch's Z is ten times its Y): set it to about three times the
+    /// instrument's repeatability (the difference of two readings has √2 times its
+    /// noise).
+    pub tolerance: f64,
+    /// Absolute agreement (cd/m²) for dim patches, where the instrument's noise floor
+    /// dominates.
+    pub floor: f64,
+    /// Readings per patch at most; the last is kept, with a warning, if none agree.
+    pub max_reads: usize,
+}
+
+impl Default for Stability {
+    fn default() -> Self {
+        Stability {
+            tolerance: 0.01,
+            floor: 0.005,
+            max_reads: 6,
+        }
+    }
+}
+
+impl Stability {
+    /// Do two readings agree? Tristimulus values where both have them, else luminance.
+    pub fn agree(&self, a: &Reading, b: &Reading) -> bool {
+        let close =
+            |u: f64, v: f64, scale: f64| (u - v).abs() <= self.tolerance * scale + self.floor;
+        match (a.xyz, b.xyz) {
+            (Some(p), Some(q)) => (0..3).all(|i| close(p[i], q[i], p[i].abs().max(q[i].abs()))),
+            _ => match (a.luminance(), b.luminance()) {
+                (Some(p), Some(q)) => close(p, q, p.abs().max(q.abs())),
+                _ => false,
+            },
+        }
+    }
+}
+
+/// How the loop measures.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunOptions {
+    /// Attempts per reading before giving up on an instrument error.
+    pub attempts: usize,
+    pub stability: Option<Stability>,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            attempts: DEFAULT_ATTEMPTS,
+            stability: None,
+        }
+    }
+}
+
+/// Called when the patch moves to another place on the screen, before it is measured
+/// there: a real instrument has to be moved by hand. An error stops the run.
+pub type PositionPrompt<'a> = &'a mut dyn FnMut(ScreenPosition) -> Result<(), String>;
 
 /// Why a run stopped before its end. The journal keeps everything measured so far.
 #[derive(Debug, thiserror::Error)]
@@ -24,6 +92,8 @@ pub enum RunError {
     },
     #[error("journal: {0}")]
     Journal(#[from] JournalError),
+    #[error("patch {index}: {message}")]
+    Position { index: usize, message: String },
 }
 
 /// Where a run is, after each reading.
@@ -46,6 +116,38 @@ pub struct RunSummary {
     pub measured_now: usize,
     /// Patches the journal already had.
     pub already_measured: usize,
+    /// Readings taken beyond one per patch by the stability check.
+    pub extra_reads: usize,
+    /// Patches whose readings never agreed within `max_reads`.
+    pub unsettled: usize,
+    /// Integration seconds those extra readings took.
+    pub extra_read_s: f64,
+}
+
+/// One reading, retried on instrument errors and on non-finite values.
+async fn read<I: Instrument>(
+    instrument: &mut I,
+    attempts: usize,
+    index: usize,
+) -> Result<Reading, RunError> {
+    let mut last_error = None;
+    for attempt in 1..=attempts.max(1) {
+        match instrument.measure().await {
+            Ok(r) if r.xyz.is_none_or(|x| x.iter().all(|v| v.is_finite())) => return Ok(r),
+            Ok(_) => {
+                last_error = Some(InstrumentError::Protocol(
+                    "the reading has a value that is not a finite number".into(),
+                ));
+            }
+            Err(e) => last_error = Some(e),
+        }
+        tracing::warn!(index, attempt, error = ?last_error, "measurement failed");
+    }
+    Err(RunError::Instrument {
+        index,
+        attempts: attempts.max(1),
+        source: last_error.unwrap_or(InstrumentError::Protocol("no reading".into())),
+    })
 }
 
 /// Measure every patch of the journal's plan that it does not have yet.
@@ -54,8 +156,9 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
     display: &mut D,
     instrument: &mut I,
     clock: &dyn TimeSource,
-    attempts: usize,
+    options: &RunOptions,
     on_progress: &mut dyn FnMut(&Progress),
+    mut on_position: Option<PositionPrompt<'_>>,
 ) -> Result<RunSummary, RunError> {
     let measured = journal.measured();
     let already_measured = measured.len();
@@ -69,36 +172,63 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
         .collect();
     let total = journal.header().plan.patches.len();
     let mut measured_now = 0;
+    let (mut extra_reads, mut unsettled, mut extra_read_s) = (0, 0, 0.0);
+    let mut aimed_at: Option<ScreenPosition> = None;
     for planned in todo {
+        let position = planned.patch.geometry.centre();
         if let Err(e) = display.show(&planned.patch).await {
             let _ = display.blank().await;
             return Err(e.into());
         }
-        let mut last_error = None;
-        let mut reading = None;
-        for attempt in 1..=attempts.max(1) {
-            match instrument.measure().await {
-                Ok(r) if r.xyz.is_none_or(|x| x.iter().all(|v| v.is_finite())) => {
-                    reading = Some(r);
+        // With the patch already where it will be read, so that it can be aimed at.
+        if let Some(prompt) = on_position.as_mut()
+            && aimed_at != Some(position)
+        {
+            if let Err(message) = prompt(position) {
+                let _ = display.blank().await;
+                return Err(RunError::Position {
+                    index: planned.index,
+                    message,
+                });
+            }
+            aimed_at = Some(position);
+        }
+        let mut reading = match read(instrument, options.attempts, planned.index).await {
+            Ok(r) => r,
+            Err(e) => {
+                let _ = display.blank().await;
+                return Err(e);
+            }
+        };
+        if let Some(stability) = options.stability {
+            let mut reads = 1;
+            let mut agreed = false;
+            while reads < stability.max_reads.max(2) {
+                let next = match read(instrument, options.attempts, planned.index).await {
+                    Ok(r) => r,
+                    Err(e) => {
+                        let _ = display.blank().await;
+                        return Err(e);
+                    }
+                };
+                reads += 1;
+                extra_read_s += reading.integration_s;
+                agreed = stability.agree(&reading, &next);
+                reading = next;
+                if agreed {
                     break;
                 }
-                Ok(_) => {
-                    last_error = Some(InstrumentError::Protocol(
-                        "the reading has a value that is not a finite number".into(),
-                    ));
-                }
-                Err(e) => last_error = Some(e),
             }
-            tracing::warn!(index = planned.index, attempt, error = ?last_error, "measurement failed");
+            extra_reads += reads - 1;
+            if !agreed {
+                unsettled += 1;
+                tracing::warn!(
+                    index = planned.index,
+                    reads,
+                    "readings never agreed; kept the last"
+                );
+            }
         }
-        let Some(reading) = reading else {
-            let _ = display.blank().await;
-            return Err(RunError::Instrument {
-                index: planned.index,
-                attempts: attempts.max(1),
-                source: last_error.unwrap_or(InstrumentError::Protocol("no reading".into())),
-            });
-        };
         let time_s = clock.now() - reading.integration_s / 2.0;
         let progress = Progress {
             done: journal.entries().len() + 1,
@@ -126,5 +256,8 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
     Ok(RunSummary {
         measured_now,
         already_measured,
+        extra_reads,
+        unsettled,
+        extra_read_s,
     })
 }

@@ -7,8 +7,8 @@ use std::time::{Instant, SystemTime};
 use super::devices::{DevicesError, Overrides, open_devices};
 use super::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, JournalHeader};
 use super::plan::{Plan, PlanError, make_plan};
-use super::run::{DEFAULT_ATTEMPTS, Progress, RunError, RunSummary, run_plan};
-use crate::config::{Config, ConfigError, LoadedConfig, PublishConfig, parse_config};
+use super::run::{PositionPrompt, Progress, RunError, RunOptions, RunSummary, run_plan};
+use crate::config::{Config, ConfigError, LoadedConfig, PublishConfig, check_config, parse_config};
 use crate::display::PatchDisplay;
 use crate::fit::{FitError, FittedModel, fit_monitor};
 use crate::instrument::Instrument;
@@ -51,6 +51,10 @@ pub enum CalibrateError {
     Devices(#[from] DevicesError),
     #[error("cannot write the config: {0}")]
     Serialize(String),
+    #[error(
+        "display.prompt_positions is set, but nothing here can ask someone to move the instrument"
+    )]
+    NoPrompt,
 }
 
 /// How to run a calibration.
@@ -74,6 +78,16 @@ pub fn digest(text: &str) -> String {
         .collect()
 }
 
+/// Check a config again once the command line changed it.
+fn check_overridden(config: &Config) -> Result<(), CalibrateError> {
+    check_config(config).map_err(|message| {
+        CalibrateError::Config(ConfigError::Invalid {
+            path: "the config with the command line's settings".into(),
+            message,
+        })
+    })
+}
+
 /// What a calibration did and made.
 #[derive(Debug, Clone)]
 pub struct CalibrationOutcome {
@@ -88,7 +102,8 @@ pub struct CalibrationOutcome {
     pub rejection: Option<String>,
     /// Wall-clock seconds of the fit.
     pub fit_seconds: f64,
-    /// Seconds the instrument spent: integration plus settling, every patch.
+    /// Seconds the instrument spent: integration plus settling, every patch, and the
+    /// stability check's extra readings (those of this call only, on a resume).
     pub instrument_seconds: f64,
     pub display: String,
 }
@@ -147,14 +162,14 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
     instrument: &mut I,
     clock: &dyn crate::time::TimeSource,
     progress: &mut dyn FnMut(&Progress),
+    prompt: Option<PositionPrompt<'_>>,
 ) -> Result<(RunSummary, FittedModel, f64), CalibrateError> {
+    let options = RunOptions {
+        stability: config.display.stability,
+        ..RunOptions::default()
+    };
     let run = run_plan(
-        journal,
-        display,
-        instrument,
-        clock,
-        DEFAULT_ATTEMPTS,
-        progress,
+        journal, display, instrument, clock, &options, progress, prompt,
     )
     .await
     .map_err(|source| CalibrateError::Run {
@@ -167,10 +182,13 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
 }
 
 /// Run (or resume) the calibration `loaded` describes, with `options.overrides`.
+/// `prompt` asks for the instrument to be aimed at each new patch position; it is
+/// needed when the config sets `display.prompt_positions`.
 pub async fn calibrate(
     loaded: &LoadedConfig,
     options: &CalibrateOptions,
     progress: &mut dyn FnMut(&Progress),
+    prompt: Option<PositionPrompt<'_>>,
 ) -> Result<CalibrationOutcome, CalibrateError> {
     let store = ProfileStore::new(&options.state_dir);
     // A resumed run goes on with the config it started with (and the overrides).
@@ -187,6 +205,7 @@ pub async fn calibrate(
         }
         let mut config = parse_config(&journal.header().config, "the run's journal header")?;
         options.overrides.apply(&mut config);
+        check_overridden(&config)?;
         let run_id = journal.header().run_id.clone();
         let base_dir = journal.header().config_dir.clone();
         let devices = open_devices(&config, &base_dir, options.realtime_scale).await?;
@@ -194,6 +213,7 @@ pub async fn calibrate(
     } else {
         let mut config = loaded.config.clone();
         options.overrides.apply(&mut config);
+        check_overridden(&config)?;
         let text =
             toml::to_string(&config).map_err(|e| CalibrateError::Serialize(e.to_string()))?;
         let run_id = new_run_id();
@@ -234,6 +254,11 @@ pub async fn calibrate(
         clock.set(end);
     }
     let display_name = devices.display.name();
+    let prompt = match (config.display.prompt_positions, prompt) {
+        (false, _) => None,
+        (true, Some(p)) => Some(p),
+        (true, None) => return Err(CalibrateError::NoPrompt),
+    };
     let measured = measure_and_fit(
         &mut journal,
         &config,
@@ -241,6 +266,7 @@ pub async fn calibrate(
         &mut devices.instrument,
         devices.clock.as_ref(),
         progress,
+        prompt,
     )
     .await;
     devices.instrument.close();
@@ -251,7 +277,8 @@ pub async fn calibrate(
         .entries()
         .iter()
         .map(|m| m.reading.integration_s + config.display.settle_s)
-        .sum();
+        .sum::<f64>()
+        + run.extra_read_s;
     let profile = Profile {
         schema_version: SCHEMA_VERSION,
         id: run_id.clone(),
@@ -333,8 +360,9 @@ pub async fn measure_simulated(
         &mut rig.display,
         &mut rig.instrument,
         rig.clock.as_ref(),
-        DEFAULT_ATTEMPTS,
+        &RunOptions::default(),
         &mut |_| {},
+        None,
     )
     .await
     .map_err(|source| CalibrateError::Run {

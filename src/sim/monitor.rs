@@ -195,6 +195,11 @@ pub struct Failures {
     pub warmup_time_constant_s: f64,
     /// Relative change of the light per hour (slow drift).
     pub drift_per_hour: f64,
+    /// Time constant (s) of the screen's response to a change: the light moves from
+    /// the old content's to the new one's as 1 − exp(−t/τ) (LCD liquid-crystal
+    /// response, CRT phosphor persistence; 0: instant). What a display's settle time
+    /// and the run's stability check are for.
+    pub response_time_s: f64,
 }
 
 /// Everything that defines a virtual monitor.
@@ -231,6 +236,9 @@ pub struct VirtualMonitor {
     black: Vec<f64>,
     flare: Vec<f64>,
     screen: ScreenContent,
+    /// What the screen showed before the last change, and when the change came.
+    previous: ScreenContent,
+    changed_at: f64,
     clock: Arc<VirtualClock>,
 }
 
@@ -287,6 +295,8 @@ impl VirtualMonitor {
             black,
             flare,
             screen: ScreenContent::default(),
+            previous: ScreenContent::default(),
+            changed_at: f64::NEG_INFINITY,
             clock,
         })
     }
@@ -299,9 +309,15 @@ impl VirtualMonitor {
         &self.clock
     }
 
-    /// Put `content` on the screen.
+    /// Put `content` on the screen. (A change during a change's transition starts
+    /// from the content before it, not from the blend on the screen: a simplification
+    /// that only matters when patches change faster than the response time.)
     pub fn show(&mut self, content: ScreenContent) {
-        self.screen = content;
+        if content != self.screen {
+            self.previous = self.screen;
+            self.changed_at = self.clock.now();
+            self.screen = content;
+        }
     }
 
     pub fn screen(&self) -> &ScreenContent {
@@ -328,14 +344,30 @@ impl VirtualMonitor {
     /// Radiance reaching an instrument aimed at `position` now. (An error only when
     /// the spec's numbers make the radiance non-finite.)
     pub fn radiance_at(&self, position: ScreenPosition) -> Result<Spectrum, SpectrumError> {
-        let inside = self.screen.geometry.contains(position);
+        let t = self.clock.now();
+        let mut values = self.radiance_of(&self.screen, position, t);
+        let tau = self.spec.failures.response_time_s;
+        if tau > 0.0 {
+            let old = (-(t - self.changed_at).max(0.0) / tau).exp();
+            if old > 1e-12 {
+                let before = self.radiance_of(&self.previous, position, t);
+                for (v, b) in values.iter_mut().zip(before) {
+                    *v = (1.0 - old) * *v + old * b;
+                }
+            }
+        }
+        self.spec.primaries.spectrum(values)
+    }
+
+    /// Radiance values at `position` of a screen showing `screen`, settled, at time `t`.
+    fn radiance_of(&self, screen: &ScreenContent, position: ScreenPosition, t: f64) -> Vec<f64> {
+        let inside = screen.geometry.contains(position);
         let drive = if inside {
-            self.screen.patch
+            screen.patch
         } else {
-            self.screen.background
+            screen.background
         };
         let f = &self.spec.failures;
-        let t = self.clock.now();
         let mut gain = 1.0 + f.drift_per_hour * t / 3600.0;
         if f.warmup_amplitude != 0.0 && f.warmup_time_constant_s > 0.0 {
             gain *= 1.0 - f.warmup_amplitude * (-t / f.warmup_time_constant_s).exp();
@@ -343,10 +375,9 @@ impl VirtualMonitor {
         let above = self.outputs_above_black(drive);
         gain *= 1.0 - f.channel_interaction * above.iter().sum::<f64>() / 3.0;
         if f.surround_dependence != 0.0 {
-            let area = self.screen.geometry.area();
+            let area = screen.geometry.area();
             let mean = |d: Drive| self.outputs_above_black(d).iter().sum::<f64>() / 3.0;
-            let screen_mean =
-                area * mean(self.screen.patch) + (1.0 - area) * mean(self.screen.background);
+            let screen_mean = area * mean(screen.patch) + (1.0 - area) * mean(screen.background);
             gain *= 1.0 - f.surround_dependence * screen_mean;
         }
         let output = self.outputs(drive);
@@ -366,7 +397,7 @@ impl VirtualMonitor {
                 *v += weight * (self.primaries[c][i] + admixture * self.primaries[next][i]);
             }
         }
-        self.spec.primaries.spectrum(values)
+        values
     }
 
     /// Noise-free XYZ (CIE 1931 2°) at `position` now.
@@ -485,6 +516,26 @@ mod tests {
         assert!((sum - white).norm() < 1e-9);
         let truth = m.true_model();
         assert!((truth.white() - white).norm() < 1e-9);
+    }
+
+    #[test]
+    fn a_slow_screen_moves_to_a_new_patch_exponentially() {
+        let mut spec = ideal(PrimarySpectra::typical_crt());
+        spec.failures.response_time_s = 0.5;
+        let mut m = monitor(spec);
+        m.show(centre_patch([1.0; 3]));
+        m.clock().advance(100.0);
+        let white = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
+        m.show(centre_patch([0.0; 3]));
+        assert!((m.xyz_at(ScreenPosition::CENTRE).unwrap().y - white).abs() < 1e-9);
+        m.clock().advance(0.5);
+        let y = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
+        assert!((y / white - (-1.0f64).exp()).abs() < 1e-9, "{y}");
+        // Showing the same content again is no change.
+        m.show(centre_patch([0.0; 3]));
+        assert_eq!(m.xyz_at(ScreenPosition::CENTRE).unwrap().y, y);
+        m.clock().advance(10.0);
+        assert!(m.xyz_at(ScreenPosition::CENTRE).unwrap().y < 1e-6);
     }
 
     #[test]

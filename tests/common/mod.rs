@@ -160,3 +160,30 @@ pub fn emulate(args: &[&str]) -> Emulator {
         screen,
     }
 }
+
+/// The Brainard CRT phosphors of the `crt` preset, as a manufacturer would give them.
+pub const CRT_PRIMARIES: &str =
+    "[fit]\nprimaries_xy = [[0.6190, 0.3440], [0.2765, 0.6050], [0.1513, 0.0611]]\n";
+
+/// Two profiles of the same monitor agree within the instrument's noise: white within
+/// 1.5 %, each primary's chromaticity within 0.005.
+pub fn assert_same_model(
+    label: &str,
+    profile: &chromacal::profile::Profile,
+    reference: &chromacal::profile::Profile,
+) {
+    use chromacal::color::spaces::xyz_to_xyy;
+    let (white, reference_white) = (profile.model.white(), reference.model.white());
+    assert!(
+        (white - reference_white).norm() / reference_white.norm() < 0.015,
+        "{label}: white {white:?} vs {reference_white:?}"
+    );
+    for c in 0..3 {
+        let a = xyz_to_xyy(&profile.model.matrix.column(c).into_owned(), [0.0, 0.0]);
+        let b = xyz_to_xyy(&reference.model.matrix.column(c).into_owned(), [0.0, 0.0]);
+        assert!(
+            (a.x - b.x).abs() < 0.005 && (a.y - b.y).abs() < 0.005,
+            "{label}: primary {c} at {a:?} vs {b:?}"
+        );
+    }
+}
