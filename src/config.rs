@@ -332,6 +332,40 @@ mod tests {
     }
 
     #[test]
+    fn instrument_display_and_plan_must_go_together() {
+        let error = |text: &str| parse_config(text, "c.toml").unwrap_err().to_string();
+        let serial = "[instrument]\ndriver = \"pr670\"\nport = \"/dev/ttyACM0\"\n";
+        assert!(error("[display]\nsink = \"web\"\n").contains("needs a serial instrument"));
+        assert!(error(serial).contains("needs a display it can measure"));
+        assert!(
+            error(&format!("{serial}[display]\nsink = \"emulator\"\n"))
+                .contains("needs display.screen")
+        );
+        assert!(
+            error(&format!(
+                "{serial}[display]\nsink = \"web\"\n[plan]\nbit_depth = 10\n"
+            ))
+            .contains("8 bits per channel")
+        );
+        assert!(
+            error(&format!("{serial}[display]\nsink = \"resolve\"\n[display.resolve]\nflavour = \"ls\"\n[plan]\nbit_depth = 10\n"))
+                .contains("LightSpace")
+        );
+        assert!(
+            error(&format!(
+                "{serial}[display]\nsink = \"web\"\n[display.stability]\nmax_reads = 1\n"
+            ))
+            .contains("max_reads")
+        );
+        let ok = parse_config(
+            &format!("{serial}[display]\nsink = \"resolve\"\n[display.resolve]\naddress = \"127.0.0.1:0\"\n[plan]\nbit_depth = 10\n"),
+            "c.toml",
+        )
+        .unwrap();
+        assert_eq!(ok.display.sink(), Sink::Resolve);
+    }
+
+    #[test]
     fn unknown_keys_are_errors_with_line_and_column() {
         let text = "[plan]\nbudget = 48\nbugdet = 12\n";
         match parse_config(text, "test.toml") {

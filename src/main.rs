@@ -550,6 +550,9 @@ fn calibrate(
 fn announce_display(loaded: &chromacal::config::LoadedConfig, options: &CalibrateOptions) {
     let mut config = loaded.config.clone();
     options.overrides.apply(&mut config);
+    if options.resume || chromacal::config::check_config(&config).is_err() {
+        return; // the session reports the error, or resumes with the journal's config
+    }
     match config.display.sink() {
         Sink::Web => eprintln!(
             "chromacal: open http://{}/ full-screen on the display to measure (e.g. chromium --kiosk)",
