@@ -94,12 +94,16 @@ pub fn run(args: EmulateArgs) -> Result<(), String> {
         },
     )
     .map_err(|e| format!("cannot open a pseudo-terminal: {e}"))?;
-    println!("device {}", emulator.path());
-    println!("screen {}", screen.display());
+    // Written without panicking: whoever started us may stop reading after the lines
+    // it needs.
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "device {}", emulator.path());
+    let _ = writeln!(out, "screen {}", screen.display());
     if let Some(address) = &args.resolve {
-        println!("resolve {address}");
+        let _ = writeln!(out, "resolve {address}");
     }
-    let _ = std::io::stdout().flush();
+    let _ = out.flush();
+    drop(out);
     emulator.wait();
     Err(format!("the emulated {kind} vanished (an injected fault)"))
 }

@@ -29,7 +29,12 @@ fn calibrate_over_resolve(
 ) {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("config.toml");
-    std::fs::write(&config, CRT_PRIMARIES).unwrap();
+    // A generator that never comes is an error here, not a hang.
+    std::fs::write(
+        &config,
+        format!("{CRT_PRIMARIES}[display.resolve]\nconnect_timeout_s = 60.0\n"),
+    )
+    .unwrap();
     let reference_state = dir.path().join("reference");
     let out = chromacal()
         .args(["calibrate", "--config"])
@@ -77,6 +82,21 @@ fn calibrate_over_resolve(
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(out.status.success(), "{stderr}");
     let profile = Profile::read(&state.join("current.toml")).unwrap();
+    eprintln!(
+        "over Resolve: held-out mean ΔE00 {:.3} (in-process {:.3}), white Y {:.3} vs {:.3} cd/m²",
+        profile
+            .report
+            .held_out
+            .as_ref()
+            .map_or(f64::NAN, |h| h.mean),
+        reference
+            .report
+            .held_out
+            .as_ref()
+            .map_or(f64::NAN, |h| h.mean),
+        profile.model.white().y,
+        reference.model.white().y
+    );
     (profile, reference, state, stderr, dir)
 }
 

@@ -10,7 +10,7 @@
 //! the run until one connects again; the patch is then sent again, so nothing measured
 //! is lost and nothing is measured on a screen that did not change.
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::net::{SocketAddr, TcpStream};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -460,7 +460,6 @@ pub fn run_client(
                 break;
             }
         }
-        let _ = std::io::stdout().flush();
     }
 }
 

@@ -154,6 +154,8 @@ pub fn emulate(args: &[&str]) -> Emulator {
         .unwrap()
         .trim_start_matches("screen ")
         .to_string();
+    // Keep reading what else it prints, so that it never writes to a closed pipe.
+    std::thread::spawn(move || lines.for_each(drop));
     Emulator {
         child,
         device,
