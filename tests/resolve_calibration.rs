@@ -7,7 +7,7 @@ use chromacal::calibrate::journal::Journal;
 use chromacal::profile::Profile;
 
 mod common;
-use common::{CRT_PRIMARIES, assert_same_model, chromacal, emulate};
+use common::{CRT_PRIMARIES, assert_same_model, chromacal, emulate, in_process_profile};
 
 const TIME_SCALE: &str = "0.002";
 
@@ -35,20 +35,7 @@ fn calibrate_over_resolve(
         format!("{CRT_PRIMARIES}[display.resolve]\nconnect_timeout_s = 60.0\n"),
     )
     .unwrap();
-    let reference_state = dir.path().join("reference");
-    let out = chromacal()
-        .args(["calibrate", "--config"])
-        .arg(&config)
-        .arg("--state-dir")
-        .arg(&reference_state)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let reference = Profile::read(&reference_state.join("current.toml")).unwrap();
+    let reference = in_process_profile(&config, &dir.path().join("reference"));
 
     let address = free_address();
     let mut args = vec![

@@ -7,7 +7,7 @@ use chromacal::instrument::devices::DeviceKind;
 use chromacal::profile::Profile;
 
 mod common;
-use common::{CRT_PRIMARIES, chromacal, emulate};
+use common::{CRT_PRIMARIES, chromacal, emulate, in_process_profile};
 
 const TIME_SCALE: &str = "0.002";
 
@@ -16,20 +16,7 @@ fn every_instrument_calibrates_through_its_emulator_like_the_simulated_one() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("config.toml");
     std::fs::write(&config, CRT_PRIMARIES).unwrap();
-    let reference_state = dir.path().join("reference");
-    let out = chromacal()
-        .args(["calibrate", "--config"])
-        .arg(&config)
-        .arg("--state-dir")
-        .arg(&reference_state)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let reference = Profile::read(&reference_state.join("current.toml")).unwrap();
+    let reference = in_process_profile(&config, &dir.path().join("reference"));
 
     for kind in DeviceKind::ALL {
         let emulator = emulate(&["--instrument", kind.name(), "--time-scale", TIME_SCALE]);

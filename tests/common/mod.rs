@@ -189,3 +189,25 @@ pub fn assert_same_model(
         );
     }
 }
+
+/// Calibrate with `config` on the in-process simulated rig (the `chromacal` command)
+/// into `state`, and return the published profile: the reference the serial and
+/// network paths are compared with.
+pub fn in_process_profile(
+    config: &std::path::Path,
+    state: &std::path::Path,
+) -> chromacal::profile::Profile {
+    let out = chromacal()
+        .args(["calibrate", "--config"])
+        .arg(config)
+        .arg("--state-dir")
+        .arg(state)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    chromacal::profile::Profile::read(&state.join("current.toml")).unwrap()
+}
