@@ -79,6 +79,28 @@ impl Default for RunOptions {
 /// there: a real instrument has to be moved by hand. An error stops the run.
 pub type PositionPrompt<'a> = &'a mut dyn FnMut(ScreenPosition) -> Result<(), String>;
 
+/// What the caller of a run hears and says while it measures.
+pub struct RunHooks<'a> {
+    /// Told after each reading is in the journal.
+    pub progress: &'a mut dyn FnMut(&Progress),
+    /// Asked to aim the instrument when the patch moves (see [`PositionPrompt`]).
+    pub prompt: Option<PositionPrompt<'a>>,
+    /// Asked before each patch whether to stop (a cancelled job, SIGTERM): the
+    /// reading under way is finished and journaled first.
+    pub stop: Option<&'a (dyn Fn() -> bool + Send + Sync)>,
+}
+
+impl<'a> RunHooks<'a> {
+    /// Progress only.
+    pub fn progress(progress: &'a mut dyn FnMut(&Progress)) -> Self {
+        RunHooks {
+            progress,
+            prompt: None,
+            stop: None,
+        }
+    }
+}
+
 /// Why a run stopped before its end. The journal keeps everything measured so far.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -94,6 +116,8 @@ pub enum RunError {
     Journal(#[from] JournalError),
     #[error("patch {index}: {message}")]
     Position { index: usize, message: String },
+    #[error("stopped on request after {done} of {total} patches")]
+    Stopped { done: usize, total: usize },
 }
 
 /// Where a run is, after each reading.
@@ -157,8 +181,7 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
     instrument: &mut I,
     clock: &dyn TimeSource,
     options: &RunOptions,
-    on_progress: &mut dyn FnMut(&Progress),
-    mut on_position: Option<PositionPrompt<'_>>,
+    hooks: &mut RunHooks<'_>,
 ) -> Result<RunSummary, RunError> {
     let measured = journal.measured();
     let already_measured = measured.len();
@@ -175,13 +198,20 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
     let (mut extra_reads, mut unsettled, mut extra_read_s) = (0, 0, 0.0);
     let mut aimed_at: Option<ScreenPosition> = None;
     for planned in todo {
+        if hooks.stop.is_some_and(|stop| stop()) {
+            let _ = display.blank().await;
+            return Err(RunError::Stopped {
+                done: journal.entries().len(),
+                total,
+            });
+        }
         let position = planned.patch.geometry.centre();
         if let Err(e) = display.show(&planned.patch).await {
             let _ = display.blank().await;
             return Err(e.into());
         }
         // With the patch already where it will be read, so that it can be aimed at.
-        if let Some(prompt) = on_position.as_mut()
+        if let Some(prompt) = hooks.prompt.as_mut()
             && aimed_at != Some(position)
         {
             if let Err(message) = prompt(position) {
@@ -250,7 +280,7 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
         })?;
         measured_now += 1;
         tracing::debug!(index = planned.index, role = ?planned.role, "measured");
-        on_progress(&progress);
+        (hooks.progress)(&progress);
     }
     display.blank().await?;
     Ok(RunSummary {

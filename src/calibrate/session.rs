@@ -4,10 +4,10 @@
 use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
 
-use super::devices::{DevicesError, Overrides, open_devices};
+use super::devices::{Devices, DevicesError, Overrides, open_devices};
 use super::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, JournalHeader};
 use super::plan::{Plan, PlanError, make_plan};
-use super::run::{PositionPrompt, Progress, RunError, RunOptions, RunSummary, run_plan};
+use super::run::{PositionPrompt, Progress, RunError, RunHooks, RunOptions, RunSummary, run_plan};
 use crate::config::{Config, ConfigError, LoadedConfig, PublishConfig, check_config, parse_config};
 use crate::display::PatchDisplay;
 use crate::fit::{FitError, FittedModel, fit_monitor};
@@ -161,88 +161,96 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
     display: &mut D,
     instrument: &mut I,
     clock: &dyn crate::time::TimeSource,
-    progress: &mut dyn FnMut(&Progress),
-    prompt: Option<PositionPrompt<'_>>,
+    hooks: &mut RunHooks<'_>,
 ) -> Result<(RunSummary, FittedModel, f64), CalibrateError> {
     let options = RunOptions {
         stability: config.display.stability,
         ..RunOptions::default()
     };
-    let run = run_plan(
-        journal, display, instrument, clock, &options, progress, prompt,
-    )
-    .await
-    .map_err(|source| CalibrateError::Run {
-        source,
-        journal: journal.path().to_path_buf(),
-    })?;
+    let run = run_plan(journal, display, instrument, clock, &options, hooks)
+        .await
+        .map_err(|source| CalibrateError::Run {
+            source,
+            journal: journal.path().to_path_buf(),
+        })?;
     let started = Instant::now();
     let fitted = fit_monitor(&journal.measurement_set(), &config.fit)?;
     Ok((run, fitted, started.elapsed().as_secs_f64()))
 }
 
-/// Run (or resume) the calibration `loaded` describes, with `options.overrides`.
-/// `prompt` asks for the instrument to be aimed at each new patch position; it is
-/// needed when the config sets `display.prompt_positions`.
-pub async fn calibrate(
-    loaded: &LoadedConfig,
-    options: &CalibrateOptions,
-    progress: &mut dyn FnMut(&Progress),
-    prompt: Option<PositionPrompt<'_>>,
-) -> Result<CalibrationOutcome, CalibrateError> {
-    let store = ProfileStore::new(&options.state_dir);
-    // A resumed run goes on with the config it started with (and the overrides).
-    let (mut journal, config, base_dir, run_id, mut devices) = if options.resume {
-        let dir = unfinished_run(&store)
-            .ok_or_else(|| CalibrateError::NothingToResume(store.runs_dir()))?;
-        let (journal, recovery) = Journal::open(&dir.join("journal.jsonl"))?;
-        if let Some((line, bytes)) = recovery.dropped_tail {
-            tracing::warn!(
-                line,
-                bytes,
-                "dropped a reading cut short by the interruption"
-            );
-        }
-        let mut config = parse_config(&journal.header().config, "the run's journal header")?;
-        options.overrides.apply(&mut config);
-        check_overridden(&config)?;
-        let run_id = journal.header().run_id.clone();
-        let base_dir = journal.header().config_dir.clone();
-        let devices = open_devices(&config, &base_dir, options.realtime_scale).await?;
-        (journal, config, base_dir, run_id, devices)
-    } else {
-        let mut config = loaded.config.clone();
-        options.overrides.apply(&mut config);
-        check_overridden(&config)?;
-        let text =
-            toml::to_string(&config).map_err(|e| CalibrateError::Serialize(e.to_string()))?;
-        let run_id = new_run_id();
-        let plan = make_plan(&config.plan)?;
-        let devices = open_devices(&config, &loaded.base_dir, options.realtime_scale).await?;
-        let header = JournalHeader {
-            format: JOURNAL_FORMAT.into(),
-            version: JOURNAL_VERSION,
-            run_id: run_id.clone(),
-            started: now_rfc3339(),
-            config_digest: digest(&text),
-            config: text,
-            config_dir: loaded.base_dir.clone(),
-            display: devices.display.name(),
-            instrument: devices.instrument.info(),
-            units: Units::Absolute,
-            plan,
-        };
-        let path = store.runs_dir().join(&run_id).join("journal.jsonl");
-        (
-            Journal::create(&path, header)?,
-            config,
-            loaded.base_dir.clone(),
-            run_id,
-            devices,
-        )
-    };
-    let _ = &base_dir;
+/// A calibration run with its journal open, ready to measure what it lacks.
+pub struct PreparedRun {
+    pub journal: Journal,
+    /// The config the run goes on with (a resumed run's own, from its journal).
+    pub config: Config,
+    pub run_id: String,
+}
 
+/// Start a new run of `config` in `store`, on devices named `display` and `instrument`.
+pub fn start_run(
+    store: &ProfileStore,
+    config: &Config,
+    base_dir: &Path,
+    display: String,
+    instrument: crate::instrument::InstrumentInfo,
+) -> Result<PreparedRun, CalibrateError> {
+    let text = toml::to_string(config).map_err(|e| CalibrateError::Serialize(e.to_string()))?;
+    let run_id = new_run_id();
+    let header = JournalHeader {
+        format: JOURNAL_FORMAT.into(),
+        version: JOURNAL_VERSION,
+        run_id: run_id.clone(),
+        started: now_rfc3339(),
+        config_digest: digest(&text),
+        config: text,
+        config_dir: base_dir.to_path_buf(),
+        display,
+        instrument,
+        units: Units::Absolute,
+        plan: make_plan(&config.plan)?,
+    };
+    let path = store.runs_dir().join(&run_id).join("journal.jsonl");
+    Ok(PreparedRun {
+        journal: Journal::create(&path, header)?,
+        config: config.clone(),
+        run_id,
+    })
+}
+
+/// Reopen the unfinished run in `dir`, with the config it started with.
+pub fn reopen_run(dir: &Path) -> Result<PreparedRun, CalibrateError> {
+    let (journal, recovery) = Journal::open(&dir.join("journal.jsonl"))?;
+    if let Some((line, bytes)) = recovery.dropped_tail {
+        tracing::warn!(
+            line,
+            bytes,
+            "dropped a reading cut short by the interruption"
+        );
+    }
+    let config = parse_config(&journal.header().config, "the run's journal header")?;
+    let run_id = journal.header().run_id.clone();
+    Ok(PreparedRun {
+        journal,
+        config,
+        run_id,
+    })
+}
+
+/// Mark an unfinished run as given up, so that it is not resumed.
+pub fn discard_run(dir: &Path) -> std::io::Result<()> {
+    std::fs::write(dir.join(DONE_MARKER), "discarded\n")
+}
+
+/// Measure what `run` lacks on `devices`, fit, and publish if the profile passes the
+/// run's `[publish]` limits (else keep it beside the current one).
+pub async fn finish_run(
+    mut run: PreparedRun,
+    devices: &mut Devices,
+    store: &ProfileStore,
+    hooks: &mut RunHooks<'_>,
+) -> Result<CalibrationOutcome, CalibrateError> {
+    let config = &run.config;
+    let journal = &mut run.journal;
     // Simulated time goes on from the last reading.
     if let Some(clock) = &devices.virtual_clock
         && let Some(end) = journal
@@ -250,27 +258,20 @@ pub async fn calibrate(
             .iter()
             .filter_map(|m| Some(m.time_s? + m.reading.integration_s / 2.0))
             .reduce(f64::max)
+        && clock.now() < end
     {
         clock.set(end);
     }
     let display_name = devices.display.name();
-    let prompt = match (config.display.prompt_positions, prompt) {
-        (false, _) => None,
-        (true, Some(p)) => Some(p),
-        (true, None) => return Err(CalibrateError::NoPrompt),
-    };
-    let measured = measure_and_fit(
-        &mut journal,
-        &config,
+    let (summary, fitted, fit_seconds) = measure_and_fit(
+        journal,
+        config,
         &mut devices.display,
         &mut devices.instrument,
         devices.clock.as_ref(),
-        progress,
-        prompt,
+        hooks,
     )
-    .await;
-    devices.instrument.close();
-    let (run, fitted, fit_seconds) = measured?;
+    .await?;
 
     let header = journal.header().clone();
     let instrument_seconds = journal
@@ -278,10 +279,10 @@ pub async fn calibrate(
         .iter()
         .map(|m| m.reading.integration_s + config.display.settle_s)
         .sum::<f64>()
-        + run.extra_read_s;
+        + summary.extra_read_s;
     let profile = Profile {
         schema_version: SCHEMA_VERSION,
-        id: run_id.clone(),
+        id: run.run_id.clone(),
         created: now_rfc3339(),
         units: Units::Absolute,
         model: fitted.model.clone(),
@@ -297,13 +298,20 @@ pub async fn calibrate(
     let text = profile.to_toml()?;
     let rejection = publish_rejection(&fitted, &config.publish);
     let store_error = |source| CalibrateError::Store {
-        path: options.state_dir.clone(),
+        path: store.root().to_path_buf(),
         source,
     };
     let profile_path = if rejection.is_none() {
-        store.publish(&run_id, &text).map_err(store_error)?
+        store
+            .publish(
+                &run.run_id,
+                &text,
+                fitted.report.held_out.as_ref(),
+                "calibration",
+            )
+            .map_err(store_error)?
     } else {
-        store.keep(&run_id, &text).map_err(store_error)?
+        store.keep(&run.run_id, &text).map_err(store_error)?
     };
     let run_dir = journal
         .path()
@@ -315,9 +323,9 @@ pub async fn calibrate(
     )
     .map_err(store_error)?;
     Ok(CalibrationOutcome {
-        run_id,
+        run_id: run.run_id.clone(),
         journal_path: journal.path().to_path_buf(),
-        run,
+        run: summary,
         plan: header.plan,
         fitted,
         profile,
@@ -327,6 +335,56 @@ pub async fn calibrate(
         instrument_seconds,
         display: display_name,
     })
+}
+
+/// Run (or resume) the calibration `loaded` describes, with `options.overrides`.
+/// `prompt` asks for the instrument to be aimed at each new patch position; it is
+/// needed when the config sets `display.prompt_positions`.
+pub async fn calibrate<'a>(
+    loaded: &LoadedConfig,
+    options: &CalibrateOptions,
+    progress: &'a mut dyn FnMut(&Progress),
+    prompt: Option<PositionPrompt<'a>>,
+) -> Result<CalibrationOutcome, CalibrateError> {
+    let store = ProfileStore::new(&options.state_dir);
+    // A resumed run goes on with the config it started with (and the overrides).
+    let (run, mut devices) = if options.resume {
+        let dir = unfinished_run(&store)
+            .ok_or_else(|| CalibrateError::NothingToResume(store.runs_dir()))?;
+        let mut run = reopen_run(&dir)?;
+        options.overrides.apply(&mut run.config);
+        check_overridden(&run.config)?;
+        let base_dir = run.journal.header().config_dir.clone();
+        let devices = open_devices(&run.config, &base_dir, options.realtime_scale).await?;
+        (run, devices)
+    } else {
+        let mut config = loaded.config.clone();
+        options.overrides.apply(&mut config);
+        check_overridden(&config)?;
+        make_plan(&config.plan)?;
+        let devices = open_devices(&config, &loaded.base_dir, options.realtime_scale).await?;
+        let run = start_run(
+            &store,
+            &config,
+            &loaded.base_dir,
+            devices.display.name(),
+            devices.instrument.info(),
+        )?;
+        (run, devices)
+    };
+    let prompt = match (run.config.display.prompt_positions, prompt) {
+        (false, _) => None,
+        (true, Some(p)) => Some(p),
+        (true, None) => return Err(CalibrateError::NoPrompt),
+    };
+    let mut hooks = RunHooks {
+        progress,
+        prompt,
+        stop: None,
+    };
+    let outcome = finish_run(run, &mut devices, &store, &mut hooks).await;
+    devices.instrument.close();
+    outcome
 }
 
 /// Measure the plan of `config` on its simulated rig into a new journal at
@@ -361,8 +419,7 @@ pub async fn measure_simulated(
         &mut rig.instrument,
         rig.clock.as_ref(),
         &RunOptions::default(),
-        &mut |_| {},
-        None,
+        &mut RunHooks::progress(&mut |_| {}),
     )
     .await
     .map_err(|source| CalibrateError::Run {
