@@ -10,6 +10,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::calibrate::plan::PlanConfig;
 use crate::calibrate::run::Stability;
+use crate::calibrate::warmup::WarmupConfig;
+use crate::daemon::{DaemonConfig, ScheduleConfig};
 use crate::display::resolve::ResolveConfig;
 use crate::display::web::WebConfig;
 use crate::fit::FitOptions;
@@ -191,6 +193,12 @@ pub struct Config {
     pub fit: FitOptions,
     #[serde(default)]
     pub publish: PublishConfig,
+    #[serde(default)]
+    pub daemon: DaemonConfig,
+    #[serde(default)]
+    pub schedule: ScheduleConfig,
+    #[serde(default)]
+    pub warmup: WarmupConfig,
 }
 
 /// A configuration with the text it came from.
@@ -232,6 +240,9 @@ pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
 /// Check what the types cannot: ranges, and that the instrument, display and plan go
 /// together. Run again after command-line overrides.
 pub fn check_config(config: &Config) -> Result<(), String> {
+    config.daemon.check()?;
+    config.schedule.check()?;
+    config.warmup.check()?;
     if !(config.display.settle_s >= 0.0) {
         return Err("display.settle_s must not be negative".into());
     }

@@ -13,6 +13,7 @@ pub mod calibrate;
 pub mod cgats;
 pub mod color;
 pub mod config;
+pub mod daemon;
 pub mod display;
 pub mod fit;
 pub mod instrument;

@@ -29,6 +29,7 @@ use chromacal::report;
 
 mod bench;
 mod emulate;
+mod remote;
 
 #[derive(Parser)]
 #[command(
@@ -197,6 +198,55 @@ enum Command {
     /// Speed against error: fit time per law against readings, and held-out ΔE00
     /// against patch budget, on simulated monitors (and on real measured displays when
     /// ../shared/data is present).
+    /// Run as a service: hold the instrument and the display, run one job at a time,
+    /// verify on a schedule and recalibrate when the screen moved, and answer the
+    /// control API (HTTP on a unix socket, mode 0600; optionally loopback TCP with a
+    /// token): GET /status, POST /jobs {"kind": …}, POST /jobs/cancel, GET /events
+    /// (server-sent events), GET /profile[?format=json], GET /history, POST /rollback.
+    /// Stops on SIGTERM after the reading under way; an interrupted calibration
+    /// resumes at the next start.
+    Daemon {
+        /// Configuration file [default: the built-in one].
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Profile store, journals, history [default: as for calibrate].
+        #[arg(long)]
+        state_dir: Option<PathBuf>,
+        /// The API's unix socket [default: $RUNTIME_DIRECTORY/api.sock, else <state>/api.sock].
+        #[arg(long)]
+        socket: Option<PathBuf>,
+        /// Also serve the API on this loopback TCP address (token in <state>/api.token).
+        #[arg(long, value_name = "ADDR")]
+        tcp: Option<String>,
+    },
+    /// Ask a running daemon how it is.
+    Status {
+        #[command(flatten)]
+        api: remote::ApiArgs,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Start, follow or cancel a daemon's job.
+    Job {
+        #[command(subcommand)]
+        command: JobCommand,
+        #[command(flatten)]
+        api: remote::ApiArgs,
+    },
+    /// The daemon's profiles (made current, oldest first) and verifications.
+    History {
+        #[command(flatten)]
+        api: remote::ApiArgs,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Make an earlier profile current again (default: the one before the current).
+    Rollback {
+        /// The profile id to go back to.
+        to: Option<String>,
+        #[command(flatten)]
+        api: remote::ApiArgs,
+    },
     Bench {
         /// Fewer repeats, for a quick look.
         #[arg(long)]
@@ -267,6 +317,29 @@ fn parse_instrument(spec: &str) -> Result<(DeviceKind, String), Failure> {
 enum ProfileCommand {
     /// Print the model in words and numbers.
     Show { profile: PathBuf },
+    /// The current profile of a running daemon (TOML, or JSON).
+    Current {
+        #[command(flatten)]
+        api: remote::ApiArgs,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Subcommand)]
+enum JobCommand {
+    /// Start a job: calibrate, verify or uniformity.
+    Start {
+        kind: String,
+        /// Follow it to its end with a progress bar.
+        #[arg(long)]
+        watch: bool,
+    },
+    /// Follow the running job to its end.
+    Watch,
+    /// Stop the running job after the reading under way (a cancelled calibration is
+    /// not resumed).
+    Cancel,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -334,14 +407,21 @@ impl<E: std::fmt::Display> From<E> for Failure {
 const NOT_PUBLISHED: u8 = 3;
 
 fn main() -> ExitCode {
+    let cli = Cli::parse();
+    // A service logs what it does; a command only what went wrong. One line per event,
+    // without colour when stderr is not a terminal (the systemd journal).
+    let default_level = match cli.command {
+        Command::Daemon { .. } => "info",
+        _ => "warn",
+    };
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("CHROMACAL_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level)),
         )
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_writer(std::io::stderr)
         .init();
-    let cli = Cli::parse();
     let result = match cli.command {
         Command::Calibrate {
             config,
@@ -430,7 +510,25 @@ fn main() -> ExitCode {
         } => Profile::read(&profile)
             .map(|p| print!("{}", report::describe_profile(&p)))
             .map_err(Failure::from),
+        Command::Profile {
+            command: ProfileCommand::Current { api, json },
+        } => remote::current_profile(&api, json).map_err(Failure::from),
         Command::Bench { quick, data } => bench::run(quick, data).map_err(Failure::from),
+        Command::Daemon {
+            config,
+            state_dir,
+            socket,
+            tcp,
+        } => daemon(config.as_deref(), state_dir, socket, tcp),
+        Command::Status { api, json } => remote::status(&api, json).map_err(Failure::from),
+        Command::Job { command, api } => match command {
+            JobCommand::Start { kind, watch } => remote::job_start(&api, &kind, watch),
+            JobCommand::Watch => remote::job_watch(&api),
+            JobCommand::Cancel => remote::job_cancel(&api),
+        }
+        .map_err(Failure::from),
+        Command::History { api, json } => remote::history(&api, json).map_err(Failure::from),
+        Command::Rollback { to, api } => remote::rollback(&api, to).map_err(Failure::from),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -439,6 +537,29 @@ fn main() -> ExitCode {
             ExitCode::from(f.code)
         }
     }
+}
+
+fn daemon(
+    config: Option<&Path>,
+    state_dir: Option<PathBuf>,
+    socket: Option<PathBuf>,
+    tcp: Option<String>,
+) -> Result<(), Failure> {
+    let loaded = load_config(config)?;
+    let options = chromacal::daemon::DaemonOptions {
+        state_dir: state_dir.unwrap_or_else(default_state_dir),
+        socket,
+        tcp,
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let result = runtime.block_on(chromacal::daemon::run(loaded, options));
+    // The daemon has stopped its job and left its devices; connections still open
+    // (event streams) are simply dropped.
+    runtime.shutdown_timeout(std::time::Duration::from_millis(200));
+    result.map_err(|e| Failure::from(e.to_string()))
 }
 
 fn calibrate(

@@ -5,3 +5,4 @@ pub mod journal;
 pub mod plan;
 pub mod run;
 pub mod session;
+pub mod warmup;

@@ -69,6 +69,8 @@ pub enum PlanError {
     BitDepth(u32),
     #[error("patch size {0} must be in (0, 1]")]
     PatchSize(f64),
+    #[error("plan.uniformity_grid is below 2: there is no grid to measure")]
+    NoGrid,
 }
 
 /// One patch of the plan.
@@ -165,6 +167,141 @@ fn verification_drives(n: usize, seed: u64) -> Vec<Drive> {
     drives
 }
 
+/// The uniformity grid of `config`: white (or R, G and B) at each n × n position but
+/// the centre, which the rest of the plan measures.
+fn uniformity_patches(config: &PlanConfig) -> Vec<(Role, Patch)> {
+    let mut patches = Vec::new();
+    if config.uniformity_grid < 2 {
+        return patches;
+    }
+    let n = config.uniformity_grid;
+    let depth = config.bit_depth;
+    let size = config.patch_size.min(1.0 / n as f64);
+    let drives: Vec<Drive> = if config.uniformity_per_channel {
+        vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    } else {
+        vec![[1.0; 3]]
+    };
+    for i in 0..n {
+        for j in 0..n {
+            let p = ScreenPosition::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+            if p.is_centre() {
+                continue;
+            }
+            for d in &drives {
+                patches.push((
+                    Role::Uniformity,
+                    Patch {
+                        codes: Codes::from_drive(*d, depth),
+                        background: Codes::from_drive([0.0; 3], depth),
+                        geometry: Geometry::around(p, size),
+                    },
+                ));
+            }
+        }
+    }
+    patches
+}
+
+/// Number the patches of a short plan in order.
+fn numbered(patches: Vec<(Role, Patch)>) -> Vec<PlannedPatch> {
+    patches
+        .into_iter()
+        .enumerate()
+        .map(|(index, (role, patch))| PlannedPatch { index, role, patch })
+        .collect()
+}
+
+/// A verification: `n` patches (at least 5) to compare with what the current profile
+/// predicts: white, the three primaries, a mid grey, then held-out-style drives. The
+/// set depends only on `config` and `n`, so verifications over weeks compare alike.
+pub fn make_verification_plan(config: &PlanConfig, n: usize) -> Result<Plan, PlanError> {
+    if !(1..=16).contains(&config.bit_depth) {
+        return Err(PlanError::BitDepth(config.bit_depth));
+    }
+    if !(config.patch_size > 0.0 && config.patch_size <= 1.0) {
+        return Err(PlanError::PatchSize(config.patch_size));
+    }
+    let depth = config.bit_depth;
+    let centre = Geometry::centred(config.patch_size);
+    let mut drives: Vec<Drive> = vec![
+        [1.0; 3],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.5; 3],
+    ];
+    drives.extend(verification_drives(n.saturating_sub(5), config.seed));
+    let patches = drives
+        .into_iter()
+        .map(|d| {
+            (
+                Role::Verification,
+                Patch {
+                    codes: Codes::from_drive(d, depth),
+                    background: Codes::from_drive([0.0; 3], depth),
+                    geometry: centre,
+                },
+            )
+        })
+        .collect();
+    let patches = numbered(patches);
+    let verification = patches.len();
+    Ok(Plan {
+        patches,
+        budget: BudgetBreakdown {
+            black: 0,
+            ramp_levels_per_channel: 0,
+            grey: 0,
+            surround: 0,
+            reference: 0,
+            counted: 0,
+            verification,
+            uniformity: 0,
+        },
+    })
+}
+
+/// A uniformity measurement on its own: the grid of `config`, with a white reference
+/// at the centre before, between every `n` positions and after, so that a change of
+/// the whole screen since the calibration is told apart from the map.
+pub fn make_uniformity_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
+    if config.uniformity_grid < 2 {
+        return Err(PlanError::NoGrid);
+    }
+    let centre = Geometry::centred(config.patch_size);
+    let white = Codes::from_drive([1.0; 3], config.bit_depth);
+    let reference = (
+        Role::Reference,
+        Patch {
+            codes: white,
+            background: Codes::from_drive([0.0; 3], config.bit_depth),
+            geometry: centre,
+        },
+    );
+    let grid = uniformity_patches(config);
+    let uniformity = grid.len();
+    let mut patches = vec![reference];
+    for chunk in grid.chunks(config.uniformity_grid.max(2)) {
+        patches.extend_from_slice(chunk);
+        patches.push(reference);
+    }
+    let references = patches.len() - uniformity;
+    Ok(Plan {
+        patches: numbered(patches),
+        budget: BudgetBreakdown {
+            black: 0,
+            ramp_levels_per_channel: 0,
+            grey: 0,
+            surround: 0,
+            reference: references,
+            counted: references,
+            verification: 0,
+            uniformity,
+        },
+    })
+}
+
 /// Build the patch sequence for `config`.
 pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
     if !(1..=16).contains(&config.bit_depth) {
@@ -256,33 +393,9 @@ pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
             patch(Codes::from_drive(*d, depth), centre),
         ));
     }
-    let mut uniformity = 0;
-    if config.uniformity_grid >= 2 {
-        let n = config.uniformity_grid;
-        let size = config.patch_size.min(1.0 / n as f64);
-        let drives: Vec<Drive> = if config.uniformity_per_channel {
-            vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
-        } else {
-            vec![[1.0; 3]]
-        };
-        for i in 0..n {
-            for j in 0..n {
-                let p =
-                    ScreenPosition::new((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
-                // The centre is measured by the ramps and the reference already.
-                if p.is_centre() {
-                    continue;
-                }
-                for d in &drives {
-                    body.push((
-                        Role::Uniformity,
-                        patch(Codes::from_drive(*d, depth), Geometry::around(p, size)),
-                    ));
-                    uniformity += 1;
-                }
-            }
-        }
-    }
+    let grid = uniformity_patches(config);
+    let uniformity = grid.len();
+    body.extend(grid);
 
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     body.shuffle(&mut rng);

@@ -77,12 +77,12 @@ impl Default for RunOptions {
 
 /// Called when the patch moves to another place on the screen, before it is measured
 /// there: a real instrument has to be moved by hand. An error stops the run.
-pub type PositionPrompt<'a> = &'a mut dyn FnMut(ScreenPosition) -> Result<(), String>;
+pub type PositionPrompt<'a> = &'a mut (dyn FnMut(ScreenPosition) -> Result<(), String> + Send);
 
 /// What the caller of a run hears and says while it measures.
 pub struct RunHooks<'a> {
     /// Told after each reading is in the journal.
-    pub progress: &'a mut dyn FnMut(&Progress),
+    pub progress: &'a mut (dyn FnMut(&Progress) + Send),
     /// Asked to aim the instrument when the patch moves (see [`PositionPrompt`]).
     pub prompt: Option<PositionPrompt<'a>>,
     /// Asked before each patch whether to stop (a cancelled job, SIGTERM): the
@@ -92,7 +92,7 @@ pub struct RunHooks<'a> {
 
 impl<'a> RunHooks<'a> {
     /// Progress only.
-    pub fn progress(progress: &'a mut dyn FnMut(&Progress)) -> Self {
+    pub fn progress(progress: &'a mut (dyn FnMut(&Progress) + Send)) -> Self {
         RunHooks {
             progress,
             prompt: None,
@@ -130,6 +130,9 @@ pub struct Progress {
     pub index: usize,
     pub role: Role,
     pub luminance: Option<f64>,
+    pub xyz: Option<crate::color::Xyz>,
+    pub drive: crate::model::Drive,
+    pub position: ScreenPosition,
     pub status: ReadingStatus,
 }
 
@@ -265,7 +268,10 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
             total,
             index: planned.index,
             role: planned.role,
-            luminance: reading.xyz.map(|x| x.y),
+            luminance: reading.luminance(),
+            xyz: reading.xyz,
+            drive: planned.patch.codes.drive(),
+            position: planned.position(),
             status: reading.status,
         };
         journal.append(Measurement {

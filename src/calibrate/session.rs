@@ -108,11 +108,12 @@ pub struct CalibrationOutcome {
     pub display: String,
 }
 
-fn now_rfc3339() -> String {
+pub(crate) fn now_rfc3339() -> String {
     humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
 }
 
-fn new_run_id() -> String {
+/// A new run id: the UTC time and a few random-ish hex digits.
+pub fn new_run_id() -> String {
     let stamp = humantime::format_rfc3339_seconds(SystemTime::now())
         .to_string()
         .replace([':', '-'], "");
@@ -343,7 +344,7 @@ pub async fn finish_run(
 pub async fn calibrate<'a>(
     loaded: &LoadedConfig,
     options: &CalibrateOptions,
-    progress: &'a mut dyn FnMut(&Progress),
+    progress: &'a mut (dyn FnMut(&Progress) + Send),
     prompt: Option<PositionPrompt<'a>>,
 ) -> Result<CalibrationOutcome, CalibrateError> {
     let store = ProfileStore::new(&options.state_dir);

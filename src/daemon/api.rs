@@ -1,0 +1,478 @@
+//! The control API: HTTP/1.1 over the daemon's unix socket (mode 0600, and only the
+//! socket's owner or root are answered), and optionally over loopback TCP with a
+//! bearer token.
+//!
+//! | method and path | what |
+//! |---|---|
+//! | `GET /status` | daemon, running job (progress, ETA, last reading), last outcome, current profile |
+//! | `POST /jobs` `{"kind": "calibrate"\|"verify"\|"uniformity"}` | start a job: 202, or 409 while one runs |
+//! | `POST /jobs/cancel` | stop the running job after its reading: 202, or 404 |
+//! | `GET /events` | server-sent events (`events.rs`) |
+//! | `GET /profile[?format=toml\|json]` | the current profile |
+//! | `GET /history` | profiles made current, and every verification |
+//! | `POST /rollback` `{"to": ID}` (or `{}`) | make an earlier profile current |
+//!
+//! Every refusal is JSON `{"error": "…"}` with a status that says which: 401 (no or
+//! wrong token), 403 (not the socket's owner), 404 (no such endpoint), 405, 409, 413
+//! (body over `daemon.max_body_bytes`), 429 (over `daemon.requests_per_s`), 503 (too
+//! many event streams, or shutting down).
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use axum::Router;
+use axum::extract::connect_info::Connected;
+use axum::extract::{ConnectInfo, DefaultBodyLimit, Query, Request, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::serve::IncomingStream;
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+use tokio_stream::StreamExt;
+use tokio_stream::wrappers::BroadcastStream;
+
+use super::events::{JobKind, JobOutcome, JobStatus};
+use super::{Daemon, JobRefused};
+use crate::profile::Profile;
+
+/// Who may use the API.
+#[derive(Debug, Clone)]
+pub struct Access {
+    /// The uid that owns the socket (the daemon's); it and root are answered.
+    pub owner: u32,
+    /// The bearer token TCP clients must send.
+    pub token: Option<String>,
+}
+
+/// Who is calling: a local process (with its uid) or a TCP peer.
+#[derive(Debug, Clone, Copy)]
+pub enum Peer {
+    Local { uid: Option<u32> },
+    Tcp(SocketAddr),
+}
+
+impl Connected<IncomingStream<'_, tokio::net::UnixListener>> for Peer {
+    fn connect_info(stream: IncomingStream<'_, tokio::net::UnixListener>) -> Self {
+        Peer::Local {
+            uid: stream.io().peer_cred().ok().map(|c| c.uid()),
+        }
+    }
+}
+
+impl Connected<IncomingStream<'_, tokio::net::TcpListener>> for Peer {
+    fn connect_info(stream: IncomingStream<'_, tokio::net::TcpListener>) -> Self {
+        Peer::Tcp(*stream.remote_addr())
+    }
+}
+
+/// A token bucket shared by every client: a local API has one user, so one bucket.
+struct RateLimit {
+    state: Mutex<(f64, Instant)>,
+    per_s: f64,
+    burst: f64,
+}
+
+impl RateLimit {
+    fn allow(&self) -> bool {
+        let Ok(mut state) = self.state.lock() else {
+            return true;
+        };
+        let now = Instant::now();
+        let (tokens, last) = *state;
+        let tokens = (tokens + now.duration_since(last).as_secs_f64() * self.per_s).min(self.burst);
+        if tokens >= 1.0 {
+            *state = (tokens - 1.0, now);
+            true
+        } else {
+            *state = (tokens, now);
+            false
+        }
+    }
+}
+
+struct ApiState {
+    daemon: Arc<Daemon>,
+    access: Access,
+    limit: RateLimit,
+    streams: AtomicUsize,
+}
+
+type Shared = Arc<ApiState>;
+
+fn refusal(status: StatusCode, message: impl Into<String>) -> Response {
+    (status, axum::Json(json!({ "error": message.into() }))).into_response()
+}
+
+/// The router, for both listeners.
+pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
+    let config = &daemon.loaded.config.daemon;
+    let state = Arc::new(ApiState {
+        limit: RateLimit {
+            state: Mutex::new((config.burst as f64, Instant::now())),
+            per_s: config.requests_per_s,
+            burst: config.burst as f64,
+        },
+        access,
+        streams: AtomicUsize::new(0),
+        daemon: daemon.clone(),
+    });
+    let max_body = config.max_body_bytes;
+    Router::new()
+        .route("/status", get(status))
+        .route("/jobs", post(start_job))
+        .route("/jobs/cancel", post(cancel_job))
+        .route("/events", get(events))
+        .route("/profile", get(profile))
+        .route("/history", get(history))
+        .route("/rollback", post(rollback))
+        .fallback(not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(DefaultBodyLimit::max(max_body))
+        .layer(middleware::from_fn_with_state(state.clone(), guard))
+        .with_state(state)
+}
+
+/// Serve on the unix socket, with each peer's credentials.
+pub async fn serve_unix(listener: tokio::net::UnixListener, app: Router) {
+    let service = app.into_make_service_with_connect_info::<Peer>();
+    if let Err(e) = axum::serve(listener, service).await {
+        tracing::error!(error = %e, "the API's unix socket stopped");
+    }
+}
+
+/// Serve on TCP.
+pub async fn serve_tcp(listener: tokio::net::TcpListener, app: Router) {
+    let service = app.into_make_service_with_connect_info::<Peer>();
+    if let Err(e) = axum::serve(listener, service).await {
+        tracing::error!(error = %e, "the API's TCP listener stopped");
+    }
+}
+
+/// Compare without an early exit, so that timing tells nothing of the token.
+fn same_secret(a: &str, b: &str) -> bool {
+    a.len() == b.len() && a.bytes().zip(b.bytes()).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// Who may call, how often, and how much they may send.
+async fn guard(
+    State(state): State<Shared>,
+    ConnectInfo(peer): ConnectInfo<Peer>,
+    request: Request,
+    next: Next,
+) -> Response {
+    match peer {
+        Peer::Local { uid } => {
+            let allowed = uid.is_some_and(|u| u == state.access.owner || u == 0);
+            if !allowed {
+                let who = uid.map_or("an unknown user".to_string(), |u| format!("uid {u}"));
+                tracing::warn!(who, "refused a local client that does not own the socket");
+                return refusal(
+                    StatusCode::FORBIDDEN,
+                    format!(
+                        "{who} may not use this daemon: only its owner (uid {}) and root may",
+                        state.access.owner
+                    ),
+                );
+            }
+        }
+        Peer::Tcp(addr) => {
+            let sent = request
+                .headers()
+                .get(header::AUTHORIZATION)
+                .and_then(|v| v.to_str().ok())
+                .and_then(|v| v.strip_prefix("Bearer "));
+            let ok = match (&state.access.token, sent) {
+                (Some(token), Some(sent)) => same_secret(token, sent.trim()),
+                _ => false,
+            };
+            if !ok {
+                tracing::warn!(%addr, "refused a TCP client without the right token");
+                return refusal(
+                    StatusCode::UNAUTHORIZED,
+                    "send the API token as 'Authorization: Bearer <token>' (daemon.token_file)",
+                );
+            }
+        }
+    }
+    if !state.limit.allow() {
+        return (
+            StatusCode::TOO_MANY_REQUESTS,
+            [(header::RETRY_AFTER, "1")],
+            axum::Json(json!({"error": format!(
+                "more than {} requests a second; slow down",
+                state.limit.per_s
+            )})),
+        )
+            .into_response();
+    }
+    let max = state.daemon.loaded.config.daemon.max_body_bytes;
+    if let Some(length) = content_length(request.headers())
+        && length > max
+    {
+        return refusal(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("the body has {length} bytes; the limit is {max} (daemon.max_body_bytes)"),
+        );
+    }
+    let mut response = next.run(request).await;
+    // The body limit of the extractors answers in plain text; say it in JSON too.
+    if response.status() == StatusCode::PAYLOAD_TOO_LARGE
+        && !is_json(response.headers())
+    {
+        response = refusal(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("the body is over the limit of {max} bytes (daemon.max_body_bytes)"),
+        );
+    }
+    response
+}
+
+fn content_length(headers: &HeaderMap) -> Option<usize> {
+    headers
+        .get(header::CONTENT_LENGTH)?
+        .to_str()
+        .ok()?
+        .trim()
+        .parse()
+        .ok()
+}
+
+fn is_json(headers: &HeaderMap) -> bool {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("application/json"))
+}
+
+async fn not_found(request: Request) -> Response {
+    refusal(
+        StatusCode::NOT_FOUND,
+        format!(
+            "no such endpoint: {} {} (see the list in `chromacal daemon --help`)",
+            request.method(),
+            request.uri().path()
+        ),
+    )
+}
+
+async fn method_not_allowed(request: Request) -> Response {
+    refusal(
+        StatusCode::METHOD_NOT_ALLOWED,
+        format!(
+            "{} is not allowed on {}",
+            request.method(),
+            request.uri().path()
+        ),
+    )
+}
+
+/// `GET /status`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StatusReply {
+    pub version: String,
+    pub pid: u32,
+    pub uptime_s: f64,
+    pub state_dir: String,
+    pub shutting_down: bool,
+    pub job: Option<JobStatus>,
+    pub last_job: Option<(JobStatus, JobOutcome)>,
+    pub current_profile: Option<CurrentProfile>,
+    /// RFC 3339.
+    pub next_verification: Option<String>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CurrentProfile {
+    pub id: String,
+    pub created: String,
+    pub held_out: Option<crate::fit::stats::ErrorStats>,
+    pub path: String,
+}
+
+fn read_current(daemon: &Daemon) -> Result<Option<(Profile, String)>, Response> {
+    let path = daemon.store().current_path();
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => {
+            return Err(refusal(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                format!("{}: {e}", path.display()),
+            ));
+        }
+    };
+    Profile::from_toml(&text, &path.display().to_string())
+        .map(|p| Some((p, text)))
+        .map_err(|e| refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))
+}
+
+async fn status(State(state): State<Shared>) -> Response {
+    let daemon = &state.daemon;
+    let current = match read_current(daemon) {
+        Ok(c) => c.map(|(p, _)| CurrentProfile {
+            id: p.id,
+            created: p.created,
+            held_out: p.report.held_out,
+            path: daemon.store().current_path().display().to_string(),
+        }),
+        Err(r) => return r,
+    };
+    axum::Json(StatusReply {
+        version: env!("CARGO_PKG_VERSION").into(),
+        pid: std::process::id(),
+        uptime_s: daemon.uptime_s(),
+        state_dir: daemon.store().root().display().to_string(),
+        shutting_down: daemon.is_shutting_down(),
+        job: daemon.job(),
+        last_job: daemon.last_outcome(),
+        current_profile: current,
+        next_verification: daemon
+            .next_verification()
+            .map(|t| humantime::format_rfc3339_seconds(t).to_string()),
+    })
+    .into_response()
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StartJob {
+    kind: String,
+}
+
+async fn start_job(State(state): State<Shared>, body: axum::body::Bytes) -> Response {
+    let request: StartJob = match serde_json::from_slice(&body) {
+        Ok(r) => r,
+        Err(e) => {
+            return refusal(
+                StatusCode::BAD_REQUEST,
+                format!("the body must be {{\"kind\": \"calibrate\"|\"verify\"|\"uniformity\"}}: {e}"),
+            );
+        }
+    };
+    let kind = match JobKind::parse(&request.kind) {
+        Ok(k) => k,
+        Err(e) => return refusal(StatusCode::BAD_REQUEST, e),
+    };
+    match state.daemon.start_job(kind, "api", None) {
+        Ok(job) => (StatusCode::ACCEPTED, axum::Json(job)).into_response(),
+        Err(e @ JobRefused::Busy { .. }) => refusal(StatusCode::CONFLICT, e.to_string()),
+        Err(e @ JobRefused::ShuttingDown) => refusal(StatusCode::SERVICE_UNAVAILABLE, e.to_string()),
+    }
+}
+
+async fn cancel_job(State(state): State<Shared>) -> Response {
+    match state.daemon.cancel_job() {
+        Some(job) => (StatusCode::ACCEPTED, axum::Json(job)).into_response(),
+        None => refusal(StatusCode::NOT_FOUND, "no job is running"),
+    }
+}
+
+/// Keeps the count of open event streams.
+struct StreamSlot(Shared);
+
+impl Drop for StreamSlot {
+    fn drop(&mut self) {
+        self.0.streams.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+async fn events(State(state): State<Shared>) -> Response {
+    let max = state.daemon.loaded.config.daemon.max_event_streams;
+    if state.streams.fetch_add(1, Ordering::SeqCst) >= max {
+        state.streams.fetch_sub(1, Ordering::SeqCst);
+        return refusal(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!("{max} event streams are open already (daemon.max_event_streams)"),
+        );
+    }
+    let slot = StreamSlot(state.clone());
+    let stream = BroadcastStream::new(state.daemon.events.subscribe()).map(move |item| {
+        let _held = &slot;
+        Ok::<_, std::convert::Infallible>(match item {
+            Ok(event) => SseEvent::default()
+                .event(event.name())
+                .data(serde_json::to_string(&event).unwrap_or_default()),
+            Err(tokio_stream::wrappers::errors::BroadcastStreamRecvError::Lagged(n)) => {
+                SseEvent::default()
+                    .event("lagged")
+                    .data(json!({ "missed": n }).to_string())
+            }
+        })
+    });
+    Sse::new(stream).keep_alive(KeepAlive::default()).into_response()
+}
+
+#[derive(Debug, Deserialize)]
+struct ProfileQuery {
+    format: Option<String>,
+}
+
+async fn profile(State(state): State<Shared>, Query(query): Query<ProfileQuery>) -> Response {
+    let (profile, text) = match read_current(&state.daemon) {
+        Ok(Some(c)) => c,
+        Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
+        Err(r) => return r,
+    };
+    match query.format.as_deref().unwrap_or("toml") {
+        "toml" => ([(header::CONTENT_TYPE, "application/toml")], text).into_response(),
+        "json" => axum::Json(profile).into_response(),
+        other => refusal(
+            StatusCode::BAD_REQUEST,
+            format!("format '{other}' is not one of toml, json"),
+        ),
+    }
+}
+
+async fn history(State(state): State<Shared>) -> Response {
+    let store = state.daemon.store();
+    match (store.history(), store.verifications()) {
+        (Ok(history), Ok(verifications)) => axum::Json(json!({
+            "current": history.current,
+            "profiles": history.entries,
+            "verifications": verifications,
+        }))
+        .into_response(),
+        (Err(e), _) | (_, Err(e)) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+    }
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct Rollback {
+    to: Option<String>,
+}
+
+async fn rollback(State(state): State<Shared>, body: axum::body::Bytes) -> Response {
+    let request: Rollback = if body.iter().all(|b| b.is_ascii_whitespace()) {
+        Rollback::default()
+    } else {
+        match serde_json::from_slice(&body) {
+            Ok(r) => r,
+            Err(e) => {
+                return refusal(
+                    StatusCode::BAD_REQUEST,
+                    format!("the body must be {{\"to\": \"<profile id>\"}} or empty: {e}"),
+                );
+            }
+        }
+    };
+    match state.daemon.store().rollback(request.to.as_deref()) {
+        Ok(entry) => {
+            tracing::info!(profile = %entry.id, "rolled back");
+            state.daemon.emit(super::events::Event::RolledBack {
+                entry: entry.clone(),
+            });
+            axum::Json(entry).into_response()
+        }
+        Err(e @ crate::profile::store::StoreError::NoRollback(_)) => {
+            refusal(StatusCode::CONFLICT, e.to_string())
+        }
+        Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+    }
+}

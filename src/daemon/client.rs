@@ -1,0 +1,206 @@
+//! The client side of the control API, for the `chromacal status`, `job`, `history`,
+//! `rollback` commands and for tests: HTTP/1.1 (hyper) over the unix socket or TCP.
+
+use std::path::PathBuf;
+
+use bytes::Bytes;
+use http_body_util::{BodyExt, Full};
+use hyper::Request;
+use hyper::header;
+use hyper_util::rt::TokioIo;
+
+/// Where the daemon listens.
+#[derive(Debug, Clone)]
+pub enum Endpoint {
+    Unix(PathBuf),
+    Tcp { address: String, token: String },
+}
+
+impl std::fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Endpoint::Unix(path) => write!(f, "{}", path.display()),
+            Endpoint::Tcp { address, .. } => write!(f, "http://{address}"),
+        }
+    }
+}
+
+/// Why a request got no answer.
+#[derive(Debug, thiserror::Error)]
+pub enum ClientError {
+    #[error("cannot reach the daemon at {endpoint}: {source} (is `chromacal daemon` running?)")]
+    Connect {
+        endpoint: String,
+        source: std::io::Error,
+    },
+    #[error("the daemon at {endpoint} broke off: {message}")]
+    Http { endpoint: String, message: String },
+}
+
+/// An answer.
+#[derive(Debug, Clone)]
+pub struct Reply {
+    pub status: u16,
+    pub body: Bytes,
+}
+
+impl Reply {
+    pub fn text(&self) -> String {
+        String::from_utf8_lossy(&self.body).into_owned()
+    }
+
+    pub fn json(&self) -> Result<serde_json::Value, String> {
+        serde_json::from_slice(&self.body).map_err(|e| format!("not JSON ({e}): {}", self.text()))
+    }
+
+    /// The `error` of a refusal, or the whole body.
+    pub fn error_message(&self) -> String {
+        self.json()
+            .ok()
+            .and_then(|v| v.get("error").and_then(|e| e.as_str()).map(String::from))
+            .unwrap_or_else(|| self.text())
+    }
+}
+
+type Sender = hyper::client::conn::http1::SendRequest<Full<Bytes>>;
+
+async fn connect(endpoint: &Endpoint) -> Result<Sender, ClientError> {
+    let connect_error = |source| ClientError::Connect {
+        endpoint: endpoint.to_string(),
+        source,
+    };
+    let http_error = |e: hyper::Error| ClientError::Http {
+        endpoint: endpoint.to_string(),
+        message: e.to_string(),
+    };
+    match endpoint {
+        Endpoint::Unix(path) => {
+            let stream = tokio::net::UnixStream::connect(path)
+                .await
+                .map_err(connect_error)?;
+            let (sender, connection) = hyper::client::conn::http1::handshake(TokioIo::new(stream))
+                .await
+                .map_err(http_error)?;
+            tokio::spawn(connection);
+            Ok(sender)
+        }
+        Endpoint::Tcp { address, .. } => {
+            let stream = tokio::net::TcpStream::connect(address)
+                .await
+                .map_err(connect_error)?;
+            let (sender, connection) = hyper::client::conn::http1::handshake(TokioIo::new(stream))
+                .await
+                .map_err(http_error)?;
+            tokio::spawn(connection);
+            Ok(sender)
+        }
+    }
+}
+
+fn build(
+    endpoint: &Endpoint,
+    method: &str,
+    path: &str,
+    body: Option<Bytes>,
+) -> Result<Request<Full<Bytes>>, ClientError> {
+    let mut request = Request::builder()
+        .method(method)
+        .uri(path)
+        .header(header::HOST, "chromacal");
+    if let Endpoint::Tcp { token, .. } = endpoint {
+        request = request.header(header::AUTHORIZATION, format!("Bearer {token}"));
+    }
+    if body.is_some() {
+        request = request.header(header::CONTENT_TYPE, "application/json");
+    }
+    request
+        .body(Full::new(body.unwrap_or_default()))
+        .map_err(|e| ClientError::Http {
+            endpoint: endpoint.to_string(),
+            message: e.to_string(),
+        })
+}
+
+/// Send one request and read the whole answer.
+pub async fn request(
+    endpoint: &Endpoint,
+    method: &str,
+    path: &str,
+    body: Option<Bytes>,
+) -> Result<Reply, ClientError> {
+    let http_error = |message: String| ClientError::Http {
+        endpoint: endpoint.to_string(),
+        message,
+    };
+    let mut sender = connect(endpoint).await?;
+    let response = sender
+        .send_request(build(endpoint, method, path, body)?)
+        .await
+        .map_err(|e| http_error(e.to_string()))?;
+    let status = response.status().as_u16();
+    let body = response
+        .into_body()
+        .collect()
+        .await
+        .map_err(|e| http_error(e.to_string()))?
+        .to_bytes();
+    Ok(Reply { status, body })
+}
+
+/// `GET /events` and call `on_event(name, data)` for each event until it returns
+/// false or the stream ends. A refusal is returned as the reply.
+pub async fn follow_events(
+    endpoint: &Endpoint,
+    mut on_event: impl FnMut(&str, &str) -> bool,
+) -> Result<Option<Reply>, ClientError> {
+    let http_error = |message: String| ClientError::Http {
+        endpoint: endpoint.to_string(),
+        message,
+    };
+    let mut sender = connect(endpoint).await?;
+    let response = sender
+        .send_request(build(endpoint, "GET", "/events", None)?)
+        .await
+        .map_err(|e| http_error(e.to_string()))?;
+    let status = response.status().as_u16();
+    let mut body = response.into_body();
+    if status != 200 {
+        let bytes = body
+            .collect()
+            .await
+            .map_err(|e| http_error(e.to_string()))?
+            .to_bytes();
+        return Ok(Some(Reply {
+            status,
+            body: bytes,
+        }));
+    }
+    let mut buffer = String::new();
+    let (mut name, mut data) = (String::new(), String::new());
+    while let Some(frame) = body.frame().await {
+        let frame = frame.map_err(|e| http_error(e.to_string()))?;
+        let Ok(chunk) = frame.into_data() else {
+            continue;
+        };
+        buffer.push_str(&String::from_utf8_lossy(&chunk));
+        while let Some(end) = buffer.find('\n') {
+            let line: String = buffer.drain(..=end).collect();
+            let line = line.trim_end_matches(['\r', '\n']);
+            if line.is_empty() {
+                if !data.is_empty() && !on_event(&name, &data) {
+                    return Ok(None);
+                }
+                name.clear();
+                data.clear();
+            } else if let Some(v) = line.strip_prefix("event:") {
+                name = v.trim().to_string();
+            } else if let Some(v) = line.strip_prefix("data:") {
+                if !data.is_empty() {
+                    data.push('\n');
+                }
+                data.push_str(v.trim_start());
+            }
+        }
+    }
+    Ok(None)
+}

@@ -1,0 +1,138 @@
+//! What the daemon tells its subscribers (`GET /events`), and the job status that
+//! `GET /status` shows.
+
+use serde::{Deserialize, Serialize};
+
+use crate::calibrate::warmup::WarmupStep;
+use crate::fit::stats::ErrorStats;
+use crate::measurement::Role;
+use crate::profile::store::{HistoryEntry, VerificationRecord};
+
+/// The jobs the daemon runs, one at a time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobKind {
+    /// A whole calibration, published if it passes the limits.
+    Calibrate,
+    /// A few patches compared with the current profile; past the threshold it starts a
+    /// calibration.
+    Verify,
+    /// The uniformity grid alone: a new spatial map for the current profile.
+    Uniformity,
+}
+
+impl JobKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            JobKind::Calibrate => "calibrate",
+            JobKind::Verify => "verify",
+            JobKind::Uniformity => "uniformity",
+        }
+    }
+
+    pub fn parse(text: &str) -> Result<JobKind, String> {
+        match text {
+            "calibrate" => Ok(JobKind::Calibrate),
+            "verify" => Ok(JobKind::Verify),
+            "uniformity" => Ok(JobKind::Uniformity),
+            _ => Err(format!(
+                "unknown job '{text}': calibrate, verify or uniformity"
+            )),
+        }
+    }
+}
+
+/// The last reading of a running job.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LastReading {
+    pub index: usize,
+    pub role: Role,
+    pub luminance: Option<f64>,
+    /// CIE 1931 x, y.
+    pub xy: Option<[f64; 2]>,
+    /// ΔE00 between the reading and the current profile's prediction for it: how far
+    /// the screen is from its profile now.
+    pub delta_e00: Option<f64>,
+}
+
+/// A running job.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JobStatus {
+    pub id: String,
+    pub kind: JobKind,
+    /// Who started it: `api`, `schedule`, `escalation`, `resume`.
+    pub origin: String,
+    /// RFC 3339.
+    pub started: String,
+    /// `starting`, `warming up`, `measuring`, `fitting`.
+    pub phase: String,
+    /// Readings in the job's journal, and how many it plans.
+    pub done: usize,
+    pub total: usize,
+    /// Seconds left, from the pace of this job's readings so far.
+    pub eta_s: Option<f64>,
+    pub last: Option<LastReading>,
+}
+
+/// How a job ended.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JobOutcome {
+    /// `ok`, `failed`, `cancelled` (by request; not resumed) or `interrupted` (by
+    /// shutdown; resumed at the next start).
+    pub result: String,
+    pub message: String,
+    /// The profile a calibration or uniformity job made.
+    pub profile_id: Option<String>,
+    /// That profile became current.
+    pub published: bool,
+    /// A verification past its threshold started a calibration.
+    pub escalated: bool,
+}
+
+/// One event on `GET /events` (the SSE event name is `event`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum Event {
+    JobStarted {
+        job: JobStatus,
+    },
+    Warmup {
+        job_id: String,
+        step: WarmupStep,
+    },
+    Progress {
+        job: JobStatus,
+    },
+    JobFinished {
+        job: JobStatus,
+        outcome: JobOutcome,
+    },
+    Published {
+        profile_id: String,
+        how: String,
+        held_out: Option<ErrorStats>,
+    },
+    Verification {
+        record: VerificationRecord,
+    },
+    RolledBack {
+        entry: HistoryEntry,
+    },
+    ShuttingDown,
+}
+
+impl Event {
+    /// The SSE event name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Event::JobStarted { .. } => "job_started",
+            Event::Warmup { .. } => "warmup",
+            Event::Progress { .. } => "progress",
+            Event::JobFinished { .. } => "job_finished",
+            Event::Published { .. } => "published",
+            Event::Verification { .. } => "verification",
+            Event::RolledBack { .. } => "rolled_back",
+            Event::ShuttingDown => "shutting_down",
+        }
+    }
+}

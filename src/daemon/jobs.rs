@@ -1,0 +1,623 @@
+//! What the daemon's jobs do, on the devices it holds: calibrate (or resume a
+//! calibration), verify the current profile, measure the uniformity grid again; the
+//! warm-up wait before each; and the scheduler that starts verifications.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant, SystemTime};
+
+use super::Daemon;
+use super::events::{Event, JobKind, JobOutcome, LastReading};
+use crate::calibrate::devices::{Devices, open_devices};
+use crate::calibrate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalHeader};
+use crate::calibrate::plan::{Plan, make_uniformity_plan, make_verification_plan};
+use crate::calibrate::run::{Progress, RunError, RunHooks, RunOptions, run_plan};
+use crate::calibrate::session::{
+    CalibrateError, discard_run, finish_run, new_run_id, now_rfc3339, reopen_run, start_run,
+};
+use crate::calibrate::warmup::wait_for_warmup;
+use crate::color::spaces::xyz_to_xyy;
+use crate::fit::primaries::Corrected;
+use crate::fit::spatial::choose_spatial_map;
+use crate::fit::stats::ErrorStats;
+use crate::fit::validate::{delta_e00_xyz, evaluate};
+use crate::display::PatchDisplay;
+use crate::instrument::{Instrument, ReadingStatus};
+use crate::measurement::{Role, Units};
+use crate::model::{MonitorModel, ScreenPosition};
+use crate::profile::store::VerificationRecord;
+use crate::profile::{Profile, Provenance, SCHEMA_VERSION};
+
+/// A job id: the kind and a run id.
+pub fn new_job_id(kind: JobKind) -> String {
+    format!("{}-{}", kind.name(), new_run_id())
+}
+
+/// Why a job failed; the message is what the API reports.
+struct JobFailure {
+    message: String,
+    /// The devices should be opened again before the next job.
+    devices_suspect: bool,
+    /// Stopped on request rather than failed.
+    stopped: bool,
+}
+
+impl From<CalibrateError> for JobFailure {
+    fn from(e: CalibrateError) -> Self {
+        let stopped = matches!(
+            &e,
+            CalibrateError::Run {
+                source: RunError::Stopped { .. },
+                ..
+            }
+        );
+        let devices_suspect = matches!(
+            &e,
+            CalibrateError::Run {
+                source: RunError::Display(_) | RunError::Instrument { .. },
+                ..
+            } | CalibrateError::Devices(_)
+        );
+        let message = match &e {
+            // The journal's whereabouts and `--resume` are for the command line; the
+            // daemon resumes by itself.
+            CalibrateError::Run { source, .. } => source.to_string(),
+            other => other.to_string(),
+        };
+        JobFailure {
+            message,
+            devices_suspect,
+            stopped,
+        }
+    }
+}
+
+impl From<String> for JobFailure {
+    fn from(message: String) -> Self {
+        JobFailure {
+            message,
+            devices_suspect: false,
+            stopped: false,
+        }
+    }
+}
+
+/// What a job made.
+#[derive(Default)]
+struct JobSuccess {
+    message: String,
+    profile_id: Option<String>,
+    published: bool,
+    escalated: bool,
+}
+
+/// Run one job to its end and say how it ended.
+pub(crate) async fn run_job(
+    daemon: &Arc<Daemon>,
+    kind: JobKind,
+    id: &str,
+    resume: Option<PathBuf>,
+    cancel: &Arc<AtomicBool>,
+) -> JobOutcome {
+    let mut guard = daemon.devices.lock().await;
+    let result = match ensure_devices(daemon, &mut guard).await {
+        Err(message) => Err(JobFailure {
+            message,
+            devices_suspect: true,
+            stopped: false,
+        }),
+        Ok(devices) => {
+            let stop = {
+                let daemon = daemon.clone();
+                let cancel = cancel.clone();
+                move || cancel.load(Ordering::SeqCst) || daemon.is_shutting_down()
+            };
+            match warm_up(daemon, id, devices, &stop).await {
+                Err(message) => Err(JobFailure {
+                    message,
+                    devices_suspect: true,
+                    stopped: false,
+                }),
+                Ok(()) => match kind {
+                    JobKind::Calibrate => calibrate(daemon, id, devices, resume, &stop).await,
+                    JobKind::Verify => verify(daemon, id, devices, &stop).await,
+                    JobKind::Uniformity => uniformity(daemon, id, devices, &stop).await,
+                },
+            }
+        }
+    };
+    match result {
+        Ok(success) => JobOutcome {
+            result: "ok".into(),
+            message: success.message,
+            profile_id: success.profile_id,
+            published: success.published,
+            escalated: success.escalated,
+        },
+        Err(failure) => {
+            if failure.devices_suspect
+                && let Some(devices) = guard.take()
+            {
+                devices.instrument.close();
+            }
+            let cancelled = cancel.load(Ordering::SeqCst);
+            let result = match (failure.stopped, cancelled) {
+                (true, true) => "cancelled",
+                (true, false) => "interrupted",
+                (false, _) => "failed",
+            };
+            let message = match result {
+                "interrupted" if kind == JobKind::Calibrate => format!(
+                    "{}; the calibration resumes when the daemon starts again",
+                    failure.message
+                ),
+                _ => failure.message,
+            };
+            JobOutcome {
+                result: result.into(),
+                message,
+                profile_id: None,
+                published: false,
+                escalated: false,
+            }
+        }
+    }
+}
+
+/// The held devices, opened now if they are not open.
+async fn ensure_devices<'a>(
+    daemon: &Daemon,
+    slot: &'a mut Option<Devices>,
+) -> Result<&'a mut Devices, String> {
+    if slot.is_none() {
+        let config = &daemon.loaded.config;
+        let devices = open_devices(
+            config,
+            &daemon.loaded.base_dir,
+            Some(config.daemon.simulated_time_scale),
+        )
+        .await
+        .map_err(|e| format!("cannot open the devices: {e}"))?;
+        tracing::info!(display = %devices.display.name(), instrument = %devices.instrument.info().name, "devices open");
+        *slot = Some(devices);
+    }
+    slot.as_mut()
+        .ok_or_else(|| "the devices are not open".to_string())
+}
+
+/// Wait for warm-up if the config asks for it.
+async fn warm_up(
+    daemon: &Arc<Daemon>,
+    id: &str,
+    devices: &mut Devices,
+    stop: &(dyn Fn() -> bool + Send + Sync),
+) -> Result<(), String> {
+    let config = &daemon.loaded.config;
+    if !config.warmup.enabled {
+        return Ok(());
+    }
+    daemon.update_job(|j| j.phase = "warming up".into());
+    let clock = devices.clock.clone();
+    let virtual_clock = devices.virtual_clock.clone();
+    let now = move || clock.now();
+    let wait = |s: f64| {
+        let virtual_clock = virtual_clock.clone();
+        async move {
+            match virtual_clock {
+                Some(c) => c.wait(s).await,
+                None => tokio::time::sleep(Duration::from_secs_f64(s.max(0.0))).await,
+            }
+        }
+    };
+    let job_id = id.to_string();
+    let mut on_step = |step: &crate::calibrate::warmup::WarmupStep| {
+        daemon.emit(Event::Warmup {
+            job_id: job_id.clone(),
+            step: *step,
+        });
+    };
+    let outcome = wait_for_warmup(
+        &config.warmup,
+        config.plan.bit_depth,
+        &mut devices.display,
+        &mut devices.instrument,
+        &now,
+        wait,
+        &mut on_step,
+        stop,
+    )
+    .await?;
+    tracing::info!(
+        readings = outcome.steps.len(),
+        settled = outcome.settled,
+        "warm-up done"
+    );
+    Ok(())
+}
+
+/// The current profile, if there is one that reads.
+fn current_profile(daemon: &Daemon) -> Option<Profile> {
+    let path = daemon.store.current_path();
+    if !path.exists() {
+        return None;
+    }
+    match Profile::read(&path) {
+        Ok(p) => Some(p),
+        Err(e) => {
+            tracing::warn!(error = %e, "the current profile does not read");
+            None
+        }
+    }
+}
+
+/// A progress handler that updates the job status (with an ETA from this job's pace
+/// and the ΔE00 against the current profile) and tells subscribers.
+fn progress_handler<'a>(
+    daemon: &'a Arc<Daemon>,
+    current: Option<&'a MonitorModel>,
+) -> impl FnMut(&Progress) + Send + 'a {
+    let started = Instant::now();
+    let mut measured_here = 0usize;
+    move |p: &Progress| {
+        measured_here += 1;
+        let per_patch = started.elapsed().as_secs_f64() / measured_here as f64;
+        let delta_e00 = match (current, p.xyz) {
+            (Some(model), Some(xyz)) if p.status == ReadingStatus::Ok => {
+                let predicted = model.forward(p.drive, p.position);
+                Some(delta_e00_xyz(&xyz, &predicted, &model.white()))
+            }
+            _ => None,
+        };
+        let last = LastReading {
+            index: p.index,
+            role: p.role,
+            luminance: p.luminance,
+            xy: p.xyz.map(|x| {
+                let v = xyz_to_xyy(&x, [0.3127, 0.3290]);
+                [v.x, v.y]
+            }),
+            delta_e00,
+        };
+        if let Some(job) = daemon.update_job(|j| {
+            j.phase = "measuring".into();
+            j.done = p.done;
+            j.total = p.total;
+            j.eta_s = Some(per_patch * p.total.saturating_sub(p.done) as f64);
+            j.last = Some(last);
+        }) {
+            daemon.emit(Event::Progress { job });
+        }
+    }
+}
+
+async fn calibrate(
+    daemon: &Arc<Daemon>,
+    _id: &str,
+    devices: &mut Devices,
+    resume: Option<PathBuf>,
+    stop: &(dyn Fn() -> bool + Send + Sync),
+) -> Result<JobSuccess, JobFailure> {
+    let store = &daemon.store;
+    let run = match &resume {
+        Some(dir) => reopen_run(dir)?,
+        None => start_run(
+            store,
+            &daemon.loaded.config,
+            &daemon.loaded.base_dir,
+            devices.display.name(),
+            devices.instrument.info(),
+        )?,
+    };
+    let already = run.journal.entries().len();
+    let run_dir = run.journal.path().parent().map(PathBuf::from);
+    let current = current_profile(daemon);
+    let mut progress = progress_handler(daemon, current.as_ref().map(|p| &p.model));
+    let mut hooks = RunHooks {
+        progress: &mut progress,
+        prompt: None,
+        stop: Some(stop),
+    };
+    daemon.update_job(|j| {
+        j.phase = "measuring".into();
+        j.done = already;
+    });
+    match finish_run(run, devices, store, &mut hooks).await {
+        Ok(outcome) => {
+            let published = outcome.rejection.is_none();
+            if published {
+                daemon.emit(Event::Published {
+                    profile_id: outcome.run_id.clone(),
+                    how: "calibration".into(),
+                    held_out: outcome.fitted.report.held_out,
+                });
+            }
+            Ok(JobSuccess {
+                message: match &outcome.rejection {
+                    None => format!(
+                        "published {} ({} patches, {} measured now)",
+                        outcome.run_id,
+                        outcome.plan.patches.len(),
+                        outcome.run.measured_now
+                    ),
+                    Some(why) => format!("kept {} but not published: {why}", outcome.run_id),
+                },
+                profile_id: Some(outcome.run_id),
+                published,
+                escalated: false,
+            })
+        }
+        Err(e) => {
+            let failure = JobFailure::from(e);
+            // A cancelled run is given up; one stopped by shutdown resumes at start.
+            if failure.stopped
+                && !daemon.is_shutting_down()
+                && let Some(dir) = &run_dir
+            {
+                let _ = discard_run(dir);
+            }
+            Err(failure)
+        }
+    }
+}
+
+/// Measure `plan` into a fresh journal under `<state>/<folder>/<id>/`.
+async fn measure_plan(
+    daemon: &Arc<Daemon>,
+    id: &str,
+    folder: &str,
+    plan: Plan,
+    devices: &mut Devices,
+    current: &MonitorModel,
+    stop: &(dyn Fn() -> bool + Send + Sync),
+) -> Result<Journal, JobFailure> {
+    let config = &daemon.loaded.config;
+    let header = JournalHeader {
+        format: JOURNAL_FORMAT.into(),
+        version: JOURNAL_VERSION,
+        run_id: id.to_string(),
+        started: now_rfc3339(),
+        config_digest: daemon.loaded.digest(),
+        config: daemon.loaded.text.clone(),
+        config_dir: daemon.loaded.base_dir.clone(),
+        display: devices.display.name(),
+        instrument: devices.instrument.info(),
+        units: Units::Absolute,
+        plan,
+    };
+    let path = daemon
+        .store
+        .root()
+        .join(folder)
+        .join(id)
+        .join("journal.jsonl");
+    let mut journal = Journal::create(&path, header).map_err(|e| e.to_string())?;
+    let mut progress = progress_handler(daemon, Some(current));
+    let mut hooks = RunHooks {
+        progress: &mut progress,
+        prompt: None,
+        stop: Some(stop),
+    };
+    let options = RunOptions {
+        stability: config.display.stability,
+        ..RunOptions::default()
+    };
+    run_plan(
+        &mut journal,
+        &mut devices.display,
+        &mut devices.instrument,
+        devices.clock.as_ref(),
+        &options,
+        &mut hooks,
+    )
+    .await
+    .map_err(|source| {
+        JobFailure::from(CalibrateError::Run {
+            source,
+            journal: path.clone(),
+        })
+    })?;
+    Ok(journal)
+}
+
+async fn verify(
+    daemon: &Arc<Daemon>,
+    id: &str,
+    devices: &mut Devices,
+    stop: &(dyn Fn() -> bool + Send + Sync),
+) -> Result<JobSuccess, JobFailure> {
+    let config = &daemon.loaded.config;
+    let profile = current_profile(daemon)
+        .ok_or_else(|| "there is no current profile to verify: calibrate first".to_string())?;
+    let plan = make_verification_plan(&config.plan, config.schedule.verify_patches)
+        .map_err(|e| e.to_string())?;
+    let journal = measure_plan(
+        daemon,
+        id,
+        "verifications",
+        plan,
+        devices,
+        &profile.model,
+        stop,
+    )
+    .await?;
+    let usable: Vec<_> = journal
+        .entries()
+        .iter()
+        .filter(|m| m.reading.status == ReadingStatus::Ok)
+        .filter_map(|m| m.reading.xyz.map(|xyz| (m, xyz)))
+        .collect();
+    let evaluation = evaluate(&profile.model, usable);
+    let threshold = config.schedule.threshold_de00;
+    let past = evaluation.stats.is_some_and(|s| s.mean > threshold);
+    let record = VerificationRecord {
+        at: now_rfc3339(),
+        profile_id: profile.id.clone(),
+        stats: evaluation.stats,
+        delta_e00: evaluation.patches.iter().map(|p| p.delta_e00).collect(),
+        threshold,
+        escalated: past && config.schedule.escalate,
+    };
+    daemon
+        .store
+        .append_verification(&record)
+        .map_err(|e| e.to_string())?;
+    daemon.emit(Event::Verification {
+        record: record.clone(),
+    });
+    let mean = record.stats.map_or(f64::NAN, |s| s.mean);
+    Ok(JobSuccess {
+        message: format!(
+            "profile {}: mean ΔE00 {mean:.3} over {} patches (threshold {threshold}){}",
+            profile.id,
+            record.delta_e00.len(),
+            if record.escalated {
+                "; recalibrating"
+            } else if past {
+                "; past the threshold (schedule.escalate is off)"
+            } else {
+                ""
+            }
+        ),
+        profile_id: None,
+        published: false,
+        escalated: record.escalated,
+    })
+}
+
+/// Measure the uniformity grid again and give the current profile a new spatial map.
+/// The grid readings are divided by the centre white of their time (interpolated
+/// between the references around them), so the map carries no change of the whole
+/// screen since the calibration.
+async fn uniformity(
+    daemon: &Arc<Daemon>,
+    id: &str,
+    devices: &mut Devices,
+    stop: &(dyn Fn() -> bool + Send + Sync),
+) -> Result<JobSuccess, JobFailure> {
+    let config = &daemon.loaded.config;
+    let profile = current_profile(daemon).ok_or_else(|| {
+        "there is no current profile to give a spatial map: calibrate first".to_string()
+    })?;
+    let plan = make_uniformity_plan(&config.plan).map_err(|e| e.to_string())?;
+    let journal = measure_plan(
+        daemon,
+        id,
+        "uniformity",
+        plan,
+        devices,
+        &profile.model,
+        stop,
+    )
+    .await?;
+    daemon.update_job(|j| j.phase = "fitting".into());
+    let model = &profile.model;
+    let predicted_white = model.forward([1.0; 3], ScreenPosition::CENTRE);
+    // Ratio of measured to predicted centre white, at each reference's time.
+    let references: Vec<(f64, f64)> = journal
+        .entries()
+        .iter()
+        .filter(|m| m.role == Role::Reference && m.reading.status == ReadingStatus::Ok)
+        .filter_map(|m| Some((m.time_s?, m.reading.xyz?.y / predicted_white.y)))
+        .collect();
+    if references.is_empty() || !(predicted_white.y > 0.0) {
+        return Err("no usable reference white: the grid cannot be scaled".to_string().into());
+    }
+    let ratio_at = |t: Option<f64>| -> f64 {
+        let Some(t) = t else {
+            return references.iter().map(|r| r.1).sum::<f64>() / references.len() as f64;
+        };
+        let after = references.iter().position(|r| r.0 >= t);
+        match after {
+            Some(0) => references[0].1,
+            None => references[references.len() - 1].1,
+            Some(i) => {
+                let (a, b) = (references[i - 1], references[i]);
+                let w = if b.0 > a.0 { (t - a.0) / (b.0 - a.0) } else { 0.5 };
+                a.1 + w * (b.1 - a.1)
+            }
+        }
+    };
+    let grid: Vec<Corrected<'_>> = journal
+        .entries()
+        .iter()
+        .filter(|m| m.role == Role::Uniformity && m.reading.status == ReadingStatus::Ok)
+        .filter_map(|m| {
+            let xyz = m.reading.xyz?;
+            Some(Corrected {
+                measurement: m,
+                xyz: xyz / ratio_at(m.time_s),
+            })
+        })
+        .collect();
+    let (map, report) = choose_spatial_map(model, &grid, &profile.report.noise);
+    let chosen: Option<ErrorStats> = report
+        .candidates
+        .iter()
+        .find(|c| c.chosen)
+        .and_then(|c| c.cross_validation);
+    let new_id = format!("{}-uniformity", new_run_id());
+    let mut updated = profile.clone();
+    updated.id = new_id.clone();
+    updated.created = now_rfc3339();
+    updated.model.spatial = map;
+    updated.report.spatial = report;
+    updated.provenance = Provenance {
+        source: journal.path().display().to_string(),
+        program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
+        ..profile.provenance.clone()
+    };
+    updated.schema_version = SCHEMA_VERSION;
+    let text = updated.to_toml().map_err(|e| e.to_string())?;
+    let limits = &config.publish;
+    let passes = chosen.is_some_and(|s| s.mean <= limits.max_mean_de00 && s.p95 <= limits.max_p95_de00);
+    let store_error = |e: std::io::Error| format!("profile store: {e}");
+    if passes {
+        daemon
+            .store
+            .publish(&new_id, &text, profile.report.held_out.as_ref(), "uniformity")
+            .map_err(store_error)?;
+        daemon.emit(Event::Published {
+            profile_id: new_id.clone(),
+            how: "uniformity".into(),
+            held_out: profile.report.held_out,
+        });
+    } else {
+        daemon.store.keep(&new_id, &text).map_err(store_error)?;
+    }
+    let cv = chosen.map_or("no score".to_string(), |s| {
+        format!("leave-one-position-out mean ΔE00 {:.3}", s.mean)
+    });
+    Ok(JobSuccess {
+        message: if passes {
+            format!("published {new_id}: a new spatial map ({cv})")
+        } else {
+            format!("kept {new_id} but not published: the new map's {cv} misses the [publish] limits")
+        },
+        profile_id: Some(new_id),
+        published: passes,
+        escalated: false,
+    })
+}
+
+/// Start a verification every `schedule.verify_every_s`, skipping a turn while a job
+/// runs.
+pub(crate) async fn scheduler(daemon: Arc<Daemon>) {
+    let Some(every) = daemon.loaded.config.schedule.verify_every_s else {
+        return;
+    };
+    let every = Duration::from_secs_f64(every);
+    loop {
+        if let Ok(mut next) = daemon.next_verification.lock() {
+            *next = Some(SystemTime::now() + every);
+        }
+        tokio::time::sleep(every).await;
+        if daemon.is_shutting_down() {
+            return;
+        }
+        match daemon.start_job(JobKind::Verify, "schedule", None) {
+            Ok(_) => {}
+            Err(e) => tracing::info!(reason = %e, "scheduled verification skipped"),
+        }
+    }
+}

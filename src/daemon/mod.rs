@@ -1,0 +1,578 @@
+//! `chromacal daemon`: a service that holds the instrument and the patch display, runs
+//! one job at a time (calibrate, verify, uniformity), verifies on a schedule and
+//! recalibrates when the screen has moved, and answers a control API while it works.
+//!
+//! * `api.rs`: the HTTP control API (unix socket, optionally loopback TCP with a token).
+//! * `jobs.rs`: what each job does, on the held devices.
+//! * `events.rs`: the events subscribers hear and the job status.
+//! * `client.rs`: the client the `chromacal status`/`job`/… commands use.
+//! * `notify.rs`: systemd's readiness and watchdog notifications.
+//!
+//! A job's readings go to a journal as they are taken (see `calibrate::run`), so a
+//! daemon stopped any way (SIGTERM, a crash, a power cut) resumes the calibration at its
+//! next start with nothing lost or measured twice.
+
+pub mod api;
+pub mod client;
+pub mod events;
+pub mod jobs;
+pub mod notify;
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+use tokio::sync::broadcast;
+
+use crate::calibrate::devices::Devices;
+use crate::calibrate::session::{discard_run, unfinished_run};
+use crate::config::LoadedConfig;
+use crate::profile::store::ProfileStore;
+use events::{Event, JobKind, JobStatus};
+
+/// What to do at start with a calibration a stop cut short.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum OnStart {
+    /// Go on measuring where it stopped.
+    #[default]
+    Resume,
+    /// Give it up (its journal is kept, marked discarded).
+    Discard,
+}
+
+/// `[daemon]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DaemonConfig {
+    /// The API's unix socket [default: `$RUNTIME_DIRECTORY/api.sock` under systemd,
+    /// else `<state>/api.sock`]. Created with mode 0600.
+    pub socket: Option<PathBuf>,
+    /// Also serve the API on this TCP address (loopback; a bearer token is required).
+    pub tcp: Option<String>,
+    /// Let `tcp` be an address other machines can reach (warned about at start).
+    pub allow_remote: bool,
+    /// The bearer token for TCP clients [default: `<state>/api.token`, made at first
+    /// start with mode 0600].
+    pub token_file: Option<PathBuf>,
+    pub on_start: OnStart,
+    /// Seconds SIGTERM waits for the reading under way before the daemon exits.
+    pub stop_timeout_s: f64,
+    /// Real seconds per simulated second, for the simulated monitor and instrument.
+    pub simulated_time_scale: f64,
+    /// Profiles kept in the history (at least 2).
+    pub keep_profiles: usize,
+    /// Largest request body, bytes.
+    pub max_body_bytes: usize,
+    /// Sustained requests per second, and the burst above it.
+    pub requests_per_s: f64,
+    pub burst: usize,
+    /// Event streams open at once.
+    pub max_event_streams: usize,
+}
+
+impl Default for DaemonConfig {
+    fn default() -> Self {
+        DaemonConfig {
+            socket: None,
+            tcp: None,
+            allow_remote: false,
+            token_file: None,
+            on_start: OnStart::Resume,
+            stop_timeout_s: 20.0,
+            simulated_time_scale: 1.0,
+            keep_profiles: crate::profile::store::DEFAULT_KEEP,
+            max_body_bytes: 64 * 1024,
+            requests_per_s: 50.0,
+            burst: 200,
+            max_event_streams: 32,
+        }
+    }
+}
+
+impl DaemonConfig {
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.stop_timeout_s >= 0.0 && self.simulated_time_scale > 0.0) {
+            return Err(
+                "daemon: stop_timeout_s must not be negative and simulated_time_scale must be positive"
+                    .into(),
+            );
+        }
+        if !(self.requests_per_s > 0.0) || self.burst == 0 || self.max_event_streams == 0 {
+            return Err(
+                "daemon: requests_per_s, burst and max_event_streams must be positive".into(),
+            );
+        }
+        if let Some(address) = &self.tcp {
+            let addr: SocketAddr = address
+                .parse()
+                .map_err(|_| format!("daemon.tcp = \"{address}\" is not an IP address and port"))?;
+            if !addr.ip().is_loopback() && !self.allow_remote {
+                return Err(format!(
+                    "daemon.tcp = \"{address}\" can be reached from other machines: set daemon.allow_remote = true if that is meant"
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `[schedule]`: verification on a timer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScheduleConfig {
+    /// Seconds between verifications (none: only on request).
+    pub verify_every_s: Option<f64>,
+    /// Patches a verification measures (at least 5).
+    pub verify_patches: usize,
+    /// Mean ΔE00 past which a verification starts a recalibration.
+    pub threshold_de00: f64,
+    /// Start the recalibration (false: only record and report).
+    pub escalate: bool,
+}
+
+impl Default for ScheduleConfig {
+    fn default() -> Self {
+        ScheduleConfig {
+            verify_every_s: None,
+            verify_patches: 8,
+            threshold_de00: 1.0,
+            escalate: true,
+        }
+    }
+}
+
+impl ScheduleConfig {
+    pub fn check(&self) -> Result<(), String> {
+        if self.verify_every_s.is_some_and(|s| !(s > 0.0)) {
+            return Err("schedule.verify_every_s must be positive".into());
+        }
+        if self.verify_patches < 5 {
+            return Err("schedule.verify_patches must be at least 5".into());
+        }
+        if !(self.threshold_de00 > 0.0) {
+            return Err("schedule.threshold_de00 must be positive".into());
+        }
+        Ok(())
+    }
+}
+
+/// Why the daemon could not start or run.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{0}")]
+    Config(String),
+    #[error("another daemon already answers on {0}")]
+    AlreadyRunning(PathBuf),
+}
+
+/// Where the API socket is by default.
+pub fn default_socket(state_dir: &Path) -> PathBuf {
+    match std::env::var_os("RUNTIME_DIRECTORY").filter(|d| !d.is_empty()) {
+        // systemd may give several directories, separated by ':'.
+        Some(dirs) => {
+            let dirs = dirs.to_string_lossy().into_owned();
+            PathBuf::from(dirs.split(':').next().unwrap_or(&dirs)).join("api.sock")
+        }
+        None => state_dir.join("api.sock"),
+    }
+}
+
+/// A job slot: the running job's status and its cancel flag.
+struct RunningJob {
+    status: JobStatus,
+    cancel: Arc<AtomicBool>,
+}
+
+/// The daemon's state, shared by the API, the scheduler and the job.
+pub struct Daemon {
+    pub(crate) loaded: LoadedConfig,
+    pub(crate) store: ProfileStore,
+    /// Opened at the first job, kept between jobs, reopened after a device failure.
+    pub(crate) devices: tokio::sync::Mutex<Option<Devices>>,
+    job: Mutex<Option<RunningJob>>,
+    last_outcome: Mutex<Option<(JobStatus, events::JobOutcome)>>,
+    pub(crate) events: broadcast::Sender<Event>,
+    shutting_down: AtomicBool,
+    /// Told when the running job ends.
+    job_done: tokio::sync::Notify,
+    started: Instant,
+    next_verification: Mutex<Option<std::time::SystemTime>>,
+}
+
+/// Why a job was not started.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum JobRefused {
+    #[error("a {kind} job ({id}) is running; one job runs at a time")]
+    Busy { kind: &'static str, id: String },
+    #[error("the daemon is shutting down")]
+    ShuttingDown,
+}
+
+impl Daemon {
+    pub fn new(loaded: LoadedConfig, store: ProfileStore) -> Arc<Self> {
+        let (events, _) = broadcast::channel(256);
+        Arc::new(Daemon {
+            loaded,
+            store,
+            devices: tokio::sync::Mutex::new(None),
+            job: Mutex::new(None),
+            last_outcome: Mutex::new(None),
+            events,
+            shutting_down: AtomicBool::new(false),
+            job_done: tokio::sync::Notify::new(),
+            started: Instant::now(),
+            next_verification: Mutex::new(None),
+        })
+    }
+
+    pub fn store(&self) -> &ProfileStore {
+        &self.store
+    }
+
+    pub(crate) fn emit(&self, event: Event) {
+        tracing::debug!(event = event.name(), "event");
+        let _ = self.events.send(event);
+    }
+
+    pub fn is_shutting_down(&self) -> bool {
+        self.shutting_down.load(Ordering::SeqCst)
+    }
+
+    /// The running job's status.
+    pub fn job(&self) -> Option<JobStatus> {
+        self.job
+            .lock()
+            .ok()
+            .and_then(|j| j.as_ref().map(|r| r.status.clone()))
+    }
+
+    pub(crate) fn update_job(&self, update: impl FnOnce(&mut JobStatus)) -> Option<JobStatus> {
+        let mut slot = self.job.lock().ok()?;
+        let running = slot.as_mut()?;
+        update(&mut running.status);
+        Some(running.status.clone())
+    }
+
+    pub fn last_outcome(&self) -> Option<(JobStatus, events::JobOutcome)> {
+        self.last_outcome.lock().ok().and_then(|o| o.clone())
+    }
+
+    pub fn uptime_s(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+
+    pub fn next_verification(&self) -> Option<std::time::SystemTime> {
+        self.next_verification.lock().ok().and_then(|n| *n)
+    }
+
+    /// Start a job unless one runs. `resume` names an unfinished calibration run.
+    pub fn start_job(
+        self: &Arc<Self>,
+        kind: JobKind,
+        origin: &str,
+        resume: Option<PathBuf>,
+    ) -> Result<JobStatus, JobRefused> {
+        if self.is_shutting_down() {
+            return Err(JobRefused::ShuttingDown);
+        }
+        let mut slot = self.job.lock().map_err(|_| JobRefused::ShuttingDown)?;
+        if let Some(running) = slot.as_ref() {
+            return Err(JobRefused::Busy {
+                kind: running.status.kind.name(),
+                id: running.status.id.clone(),
+            });
+        }
+        let status = JobStatus {
+            id: jobs::new_job_id(kind),
+            kind,
+            origin: origin.to_string(),
+            started: humantime::format_rfc3339_seconds(std::time::SystemTime::now())
+                .to_string(),
+            phase: "starting".into(),
+            done: 0,
+            total: 0,
+            eta_s: None,
+            last: None,
+        };
+        let cancel = Arc::new(AtomicBool::new(false));
+        *slot = Some(RunningJob {
+            status: status.clone(),
+            cancel: cancel.clone(),
+        });
+        drop(slot);
+        tracing::info!(job = %status.id, kind = kind.name(), origin, "job started");
+        self.emit(Event::JobStarted {
+            job: status.clone(),
+        });
+        let daemon = self.clone();
+        let id = status.id.clone();
+        tokio::spawn(async move {
+            let outcome = jobs::run_job(&daemon, kind, &id, resume, &cancel).await;
+            let finished = daemon.job.lock().ok().and_then(|mut s| s.take());
+            let status = finished.map(|r| r.status);
+            if let Some(status) = &status {
+                tracing::info!(
+                    job = %status.id,
+                    result = %outcome.result,
+                    message = %outcome.message,
+                    "job finished"
+                );
+                if let Ok(mut last) = daemon.last_outcome.lock() {
+                    *last = Some((status.clone(), outcome.clone()));
+                }
+                daemon.emit(Event::JobFinished {
+                    job: status.clone(),
+                    outcome: outcome.clone(),
+                });
+            }
+            daemon.job_done.notify_waiters();
+            if outcome.escalated
+                && let Err(e) = daemon.start_job(JobKind::Calibrate, "escalation", None)
+            {
+                tracing::warn!(error = %e, "the verification asked for a recalibration that could not start");
+            }
+        });
+        Ok(status)
+    }
+
+    /// Ask the running job to stop after the reading under way. Its run is given up.
+    pub fn cancel_job(&self) -> Option<JobStatus> {
+        let slot = self.job.lock().ok()?;
+        let running = slot.as_ref()?;
+        running.cancel.store(true, Ordering::SeqCst);
+        Some(running.status.clone())
+    }
+
+    /// Wait until no job runs, at most `timeout`. True if none runs.
+    pub async fn wait_idle(&self, timeout: Duration) -> bool {
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            let notified = self.job_done.notified();
+            if self.job().is_none() {
+                return true;
+            }
+            if tokio::time::timeout_at(deadline, notified).await.is_err() {
+                return self.job().is_none();
+            }
+        }
+    }
+
+    /// Stop taking jobs and ask the running one to stop after its reading.
+    pub fn begin_shutdown(&self) {
+        self.shutting_down.store(true, Ordering::SeqCst);
+        self.emit(Event::ShuttingDown);
+    }
+}
+
+/// Options from the command line.
+#[derive(Debug, Clone)]
+pub struct DaemonOptions {
+    pub state_dir: PathBuf,
+    pub socket: Option<PathBuf>,
+    pub tcp: Option<String>,
+}
+
+/// Bind the unix socket at `path` with mode 0600, replacing a stale one.
+fn bind_socket(path: &Path) -> Result<tokio::net::UnixListener, DaemonError> {
+    use std::os::unix::fs::PermissionsExt;
+    let io = |source| DaemonError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+        && !dir.exists()
+    {
+        std::fs::create_dir_all(dir).map_err(io)?;
+        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700)).map_err(io)?;
+    }
+    if path.exists() {
+        if std::os::unix::net::UnixStream::connect(path).is_ok() {
+            return Err(DaemonError::AlreadyRunning(path.to_path_buf()));
+        }
+        std::fs::remove_file(path).map_err(io)?;
+    }
+    let listener = tokio::net::UnixListener::bind(path).map_err(io)?;
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).map_err(io)?;
+    Ok(listener)
+}
+
+/// The bearer token for TCP clients: read it, or make one (mode 0600).
+fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
+    use rand::RngCore;
+    use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+    let io = |source| DaemonError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    match std::fs::read_to_string(path) {
+        Ok(text) if !text.trim().is_empty() => {
+            let mode = std::fs::metadata(path).map_err(io)?.permissions().mode();
+            if mode & 0o077 != 0 {
+                tracing::warn!(path = %path.display(), "the API token file can be read by others; chmod 600 it");
+            }
+            return Ok(text.trim().to_string());
+        }
+        Ok(_) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(io(e)),
+    }
+    let mut bytes = [0u8; 32];
+    rand::rng().fill_bytes(&mut bytes);
+    let token: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(io)?;
+    }
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .mode(0o600)
+        .open(path)
+        .map_err(io)?;
+    use std::io::Write;
+    file.write_all(format!("{token}\n").as_bytes())
+        .and_then(|()| file.sync_all())
+        .map_err(io)?;
+    Ok(token)
+}
+
+/// Run the daemon until SIGTERM or SIGINT.
+pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(), DaemonError> {
+    if let Some(socket) = &options.socket {
+        loaded.config.daemon.socket = Some(socket.clone());
+    }
+    if let Some(tcp) = &options.tcp {
+        loaded.config.daemon.tcp = Some(tcp.clone());
+    }
+    crate::config::check_config(&loaded.config).map_err(DaemonError::Config)?;
+    let config = loaded.config.daemon.clone();
+    std::fs::create_dir_all(&options.state_dir).map_err(|source| DaemonError::Io {
+        path: options.state_dir.clone(),
+        source,
+    })?;
+    let store = ProfileStore::new(&options.state_dir).keeping(config.keep_profiles);
+    let daemon = Daemon::new(loaded, store);
+
+    let socket_path = config
+        .socket
+        .clone()
+        .unwrap_or_else(|| default_socket(&options.state_dir));
+    let unix = bind_socket(&socket_path)?;
+    let owner = {
+        use std::os::unix::fs::MetadataExt;
+        std::fs::metadata(&socket_path)
+            .map_err(|source| DaemonError::Io {
+                path: socket_path.clone(),
+                source,
+            })?
+            .uid()
+    };
+    let token = match &config.tcp {
+        Some(_) => Some(load_or_create_token(
+            &config
+                .token_file
+                .clone()
+                .unwrap_or_else(|| options.state_dir.join("api.token")),
+        )?),
+        None => None,
+    };
+    let app = api::router(daemon.clone(), api::Access { owner, token });
+    tokio::spawn(api::serve_unix(unix, app.clone()));
+    if let Some(address) = &config.tcp {
+        let listener = tokio::net::TcpListener::bind(address)
+            .await
+            .map_err(|source| DaemonError::Io {
+                path: PathBuf::from(address),
+                source,
+            })?;
+        if let Ok(addr) = listener.local_addr() {
+            if !addr.ip().is_loopback() {
+                tracing::warn!(%addr, "the control API listens beyond this machine (daemon.allow_remote)");
+            }
+            tracing::info!(%addr, "control API on TCP (bearer token required)");
+        }
+        tokio::spawn(api::serve_tcp(listener, app));
+    }
+    tracing::info!(socket = %socket_path.display(), state = %options.state_dir.display(), "chromacal daemon ready");
+
+    // A calibration a stop cut short.
+    if let Some(dir) = unfinished_run(&daemon.store) {
+        match config.on_start {
+            OnStart::Resume => {
+                tracing::info!(run = %dir.display(), "resuming the calibration a stop cut short");
+                if let Err(e) = daemon.start_job(JobKind::Calibrate, "resume", Some(dir)) {
+                    tracing::warn!(error = %e, "cannot resume");
+                }
+            }
+            OnStart::Discard => {
+                tracing::warn!(run = %dir.display(), "discarding the calibration a stop cut short (daemon.on_start = \"discard\")");
+                if let Err(e) = discard_run(&dir) {
+                    tracing::warn!(error = %e, "cannot mark the run discarded");
+                }
+            }
+        }
+    }
+    tokio::spawn(jobs::scheduler(daemon.clone()));
+    if let Some(interval) = notify::watchdog_interval() {
+        tokio::spawn(async move {
+            loop {
+                notify::notify("WATCHDOG=1");
+                tokio::time::sleep(interval / 2).await;
+            }
+        });
+    }
+    notify::notify("READY=1\nSTATUS=waiting for jobs");
+
+    wait_for_stop_signal().await;
+    tracing::info!("stopping: finishing the reading under way");
+    notify::notify("STOPPING=1\nSTATUS=stopping");
+    daemon.begin_shutdown();
+    let stopped = daemon
+        .wait_idle(Duration::from_secs_f64(config.stop_timeout_s))
+        .await;
+    if !stopped {
+        tracing::warn!(
+            timeout_s = config.stop_timeout_s,
+            "the job did not stop in time; exiting (its journal holds every reading taken)"
+        );
+    }
+    // Leave the screen black and the instrument out of remote mode.
+    if let Ok(mut devices) = daemon.devices.try_lock()
+        && let Some(devices) = devices.as_mut()
+    {
+        use crate::display::PatchDisplay;
+        let _ = tokio::time::timeout(Duration::from_secs(2), devices.display.blank()).await;
+        devices.instrument.close();
+    }
+    let _ = std::fs::remove_file(&socket_path);
+    tracing::info!("stopped");
+    Ok(())
+}
+
+/// SIGTERM (systemd's stop) or SIGINT (Ctrl-C).
+async fn wait_for_stop_signal() {
+    use tokio::signal::unix::{SignalKind, signal};
+    match (
+        signal(SignalKind::terminate()),
+        signal(SignalKind::interrupt()),
+    ) {
+        (Ok(mut term), Ok(mut int)) => {
+            tokio::select! {
+                _ = term.recv() => {}
+                _ = int.recv() => {}
+            }
+        }
+        _ => {
+            let _ = tokio::signal::ctrl_c().await;
+        }
+    }
+}

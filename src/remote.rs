@@ -1,0 +1,383 @@
+//! The commands that talk to a running daemon: `status`, `job start|watch|cancel`,
+//! `history`, `rollback`, `profile current`.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use bytes::Bytes;
+use chromacal::daemon::api::StatusReply;
+use chromacal::daemon::client::{Endpoint, Reply, follow_events, request};
+use chromacal::daemon::default_socket;
+use chromacal::daemon::events::{Event, JobKind, JobOutcome, JobStatus};
+use chromacal::profile::store::default_state_dir;
+
+/// How to reach the daemon.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ApiArgs {
+    /// The daemon's unix socket [default: as the daemon's: $RUNTIME_DIRECTORY/api.sock,
+    /// else <state>/api.sock].
+    #[arg(long, global = true)]
+    socket: Option<PathBuf>,
+    /// The daemon's state directory, to find its socket.
+    #[arg(long, global = true)]
+    state_dir: Option<PathBuf>,
+    /// Talk TCP to this address instead (the daemon's `daemon.tcp`).
+    #[arg(long, global = true, value_name = "ADDR")]
+    tcp: Option<String>,
+    /// The token file for TCP [default: <state>/api.token].
+    #[arg(long, global = true)]
+    token_file: Option<PathBuf>,
+}
+
+impl ApiArgs {
+    fn endpoint(&self) -> Result<Endpoint, String> {
+        let state = self.state_dir.clone().unwrap_or_else(default_state_dir);
+        match &self.tcp {
+            Some(address) => {
+                let path = self
+                    .token_file
+                    .clone()
+                    .unwrap_or_else(|| state.join("api.token"));
+                let token = std::fs::read_to_string(&path)
+                    .map_err(|e| format!("the API token {}: {e}", path.display()))?;
+                Ok(Endpoint::Tcp {
+                    address: address.clone(),
+                    token: token.trim().to_string(),
+                })
+            }
+            None => Ok(Endpoint::Unix(
+                self.socket.clone().unwrap_or_else(|| default_socket(&state)),
+            )),
+        }
+    }
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime, String> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| e.to_string())
+}
+
+/// A reply that must be 2xx, else its error as ours.
+fn expect_ok(reply: Reply) -> Result<Reply, String> {
+    if (200..300).contains(&reply.status) {
+        Ok(reply)
+    } else {
+        Err(format!(
+            "the daemon refused ({}): {}",
+            reply.status,
+            reply.error_message()
+        ))
+    }
+}
+
+async fn get(endpoint: &Endpoint, path: &str) -> Result<Reply, String> {
+    expect_ok(
+        request(endpoint, "GET", path, None)
+            .await
+            .map_err(|e| e.to_string())?,
+    )
+}
+
+async fn post(endpoint: &Endpoint, path: &str, body: serde_json::Value) -> Result<Reply, String> {
+    expect_ok(
+        request(endpoint, "POST", path, Some(Bytes::from(body.to_string())))
+            .await
+            .map_err(|e| e.to_string())?,
+    )
+}
+
+fn describe_job(job: &JobStatus) -> String {
+    let mut out = format!(
+        "{} ({}, started {} by {}): {}",
+        job.id, job.kind.name(), job.started, job.origin, job.phase
+    );
+    if job.total > 0 {
+        out += &format!(", {}/{} patches", job.done, job.total);
+    }
+    if let Some(eta) = job.eta_s {
+        out += &format!(", about {} left", chromacal::report::duration(eta));
+    }
+    if let Some(last) = &job.last
+        && let Some(de) = last.delta_e00
+    {
+        out += &format!(", last reading ΔE00 {de:.2} from the current profile");
+    }
+    out
+}
+
+fn describe_outcome(outcome: &JobOutcome) -> String {
+    format!("{}: {}", outcome.result, outcome.message)
+}
+
+pub fn status(api: &ApiArgs, json: bool) -> Result<(), String> {
+    let endpoint = api.endpoint()?;
+    runtime()?.block_on(async {
+        let reply = get(&endpoint, "/status").await?;
+        if json {
+            println!("{}", reply.text());
+            return Ok(());
+        }
+        let status: StatusReply = serde_json::from_slice(&reply.body)
+            .map_err(|e| format!("the daemon's status does not read: {e}"))?;
+        println!(
+            "chromacal daemon {} (pid {}), up {}, state {}{}",
+            status.version,
+            status.pid,
+            chromacal::report::duration(status.uptime_s),
+            status.state_dir,
+            if status.shutting_down { ", shutting down" } else { "" }
+        );
+        match &status.job {
+            Some(job) => println!("  job: {}", describe_job(job)),
+            None => println!("  job: none running"),
+        }
+        if let Some((job, outcome)) = &status.last_job {
+            println!("  last job: {} {}", job.id, describe_outcome(outcome));
+        }
+        match &status.current_profile {
+            Some(p) => println!(
+                "  current profile: {} (made {}{}) at {}",
+                p.id,
+                p.created,
+                p.held_out
+                    .map_or(String::new(), |h| format!(", held-out mean ΔE00 {:.3}", h.mean)),
+                p.path
+            ),
+            None => println!("  current profile: none yet"),
+        }
+        if let Some(next) = &status.next_verification {
+            println!("  next verification: {next}");
+        }
+        Ok(())
+    })
+}
+
+/// Follow the events of job `id` (or of whatever job runs, if `None`) to its end,
+/// with a progress bar. Events arrive through `events`.
+async fn watch_job(
+    mut events: tokio::sync::mpsc::UnboundedReceiver<Event>,
+    mut id: Option<String>,
+) -> Result<JobOutcome, String> {
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} {prefix} [{bar:40}] {pos}/{len}  {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    bar.enable_steady_tick(Duration::from_millis(200));
+    let ours = |job: &JobStatus, id: &mut Option<String>| match id {
+        Some(id) => job.id == *id,
+        None => {
+            *id = Some(job.id.clone());
+            true
+        }
+    };
+    while let Some(event) = events.recv().await {
+        match event {
+            Event::JobStarted { job } | Event::Progress { job } if ours(&job, &mut id) => {
+                bar.set_prefix(job.kind.name());
+                bar.set_length(job.total as u64);
+                bar.set_position(job.done as u64);
+                let mut message = job.phase.clone();
+                if let Some(last) = &job.last {
+                    if let Some(y) = last.luminance {
+                        message = format!("Y {y:.3} cd/m²");
+                    }
+                    if let Some(de) = last.delta_e00 {
+                        message += &format!("  ΔE00 {de:.2}");
+                    }
+                }
+                if let Some(eta) = job.eta_s {
+                    message += &format!("  ETA {}", chromacal::report::duration(eta));
+                }
+                bar.set_message(message);
+            }
+            Event::Warmup { job_id, step } if id.as_deref() == Some(job_id.as_str()) => {
+                bar.set_message(format!(
+                    "warming up: Y {:.3} cd/m², slope {}",
+                    step.luminance,
+                    step.slope_per_min
+                        .map_or("…".into(), |s| format!("{:+.4} %/min", s * 100.0))
+                ));
+            }
+            Event::Verification { record } => bar.println(format!(
+                "verification of {}: mean ΔE00 {:.3} (threshold {})",
+                record.profile_id,
+                record.stats.map_or(f64::NAN, |s| s.mean),
+                record.threshold
+            )),
+            Event::Published { profile_id, how, .. } => {
+                bar.println(format!("published {profile_id} ({how})"))
+            }
+            Event::JobFinished { job, outcome } if ours(&job, &mut id) => {
+                bar.finish_and_clear();
+                return Ok(outcome);
+            }
+            Event::ShuttingDown => {
+                bar.finish_and_clear();
+                return Err("the daemon is shutting down; the job resumes when it starts again".into());
+            }
+            _ => {}
+        }
+    }
+    bar.finish_and_clear();
+    Err("the daemon closed the event stream".into())
+}
+
+/// Open the event stream, forwarding parsed events to a channel.
+fn subscribe(endpoint: &Endpoint) -> tokio::sync::mpsc::UnboundedReceiver<Event> {
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    let endpoint = endpoint.clone();
+    tokio::spawn(async move {
+        let result = follow_events(&endpoint, |_, data| {
+            match serde_json::from_str::<Event>(data) {
+                Ok(event) => tx.send(event).is_ok(),
+                Err(_) => true, // an event this client does not know
+            }
+        })
+        .await;
+        match result {
+            Ok(Some(refused)) => eprintln!("chromacal: events refused: {}", refused.error_message()),
+            Err(e) => eprintln!("chromacal: {e}"),
+            Ok(None) => {}
+        }
+    });
+    rx
+}
+
+fn finish(outcome: JobOutcome) -> Result<(), String> {
+    println!("{}", describe_outcome(&outcome));
+    if outcome.result == "ok" {
+        Ok(())
+    } else {
+        Err(format!("the job ended {}", outcome.result))
+    }
+}
+
+pub fn job_start(api: &ApiArgs, kind: &str, watch: bool) -> Result<(), String> {
+    let kind = JobKind::parse(kind)?;
+    let endpoint = api.endpoint()?;
+    runtime()?.block_on(async {
+        // Subscribe first, so that no event of the new job is missed.
+        let events = watch.then(|| subscribe(&endpoint));
+        if events.is_some() {
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        let reply = post(&endpoint, "/jobs", serde_json::json!({ "kind": kind.name() })).await?;
+        let job: JobStatus = serde_json::from_slice(&reply.body)
+            .map_err(|e| format!("the daemon's answer does not read: {e}"))?;
+        match events {
+            None => {
+                println!("started {}", job.id);
+                Ok(())
+            }
+            Some(events) => finish(watch_job(events, Some(job.id)).await?),
+        }
+    })
+}
+
+pub fn job_watch(api: &ApiArgs) -> Result<(), String> {
+    let endpoint = api.endpoint()?;
+    runtime()?.block_on(async {
+        let events = subscribe(&endpoint);
+        let status: StatusReply = serde_json::from_slice(&get(&endpoint, "/status").await?.body)
+            .map_err(|e| format!("the daemon's status does not read: {e}"))?;
+        match status.job {
+            Some(job) => finish(watch_job(events, Some(job.id)).await?),
+            None => {
+                match status.last_job {
+                    Some((job, outcome)) => {
+                        println!("no job is running; the last, {}, ended {}", job.id, describe_outcome(&outcome))
+                    }
+                    None => println!("no job is running"),
+                }
+                Ok(())
+            }
+        }
+    })
+}
+
+pub fn job_cancel(api: &ApiArgs) -> Result<(), String> {
+    let endpoint = api.endpoint()?;
+    runtime()?.block_on(async {
+        let reply = post(&endpoint, "/jobs/cancel", serde_json::json!({})).await?;
+        let job: JobStatus = serde_json::from_slice(&reply.body)
+            .map_err(|e| format!("the daemon's answer does not read: {e}"))?;
+        println!("cancelling {} after the reading under way", job.id);
+        Ok(())
+    })
+}
+
+pub fn history(api: &ApiArgs, json: bool) -> Result<(), String> {
+    let endpoint = api.endpoint()?;
+    runtime()?.block_on(async {
+        let reply = get(&endpoint, "/history").await?;
+        if json {
+            println!("{}", reply.text());
+            return Ok(());
+        }
+        let value = reply.json()?;
+        let current = value["current"].as_str().unwrap_or("");
+        println!("profiles made current, oldest first:");
+        for p in value["profiles"].as_array().into_iter().flatten() {
+            let id = p["id"].as_str().unwrap_or("?");
+            println!(
+                "  {} {:<10} {}{}{}",
+                p["at"].as_str().unwrap_or("?"),
+                p["how"].as_str().unwrap_or("?"),
+                id,
+                p["held_out"]["mean"]
+                    .as_f64()
+                    .map_or(String::new(), |m| format!("  held-out mean ΔE00 {m:.3}")),
+                if id == current { "  ← current" } else { "" }
+            );
+        }
+        let verifications = value["verifications"].as_array().cloned().unwrap_or_default();
+        println!("verifications ({}):", verifications.len());
+        for v in verifications {
+            println!(
+                "  {} {}  mean ΔE00 {}  max {}{}",
+                v["at"].as_str().unwrap_or("?"),
+                v["profile_id"].as_str().unwrap_or("?"),
+                v["stats"]["mean"].as_f64().map_or("-".into(), |m| format!("{m:.3}")),
+                v["stats"]["max"].as_f64().map_or("-".into(), |m| format!("{m:.3}")),
+                if v["escalated"].as_bool() == Some(true) {
+                    "  → recalibrated"
+                } else {
+                    ""
+                }
+            );
+        }
+        Ok(())
+    })
+}
+
+pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), String> {
+    let endpoint = api.endpoint()?;
+    runtime()?.block_on(async {
+        let body = match &to {
+            Some(id) => serde_json::json!({ "to": id }),
+            None => serde_json::json!({}),
+        };
+        let reply = post(&endpoint, "/rollback", body).await?;
+        let entry = reply.json()?;
+        println!(
+            "current profile is now {}",
+            entry["id"].as_str().unwrap_or("?")
+        );
+        Ok(())
+    })
+}
+
+pub fn current_profile(api: &ApiArgs, json: bool) -> Result<(), String> {
+    let endpoint = api.endpoint()?;
+    runtime()?.block_on(async {
+        let path = if json { "/profile?format=json" } else { "/profile" };
+        print!("{}", get(&endpoint, path).await?.text());
+        Ok(())
+    })
+}
