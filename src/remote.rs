@@ -46,7 +46,9 @@ impl ApiArgs {
                 })
             }
             None => Ok(Endpoint::Unix(
-                self.socket.clone().unwrap_or_else(|| default_socket(&state)),
+                self.socket
+                    .clone()
+                    .unwrap_or_else(|| default_socket(&state)),
             )),
         }
     }
@@ -91,7 +93,11 @@ async fn post(endpoint: &Endpoint, path: &str, body: serde_json::Value) -> Resul
 fn describe_job(job: &JobStatus) -> String {
     let mut out = format!(
         "{} ({}, started {} by {}): {}",
-        job.id, job.kind.name(), job.started, job.origin, job.phase
+        job.id,
+        job.kind.name(),
+        job.started,
+        job.origin,
+        job.phase
     );
     if job.total > 0 {
         out += &format!(", {}/{} patches", job.done, job.total);
@@ -127,7 +133,11 @@ pub fn status(api: &ApiArgs, json: bool) -> Result<(), String> {
             status.pid,
             chromacal::report::duration(status.uptime_s),
             status.state_dir,
-            if status.shutting_down { ", shutting down" } else { "" }
+            if status.shutting_down {
+                ", shutting down"
+            } else {
+                ""
+            }
         );
         match &status.job {
             Some(job) => println!("  job: {}", describe_job(job)),
@@ -141,8 +151,10 @@ pub fn status(api: &ApiArgs, json: bool) -> Result<(), String> {
                 "  current profile: {} (made {}{}) at {}",
                 p.id,
                 p.created,
-                p.held_out
-                    .map_or(String::new(), |h| format!(", held-out mean ΔE00 {:.3}", h.mean)),
+                p.held_out.map_or(String::new(), |h| format!(
+                    ", held-out mean ΔE00 {:.3}",
+                    h.mean
+                )),
                 p.path
             ),
             None => println!("  current profile: none yet"),
@@ -162,11 +174,9 @@ async fn watch_job(
 ) -> Result<JobOutcome, String> {
     let bar = indicatif::ProgressBar::new(0);
     bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} {prefix} [{bar:40}] {pos}/{len}  {msg}",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-        .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template("{spinner} {prefix} [{bar:40}] {pos}/{len}  {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
     );
     bar.enable_steady_tick(Duration::from_millis(200));
     let ours = |job: &JobStatus, id: &mut Option<String>| match id {
@@ -210,16 +220,18 @@ async fn watch_job(
                 record.stats.map_or(f64::NAN, |s| s.mean),
                 record.threshold
             )),
-            Event::Published { profile_id, how, .. } => {
-                bar.println(format!("published {profile_id} ({how})"))
-            }
+            Event::Published {
+                profile_id, how, ..
+            } => bar.println(format!("published {profile_id} ({how})")),
             Event::JobFinished { job, outcome } if ours(&job, &mut id) => {
                 bar.finish_and_clear();
                 return Ok(outcome);
             }
             Event::ShuttingDown => {
                 bar.finish_and_clear();
-                return Err("the daemon is shutting down; the job resumes when it starts again".into());
+                return Err(
+                    "the daemon is shutting down; the job resumes when it starts again".into(),
+                );
             }
             _ => {}
         }
@@ -241,7 +253,9 @@ fn subscribe(endpoint: &Endpoint) -> tokio::sync::mpsc::UnboundedReceiver<Event>
         })
         .await;
         match result {
-            Ok(Some(refused)) => eprintln!("chromacal: events refused: {}", refused.error_message()),
+            Ok(Some(refused)) => {
+                eprintln!("chromacal: events refused: {}", refused.error_message())
+            }
             Err(e) => eprintln!("chromacal: {e}"),
             Ok(None) => {}
         }
@@ -267,7 +281,12 @@ pub fn job_start(api: &ApiArgs, kind: &str, watch: bool) -> Result<(), String> {
         if events.is_some() {
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
-        let reply = post(&endpoint, "/jobs", serde_json::json!({ "kind": kind.name() })).await?;
+        let reply = post(
+            &endpoint,
+            "/jobs",
+            serde_json::json!({ "kind": kind.name() }),
+        )
+        .await?;
         let job: JobStatus = serde_json::from_slice(&reply.body)
             .map_err(|e| format!("the daemon's answer does not read: {e}"))?;
         match events {
@@ -291,7 +310,11 @@ pub fn job_watch(api: &ApiArgs) -> Result<(), String> {
             None => {
                 match status.last_job {
                     Some((job, outcome)) => {
-                        println!("no job is running; the last, {}, ended {}", job.id, describe_outcome(&outcome))
+                        println!(
+                            "no job is running; the last, {}, ended {}",
+                            job.id,
+                            describe_outcome(&outcome)
+                        )
                     }
                     None => println!("no job is running"),
                 }
@@ -336,15 +359,22 @@ pub fn history(api: &ApiArgs, json: bool) -> Result<(), String> {
                 if id == current { "  ← current" } else { "" }
             );
         }
-        let verifications = value["verifications"].as_array().cloned().unwrap_or_default();
+        let verifications = value["verifications"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default();
         println!("verifications ({}):", verifications.len());
         for v in verifications {
             println!(
                 "  {} {}  mean ΔE00 {}  max {}{}",
                 v["at"].as_str().unwrap_or("?"),
                 v["profile_id"].as_str().unwrap_or("?"),
-                v["stats"]["mean"].as_f64().map_or("-".into(), |m| format!("{m:.3}")),
-                v["stats"]["max"].as_f64().map_or("-".into(), |m| format!("{m:.3}")),
+                v["stats"]["mean"]
+                    .as_f64()
+                    .map_or("-".into(), |m| format!("{m:.3}")),
+                v["stats"]["max"]
+                    .as_f64()
+                    .map_or("-".into(), |m| format!("{m:.3}")),
                 if v["escalated"].as_bool() == Some(true) {
                     "  → recalibrated"
                 } else {
@@ -376,7 +406,11 @@ pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), String> {
 pub fn current_profile(api: &ApiArgs, json: bool) -> Result<(), String> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
-        let path = if json { "/profile?format=json" } else { "/profile" };
+        let path = if json {
+            "/profile?format=json"
+        } else {
+            "/profile"
+        };
         print!("{}", get(&endpoint, path).await?.text());
         Ok(())
     })

@@ -156,7 +156,11 @@ pub async fn serve_tcp(listener: tokio::net::TcpListener, app: Router) {
 
 /// Compare without an early exit, so that timing tells nothing of the token.
 fn same_secret(a: &str, b: &str) -> bool {
-    a.len() == b.len() && a.bytes().zip(b.bytes()).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+    a.len() == b.len()
+        && a.bytes()
+            .zip(b.bytes())
+            .fold(0u8, |acc, (x, y)| acc | (x ^ y))
+            == 0
 }
 
 /// Who may call, how often, and how much they may send.
@@ -222,9 +226,7 @@ async fn guard(
     }
     let mut response = next.run(request).await;
     // The body limit of the extractors answers in plain text; say it in JSON too.
-    if response.status() == StatusCode::PAYLOAD_TOO_LARGE
-        && !is_json(response.headers())
-    {
+    if response.status() == StatusCode::PAYLOAD_TOO_LARGE && !is_json(response.headers()) {
         response = refusal(
             StatusCode::PAYLOAD_TOO_LARGE,
             format!("the body is over the limit of {max} bytes (daemon.max_body_bytes)"),
@@ -351,7 +353,9 @@ async fn start_job(State(state): State<Shared>, body: axum::body::Bytes) -> Resp
         Err(e) => {
             return refusal(
                 StatusCode::BAD_REQUEST,
-                format!("the body must be {{\"kind\": \"calibrate\"|\"verify\"|\"uniformity\"}}: {e}"),
+                format!(
+                    "the body must be {{\"kind\": \"calibrate\"|\"verify\"|\"uniformity\"}}: {e}"
+                ),
             );
         }
     };
@@ -362,7 +366,9 @@ async fn start_job(State(state): State<Shared>, body: axum::body::Bytes) -> Resp
     match state.daemon.start_job(kind, "api", None) {
         Ok(job) => (StatusCode::ACCEPTED, axum::Json(job)).into_response(),
         Err(e @ JobRefused::Busy { .. }) => refusal(StatusCode::CONFLICT, e.to_string()),
-        Err(e @ JobRefused::ShuttingDown) => refusal(StatusCode::SERVICE_UNAVAILABLE, e.to_string()),
+        Err(e @ JobRefused::ShuttingDown) => {
+            refusal(StatusCode::SERVICE_UNAVAILABLE, e.to_string())
+        }
     }
 }
 
@@ -405,7 +411,9 @@ async fn events(State(state): State<Shared>) -> Response {
             }
         })
     });
-    Sse::new(stream).keep_alive(KeepAlive::default()).into_response()
+    Sse::new(stream)
+        .keep_alive(KeepAlive::default())
+        .into_response()
 }
 
 #[derive(Debug, Deserialize)]

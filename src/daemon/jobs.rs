@@ -18,11 +18,11 @@ use crate::calibrate::session::{
 };
 use crate::calibrate::warmup::wait_for_warmup;
 use crate::color::spaces::xyz_to_xyy;
+use crate::display::PatchDisplay;
 use crate::fit::primaries::Corrected;
 use crate::fit::spatial::choose_spatial_map;
 use crate::fit::stats::ErrorStats;
 use crate::fit::validate::{delta_e00_xyz, evaluate};
-use crate::display::PatchDisplay;
 use crate::instrument::{Instrument, ReadingStatus};
 use crate::measurement::{Role, Units};
 use crate::model::{MonitorModel, ScreenPosition};
@@ -108,6 +108,7 @@ pub(crate) async fn run_job(
             stopped: false,
         }),
         Ok(devices) => {
+            age_while_idle(daemon, devices);
             let stop = {
                 let daemon = daemon.clone();
                 let cancel = cancel.clone();
@@ -184,6 +185,17 @@ async fn ensure_devices<'a>(
     }
     slot.as_mut()
         .ok_or_else(|| "the devices are not open".to_string())
+}
+
+/// Let the simulated monitor's clock catch up with the time no job ran.
+fn age_while_idle(daemon: &Daemon, devices: &Devices) {
+    let config = &daemon.loaded.config.daemon;
+    if !config.simulated_idle_ages {
+        return;
+    }
+    if let (Some(clock), Ok(idle)) = (&devices.virtual_clock, daemon.idle_since.lock()) {
+        clock.advance(idle.elapsed().as_secs_f64() / config.simulated_time_scale);
+    }
 }
 
 /// Wait for warm-up if the config asks for it.
@@ -521,7 +533,9 @@ async fn uniformity(
         .filter_map(|m| Some((m.time_s?, m.reading.xyz?.y / predicted_white.y)))
         .collect();
     if references.is_empty() || !(predicted_white.y > 0.0) {
-        return Err("no usable reference white: the grid cannot be scaled".to_string().into());
+        return Err("no usable reference white: the grid cannot be scaled"
+            .to_string()
+            .into());
     }
     let ratio_at = |t: Option<f64>| -> f64 {
         let Some(t) = t else {
@@ -533,7 +547,11 @@ async fn uniformity(
             None => references[references.len() - 1].1,
             Some(i) => {
                 let (a, b) = (references[i - 1], references[i]);
-                let w = if b.0 > a.0 { (t - a.0) / (b.0 - a.0) } else { 0.5 };
+                let w = if b.0 > a.0 {
+                    (t - a.0) / (b.0 - a.0)
+                } else {
+                    0.5
+                };
                 a.1 + w * (b.1 - a.1)
             }
         }
@@ -570,12 +588,18 @@ async fn uniformity(
     updated.schema_version = SCHEMA_VERSION;
     let text = updated.to_toml().map_err(|e| e.to_string())?;
     let limits = &config.publish;
-    let passes = chosen.is_some_and(|s| s.mean <= limits.max_mean_de00 && s.p95 <= limits.max_p95_de00);
+    let passes =
+        chosen.is_some_and(|s| s.mean <= limits.max_mean_de00 && s.p95 <= limits.max_p95_de00);
     let store_error = |e: std::io::Error| format!("profile store: {e}");
     if passes {
         daemon
             .store
-            .publish(&new_id, &text, profile.report.held_out.as_ref(), "uniformity")
+            .publish(
+                &new_id,
+                &text,
+                profile.report.held_out.as_ref(),
+                "uniformity",
+            )
             .map_err(store_error)?;
         daemon.emit(Event::Published {
             profile_id: new_id.clone(),
@@ -592,7 +616,9 @@ async fn uniformity(
         message: if passes {
             format!("published {new_id}: a new spatial map ({cv})")
         } else {
-            format!("kept {new_id} but not published: the new map's {cv} misses the [publish] limits")
+            format!(
+                "kept {new_id} but not published: the new map's {cv} misses the [publish] limits"
+            )
         },
         profile_id: Some(new_id),
         published: passes,

@@ -63,6 +63,9 @@ pub struct DaemonConfig {
     pub stop_timeout_s: f64,
     /// Real seconds per simulated second, for the simulated monitor and instrument.
     pub simulated_time_scale: f64,
+    /// The simulated monitor ages while no job runs (warm-up fades, drift goes on), as
+    /// a real one does. Off, its readings depend on nothing but the seeds.
+    pub simulated_idle_ages: bool,
     /// Profiles kept in the history (at least 2).
     pub keep_profiles: usize,
     /// Largest request body, bytes.
@@ -84,6 +87,7 @@ impl Default for DaemonConfig {
             on_start: OnStart::Resume,
             stop_timeout_s: 20.0,
             simulated_time_scale: 1.0,
+            simulated_idle_ages: true,
             keep_profiles: crate::profile::store::DEFAULT_KEEP,
             max_body_bytes: 64 * 1024,
             requests_per_s: 50.0,
@@ -205,6 +209,8 @@ pub struct Daemon {
     /// Told when the running job ends.
     job_done: tokio::sync::Notify,
     started: Instant,
+    /// When the last job ended (or the daemon started).
+    pub(crate) idle_since: Mutex<Instant>,
     next_verification: Mutex<Option<std::time::SystemTime>>,
 }
 
@@ -230,6 +236,7 @@ impl Daemon {
             shutting_down: AtomicBool::new(false),
             job_done: tokio::sync::Notify::new(),
             started: Instant::now(),
+            idle_since: Mutex::new(Instant::now()),
             next_verification: Mutex::new(None),
         })
     }
@@ -295,8 +302,7 @@ impl Daemon {
             id: jobs::new_job_id(kind),
             kind,
             origin: origin.to_string(),
-            started: humantime::format_rfc3339_seconds(std::time::SystemTime::now())
-                .to_string(),
+            started: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
             phase: "starting".into(),
             done: 0,
             total: 0,
@@ -317,6 +323,9 @@ impl Daemon {
         let id = status.id.clone();
         tokio::spawn(async move {
             let outcome = jobs::run_job(&daemon, kind, &id, resume, &cancel).await;
+            if let Ok(mut idle) = daemon.idle_since.lock() {
+                *idle = Instant::now();
+            }
             let finished = daemon.job.lock().ok().and_then(|mut s| s.take());
             let status = finished.map(|r| r.status);
             if let Some(status) = &status {

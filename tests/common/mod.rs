@@ -2,6 +2,8 @@
 //! `../shared/data`, which tests use but the project does not carry.
 #![allow(dead_code)]
 
+pub mod daemon;
+
 use std::path::PathBuf;
 
 /// `../shared/data`, relative to the crate root.
@@ -210,4 +212,28 @@ pub fn in_process_profile(
         String::from_utf8_lossy(&out.stderr)
     );
     chromacal::profile::Profile::read(&state.join("current.toml")).unwrap()
+}
+
+/// The journals of the calibration runs in a state directory, oldest first.
+pub fn daemon_runs(state: &std::path::Path) -> Vec<PathBuf> {
+    let mut runs: Vec<PathBuf> = std::fs::read_dir(state.join("runs"))
+        .map(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path().join("journal.jsonl")))
+                .filter(|p| p.exists())
+                .collect()
+        })
+        .unwrap_or_default();
+    runs.sort();
+    runs
+}
+
+/// Every patch the journal's plan has is in it exactly once.
+pub fn assert_each_planned_patch_once(
+    header: &chromacal::calibrate::journal::JournalHeader,
+    entries: &[chromacal::measurement::Measurement],
+) {
+    let mut seen: Vec<usize> = entries.iter().map(|m| m.index).collect();
+    seen.sort();
+    let planned: Vec<usize> = header.plan.patches.iter().map(|p| p.index).collect();
+    assert_eq!(seen, planned, "a patch was lost or measured twice");
 }

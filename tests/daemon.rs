@@ -1,0 +1,429 @@
+//! The daemon as a user meets it: a process with a unix socket, jobs started and
+//! followed through the API, an emulated instrument on a pty, refusals for those who
+//! may not ask, and the systemd side (readiness, watchdog, stop).
+
+use std::time::Duration;
+
+use chromacal::daemon::events::Event;
+use chromacal::profile::Profile;
+
+mod common;
+use common::daemon::{
+    events_until, get, post, start_daemon, start_daemon_with, start_job, subscribe, wait_idle,
+};
+use common::{CRT_PRIMARIES, assert_same_model, emulate, in_process_profile};
+
+const FAST: &str = "[daemon]\nsimulated_time_scale = 0.001\n";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_calibration_started_through_the_api_measures_an_emulated_instrument_and_publishes() {
+    let dir = tempfile::tempdir().unwrap();
+    let reference_config = dir.path().join("reference.toml");
+    std::fs::write(&reference_config, CRT_PRIMARIES).unwrap();
+    let reference = in_process_profile(&reference_config, &dir.path().join("reference"));
+
+    let emulator = emulate(&["--instrument", "pr670", "--time-scale", "0.002"]);
+    let config = format!(
+        "{CRT_PRIMARIES}[instrument]\ndriver = \"pr670\"\nport = \"{}\"\n[instrument.options]\ntiming_scale = 0.002\n[display]\nscreen = \"{}\"\n",
+        emulator.device, emulator.screen
+    );
+    let daemon = start_daemon(dir.path(), &config);
+    let api = daemon.endpoint();
+    let status = get(&api, "/status").await.json().unwrap();
+    assert!(
+        status["job"].is_null() && status["current_profile"].is_null(),
+        "{status}"
+    );
+    assert_eq!(get(&api, "/profile").await.status, 404);
+
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let id = start_job(&api, "calibrate").await;
+    // A second job while one runs is refused.
+    let busy = post(&api, "/jobs", r#"{"kind": "verify"}"#).await;
+    assert_eq!(busy.status, 409, "{}", busy.text());
+    assert!(busy.error_message().contains(&id), "{}", busy.text());
+
+    let seen = events_until(
+        &mut events,
+        Duration::from_secs(120),
+        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
+    )
+    .await;
+    assert!(
+        matches!(&seen[0], Event::JobStarted { job } if job.id == id),
+        "{:?}",
+        seen[0]
+    );
+    let progress: Vec<_> = seen
+        .iter()
+        .filter_map(|e| match e {
+            Event::Progress { job } => Some(job.clone()),
+            _ => None,
+        })
+        .collect();
+    let total = progress.last().unwrap().total;
+    assert_eq!(progress.len(), total, "one progress event per reading");
+    assert!(progress.windows(2).all(|w| w[1].done == w[0].done + 1));
+    assert!(
+        progress
+            .iter()
+            .all(|p| p.last.is_some_and(|l| l.luminance.is_some()))
+    );
+    assert!(progress.iter().skip(5).all(|p| p.eta_s.is_some()));
+    let published = seen.iter().find_map(|e| match e {
+        Event::Published { profile_id, .. } => Some(profile_id.clone()),
+        _ => None,
+    });
+    let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
+        unreachable!()
+    };
+    assert_eq!(outcome.result, "ok", "{outcome:?}");
+    assert!(outcome.published);
+    assert_eq!(published, outcome.profile_id);
+
+    // The published profile, fetched in both forms, is the in-process one within noise.
+    let toml = get(&api, "/profile").await;
+    assert_eq!(toml.status, 200);
+    let profile = Profile::from_toml(&toml.text(), "GET /profile").unwrap();
+    assert_eq!(Some(profile.id.clone()), published);
+    assert!(
+        !profile
+            .provenance
+            .instrument
+            .as_ref()
+            .unwrap()
+            .name
+            .contains("simulated")
+    );
+    assert_same_model("daemon", &profile, &reference);
+    let json = get(&api, "/profile?format=json").await.json().unwrap();
+    assert_eq!(json["id"], profile.id.as_str());
+    let status = get(&api, "/status").await.json().unwrap();
+    assert_eq!(status["current_profile"]["id"], profile.id.as_str());
+    assert_eq!(status["last_job"][1]["result"], "ok");
+    // The stable path other tools read.
+    let current = Profile::read(&daemon.state.join("current.toml")).unwrap();
+    assert_eq!(current.id, profile.id);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn history_rollback_and_a_verification_are_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let daemon = start_daemon(dir.path(), FAST);
+    let api = daemon.endpoint();
+    // Nothing to roll back to, nothing to verify yet.
+    assert_eq!(post(&api, "/rollback", "").await.status, 409);
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let id = start_job(&api, "verify").await;
+    let seen = events_until(
+        &mut events,
+        Duration::from_secs(30),
+        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
+    )
+    .await;
+    let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
+        unreachable!()
+    };
+    assert_eq!(outcome.result, "failed");
+    assert!(
+        outcome.message.contains("no current profile"),
+        "{outcome:?}"
+    );
+
+    let mut ids = Vec::new();
+    for _ in 0..2 {
+        let id = start_job(&api, "calibrate").await;
+        let seen = events_until(
+            &mut events,
+            Duration::from_secs(60),
+            |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
+        )
+        .await;
+        let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
+            unreachable!()
+        };
+        assert!(outcome.published, "{outcome:?}");
+        ids.push(outcome.profile_id.clone().unwrap());
+    }
+    let id = start_job(&api, "verify").await;
+    let seen = events_until(
+        &mut events,
+        Duration::from_secs(30),
+        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
+    )
+    .await;
+    let record = seen
+        .iter()
+        .find_map(|e| match e {
+            Event::Verification { record } => Some(record.clone()),
+            _ => None,
+        })
+        .expect("a verification event");
+    assert_eq!(record.profile_id, ids[1]);
+    assert_eq!(record.delta_e00.len(), 8);
+    let mean = record.stats.unwrap().mean;
+    assert!(mean < 0.5, "a fresh profile verifies well: {mean}");
+    assert!(!record.escalated);
+
+    let history = get(&api, "/history").await.json().unwrap();
+    assert_eq!(history["current"], ids[1].as_str());
+    let listed: Vec<&str> = history["profiles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["id"].as_str().unwrap())
+        .collect();
+    assert_eq!(listed, [ids[0].as_str(), ids[1].as_str()]);
+    assert_eq!(history["verifications"].as_array().unwrap().len(), 1);
+
+    // Roll back to the first, then forward again by id; unknown ids are refused.
+    let reply = post(&api, "/rollback", "{}").await;
+    assert_eq!(reply.status, 200, "{}", reply.text());
+    assert_eq!(reply.json().unwrap()["id"], ids[0].as_str());
+    let current = Profile::read(&daemon.state.join("current.toml")).unwrap();
+    assert_eq!(current.id, ids[0]);
+    let rolled = events_until(&mut events, Duration::from_secs(5), |e| {
+        matches!(e, Event::RolledBack { .. })
+    })
+    .await;
+    assert!(matches!(rolled.last(), Some(Event::RolledBack { entry }) if entry.id == ids[0]));
+    let reply = post(&api, "/rollback", &format!("{{\"to\": \"{}\"}}", ids[1])).await;
+    assert_eq!(reply.status, 200);
+    let reply = post(&api, "/rollback", r#"{"to": "no-such-profile"}"#).await;
+    assert_eq!(reply.status, 409);
+    assert!(reply.error_message().contains("no-such-profile"));
+    let current = Profile::read(&daemon.state.join("current.toml")).unwrap();
+    assert_eq!(current.id, ids[1]);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn refusals_are_clear_and_name_what_was_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let daemon = start_daemon(
+        dir.path(),
+        &format!("{FAST}max_body_bytes = 1024\nmax_event_streams = 1\n"),
+    );
+    let api = daemon.endpoint();
+    let reply = get(&api, "/no/such/thing").await;
+    assert_eq!(reply.status, 404);
+    assert!(
+        reply
+            .error_message()
+            .contains("no such endpoint: GET /no/such/thing")
+    );
+    let reply = request_raw(&api, "DELETE", "/status").await;
+    assert_eq!(reply.status, 405);
+    assert!(
+        reply
+            .error_message()
+            .contains("DELETE is not allowed on /status")
+    );
+    let reply = post(
+        &api,
+        "/jobs",
+        &format!("{{\"kind\": \"{}\"}}", "x".repeat(4000)),
+    )
+    .await;
+    assert_eq!(reply.status, 413);
+    assert!(
+        reply.error_message().contains("limit is 1024"),
+        "{}",
+        reply.text()
+    );
+    let reply = post(&api, "/jobs", r#"{"kind": "dance"}"#).await;
+    assert_eq!(reply.status, 400);
+    assert!(reply.error_message().contains("unknown job 'dance'"));
+    let reply = post(&api, "/jobs", "not json").await;
+    assert_eq!(reply.status, 400);
+    assert_eq!(post(&api, "/jobs/cancel", "").await.status, 404);
+    let reply = get(&api, "/profile?format=xml").await;
+    assert_eq!(reply.status, 404, "no profile yet comes first");
+
+    // One event stream at most, as configured; the second is refused, not queued.
+    let _first = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let second = chromacal::daemon::client::follow_events(&api, |_, _| true)
+        .await
+        .unwrap()
+        .expect("a refusal");
+    assert_eq!(second.status, 503);
+    assert!(second.error_message().contains("event streams"));
+
+    // The socket is the owner's only: mode 0600, and a peer that gets through anyway
+    // (here: the mode opened up) is refused by its uid.
+    use std::os::unix::fs::PermissionsExt;
+    let mode = std::fs::metadata(&daemon.socket)
+        .unwrap()
+        .permissions()
+        .mode();
+    assert_eq!(mode & 0o777, 0o600);
+    let as_nobody = |path: &std::path::Path| {
+        use std::os::unix::process::CommandExt;
+        std::process::Command::new("curl")
+            .args(["-s", "-o", "-", "-w", "\n%{http_code}", "--unix-socket"])
+            .arg(path)
+            .arg("http://chromacal/status")
+            .uid(65534)
+            .gid(65534)
+            .output()
+            .unwrap()
+    };
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let out = as_nobody(&daemon.socket);
+    assert_eq!(out.status.code(), Some(7), "connect must fail: {out:?}");
+    std::fs::set_permissions(&daemon.socket, std::fs::Permissions::from_mode(0o666)).unwrap();
+    let out = as_nobody(&daemon.socket);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.ends_with("403"), "{text}");
+    assert!(text.contains("uid 65534 may not use this daemon"), "{text}");
+}
+
+async fn request_raw(
+    api: &chromacal::daemon::client::Endpoint,
+    method: &str,
+    path: &str,
+) -> chromacal::daemon::client::Reply {
+    chromacal::daemon::client::request(api, method, path, None)
+        .await
+        .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tcp_needs_the_token_and_requests_past_the_rate_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let daemon = start_daemon(
+        dir.path(),
+        &format!("{FAST}tcp = \"127.0.0.1:{port}\"\nrequests_per_s = 2.0\nburst = 5\n"),
+    );
+    let token_path = daemon.state.join("api.token");
+    let token = std::fs::read_to_string(&token_path)
+        .unwrap()
+        .trim()
+        .to_string();
+    use std::os::unix::fs::PermissionsExt;
+    assert_eq!(
+        std::fs::metadata(&token_path).unwrap().permissions().mode() & 0o777,
+        0o600
+    );
+    let address = format!("127.0.0.1:{port}");
+    let wrong = chromacal::daemon::client::Endpoint::Tcp {
+        address: address.clone(),
+        token: "not-the-token".into(),
+    };
+    let reply = get(&wrong, "/status").await;
+    assert_eq!(reply.status, 401);
+    assert!(reply.error_message().contains("Bearer"));
+    let right = chromacal::daemon::client::Endpoint::Tcp { address, token };
+    let mut statuses = Vec::new();
+    for _ in 0..10 {
+        statuses.push(get(&right, "/status").await.status);
+    }
+    assert_eq!(statuses[0], 200);
+    assert!(statuses.contains(&429), "{statuses:?}");
+    tokio::time::sleep(Duration::from_millis(1200)).await;
+    assert_eq!(
+        get(&right, "/status").await.status,
+        200,
+        "the bucket refills"
+    );
+
+    // An address other machines can reach is refused unless allowed.
+    let other = tempfile::tempdir().unwrap();
+    std::fs::write(
+        other.path().join("c.toml"),
+        "[daemon]\ntcp = \"0.0.0.0:0\"\n",
+    )
+    .unwrap();
+    let out = common::chromacal()
+        .args(["daemon", "--config"])
+        .arg(other.path().join("c.toml"))
+        .arg("--state-dir")
+        .arg(other.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("allow_remote"));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_finishes_the_reading_exits_zero_and_the_run_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = "[daemon]\nsimulated_time_scale = 0.004\n";
+    let mut daemon = start_daemon(dir.path(), config);
+    let api = daemon.endpoint();
+    start_job(&api, "calibrate").await;
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let (ok, took) = daemon.terminate();
+    assert!(ok, "{}", daemon.log_text());
+    assert!(took < Duration::from_secs(5), "{took:?}");
+    assert!(
+        daemon
+            .log_text()
+            .contains("resumes when the daemon starts again")
+    );
+    let runs = common::daemon_runs(&daemon.state);
+    assert_eq!(runs.len(), 1);
+    let (_, before, recovery) = chromacal::calibrate::journal::Journal::read(&runs[0]).unwrap();
+    assert!(
+        recovery.dropped_tail.is_none(),
+        "SIGTERM leaves no torn line"
+    );
+    assert!(!before.is_empty() && before.len() < 96, "{}", before.len());
+    drop(daemon);
+
+    let daemon = start_daemon(dir.path(), config);
+    let api = daemon.endpoint();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    wait_idle(&api, Duration::from_secs(30)).await;
+    let status = get(&api, "/status").await.json().unwrap();
+    assert_eq!(status["last_job"][0]["origin"], "resume", "{status}");
+    assert_eq!(status["last_job"][1]["result"], "ok", "{status}");
+    let (header, after, _) = chromacal::calibrate::journal::Journal::read(&runs[0]).unwrap();
+    assert_eq!(&after[..before.len()], &before[..]);
+    common::assert_each_planned_patch_once(&header, &after);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn systemd_hears_ready_watchdog_and_stopping() {
+    let dir = tempfile::tempdir().unwrap();
+    let notify_path = dir.path().join("notify.sock");
+    let listener = std::os::unix::net::UnixDatagram::bind(&notify_path).unwrap();
+    listener
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let mut daemon = start_daemon_with(
+        dir.path(),
+        FAST,
+        &[
+            ("NOTIFY_SOCKET", notify_path.to_str().unwrap()),
+            ("WATCHDOG_USEC", "200000"),
+        ],
+    );
+    let mut heard = Vec::new();
+    let mut buf = [0u8; 512];
+    while heard
+        .iter()
+        .filter(|m: &&String| m.contains("WATCHDOG=1"))
+        .count()
+        < 3
+    {
+        let n = listener.recv(&mut buf).unwrap();
+        heard.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+    }
+    assert!(heard.iter().any(|m| m.contains("READY=1")), "{heard:?}");
+    let (ok, _) = daemon.terminate();
+    assert!(ok);
+    loop {
+        let n = listener.recv(&mut buf).unwrap();
+        if String::from_utf8_lossy(&buf[..n]).contains("STOPPING=1") {
+            break;
+        }
+    }
+}
