@@ -297,21 +297,17 @@ pub struct CurrentProfile {
     pub path: String,
 }
 
-fn read_current(daemon: &Daemon) -> Result<Option<(Profile, String)>, Response> {
+/// The current profile and its text; an error says why it does not read.
+fn read_current(daemon: &Daemon) -> Result<Option<(Profile, String)>, String> {
     let path = daemon.store().current_path();
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => {
-            return Err(refusal(
-                StatusCode::INTERNAL_SERVER_ERROR,
-                format!("{}: {e}", path.display()),
-            ));
-        }
+        Err(e) => return Err(format!("{}: {e}", path.display())),
     };
     Profile::from_toml(&text, &path.display().to_string())
         .map(|p| Some((p, text)))
-        .map_err(|e| refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))
+        .map_err(|e| e.to_string())
 }
 
 async fn status(State(state): State<Shared>) -> Response {
@@ -323,7 +319,7 @@ async fn status(State(state): State<Shared>) -> Response {
             held_out: p.report.held_out,
             path: daemon.store().current_path().display().to_string(),
         }),
-        Err(r) => return r,
+        Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
     };
     axum::Json(StatusReply {
         version: env!("CARGO_PKG_VERSION").into(),
@@ -425,7 +421,7 @@ async fn profile(State(state): State<Shared>, Query(query): Query<ProfileQuery>)
     let (profile, text) = match read_current(&state.daemon) {
         Ok(Some(c)) => c,
         Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
-        Err(r) => return r,
+        Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
     };
     match query.format.as_deref().unwrap_or("toml") {
         "toml" => ([(header::CONTENT_TYPE, "application/toml")], text).into_response(),
