@@ -302,7 +302,15 @@ pub async fn finish_run(
         path: store.root().to_path_buf(),
         source,
     };
-    let profile_path = if rejection.is_none() {
+    // A run stopped between publishing and marking itself done is already current.
+    let already_current = store
+        .history()
+        .ok()
+        .and_then(|h| h.current)
+        .is_some_and(|id| id == run.run_id);
+    let profile_path = if already_current {
+        store.profile_path(&run.run_id)
+    } else if rejection.is_none() {
         store
             .publish(
                 &run.run_id,
