@@ -2,19 +2,35 @@
 # Every test, on a fresh machine: installs what the tests drive from outside Rust
 # (Debian's Chromium, for the web patch page in a real browser) when it is missing,
 # then runs the suite. .ci/run calls this; the README's test command is this.
+#
+#   scripts/test.sh                 the whole suite
+#   scripts/test.sh --soak N        only the daemon kill test, with N SIGKILLs
+#                                   (CHROMACAL_SOAK_SEED=S picks the kill times)
+#   scripts/test.sh ARGS...         passed to `cargo test --locked`
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+if [ "${1:-}" = "--soak" ]; then
+    kills="${2:?--soak needs a number of kills}"
+    CHROMACAL_SOAK_KILLS="$kills" exec cargo test --locked --test daemon_kill -- --nocapture
+fi
+
+need_package() {
+    echo "scripts/test.sh: installing $1 for the tests" >&2
+    sudo=""
+    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "$1" >/dev/null
+}
 
 have_browser() {
     command -v chromium >/dev/null || command -v chromium-headless-shell >/dev/null
 }
 
-if ! have_browser; then
-    echo "scripts/test.sh: installing Chromium for the browser tests" >&2
-    sudo=""
-    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq chromium >/dev/null
-fi
+# The web patch page is tested in a real browser.
+have_browser || need_package chromium
+# The systemd units are checked by systemd-analyze; the API's refusals by curl.
+command -v systemd-analyze >/dev/null || need_package systemd
+command -v curl >/dev/null || need_package curl
 
 cargo test --locked "$@"
