@@ -1,0 +1,110 @@
+//! The commands that talk to a running daemon, as a user types them.
+
+use std::process::Output;
+use std::time::Duration;
+
+mod common;
+use common::chromacal;
+use common::daemon::{start_daemon, wait_idle};
+
+fn run(socket: &std::path::Path, args: &[&str]) -> Output {
+    chromacal()
+        .args(args)
+        .arg("--socket")
+        .arg(socket)
+        .output()
+        .unwrap()
+}
+
+fn text(out: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn start_watch_status_history_rollback_and_cancel_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.002\n");
+    let socket = daemon.socket.clone();
+
+    let out = run(&socket, &["status"]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("job: none running")
+            && text(&out).contains("current profile: none yet")
+    );
+
+    for _ in 0..2 {
+        let out = run(&socket, &["job", "start", "calibrate", "--watch"]);
+        assert!(out.status.success(), "{}", text(&out));
+        assert!(text(&out).contains("ok: published"), "{}", text(&out));
+    }
+    let out = run(&socket, &["status"]);
+    assert!(text(&out).contains("held-out mean ΔE00"), "{}", text(&out));
+    let out = run(&socket, &["profile", "current"]);
+    assert!(out.status.success());
+    let profile =
+        chromacal::profile::Profile::from_toml(&String::from_utf8_lossy(&out.stdout), "stdout")
+            .unwrap();
+    let out = run(&socket, &["history"]);
+    assert_eq!(
+        text(&out).matches("calibration").count(),
+        2,
+        "{}",
+        text(&out)
+    );
+    assert!(text(&out).contains(&format!("{}  held-out", profile.id)));
+    let out = run(&socket, &["rollback"]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(!text(&out).contains(&profile.id));
+    let out = run(&socket, &["rollback", "no-such-id"]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out).contains("409") && text(&out).contains("no-such-id"),
+        "{}",
+        text(&out)
+    );
+
+    // A cancelled calibration stops after its reading and is not resumed.
+    let out = run(&socket, &["job", "start", "calibrate"]);
+    assert!(text(&out).contains("started calibrate-"));
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let busy = run(&socket, &["job", "start", "verify"]);
+    assert!(!busy.status.success());
+    assert!(text(&busy).contains("409"), "{}", text(&busy));
+    let out = run(&socket, &["job", "cancel"]);
+    assert!(out.status.success(), "{}", text(&out));
+    wait_idle(&daemon.endpoint(), Duration::from_secs(30)).await;
+    let out = run(&socket, &["job", "watch"]);
+    assert!(text(&out).contains("cancelled"), "{}", text(&out));
+    let runs = common::daemon_runs(&daemon.state);
+    let cancelled = runs.last().unwrap();
+    assert_eq!(
+        std::fs::read_to_string(cancelled.with_file_name("profile"))
+            .unwrap()
+            .trim(),
+        "discarded"
+    );
+    drop(daemon);
+    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.002\n");
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let status = run(&daemon.socket, &["status", "--json"]);
+    let status: serde_json::Value = serde_json::from_slice(&status.stdout).unwrap();
+    assert!(
+        status["job"].is_null(),
+        "a cancelled run must not resume: {status}"
+    );
+
+    // No daemon: a clear error, not a hang.
+    drop(daemon);
+    let out = run(&dir.path().join("nothing.sock"), &["status"]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out).contains("is `chromacal daemon` running?"),
+        "{}",
+        text(&out)
+    );
+}

@@ -1,0 +1,283 @@
+//! The daemon's jobs on the simulated monitor: a run under a load of API clients
+//! reads exactly what it reads alone; a verification on a drifting monitor starts a
+//! recalibration; warm-up waits for the screen to settle; a uniformity job gives the
+//! current profile a new spatial map.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+use chromacal::calibrate::journal::Journal;
+use chromacal::daemon::events::Event;
+use chromacal::model::ScreenPosition;
+use chromacal::profile::Profile;
+
+mod common;
+use common::daemon::{events_until, get, start_daemon, start_job, subscribe, wait_idle};
+use common::daemon_runs;
+
+/// Calibrate twice on a fresh daemon; with `clients`, API clients poll status and
+/// profile and follow the events during the second run. Returns the second run's
+/// readings and the failures the clients met.
+async fn second_run_readings(
+    clients: usize,
+) -> (Vec<chromacal::measurement::Measurement>, usize, usize) {
+    let dir = tempfile::tempdir().unwrap();
+    let config = "[daemon]\nsimulated_time_scale = 0.004\nsimulated_idle_ages = false\nrequests_per_s = 100000.0\nburst = 100000\n";
+    let daemon = start_daemon(dir.path(), config);
+    let api = daemon.endpoint();
+    start_job(&api, "calibrate").await;
+    wait_idle(&api, Duration::from_secs(60)).await;
+
+    let failures = Arc::new(AtomicUsize::new(0));
+    let answered = Arc::new(AtomicUsize::new(0));
+    let running = Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let mut tasks = Vec::new();
+    let mut streams = Vec::new();
+    for k in 0..clients {
+        let (client, failures, answered, running) = (
+            api.clone(),
+            failures.clone(),
+            answered.clone(),
+            running.clone(),
+        );
+        tasks.push(tokio::spawn(async move {
+            while running.load(Ordering::SeqCst) {
+                let path = if k % 2 == 0 { "/status" } else { "/profile" };
+                match chromacal::daemon::client::request(&client, "GET", path, None).await {
+                    Ok(r) if r.status == 200 => answered.fetch_add(1, Ordering::SeqCst),
+                    _ => failures.fetch_add(1, Ordering::SeqCst),
+                };
+                tokio::time::sleep(Duration::from_millis(5)).await;
+            }
+        }));
+        if k % 3 == 0 {
+            streams.push(subscribe(&api));
+        }
+    }
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let id = start_job(&api, "calibrate").await;
+    // Every stream hears every reading of the run and its end.
+    for events in &mut streams {
+        let seen = events_until(
+            events,
+            Duration::from_secs(60),
+            |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
+        )
+        .await;
+        let progress = seen
+            .iter()
+            .filter(|e| matches!(e, Event::Progress { job } if job.id == id))
+            .count();
+        if progress != 96 {
+            failures.fetch_add(1, Ordering::SeqCst);
+        }
+    }
+    wait_idle(&api, Duration::from_secs(60)).await;
+    running.store(false, Ordering::SeqCst);
+    for t in tasks {
+        t.await.unwrap();
+    }
+    let runs = daemon_runs(&daemon.state);
+    let (_, entries, _) = Journal::read(runs.last().unwrap()).unwrap();
+    (
+        entries,
+        failures.load(Ordering::SeqCst),
+        answered.load(Ordering::SeqCst),
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_run_under_a_load_of_clients_reads_what_it_reads_alone() {
+    let (alone, _, _) = second_run_readings(0).await;
+    let (loaded, failures, answered) = second_run_readings(9).await;
+    eprintln!("{answered} requests answered during the run, {failures} failed");
+    assert_eq!(failures, 0);
+    assert!(answered > 200, "the load was light: {answered}");
+    assert_eq!(alone.len(), 96);
+    assert_eq!(loaded, alone, "the load changed the readings");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_verification_of_a_drifting_monitor_starts_a_recalibration() {
+    for drift in [0.0, 0.5] {
+        let dir = tempfile::tempdir().unwrap();
+        let config = format!(
+            "[monitor.failures]\ndrift_per_hour = {drift}\n[daemon]\nsimulated_time_scale = 0.001\n[schedule]\nverify_every_s = 0.4\nthreshold_de00 = 1.0\n"
+        );
+        let daemon = start_daemon(dir.path(), &config);
+        let api = daemon.endpoint();
+        let mut events = subscribe(&api);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let first = start_job(&api, "calibrate").await;
+        let seen = events_until(
+            &mut events,
+            Duration::from_secs(60),
+            |e| matches!(e, Event::JobFinished { job, .. } if job.id == first),
+        )
+        .await;
+        let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
+            unreachable!()
+        };
+        assert!(outcome.published, "drift {drift}: {outcome:?}");
+        let calibrated = outcome.profile_id.clone().unwrap();
+
+        // The next scheduled verifications.
+        let seen = events_until(&mut events, Duration::from_secs(30), |e| match e {
+            Event::Verification { record } => drift == 0.0 || record.escalated,
+            _ => false,
+        })
+        .await;
+        let Some(Event::Verification { record }) = seen.last() else {
+            unreachable!()
+        };
+        let mean = record.stats.unwrap().mean;
+        eprintln!("drift {drift}/h: verification mean ΔE00 {mean:.3}");
+        assert_eq!(record.profile_id, calibrated);
+        if drift == 0.0 {
+            assert!(mean < 1.0 && !record.escalated, "{record:?}");
+            continue;
+        }
+        assert!(mean > 1.0 && record.escalated, "{record:?}");
+        // The recalibration it started, and its new profile.
+        let seen = events_until(
+            &mut events,
+            Duration::from_secs(60),
+            |e| matches!(e, Event::JobFinished { job, .. } if job.origin == "escalation"),
+        )
+        .await;
+        assert!(
+            seen.iter()
+                .any(|e| matches!(e, Event::JobStarted { job } if job.origin == "escalation"))
+        );
+        let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
+            unreachable!()
+        };
+        assert!(outcome.published, "{outcome:?}");
+        let history = get(&api, "/history").await.json().unwrap();
+        let profiles: Vec<&str> = history["profiles"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["id"].as_str().unwrap())
+            .collect();
+        assert_eq!(profiles.len(), 2);
+        assert_eq!(profiles[0], calibrated);
+        assert_eq!(Some(profiles[1]), outcome.profile_id.as_deref());
+        let verifications = history["verifications"].as_array().unwrap();
+        assert!(verifications.iter().any(|v| v["escalated"] == true));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn warm_up_waits_for_the_screen_to_settle_and_is_bounded() {
+    // Light 10 % low at switch-on, recovering with τ = 300 s: the relative slope is
+    // 2 %/min × e^(−t/300), below 0.1 %/min after about 15 minutes.
+    let monitor = "[monitor.failures]\nwarmup_amplitude = 0.1\nwarmup_time_constant_s = 300.0\n";
+    let warmup =
+        "[warmup]\nenabled = true\ninterval_s = 60.0\nwindow = 10\nmax_slope_per_min = 0.001\n";
+    for (bound, settles) in [(3600.0, true), (300.0, false)] {
+        let dir = tempfile::tempdir().unwrap();
+        let config = format!(
+            "{monitor}[daemon]\nsimulated_time_scale = 0.0005\nsimulated_idle_ages = false\n{warmup}max_s = {bound}\n"
+        );
+        let daemon = start_daemon(dir.path(), &config);
+        let api = daemon.endpoint();
+        let mut events = subscribe(&api);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let id = start_job(&api, "calibrate").await;
+        let seen = events_until(
+            &mut events,
+            Duration::from_secs(60),
+            |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
+        )
+        .await;
+        let steps: Vec<_> = seen
+            .iter()
+            .filter_map(|e| match e {
+                Event::Warmup { step, .. } => Some(*step),
+                _ => None,
+            })
+            .collect();
+        let last = steps.last().expect("warm-up readings");
+        let first_reading = seen
+            .iter()
+            .position(|e| matches!(e, Event::Progress { .. }))
+            .unwrap();
+        assert!(
+            seen[..first_reading]
+                .iter()
+                .filter(|e| matches!(e, Event::Warmup { .. }))
+                .count()
+                == steps.len(),
+            "warm-up comes before the first patch"
+        );
+        eprintln!(
+            "bound {bound} s: {} warm-up readings, ended at {:.0} s with slope {:?}",
+            steps.len(),
+            last.elapsed_s,
+            last.slope_per_min
+        );
+        if settles {
+            let slope = last.slope_per_min.unwrap();
+            assert!(slope.abs() < 0.001, "{slope}");
+            assert!(last.elapsed_s > 600.0, "stopped too early: {last:?}");
+            assert!(last.elapsed_s < 3600.0);
+        } else {
+            assert!(
+                last.elapsed_s >= 300.0 && last.elapsed_s < 400.0,
+                "{last:?}"
+            );
+            assert!(last.slope_per_min.is_none_or(|s| s.abs() >= 0.001));
+            assert!(daemon.log_text().contains("did not settle"));
+        }
+        let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
+            unreachable!()
+        };
+        assert_eq!(outcome.result, "ok", "{outcome:?}");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_uniformity_job_gives_the_profile_a_new_spatial_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.001\n");
+    let api = daemon.endpoint();
+    start_job(&api, "calibrate").await;
+    wait_idle(&api, Duration::from_secs(60)).await;
+    let calibrated = Profile::read(&daemon.state.join("current.toml")).unwrap();
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let id = start_job(&api, "uniformity").await;
+    let seen = events_until(
+        &mut events,
+        Duration::from_secs(60),
+        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
+    )
+    .await;
+    let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
+        unreachable!()
+    };
+    assert!(outcome.published, "{outcome:?}");
+    let progress = seen
+        .iter()
+        .filter(|e| matches!(e, Event::Progress { .. }))
+        .count();
+    assert_eq!(progress, 24 + 6, "24 grid positions and 6 references");
+    let updated = Profile::read(&daemon.state.join("current.toml")).unwrap();
+    assert_eq!(Some(updated.id.clone()), outcome.profile_id);
+    assert_ne!(updated.id, calibrated.id);
+    assert_eq!(updated.report.spatial.positions, 24);
+    // The same screen: the corner falls off as the calibration found (the crt preset
+    // loses 15 % at the corners), and the rest of the model is kept.
+    let falloff = |p: &Profile| {
+        let corner = p.model.forward([1.0; 3], ScreenPosition::new(0.1, 0.1)).y;
+        corner / p.model.forward([1.0; 3], ScreenPosition::CENTRE).y
+    };
+    let (a, b) = (falloff(&calibrated), falloff(&updated));
+    eprintln!("corner/centre: {a:.4} calibrated, {b:.4} after the uniformity job");
+    assert!((a - b).abs() < 0.01 && b < 0.95, "{a} vs {b}");
+    assert_eq!(updated.model.matrix, calibrated.model.matrix);
+    let history = get(&api, "/history").await.json().unwrap();
+    assert_eq!(history["profiles"][1]["how"], "uniformity");
+}
