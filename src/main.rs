@@ -195,9 +195,6 @@ enum Command {
         #[command(subcommand)]
         command: ProfileCommand,
     },
-    /// Speed against error: fit time per law against readings, and held-out ΔE00
-    /// against patch budget, on simulated monitors (and on real measured displays when
-    /// ../shared/data is present).
     /// Run as a service: hold the instrument and the display, run one job at a time,
     /// verify on a schedule and recalibrate when the screen moved, and answer the
     /// control API (HTTP on a unix socket, mode 0600; optionally loopback TCP with a
@@ -218,6 +215,10 @@ enum Command {
         /// Also serve the API on this loopback TCP address (token in <state>/api.token).
         #[arg(long, value_name = "ADDR")]
         tcp: Option<String>,
+        /// Real seconds per simulated second for the simulated monitor and instrument
+        /// (`daemon.simulated_time_scale`; 0.01 runs a 5-minute calibration in 3 s).
+        #[arg(long, value_name = "S")]
+        time_scale: Option<f64>,
     },
     /// Ask a running daemon how it is.
     Status {
@@ -247,6 +248,9 @@ enum Command {
         #[command(flatten)]
         api: remote::ApiArgs,
     },
+    /// Speed against error: fit time per law against readings, and held-out ΔE00
+    /// against patch budget, on simulated monitors (and on real measured displays when
+    /// ../shared/data is present).
     Bench {
         /// Fewer repeats, for a quick look.
         #[arg(long)]
@@ -330,6 +334,10 @@ enum ProfileCommand {
 enum JobCommand {
     /// Start a job: calibrate, verify or uniformity.
     Start {
+        /// calibrate (a whole calibration, published if it passes), verify (a few
+        /// patches against the current profile's prediction) or uniformity (the grid
+        /// alone: a new spatial map for the current profile).
+        #[arg(value_parser = ["calibrate", "verify", "uniformity"])]
         kind: String,
         /// Follow it to its end with a progress bar.
         #[arg(long)]
@@ -519,7 +527,8 @@ fn main() -> ExitCode {
             state_dir,
             socket,
             tcp,
-        } => daemon(config.as_deref(), state_dir, socket, tcp),
+            time_scale,
+        } => daemon(config.as_deref(), state_dir, socket, tcp, time_scale),
         Command::Status { api, json } => remote::status(&api, json).map_err(Failure::from),
         Command::Job { command, api } => match command {
             JobCommand::Start { kind, watch } => remote::job_start(&api, &kind, watch),
@@ -544,8 +553,13 @@ fn daemon(
     state_dir: Option<PathBuf>,
     socket: Option<PathBuf>,
     tcp: Option<String>,
+    time_scale: Option<f64>,
 ) -> Result<(), Failure> {
-    let loaded = load_config(config)?;
+    let mut loaded = load_config(config)?;
+    if let Some(scale) = time_scale {
+        loaded.config.daemon.simulated_time_scale = scale;
+        loaded.config.daemon.check().map_err(Failure::from)?;
+    }
     let options = chromacal::daemon::DaemonOptions {
         state_dir: state_dir.unwrap_or_else(default_state_dir),
         socket,

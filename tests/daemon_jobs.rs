@@ -16,16 +16,30 @@ mod common;
 use common::daemon::{events_until, get, start_daemon, start_job, subscribe, wait_idle};
 use common::daemon_runs;
 
-/// Calibrate twice on a fresh daemon; with `clients`, API clients poll status and
-/// profile and follow the events during the second run. Returns the second run's
+/// Calibrate twice on a fresh daemon; with `clients`, API clients poll status,
+/// profile and history and follow the events during the second run, half of them
+/// over loopback TCP and half over the unix socket. Returns the second run's
 /// readings and the failures the clients met.
 async fn second_run_readings(
     clients: usize,
 ) -> (Vec<chromacal::measurement::Measurement>, usize, usize) {
     let dir = tempfile::tempdir().unwrap();
-    let config = "[daemon]\nsimulated_time_scale = 0.004\nsimulated_idle_ages = false\nrequests_per_s = 100000.0\nburst = 100000\n";
-    let daemon = start_daemon(dir.path(), config);
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let config = format!(
+        "[daemon]\nsimulated_time_scale = 0.004\nsimulated_idle_ages = false\nrequests_per_s = 100000.0\nburst = 100000\ntcp = \"127.0.0.1:{port}\"\n"
+    );
+    let daemon = start_daemon(dir.path(), &config);
     let api = daemon.endpoint();
+    let token = std::fs::read_to_string(daemon.state.join("api.token")).unwrap();
+    // Half the clients come over loopback TCP with the token, half over the socket.
+    let tcp = chromacal::daemon::client::Endpoint::Tcp {
+        address: format!("127.0.0.1:{port}"),
+        token: token.trim().to_string(),
+    };
     start_job(&api, "calibrate").await;
     wait_idle(&api, Duration::from_secs(60)).await;
 
@@ -35,15 +49,16 @@ async fn second_run_readings(
     let mut tasks = Vec::new();
     let mut streams = Vec::new();
     for k in 0..clients {
+        let endpoint = if k % 2 == 0 { &api } else { &tcp };
         let (client, failures, answered, running) = (
-            api.clone(),
+            endpoint.clone(),
             failures.clone(),
             answered.clone(),
             running.clone(),
         );
         tasks.push(tokio::spawn(async move {
             while running.load(Ordering::SeqCst) {
-                let path = if k % 2 == 0 { "/status" } else { "/profile" };
+                let path = ["/status", "/profile", "/history"][k % 3];
                 match chromacal::daemon::client::request(&client, "GET", path, None).await {
                     Ok(r) if r.status == 200 => answered.fetch_add(1, Ordering::SeqCst),
                     _ => failures.fetch_add(1, Ordering::SeqCst),
@@ -52,7 +67,7 @@ async fn second_run_readings(
             }
         }));
         if k % 3 == 0 {
-            streams.push(subscribe(&api));
+            streams.push(subscribe(endpoint));
         }
     }
     tokio::time::sleep(Duration::from_millis(100)).await;
