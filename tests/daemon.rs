@@ -9,7 +9,8 @@ use chromacal::profile::Profile;
 
 mod common;
 use common::daemon::{
-    events_until, get, post, start_daemon, start_daemon_with, start_job, subscribe, wait_idle,
+    events_of_job, events_until, get, post, start_daemon, start_daemon_with, start_job, subscribe,
+    wait_idle,
 };
 use common::{CRT_PRIMARIES, assert_same_model, emulate, in_process_profile};
 
@@ -44,12 +45,7 @@ async fn a_calibration_started_through_the_api_measures_an_emulated_instrument_a
     assert_eq!(busy.status, 409, "{}", busy.text());
     assert!(busy.error_message().contains(&id), "{}", busy.text());
 
-    let seen = events_until(
-        &mut events,
-        Duration::from_secs(120),
-        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
-    )
-    .await;
+    let (seen, _) = events_of_job(&mut events, &id, Duration::from_secs(120)).await;
     assert!(
         matches!(&seen[0], Event::JobStarted { job } if job.id == id),
         "{:?}",
@@ -117,15 +113,7 @@ async fn history_rollback_and_a_verification_are_recorded() {
     let mut events = subscribe(&api);
     tokio::time::sleep(Duration::from_millis(100)).await;
     let id = start_job(&api, "verify").await;
-    let seen = events_until(
-        &mut events,
-        Duration::from_secs(30),
-        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
-    )
-    .await;
-    let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
-        unreachable!()
-    };
+    let (_, outcome) = events_of_job(&mut events, &id, Duration::from_secs(30)).await;
     assert_eq!(outcome.result, "failed");
     assert!(
         outcome.message.contains("no current profile"),
@@ -135,25 +123,12 @@ async fn history_rollback_and_a_verification_are_recorded() {
     let mut ids = Vec::new();
     for _ in 0..2 {
         let id = start_job(&api, "calibrate").await;
-        let seen = events_until(
-            &mut events,
-            Duration::from_secs(60),
-            |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
-        )
-        .await;
-        let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
-            unreachable!()
-        };
+        let (_, outcome) = events_of_job(&mut events, &id, Duration::from_secs(60)).await;
         assert!(outcome.published, "{outcome:?}");
         ids.push(outcome.profile_id.clone().unwrap());
     }
     let id = start_job(&api, "verify").await;
-    let seen = events_until(
-        &mut events,
-        Duration::from_secs(30),
-        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
-    )
-    .await;
+    let (seen, _) = events_of_job(&mut events, &id, Duration::from_secs(30)).await;
     let record = seen
         .iter()
         .find_map(|e| match e {

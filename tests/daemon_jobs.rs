@@ -13,7 +13,9 @@ use chromacal::model::ScreenPosition;
 use chromacal::profile::Profile;
 
 mod common;
-use common::daemon::{events_until, get, start_daemon, start_job, subscribe, wait_idle};
+use common::daemon::{
+    events_of_job, events_until, get, start_daemon, start_job, subscribe, wait_idle,
+};
 use common::daemon_runs;
 
 /// Calibrate twice on a fresh daemon; with `clients`, API clients poll status,
@@ -74,12 +76,7 @@ async fn second_run_readings(
     let id = start_job(&api, "calibrate").await;
     // Every stream hears every reading of the run and its end.
     for events in &mut streams {
-        let seen = events_until(
-            events,
-            Duration::from_secs(60),
-            |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
-        )
-        .await;
+        let (seen, _) = events_of_job(events, &id, Duration::from_secs(60)).await;
         let progress = seen
             .iter()
             .filter(|e| matches!(e, Event::Progress { job } if job.id == id))
@@ -125,15 +122,7 @@ async fn a_verification_of_a_drifting_monitor_starts_a_recalibration() {
         let mut events = subscribe(&api);
         tokio::time::sleep(Duration::from_millis(100)).await;
         let first = start_job(&api, "calibrate").await;
-        let seen = events_until(
-            &mut events,
-            Duration::from_secs(60),
-            |e| matches!(e, Event::JobFinished { job, .. } if job.id == first),
-        )
-        .await;
-        let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
-            unreachable!()
-        };
+        let (_, outcome) = events_of_job(&mut events, &first, Duration::from_secs(60)).await;
         assert!(outcome.published, "drift {drift}: {outcome:?}");
         let calibrated = outcome.profile_id.clone().unwrap();
 
@@ -201,12 +190,7 @@ async fn warm_up_waits_for_the_screen_to_settle_and_is_bounded() {
         let mut events = subscribe(&api);
         tokio::time::sleep(Duration::from_millis(100)).await;
         let id = start_job(&api, "calibrate").await;
-        let seen = events_until(
-            &mut events,
-            Duration::from_secs(60),
-            |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
-        )
-        .await;
+        let (seen, _) = events_of_job(&mut events, &id, Duration::from_secs(60)).await;
         let steps: Vec<_> = seen
             .iter()
             .filter_map(|e| match e {
@@ -264,15 +248,7 @@ async fn a_uniformity_job_gives_the_profile_a_new_spatial_map() {
     let mut events = subscribe(&api);
     tokio::time::sleep(Duration::from_millis(100)).await;
     let id = start_job(&api, "uniformity").await;
-    let seen = events_until(
-        &mut events,
-        Duration::from_secs(60),
-        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
-    )
-    .await;
-    let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
-        unreachable!()
-    };
+    let (seen, outcome) = events_of_job(&mut events, &id, Duration::from_secs(60)).await;
     assert!(outcome.published, "{outcome:?}");
     let progress = seen
         .iter()

@@ -78,23 +78,25 @@ async fn connect(endpoint: &Endpoint) -> Result<Sender, ClientError> {
             let stream = tokio::net::UnixStream::connect(path)
                 .await
                 .map_err(connect_error)?;
-            let (sender, connection) = hyper::client::conn::http1::handshake(TokioIo::new(stream))
-                .await
-                .map_err(http_error)?;
-            tokio::spawn(connection);
-            Ok(sender)
+            handshake(stream).await.map_err(http_error)
         }
         Endpoint::Tcp { address, .. } => {
             let stream = tokio::net::TcpStream::connect(address)
                 .await
                 .map_err(connect_error)?;
-            let (sender, connection) = hyper::client::conn::http1::handshake(TokioIo::new(stream))
-                .await
-                .map_err(http_error)?;
-            tokio::spawn(connection);
-            Ok(sender)
+            handshake(stream).await.map_err(http_error)
         }
     }
+}
+
+/// HTTP/1.1 on a connected stream; the connection is driven on its own task.
+async fn handshake<S>(stream: S) -> Result<Sender, hyper::Error>
+where
+    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin + Send + 'static,
+{
+    let (sender, connection) = hyper::client::conn::http1::handshake(TokioIo::new(stream)).await?;
+    tokio::spawn(connection);
+    Ok(sender)
 }
 
 fn build(

@@ -6,7 +6,7 @@ use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 use chromacal::daemon::client::{Endpoint, Reply, follow_events, request};
-use chromacal::daemon::events::Event;
+use chromacal::daemon::events::{Event, JobOutcome};
 
 /// A running daemon, killed when dropped.
 pub struct TestDaemon {
@@ -163,6 +163,25 @@ pub async fn events_until(
             return seen;
         }
     }
+}
+
+/// The events up to the end of job `id` (included), and how it ended.
+pub async fn events_of_job(
+    events: &mut tokio::sync::mpsc::UnboundedReceiver<Event>,
+    id: &str,
+    timeout: Duration,
+) -> (Vec<Event>, JobOutcome) {
+    let seen = events_until(
+        events,
+        timeout,
+        |e| matches!(e, Event::JobFinished { job, .. } if job.id == id),
+    )
+    .await;
+    let Some(Event::JobFinished { outcome, .. }) = seen.last() else {
+        unreachable!("events_until stops at the job's end")
+    };
+    let outcome = outcome.clone();
+    (seen, outcome)
 }
 
 /// Wait until no job runs.
