@@ -402,3 +402,52 @@ async fn systemd_hears_ready_watchdog_and_stopping() {
         }
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_on_a_serial_rig_leaves_the_screen_black_and_the_instrument_free() {
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = emulate(&["--instrument", "pr670", "--time-scale", "0.002"]);
+    let config = format!(
+        "{CRT_PRIMARIES}[instrument]\ndriver = \"pr670\"\nport = \"{}\"\n[instrument.options]\ntiming_scale = 0.002\n[display]\nscreen = \"{}\"\n",
+        emulator.device, emulator.screen
+    );
+    let mut daemon = start_daemon(dir.path(), &config);
+    let api = daemon.endpoint();
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let id = start_job(&api, "calibrate").await;
+    // Stop in the middle of the run, on a bright patch or a dark one.
+    events_until(
+        &mut events,
+        Duration::from_secs(60),
+        |e| matches!(e, Event::Progress { job } if job.id == id && job.done >= 20),
+    )
+    .await;
+    let (ok, took) = daemon.terminate();
+    assert!(ok, "{}", daemon.log_text());
+    assert!(took < Duration::from_secs(5), "{took:?}");
+
+    // The instrument was let go: another program can open it and read the screen,
+    // which the daemon left black.
+    let out = common::chromacal()
+        .args([
+            "measure",
+            "--instrument",
+            &format!("pr670:{}", emulator.device),
+            "--timing-scale",
+            "0.002",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let readings: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let y = readings[0]["xyz"][1]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{readings}"));
+    assert!(y < 0.5, "the screen shows {y} cd/m², not black");
+}
