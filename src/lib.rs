@@ -15,6 +15,7 @@ pub mod color;
 pub mod config;
 pub mod daemon;
 pub mod display;
+pub mod export;
 pub mod fit;
 pub mod instrument;
 pub mod measurement;

@@ -190,6 +190,31 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Write a profile for other tools: ICC v4 or v2 display profiles (with vcgt when a
+    /// target is given), ArgyllCMS .ti3 (the run's measurements) and .cal (calibration
+    /// curves to a target), a PsychoPy monitor file, or the profile as JSON or TOML.
+    Export {
+        /// The profile (a chromacal .toml).
+        profile: PathBuf,
+        #[arg(long, value_parser = ["icc4", "icc2", "ti3", "cal", "psychopy", "json", "toml"])]
+        format: String,
+        /// Where to write it.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The measurements for .ti3 and PsychoPy spectra [default: the run journal the
+        /// profile names].
+        #[arg(long)]
+        measurements: Option<PathBuf>,
+        /// Calibration target white: native, D50, D55, D65, D75, 6500K or x,y.
+        #[arg(long)]
+        white: Option<String>,
+        /// Calibration target tone curve: gamma:G, srgb, bt1886 or lstar [default: gamma:2.2].
+        #[arg(long)]
+        tone: Option<String>,
+        /// Calibration target white luminance in cd/m², or max [default: max].
+        #[arg(long)]
+        luminance: Option<String>,
+    },
     /// Work with profiles.
     Profile {
         #[command(subcommand)]
@@ -521,6 +546,21 @@ fn main() -> ExitCode {
         Command::Profile {
             command: ProfileCommand::Current { api, json },
         } => remote::current_profile(&api, json).map_err(Failure::from),
+        Command::Export {
+            profile,
+            format,
+            output,
+            measurements,
+            white,
+            tone,
+            luminance,
+        } => export(
+            &profile,
+            &format,
+            &output,
+            measurements.as_deref(),
+            [white, tone, luminance],
+        ),
         Command::Bench { quick, data } => bench::run(quick, data).map_err(Failure::from),
         Command::Daemon {
             config,
@@ -546,6 +586,57 @@ fn main() -> ExitCode {
             ExitCode::from(f.code)
         }
     }
+}
+
+fn export(
+    profile_path: &Path,
+    format: &str,
+    output: &Path,
+    measurements: Option<&Path>,
+    target: [Option<String>; 3],
+) -> Result<(), Failure> {
+    use chromacal::export::{ExportOptions, Format, parse_target};
+    let profile = Profile::read(profile_path).map_err(Failure::from)?;
+    let format = Format::parse(format).map_err(|e| Failure::from(e.to_string()))?;
+    let [white, tone, luminance] = target;
+    let target = parse_target(white.as_deref(), tone.as_deref(), luminance.as_deref())
+        .map_err(|e| Failure::from(e.to_string()))?;
+    let measurements = match measurements {
+        Some(path) => Some(
+            chromacal::measurement::read_measurements(path)
+                .map_err(|e| Failure::from(e.to_string()))?,
+        ),
+        None => None,
+    };
+    let options = ExportOptions {
+        target,
+        measurements,
+    };
+    let exported = chromacal::export::export(&profile, format, &options)
+        .map_err(|e| Failure::from(e.to_string()))?;
+    std::fs::write(output, &exported.bytes)
+        .map_err(|e| Failure::from(format!("{}: {e}", output.display())))?;
+    println!(
+        "wrote {} ({}, {} bytes)",
+        output.display(),
+        format.name(),
+        exported.bytes.len()
+    );
+    if let Some(k) = &exported.calibration {
+        println!(
+            "calibration curves to {}: predicted white ΔE00 {:.3}, tone within {:.2} % at 9 levels",
+            k.target.describe(),
+            k.predicted_white_de00,
+            100.0 * k.predicted_tone_error
+        );
+    }
+    for note in &exported.not_carried {
+        println!("not carried: {note}");
+    }
+    for warning in &exported.warnings {
+        println!("warning: {warning}");
+    }
+    Ok(())
 }
 
 fn daemon(

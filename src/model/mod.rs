@@ -3,6 +3,7 @@
 
 pub mod monitor;
 pub mod spatial;
+pub mod target;
 pub mod transfer;
 
 pub use monitor::{CHANNELS, Drive, MonitorModel};

@@ -1,0 +1,365 @@
+//! Publishing a profile to other tools: ICC v4 and v2 display profiles (with `vcgt`
+//! when there are calibration curves), ArgyllCMS CGATS `.ti3` (the run's
+//! measurements) and `.cal` (calibration curves), PsychoPy monitor files, and the
+//! native profile as JSON.
+//!
+//! Each format says what it cannot carry: a matrix/TRC profile describes the centre
+//! of the screen as an additive display; the spatial map, a failed additivity or
+//! primary-constancy check, and a surround dependence are listed in the profile's
+//! description and returned as notes.
+
+pub mod cal;
+pub mod icc;
+pub mod matrix_trc;
+pub mod psychopy;
+
+use std::path::Path;
+
+use crate::fit::checks::Verdict;
+use crate::measurement::{MeasurementSet, Units, read_measurements};
+use crate::model::target::{CalibrationCurves, Target, TargetError, calibration_curves};
+use crate::profile::Profile;
+use icc::{IccText, IccVersion};
+use matrix_trc::MatrixTrc;
+
+/// The formats `export` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Icc4,
+    Icc2,
+    Ti3,
+    Cal,
+    Psychopy,
+    Json,
+    Toml,
+}
+
+impl Format {
+    pub const NAMES: &'static str = "icc4, icc2, ti3, cal, psychopy, json, toml";
+
+    pub fn parse(text: &str) -> Result<Format, ExportError> {
+        Ok(match text.to_ascii_lowercase().as_str() {
+            "icc4" | "icc" => Format::Icc4,
+            "icc2" => Format::Icc2,
+            "ti3" => Format::Ti3,
+            "cal" => Format::Cal,
+            "psychopy" => Format::Psychopy,
+            "json" => Format::Json,
+            "toml" => Format::Toml,
+            _ => return Err(ExportError::UnknownFormat(text.to_string())),
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Icc4 => "icc4",
+            Format::Icc2 => "icc2",
+            Format::Ti3 => "ti3",
+            Format::Cal => "cal",
+            Format::Psychopy => "psychopy",
+            Format::Json => "json",
+            Format::Toml => "toml",
+        }
+    }
+
+    /// The MIME type an HTTP answer carries.
+    pub fn content_type(self) -> &'static str {
+        match self {
+            Format::Icc4 | Format::Icc2 => "application/vnd.iccprofile",
+            Format::Json | Format::Psychopy => "application/json",
+            Format::Toml => "application/toml",
+            Format::Ti3 | Format::Cal => "text/plain; charset=utf-8",
+        }
+    }
+
+    /// The usual file extension.
+    pub fn extension(self) -> &'static str {
+        match self {
+            Format::Icc4 | Format::Icc2 => "icc",
+            Format::Ti3 => "ti3",
+            Format::Cal => "cal",
+            Format::Psychopy | Format::Json => "json",
+            Format::Toml => "toml",
+        }
+    }
+}
+
+/// Why an export failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    #[error("unknown format '{0}': one of {names}", names = Format::NAMES)]
+    UnknownFormat(String),
+    #[error("calibration curves need a target: give a white point, a tone curve or a luminance")]
+    NoTarget,
+    #[error("{0}")]
+    Target(#[from] TargetError),
+    #[error(
+        "a .ti3 needs the run's measurements, and {0} cannot be read; give them with --measurements"
+    )]
+    NoMeasurements(String),
+    #[error("{0}")]
+    Measurements(String),
+    #[error("the profile's model has a singular primary matrix")]
+    Singular,
+    #[error("cannot write the profile: {0}")]
+    Serialize(String),
+}
+
+/// What the export needs besides the profile.
+#[derive(Debug, Clone, Default)]
+pub struct ExportOptions {
+    /// Calibration curves to this target (for `.cal`, and `vcgt` in ICC).
+    pub target: Option<Target>,
+    /// The measurements (default: the journal named in the profile's provenance).
+    pub measurements: Option<MeasurementSet>,
+}
+
+/// An exported file and what it could not carry.
+#[derive(Debug, Clone)]
+pub struct Exported {
+    pub bytes: Vec<u8>,
+    /// What the profile knows that the file does not carry.
+    pub not_carried: Vec<String>,
+    /// What else the user should know (a target that was not reachable, say).
+    pub warnings: Vec<String>,
+    pub calibration: Option<CalibrationCurves>,
+}
+
+/// What a matrix/TRC description (or a PsychoPy gamma grid) of this profile leaves out.
+pub fn limitations(profile: &Profile) -> Vec<String> {
+    let report = &profile.report;
+    let mut notes = Vec::new();
+    if !matches!(profile.model.spatial, crate::model::SpatialMap::Uniform) {
+        let falloff = report
+            .spatial
+            .largest_falloff_percent
+            .map_or(String::new(), |f| {
+                format!("; elsewhere up to {f:.1} % less light")
+            });
+        notes.push(format!(
+            "the spatial map (the profile describes the centre of the screen{falloff})"
+        ));
+    }
+    let checks = &report.checks;
+    if checks.additivity_verdict == Verdict::Fails {
+        let worst = checks
+            .additivity
+            .iter()
+            .map(|a| a.luminance_departure_percent)
+            .fold(0.0, |w: f64, v| if v.abs() > w.abs() { v } else { w });
+        notes.push(format!(
+            "channel interaction (grey luminance {worst:+.1} % off the sum of its channels)"
+        ));
+    }
+    if checks.primary_constancy_verdict == Verdict::Fails {
+        notes.push("primary chromaticities that change with drive".into());
+    }
+    if checks.spatial_independence_verdict == Verdict::Fails {
+        notes.push("the dependence of the light on the surround".into());
+    }
+    if report.luminance_only.is_some() {
+        notes.push(
+            "measured primary chromaticities (a light meter read luminance only; they were given)"
+                .into(),
+        );
+    }
+    notes
+}
+
+/// Split an RFC 3339 time into the six numbers ICC headers use (UTC).
+fn created_fields(created: &str) -> [u16; 6] {
+    let parsed = humantime::parse_rfc3339_weak(created.trim_end_matches('Z'))
+        .or_else(|_| humantime::parse_rfc3339(created))
+        .unwrap_or_else(|_| std::time::SystemTime::now());
+    let text = humantime::format_rfc3339_seconds(parsed).to_string();
+    let number = |range: std::ops::Range<usize>| -> u16 {
+        text.get(range).and_then(|s| s.parse().ok()).unwrap_or(0)
+    };
+    [
+        number(0..4),
+        number(5..7),
+        number(8..10),
+        number(11..13),
+        number(14..16),
+        number(17..19),
+    ]
+}
+
+fn epoch_seconds(created: &str) -> f64 {
+    humantime::parse_rfc3339_weak(created.trim_end_matches('Z'))
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// The profile's own measurements: `options.measurements`, else the journal its
+/// provenance names.
+fn measurements(profile: &Profile, options: &ExportOptions) -> Result<MeasurementSet, ExportError> {
+    if let Some(set) = &options.measurements {
+        return Ok(set.clone());
+    }
+    let source = &profile.provenance.source;
+    read_measurements(Path::new(source)).map_err(|_| ExportError::NoMeasurements(source.clone()))
+}
+
+/// A one-line description for ICC `desc`.
+fn description(
+    profile: &Profile,
+    notes: &[String],
+    calibration: Option<&CalibrationCurves>,
+) -> String {
+    let display = profile
+        .provenance
+        .display
+        .clone()
+        .unwrap_or_else(|| "display".into());
+    let mut text = format!("chromacal {} ({display})", profile.id);
+    if let Some(held) = &profile.report.held_out {
+        text += &format!(", held-out mean dE00 {:.2}", held.mean);
+    }
+    if let Some(k) = calibration {
+        text += &format!(", calibrated to {}", k.target.describe());
+    }
+    if !notes.is_empty() {
+        text += "; not carried: ";
+        text += &notes.join("; ");
+    }
+    text
+}
+
+/// Export `profile` as `format`.
+pub fn export(
+    profile: &Profile,
+    format: Format,
+    options: &ExportOptions,
+) -> Result<Exported, ExportError> {
+    let mut notes = limitations(profile);
+    let mut warnings = Vec::new();
+    let calibration = match &options.target {
+        Some(target) => Some(calibration_curves(&profile.model, target)?),
+        None => None,
+    };
+    if let Some(k) = &calibration
+        && k.luminance_limited
+    {
+        warnings.push(format!(
+            "the white point allows at most {:.2} {}; the target luminance was lowered to it",
+            k.white_luminance(),
+            units_name(profile.units)
+        ));
+    }
+    let created = created_fields(&profile.created);
+    let bytes = match format {
+        Format::Icc4 | Format::Icc2 => {
+            if profile.model.matrix.try_inverse().is_none() {
+                return Err(ExportError::Singular);
+            }
+            let matrix_trc = MatrixTrc::from_model(&profile.model, calibration.as_ref());
+            if matrix_trc.black_clipped {
+                notes.push("the black's chromaticity (outside the primaries' triangle)".into());
+            }
+            let text = IccText {
+                description: description(profile, &notes, calibration.as_ref()),
+                copyright: "No copyright. Made by chromacal from measurements of this display."
+                    .into(),
+                created,
+            };
+            let version = if format == Format::Icc4 {
+                IccVersion::V4
+            } else {
+                IccVersion::V2
+            };
+            icc::encode(&matrix_trc, &text, version)
+        }
+        Format::Ti3 => {
+            let set = measurements(profile, options)?;
+            crate::cgats::to_ti3(&set).into_bytes()
+        }
+        Format::Cal => {
+            let curves = calibration.as_ref().ok_or(ExportError::NoTarget)?;
+            cal::cal_text(curves, &profile.created).into_bytes()
+        }
+        Format::Psychopy => {
+            let set = measurements(profile, options).ok();
+            let mut text = description(profile, &notes, None);
+            if profile.units == Units::Relative {
+                text += "; luminances are relative (white = 100), not cd/m²";
+            }
+            psychopy::monitor_file(
+                &profile.model,
+                set.as_ref(),
+                &psychopy::calibration_name(&created),
+                epoch_seconds(&profile.created),
+                &text,
+            )
+            .into_bytes()
+        }
+        Format::Json => {
+            serde_json::to_vec_pretty(profile).map_err(|e| ExportError::Serialize(e.to_string()))?
+        }
+        Format::Toml => profile
+            .to_toml()
+            .map_err(|e| ExportError::Serialize(e.to_string()))?
+            .into_bytes(),
+    };
+    if matches!(
+        format,
+        Format::Ti3 | Format::Cal | Format::Json | Format::Toml
+    ) {
+        // These carry measurements, curves or the whole profile, not a model that
+        // leaves things out.
+        notes.clear();
+    }
+    Ok(Exported {
+        bytes,
+        not_carried: notes,
+        warnings,
+        calibration,
+    })
+}
+
+fn units_name(units: Units) -> &'static str {
+    match units {
+        Units::Absolute => "cd/m²",
+        Units::Relative => "(relative units)",
+    }
+}
+
+/// A target from the words a user gives (`--white`, `--tone`, `--luminance`; the same
+/// as the API's query): none given, no target. Unset parts default to the native
+/// white, gamma 2.2 and the most luminance the white allows.
+pub fn parse_target(
+    white: Option<&str>,
+    tone: Option<&str>,
+    luminance: Option<&str>,
+) -> Result<Option<Target>, ExportError> {
+    use crate::model::target::{ToneCurve, WhiteTarget, parse_tone, parse_white};
+    if white.is_none() && tone.is_none() && luminance.is_none() {
+        return Ok(None);
+    }
+    let luminance = match luminance.map(str::trim) {
+        None | Some("max") => None,
+        Some(text) => match text.parse::<f64>() {
+            Ok(v) if v > 0.0 && v.is_finite() => Some(v),
+            _ => {
+                return Err(TargetError::Parse {
+                    what: "luminance",
+                    text: text.into(),
+                    expected: "a positive number in the profile's units, or max",
+                }
+                .into());
+            }
+        },
+    };
+    Ok(Some(Target {
+        white: white
+            .map(parse_white)
+            .transpose()?
+            .unwrap_or(WhiteTarget::Native),
+        tone: tone
+            .map(parse_tone)
+            .transpose()?
+            .unwrap_or(ToneCurve::Power(2.2)),
+        luminance,
+    }))
+}

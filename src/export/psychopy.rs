@@ -1,0 +1,200 @@
+//! A PsychoPy monitor file: the calibration as PsychoPy's Monitor Center stores it in
+//! `~/.psychopy3/monitors/<name>.json` (`psychopy.monitors.calibTools.Monitor`), so
+//! that `monitors.Monitor(name)` loads it and its windows linearise with it.
+//!
+//! The file maps a calibration name (`%Y_%m_%d %H:%M`, as `strFromDate` makes it) to
+//! a dict. PsychoPy writes it with `json_tricks`, which stores a numpy array as
+//! `{"__ndarray__": rows, "dtype": "float64", "shape": [...], "Corder": true}`; the
+//! arrays here are written that way so that `json_tricks.load` gives numpy arrays.
+//!
+//! What PsychoPy reads:
+//! * `gammaGrid`, 4 × 6: rows luminance (grey), R, G, B; columns min, max, gamma, a,
+//!   b, k. With `linearizeMethod` 1 PsychoPy inverts y = a + (b·x)^γ: min is the
+//!   black's luminance and max each row's full-drive luminance, both in cd/m²; γ is
+//!   fitted here to the model's curve of that row (least squares on the share of the
+//!   way from black to full drive, 256 levels). b = 0 and k = (max − min)^(1/γ) give
+//!   the same curve under PsychoPy's method 4 (Pelli & Zhang 1991), y = a + (b + k·x)^γ.
+//! * `lumsPre` (4 × n) at `levelsPre` (0..255): the model's luminance series.
+//! * `spectraNM`, `spectraRGB` (3 × n): the full-drive spectra of R, G and B, when the
+//!   run measured spectra.
+//! * `calibDate` (seconds since the epoch), `notes`, `width`, `distance`, `sizePix`
+//!   (unknown to chromacal: null, set them in Monitor Center), `usebits`,
+//!   `psychopyVersion`.
+
+use serde_json::{Value, json};
+
+use crate::measurement::{MeasurementSet, Role};
+use crate::model::MonitorModel;
+
+/// Levels of the luminance series (PsychoPy's `DACrange(17)`-like spacing).
+const SERIES_LEVELS: usize = 17;
+
+/// A numpy array in json_tricks' form.
+fn ndarray(rows: &[Vec<f64>]) -> Value {
+    let shape = if rows.len() == 1 {
+        json!([rows[0].len()])
+    } else {
+        json!([rows.len(), rows.first().map_or(0, Vec::len)])
+    };
+    let data = if rows.len() == 1 {
+        json!(rows[0])
+    } else {
+        json!(rows)
+    };
+    json!({"__ndarray__": data, "dtype": "float64", "shape": shape, "Corder": true})
+}
+
+/// The γ of y = x^γ that best fits `shares` (the share of the way from black to full
+/// drive at inputs i/(n−1)), by golden-section search on the squared error.
+pub fn fit_gamma(shares: &[f64]) -> f64 {
+    let n = shares.len();
+    let error = |g: f64| -> f64 {
+        shares
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let x = i as f64 / (n - 1) as f64;
+                (x.powf(g) - s).powi(2)
+            })
+            .sum()
+    };
+    let (mut lo, mut hi) = (0.5_f64, 5.0_f64);
+    let ratio = (5f64.sqrt() - 1.0) / 2.0;
+    for _ in 0..100 {
+        let a = hi - ratio * (hi - lo);
+        let b = lo + ratio * (hi - lo);
+        if error(a) < error(b) {
+            hi = b;
+        } else {
+            lo = a;
+        }
+    }
+    (lo + hi) / 2.0
+}
+
+/// The luminance of drive `d` under the model.
+fn luminance(model: &MonitorModel, d: [f64; 3]) -> f64 {
+    model.forward_centre(d).y
+}
+
+/// The drive of row `row` (0 grey, 1..3 one channel) at input x.
+fn row_drive(row: usize, x: f64) -> [f64; 3] {
+    match row {
+        0 => [x; 3],
+        c => {
+            let mut d = [0.0; 3];
+            d[c - 1] = x;
+            d
+        }
+    }
+}
+
+/// The gamma grid: rows grey, R, G, B; columns min, max, gamma, a, b, k.
+pub fn gamma_grid(model: &MonitorModel) -> [[f64; 6]; 4] {
+    let black = luminance(model, [0.0; 3]);
+    [0, 1, 2, 3].map(|row| {
+        let max = luminance(model, row_drive(row, 1.0));
+        let shares: Vec<f64> = (0..256)
+            .map(|i| {
+                let y = luminance(model, row_drive(row, i as f64 / 255.0));
+                (y - black) / (max - black)
+            })
+            .collect();
+        let gamma = fit_gamma(&shares);
+        [
+            black,
+            max,
+            gamma,
+            black,
+            0.0,
+            (max - black).powf(1.0 / gamma),
+        ]
+    })
+}
+
+/// The monitor file's JSON text.
+pub fn monitor_file(
+    model: &MonitorModel,
+    measurements: Option<&MeasurementSet>,
+    calibration_name: &str,
+    calib_date_epoch_s: f64,
+    notes: &str,
+) -> String {
+    let grid = gamma_grid(model);
+    let levels: Vec<f64> = (0..SERIES_LEVELS)
+        .map(|i| (255.0 * i as f64 / (SERIES_LEVELS - 1) as f64).round())
+        .collect();
+    let lums: Vec<Vec<f64>> = (0..4)
+        .map(|row| {
+            levels
+                .iter()
+                .map(|l| luminance(model, row_drive(row, l / 255.0)))
+                .collect()
+        })
+        .collect();
+    let mut calibration = json!({
+        "calibDate": calib_date_epoch_s,
+        "gamma": grid[0][2],
+        "gammaGrid": ndarray(&grid.iter().map(|r| r.to_vec()).collect::<Vec<_>>()),
+        "linearizeMethod": 1,
+        "lumsPre": ndarray(&lums),
+        "levelsPre": ndarray(&[levels]),
+        "lumsPost": null,
+        "levelsPost": null,
+        "meanLum": luminance(model, [0.5; 3]),
+        "width": null,
+        "distance": null,
+        "sizePix": null,
+        "notes": notes,
+        "usebits": false,
+        "psychopyVersion": format!("chromacal {}", env!("CARGO_PKG_VERSION")),
+    });
+    if let Some((nm, rgb)) = measurements.and_then(primary_spectra) {
+        calibration["spectraNM"] = ndarray(&[nm]);
+        calibration["spectraRGB"] = ndarray(&rgb);
+    }
+    let file = json!({ calibration_name: calibration });
+    serde_json::to_string_pretty(&file).unwrap_or_default()
+}
+
+/// Wavelengths and the spectra of R, G and B at full drive (the first usable
+/// reading of each), when all three were measured on one wavelength grid.
+fn primary_spectra(set: &MeasurementSet) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
+    let mut grid: Option<Vec<f64>> = None;
+    let mut rows = Vec::new();
+    for c in 0..3 {
+        let mut drive = [0.0; 3];
+        drive[c] = 1.0;
+        let spectrum = set
+            .measurements
+            .iter()
+            .filter(|m| m.role == Role::Ramp && m.drive == drive && m.is_standard_condition())
+            .find_map(|m| m.usable_xyz().and(m.reading.spectrum.as_ref()))?;
+        let nm = spectrum.wavelengths_nm().to_vec();
+        if grid.as_ref().is_some_and(|g| *g != nm) {
+            return None;
+        }
+        grid = Some(nm);
+        rows.push(spectrum.values().to_vec());
+    }
+    Some((grid?, rows))
+}
+
+/// PsychoPy's calibration name for a time: `%Y_%m_%d %H:%M`.
+pub fn calibration_name(created: &[u16; 6]) -> String {
+    format!(
+        "{:04}_{:02}_{:02} {:02}:{:02}",
+        created[0], created[1], created[2], created[3], created[4]
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gamma_is_recovered_from_a_power_curve() {
+        let shares: Vec<f64> = (0..256).map(|i| (i as f64 / 255.0).powf(2.37)).collect();
+        assert!((fit_gamma(&shares) - 2.37).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,380 @@
+//! Exports read back by independent readers: Little CMS (`transicc`, Debian's
+//! liblcms2-utils) and moxcms for ICC v4 and v2, ArgyllCMS (`iccdump`, `colprof`,
+//! `iccvcgt`) for v2, `.ti3` and `.cal`, and PsychoPy's own loader (`json_tricks` with
+//! numpy) for the monitor file. Profiles come from calibrations of virtual monitors
+//! with real measured spectra and transfer tables (ISETBio) and the CRT preset.
+//!
+//! The Debian tools are installed by `scripts/test.sh`; a test that needs one says so
+//! and fails when it is missing.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use chromacal::color::adaptation::{AdaptationTransform, adaptation_matrix};
+use chromacal::color::{Lab, Xyz, delta_e_2000, xyz_to_lab};
+use chromacal::model::MonitorModel;
+use chromacal::profile::Profile;
+use common::{chromacal, in_process_profile, isetbio_monitor};
+
+const D50: [f64; 3] = [0.9642, 1.0, 0.8249];
+
+/// Calibrate the monitor a config describes; returns the profile and its path.
+fn calibrate(dir: &Path, name: &str, config: &str) -> (Profile, PathBuf) {
+    let config_path = dir.join(format!("{name}.toml"));
+    std::fs::write(&config_path, config).unwrap();
+    let state = dir.join(name);
+    let profile = in_process_profile(&config_path, &state);
+    (profile, state.join("current.toml"))
+}
+
+fn export(profile: &Path, format: &str, output: &Path, extra: &[&str]) -> String {
+    let out = chromacal()
+        .arg("export")
+        .arg(profile)
+        .args(["--format", format, "-o"])
+        .arg(output)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "export {format}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+/// The model's colour of `rgb` as an ICC reader should give it: relative to the
+/// display's white, adapted to D50 by Bradford, in L*a*b* (D50).
+fn model_lab(model: &MonitorModel, rgb: [f64; 3]) -> Lab {
+    let white = model.white();
+    let d50 = Xyz::new(D50[0], D50[1], D50[2]);
+    let chad = adaptation_matrix(AdaptationTransform::Bradford, &(white / white.y), &d50);
+    xyz_to_lab(&(chad * (model.forward_centre(rgb) / white.y)), &d50)
+}
+
+/// Codes (0..255) to check: a 5-level cube, and dark greys and primaries.
+fn test_codes() -> Vec<[f64; 3]> {
+    let levels = [0.0, 64.0, 128.0, 191.0, 255.0];
+    let mut codes = Vec::new();
+    for r in levels {
+        for g in levels {
+            for b in levels {
+                codes.push([r, g, b]);
+            }
+        }
+    }
+    for v in [1.0, 2.0, 4.0, 8.0, 16.0, 32.0] {
+        codes.extend([[v, v, v], [v, 0.0, 0.0], [0.0, v, 0.0], [0.0, 0.0, v]]);
+    }
+    codes
+}
+
+fn need(tool: &str) {
+    let found = Command::new("sh")
+        .args(["-c", &format!("command -v {tool}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    assert!(
+        found,
+        "{tool} is missing: scripts/test.sh installs it (Debian packages argyll, liblcms2-utils, python3-json-tricks)"
+    );
+}
+
+/// L*a*b* (D50) of `codes` through an ICC profile, by Little CMS's `transicc`,
+/// relative colorimetric, without a precalculated transform (-c0).
+fn transicc_lab(icc: &Path, codes: &[[f64; 3]]) -> Vec<Lab> {
+    need("transicc");
+    let mut child = Command::new("transicc")
+        .args(["-t1", "-c0", "-n", "-o", "*Lab"])
+        .arg(format!("-i{}", icc.display()))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let input: String = codes
+        .iter()
+        .map(|c| format!("{} {} {}\n", c[0], c[1], c[2]))
+        .collect();
+    use std::io::Write;
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let labs: Vec<Lab> = text
+        .lines()
+        .filter_map(|line| {
+            let v: Vec<f64> = line
+                .split_whitespace()
+                .map(|w| w.parse::<f64>())
+                .collect::<Result<_, _>>()
+                .ok()?;
+            (v.len() == 3).then(|| Lab {
+                l: v[0],
+                a: v[1],
+                b: v[2],
+            })
+        })
+        .collect();
+    assert_eq!(labs.len(), codes.len(), "{text}");
+    labs
+}
+
+/// The worst ΔE00 between the model and `read` over `codes`.
+fn worst_against_model(model: &MonitorModel, codes: &[[f64; 3]], read: &[Lab]) -> (f64, [f64; 3]) {
+    codes
+        .iter()
+        .zip(read)
+        .map(|(c, lab)| {
+            let rgb = c.map(|v| v / 255.0);
+            (delta_e_2000(&model_lab(model, rgb), lab), *c)
+        })
+        .fold((0.0, [0.0; 3]), |w, e| if e.0 > w.0 { e } else { w })
+}
+
+/// T(x) of a curve as moxcms parsed it (ICC.1:2022 §10.6 and §10.18).
+fn moxcms_curve(curve: &moxcms::ToneReprCurve, x: f64) -> f64 {
+    match curve {
+        moxcms::ToneReprCurve::Lut(table) => {
+            let n = table.len();
+            if n == 0 {
+                return x;
+            }
+            if n == 1 {
+                return x.powf(table[0] as f64 / 256.0);
+            }
+            let p = x * (n - 1) as f64;
+            let i = (p.floor() as usize).min(n - 2);
+            let t = p - i as f64;
+            (table[i] as f64 * (1.0 - t) + table[i + 1] as f64 * t) / 65535.0
+        }
+        moxcms::ToneReprCurve::Parametric(p) => {
+            let p: Vec<f64> = p.iter().map(|v| *v as f64).collect();
+            match p.len() {
+                1 => x.powf(p[0]),
+                4 => {
+                    let (g, a, b, c) = (p[0], p[1], p[2], p[3]);
+                    if x >= -b / a {
+                        (a * x + b).max(0.0).powf(g) + c
+                    } else {
+                        c
+                    }
+                }
+                n => panic!("chromacal writes parametric type 2 only, found {n} parameters"),
+            }
+        }
+    }
+}
+
+/// L*a*b* (D50) of `codes` from the colorants and curves moxcms parsed.
+fn moxcms_lab(bytes: &[u8], codes: &[[f64; 3]]) -> Vec<Lab> {
+    let icc = moxcms::ColorProfile::new_from_slice(bytes).expect("moxcms parses the profile");
+    let colorants = [icc.red_colorant, icc.green_colorant, icc.blue_colorant];
+    let curves = [
+        icc.red_trc.as_ref().unwrap(),
+        icc.green_trc.as_ref().unwrap(),
+        icc.blue_trc.as_ref().unwrap(),
+    ];
+    let d50 = Xyz::new(D50[0], D50[1], D50[2]);
+    codes
+        .iter()
+        .map(|c| {
+            let mut xyz = Xyz::zeros();
+            for k in 0..3 {
+                let t = moxcms_curve(curves[k], c[k] / 255.0);
+                xyz += Xyz::new(colorants[k].x, colorants[k].y, colorants[k].z) * t;
+            }
+            xyz_to_lab(&xyz, &d50)
+        })
+        .collect()
+}
+
+/// Three monitors: the CRT preset (its law is gain-offset-gamma, so v4 curves are
+/// parametric) and two ISETBio displays whose measured tables make sampled curves.
+fn monitors(dir: &Path) -> Vec<(&'static str, Profile, PathBuf)> {
+    [
+        ("crt", "[monitor]\npreset = \"crt\"\n".to_string()),
+        (
+            "lcd-dell",
+            isetbio_monitor("isetbio_lcd_dell", "flare_luminance = 0.05\nfalloff = 0.05"),
+        ),
+        (
+            "oled-sony",
+            isetbio_monitor(
+                "isetbio_oled_sony",
+                "black_luminance = 0.0005\nflare_luminance = 0.05\nfalloff = 0.02",
+            ),
+        ),
+    ]
+    .into_iter()
+    .map(|(name, config)| {
+        let (profile, path) = calibrate(dir, name, &config);
+        (name, profile, path)
+    })
+    .collect()
+}
+
+#[test]
+fn icc_profiles_read_back_by_lcms_and_moxcms_match_the_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let codes = test_codes();
+    for (name, profile, path) in monitors(dir.path()) {
+        for format in ["icc4", "icc2"] {
+            let icc = dir.path().join(format!("{name}.{format}.icc"));
+            let said = export(&path, format, &icc, &[]);
+            assert!(said.contains("not carried: the spatial map"), "{said}");
+            let bytes = std::fs::read(&icc).unwrap();
+            let (worst, at) =
+                worst_against_model(&profile.model, &codes, &transicc_lab(&icc, &codes));
+            eprintln!("{name} {format}: lcms worst ΔE00 {worst:.4} at {at:?}");
+            assert!(
+                worst < 0.1,
+                "{name} {format} via lcms: ΔE00 {worst} at {at:?}"
+            );
+            let (worst, at) =
+                worst_against_model(&profile.model, &codes, &moxcms_lab(&bytes, &codes));
+            eprintln!("{name} {format}: moxcms worst ΔE00 {worst:.4} at {at:?}");
+            assert!(
+                worst < 0.1,
+                "{name} {format} via moxcms: ΔE00 {worst} at {at:?}"
+            );
+
+            let icc_read = moxcms::ColorProfile::new_from_slice(&bytes).unwrap();
+            let lumi = icc_read.luminance.unwrap().y;
+            assert!(
+                (lumi / profile.model.white().y - 1.0).abs() < 1e-4,
+                "{lumi}"
+            );
+            match format {
+                "icc4" => {
+                    assert_eq!(icc_read.version(), moxcms::ProfileVersion::V4_4);
+                    assert!(icc_read.chromatic_adaptation.is_some());
+                    // The MD5 ID over the bytes with flags, intent and ID zeroed.
+                    let mut copy = bytes.clone();
+                    copy[44..48].fill(0);
+                    copy[64..68].fill(0);
+                    copy[84..100].fill(0);
+                    use md5::Digest;
+                    let id: [u8; 16] = md5::Md5::digest(&copy).into();
+                    assert_eq!(&bytes[84..100], &id);
+                }
+                _ => {
+                    assert_eq!(icc_read.version(), moxcms::ProfileVersion::V2_4);
+                    assert!(icc_read.chromatic_adaptation.is_none());
+                    // v2 keeps the display's own white in wtpt.
+                    let w = profile.model.white();
+                    let wtpt = icc_read.media_white_point.unwrap();
+                    assert!((wtpt.x - w.x / w.y).abs() < 1e-4 && (wtpt.z - w.z / w.y).abs() < 1e-4);
+                }
+            }
+        }
+    }
+}
+
+fn argyll(tool: &str, args: &[&str], dir: &Path) -> String {
+    need(tool);
+    let out = Command::new(tool)
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.status.success(), "{tool} {args:?}: {text}");
+    text
+}
+
+#[test]
+fn argyll_reads_the_v2_profile_the_ti3_and_the_calibration_curves() {
+    let dir = tempfile::tempdir().unwrap();
+    let (profile, path) = calibrate(
+        dir.path(),
+        "lcd",
+        &isetbio_monitor("isetbio_lcd_dell", "flare_luminance = 0.05\nfalloff = 0.05"),
+    );
+    let d = dir.path();
+    let target = ["--white", "6500K", "--tone", "bt1886", "--luminance", "100"];
+    export(&path, "icc2", &d.join("ours.icc"), &target);
+    let dump = argyll("iccdump", &["-v3", "ours.icc"], d);
+    for tag in ["'desc'", "'rXYZ'", "'rTRC'", "'wtpt'", "'lumi'", "'vcgt'"] {
+        assert!(dump.contains(tag), "iccdump shows no {tag}");
+    }
+
+    // colprof accepts the run's measurements and makes its own profile of them (its
+    // white luminance comes from our LUMINANCE_XYZ_CDM2 through its own fit).
+    export(&path, "ti3", &d.join("run.ti3"), &[]);
+    argyll("colprof", &["-v", "-qm", "-as", "run"], d);
+    let theirs =
+        moxcms::ColorProfile::new_from_slice(&std::fs::read(d.join("run.icc")).unwrap()).unwrap();
+    let lumi = theirs.luminance.unwrap().y;
+    let white = profile.model.white().y;
+    assert!(
+        (lumi / white - 1.0).abs() < 0.05,
+        "colprof lumi {lumi}, ours {white}"
+    );
+
+    // Argyll scores both profiles on the run's measurements (ΔE00, Argyll's own
+    // colour maths): ours must describe them well, and better than colprof's
+    // matrix/shaper fit of the same data.
+    let score = |icc: &str| -> (f64, f64) {
+        let text = argyll("profcheck", &["-k", "run.ti3", icc], d);
+        let line = text
+            .lines()
+            .find(|l| l.contains("errors(CIEDE2000)"))
+            .unwrap_or_else(|| panic!("{text}"));
+        let number = |key: &str| -> f64 {
+            let rest = &line[line.find(key).unwrap() + key.len()..];
+            rest.trim_start_matches([' ', '='])
+                .split(',')
+                .next()
+                .unwrap()
+                .trim()
+                .parse()
+                .unwrap()
+        };
+        (number("avg."), number("max."))
+    };
+    export(&path, "icc2", &d.join("plain.icc"), &[]);
+    let (ours_avg, ours_max) = score("plain.icc");
+    let (theirs_avg, theirs_max) = score("run.icc");
+    eprintln!(
+        "profcheck ΔE00 on the run: ours avg {ours_avg:.3} max {ours_max:.3}, colprof -qm -as avg {theirs_avg:.3} max {theirs_max:.3}"
+    );
+    assert!(ours_avg < 0.3 && ours_max < 1.5, "{ours_avg} {ours_max}");
+    assert!(ours_avg < theirs_avg, "{ours_avg} vs colprof {theirs_avg}");
+
+    // Our .cal goes into a profile through Argyll, and Argyll's reading of our vcgt
+    // gives the same curves back.
+    export(&path, "cal", &d.join("ours.cal"), &target);
+    argyll("iccvcgt", &["-i", "run.icc", "ours.cal", "with-cal.icc"], d);
+    argyll("iccvcgt", &["-x", "ours.icc", "extracted.cal"], d);
+    let rows = |file: &str| -> Vec<Vec<f64>> {
+        let text = std::fs::read_to_string(d.join(file)).unwrap();
+        let sets = chromacal::cgats::parse_cgats(&text, file).unwrap();
+        let table = &sets[0];
+        table
+            .rows
+            .iter()
+            .map(|r| r.1.iter().map(|v| v.parse().unwrap()).collect())
+            .collect()
+    };
+    let (ours, extracted) = (rows("ours.cal"), rows("extracted.cal"));
+    assert_eq!(ours.len(), 256);
+    assert_eq!(extracted.len(), 256);
+    for (a, b) in ours.iter().zip(&extracted) {
+        for k in 0..4 {
+            assert!((a[k] - b[k]).abs() < 2e-5, "{a:?} vs {b:?}");
+        }
+    }
+}
