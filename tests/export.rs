@@ -378,3 +378,239 @@ fn argyll_reads_the_v2_profile_the_ti3_and_the_calibration_curves() {
         }
     }
 }
+
+/// PsychoPy's reading of a monitor file (`psychopy.monitors.calibTools.Monitor`:
+/// `_loadAll`, `setCurrent(-1)`, the getters, and `gammaFun` for linearise methods 1
+/// and 4), in Debian's Python with json_tricks and numpy. Prints what it read as JSON.
+const PSYCHOPY_READER: &str = r#"
+import json, sys
+import numpy as np
+import json_tricks
+
+with open(sys.argv[1], 'r') as f:
+    calibs = json_tricks.load(f, ignore_comments=False, preserve_order=False)
+names = sorted(calibs)
+calib = calibs[names[-1]]
+
+grid = calib['gammaGrid']
+assert isinstance(grid, np.ndarray), type(grid)
+assert grid.shape == (4, 6) and grid.dtype == np.float64, (grid.shape, grid.dtype)
+assert calib['linearizeMethod'] == 1
+lums, levels = calib['lumsPre'], calib['levelsPre']
+assert isinstance(lums, np.ndarray) and isinstance(levels, np.ndarray)
+assert lums.shape == (4, levels.shape[0])
+assert isinstance(calib['calibDate'], float)
+assert isinstance(calib['notes'], str)
+assert calib['usebits'] is False
+for key in ('width', 'distance', 'sizePix'):
+    assert key in calib and calib[key] is None
+assert isinstance(calib['psychopyVersion'], str)
+
+def gamma_fun(xx, min_lum, max_lum, gamma, eq, a=None, b=None, k=None):
+    # psychopy.monitors.calibTools.gammaFun, methods 1 and 4
+    xx = np.array(xx, 'd')
+    if eq == 1:
+        a = min_lum
+        b = (max_lum - a) ** (1 / gamma)
+        return a + (b * xx) ** gamma
+    return a + (b + k * xx) ** gamma
+
+x = levels / 255.0
+rows = []
+for row in range(4):
+    min_lum, max_lum, gamma, a, b, k = grid[row]
+    rows.append({
+        'eq1': list(gamma_fun(x, grid[1, 0], max_lum, gamma, 1)),
+        'eq4': list(gamma_fun(x, min_lum, max_lum, gamma, 4, a=a, b=b, k=k)),
+        'lums': list(lums[row]),
+    })
+out = {'name': names[-1], 'levels': list(levels), 'rows': rows}
+if 'spectraNM' in calib:
+    nm, rgb = calib['spectraNM'], calib['spectraRGB']
+    assert isinstance(rgb, np.ndarray) and rgb.shape == (3, nm.shape[0])
+    out['spectra'] = [int(nm.shape[0]), float(nm[0]), float(nm[-1])]
+print(json.dumps(out))
+"#;
+
+#[test]
+fn psychopy_loads_the_monitor_file_with_json_tricks() {
+    need("/usr/bin/python3");
+    let dir = tempfile::tempdir().unwrap();
+    for (name, profile, path) in monitors(dir.path()).into_iter().take(2) {
+        let file = dir.path().join(format!("{name}.json"));
+        export(&path, "psychopy", &file, &[]);
+        let out = Command::new("/usr/bin/python3")
+            .args(["-c", PSYCHOPY_READER])
+            .arg(&file)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "PsychoPy's reading failed (Debian's python3-json-tricks and python3-numpy are needed): {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let read: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        // The calibration is named as PsychoPy names them: %Y_%m_%d %H:%M.
+        let calib_name = read["name"].as_str().unwrap();
+        assert_eq!(calib_name.len(), 16, "{calib_name}");
+        assert_eq!(&calib_name[..4], &profile.created[..4]);
+        let levels: Vec<f64> = serde_json::from_value(read["levels"].clone()).unwrap();
+        let mut worst: f64 = 0.0;
+        for row in 0..4 {
+            let r = &read["rows"][row];
+            let eq1: Vec<f64> = serde_json::from_value(r["eq1"].clone()).unwrap();
+            let eq4: Vec<f64> = serde_json::from_value(r["eq4"].clone()).unwrap();
+            let lums: Vec<f64> = serde_json::from_value(r["lums"].clone()).unwrap();
+            let full = {
+                let mut d = [1.0; 3];
+                if row > 0 {
+                    d = [0.0; 3];
+                    d[row - 1] = 1.0;
+                }
+                profile.model.forward_centre(d).y
+            };
+            for (i, level) in levels.iter().enumerate() {
+                let x = level / 255.0;
+                let mut drive = [x; 3];
+                if row > 0 {
+                    drive = [0.0; 3];
+                    drive[row - 1] = x;
+                }
+                let model = profile.model.forward_centre(drive).y;
+                // The luminance series is the model's; methods 1 and 4 are one curve.
+                assert!((lums[i] - model).abs() < 1e-9 * full, "{name} row {row}");
+                assert!((eq1[i] - eq4[i]).abs() < 1e-9 * full, "{name} row {row}");
+                worst = worst.max((eq1[i] - model).abs() / full);
+            }
+        }
+        eprintln!(
+            "{name}: PsychoPy's gamma grid (method 1) is within {:.2} % of full drive of the model",
+            100.0 * worst
+        );
+        // A power law plus offset is PsychoPy's model, not the fitted law: it follows
+        // a CRT closely and a measured LCD table to a few percent, and the file's
+        // notes say by how much.
+        assert!(worst < 0.06, "{name}: {worst}");
+        let text = std::fs::read_to_string(&file).unwrap();
+        let stated: f64 = text
+            .split("fitted model within ")
+            .nth(1)
+            .and_then(|rest| rest.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .expect("the notes state the power-law error");
+        // The notes look at all 256 levels, this test at PsychoPy's 17.
+        assert!(
+            stated >= 100.0 * worst - 0.05 && stated < 100.0 * worst + 1.0,
+            "{stated}"
+        );
+        // The run was measured with a spectroradiometer: the primaries' spectra are there.
+        assert!(read["spectra"][0].as_u64().unwrap() > 50, "{}", read);
+    }
+}
+
+/// The curves of an exported `.cal`, read with chromacal's CGATS reader.
+fn read_cal(path: &Path) -> ([Vec<f64>; 3], [f64; 3]) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let table = chromacal::cgats::parse_cgats(&text, "cal")
+        .unwrap()
+        .remove(0);
+    let column = |name: &str| table.fields.iter().position(|f| f == name).unwrap();
+    let curves = ["RGB_R", "RGB_G", "RGB_B"].map(|f| {
+        let i = column(f);
+        table
+            .rows
+            .iter()
+            .map(|r| r.1[i].parse::<f64>().unwrap())
+            .collect::<Vec<f64>>()
+    });
+    let white: Vec<f64> = table
+        .keyword("TARGET_WHITE_XYZ")
+        .unwrap()
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    (curves, [white[0], white[1], white[2]])
+}
+
+#[test]
+fn calibration_curves_bring_the_virtual_monitor_to_its_target() {
+    use chromacal::model::target::{interpolate, parse_tone, target_luminance, white_error};
+    let dir = tempfile::tempdir().unwrap();
+    // Real measured spectra and transfer tables; a 10-bit path from the video card's
+    // table to the panel (8 bits cannot hold 1 % at the darkest levels).
+    let cases = [
+        (
+            "isetbio_lcd_dell",
+            "flare_luminance = 0.05\nbit_depth = 10",
+            96,
+            ["D65", "gamma:2.2", "max"],
+        ),
+        (
+            "isetbio_crt_dell",
+            "white_luminance = 100.0\nblack_luminance = 0.02\nflare_luminance = 0.05\nbit_depth = 10",
+            96,
+            ["5000K", "bt1886", "80"],
+        ),
+        (
+            "isetbio_oled_sony",
+            "black_luminance = 0.0005\nflare_luminance = 0.05\nbit_depth = 10\n[fit]\nlaws = [\"table\"]",
+            96,
+            ["0.3,0.32", "lstar", "120"],
+        ),
+    ];
+    // The curves are as good as the model. At the default 48 patches the laws fitted
+    // to these measured tables are 3-4 % off in luminance at the darkest levels, so
+    // the budget is 96. On the OLED the law chosen for ΔE00 (power) stays 1.1 % off at
+    // code 64 even at 144 patches, below what ΔE00 sees but not below 1 %: there the
+    // table law, which follows the measured ramps, is asked for.
+    for (stem, extra, budget, [white, tone, luminance]) in cases {
+        let config = format!(
+            "{}[plan]\nbudget = {budget}\n",
+            isetbio_monitor(stem, extra)
+        );
+        let (profile, path) = calibrate(dir.path(), stem, &config);
+        let cal = dir.path().join(format!("{stem}.cal"));
+        let said = export(
+            &path,
+            "cal",
+            &cal,
+            &["--white", white, "--tone", tone, "--luminance", luminance],
+        );
+        let (curves, target_white) = read_cal(&cal);
+        assert_eq!(curves[0].len(), 256);
+
+        // The virtual monitor itself (not the model) shows the curves' output.
+        let parsed = chromacal::config::parse_config(&config, "test").unwrap();
+        let rig = chromacal::calibrate::session::rig_for(&parsed, Path::new("."), None).unwrap();
+        let show = |code: f64| -> Xyz {
+            let drive = [0, 1, 2].map(|c| interpolate(&curves[c], code / 255.0));
+            let mut m = rig.monitor.lock().unwrap();
+            m.show(chromacal::sim::monitor::centre_patch(drive));
+            m.xyz_at(m.patch_centre()).unwrap()
+        };
+        let target_white = Xyz::new(target_white[0], target_white[1], target_white[2]);
+        let white_de = white_error(&show(255.0), &target_white);
+        let tone_curve = parse_tone(tone).unwrap();
+        let black = profile.model.black.y;
+        let mut worst: f64 = 0.0;
+        for k in 1..=8 {
+            let code = (255.0 * k as f64 / 8.0).round();
+            let want = target_luminance(tone_curve, code / 255.0, black, target_white.y);
+            let got = show(code).y;
+            eprintln!(
+                "  code {code}: {got:.4} vs {want:.4} ({:+.2} %)",
+                100.0 * (got / want - 1.0)
+            );
+            worst = worst.max((got / want - 1.0).abs());
+        }
+        eprintln!(
+            "{stem} to {white}, {tone}, {luminance}: white ΔE00 {white_de:.3}, tone within {:.2} % at 8 levels above black ({})",
+            100.0 * worst,
+            said.lines().find(|l| l.contains("predicted")).unwrap_or("")
+        );
+        assert!(white_de < 1.0, "{stem}: white ΔE00 {white_de}");
+        assert!(worst < 0.01, "{stem}: tone off by {:.2} %", 100.0 * worst);
+        // At code 0 the curves leave the black alone.
+        assert!(curves.iter().all(|c| c[0] == 0.0));
+    }
+}

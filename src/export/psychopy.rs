@@ -112,6 +112,23 @@ pub fn gamma_grid(model: &MonitorModel) -> [[f64; 6]; 4] {
     })
 }
 
+/// The largest difference between PsychoPy's curve y = a + (b·x)^γ of each row and
+/// the model, as a share of the row's full-drive luminance.
+pub fn power_law_error(model: &MonitorModel, grid: &[[f64; 6]; 4]) -> f64 {
+    let mut worst: f64 = 0.0;
+    for (row, r) in grid.iter().enumerate() {
+        let (min, max, gamma) = (grid[1][0], r[1], r[2]);
+        let b = (max - min).powf(1.0 / gamma);
+        for i in 0..256 {
+            let x = i as f64 / 255.0;
+            let psychopy = min + (b * x).powf(gamma);
+            let y = luminance(model, row_drive(row, x));
+            worst = worst.max((psychopy - y).abs() / max);
+        }
+    }
+    worst
+}
+
 /// The monitor file's JSON text.
 pub fn monitor_file(
     model: &MonitorModel,
@@ -121,6 +138,10 @@ pub fn monitor_file(
     notes: &str,
 ) -> String {
     let grid = gamma_grid(model);
+    let notes = format!(
+        "{notes}; PsychoPy's power law (linearizeMethod 1) follows chromacal's fitted model within {:.1} % of full luminance",
+        100.0 * power_law_error(model, &grid)
+    );
     let levels: Vec<f64> = (0..SERIES_LEVELS)
         .map(|i| (255.0 * i as f64 / (SERIES_LEVELS - 1) as f64).round())
         .collect();
@@ -145,7 +166,7 @@ pub fn monitor_file(
         "width": null,
         "distance": null,
         "sizePix": null,
-        "notes": notes,
+        "notes": notes.as_str(),
         "usebits": false,
         "psychopyVersion": format!("chromacal {}", env!("CARGO_PKG_VERSION")),
     });
