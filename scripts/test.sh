@@ -15,12 +15,17 @@ if [ "${1:-}" = "--soak" ]; then
     CHROMACAL_SOAK_KILLS="$kills" exec cargo test --locked --test daemon_kill -- --nocapture
 fi
 
+updated=""
 need_package() {
     echo "scripts/test.sh: installing $1 for the tests" >&2
     sudo=""
     if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "$1" >/dev/null
+    if [ -z "$updated" ]; then
+        $sudo apt-get update -qq
+        updated=yes
+    fi
+    # shellcheck disable=SC2086 # $1 may name several packages
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq $1 >/dev/null
 }
 
 have_browser() {
@@ -32,5 +37,11 @@ have_browser || need_package chromium
 # The systemd units are checked by systemd-analyze; the API's refusals by curl.
 command -v systemd-analyze >/dev/null || need_package systemd
 command -v curl >/dev/null || need_package curl
+# Exports are read back by independent readers: ArgyllCMS, Little CMS's transicc,
+# and PsychoPy's loader (json_tricks with numpy, in Debian's Python).
+command -v iccdump >/dev/null || need_package argyll
+command -v transicc >/dev/null || need_package liblcms2-utils
+/usr/bin/python3 -c "import json_tricks, numpy" 2>/dev/null ||
+    need_package "python3-json-tricks python3-numpy"
 
 cargo test --locked "$@"

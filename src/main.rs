@@ -352,6 +352,12 @@ enum ProfileCommand {
         api: remote::ApiArgs,
         #[arg(long)]
         json: bool,
+        /// Any export format (the daemon exports it): icc4, icc2, ti3, psychopy, json, toml.
+        #[arg(long, value_parser = ["icc4", "icc2", "ti3", "psychopy", "json", "toml"])]
+        format: Option<String>,
+        /// Write to this file instead of standard output.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
     },
 }
 
@@ -544,8 +550,15 @@ fn main() -> ExitCode {
             .map(|p| print!("{}", report::describe_profile(&p)))
             .map_err(Failure::from),
         Command::Profile {
-            command: ProfileCommand::Current { api, json },
-        } => remote::current_profile(&api, json).map_err(Failure::from),
+            command:
+                ProfileCommand::Current {
+                    api,
+                    json,
+                    format,
+                    output,
+                },
+        } => remote::current_profile(&api, json, format.as_deref(), output.as_deref())
+            .map_err(Failure::from),
         Command::Export {
             profile,
             format,

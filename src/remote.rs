@@ -403,15 +403,31 @@ pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), String> {
     })
 }
 
-pub fn current_profile(api: &ApiArgs, json: bool) -> Result<(), String> {
+pub fn current_profile(
+    api: &ApiArgs,
+    json: bool,
+    format: Option<&str>,
+    output: Option<&std::path::Path>,
+) -> Result<(), String> {
     let endpoint = api.endpoint()?;
+    let format = format.unwrap_or(if json { "json" } else { "toml" });
     runtime()?.block_on(async {
-        let path = if json {
-            "/profile?format=json"
-        } else {
-            "/profile"
-        };
-        print!("{}", get(&endpoint, path).await?.text());
+        let reply = get(&endpoint, &format!("/profile?format={format}")).await?;
+        match output {
+            Some(path) => {
+                std::fs::write(path, &reply.body)
+                    .map_err(|e| format!("{}: {e}", path.display()))?;
+                println!(
+                    "wrote {} ({format}, {} bytes)",
+                    path.display(),
+                    reply.body.len()
+                );
+            }
+            None if matches!(format, "icc4" | "icc2") => {
+                return Err(format!("{format} is binary: give -o FILE"));
+            }
+            None => print!("{}", reply.text()),
+        }
         Ok(())
     })
 }

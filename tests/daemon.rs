@@ -451,3 +451,62 @@ async fn sigterm_on_a_serial_rig_leaves_the_screen_black_and_the_instrument_free
         .unwrap_or_else(|| panic!("{readings}"));
     assert!(y < 0.5, "the screen shows {y} cd/m², not black");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_api_serves_every_export_format_of_the_current_profile() {
+    let dir = tempfile::tempdir().unwrap();
+    let daemon = start_daemon(dir.path(), FAST);
+    let api = daemon.endpoint();
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let id = start_job(&api, "calibrate").await;
+    let (_, outcome) = events_of_job(&mut events, &id, Duration::from_secs(60)).await;
+    assert!(outcome.published, "{outcome:?}");
+    let current = daemon.state.join("current.toml");
+
+    // The API's ICC is the file `chromacal export` writes, byte for byte.
+    for format in ["icc4", "icc2", "psychopy"] {
+        let reply = get(&api, &format!("/profile?format={format}")).await;
+        assert_eq!(reply.status, 200, "{format}: {}", reply.text());
+        let file = dir.path().join(format!("export.{format}"));
+        let out = common::chromacal()
+            .arg("export")
+            .arg(&current)
+            .args(["--format", format, "-o"])
+            .arg(&file)
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        assert_eq!(reply.body.as_ref(), std::fs::read(&file).unwrap().as_slice(), "{format}");
+    }
+    let icc = get(&api, "/profile?format=icc4").await;
+    assert_eq!(&icc.body[36..40], b"acsp");
+    // The run's measurements, as ArgyllCMS reads them.
+    let ti3 = get(&api, "/profile?format=ti3").await;
+    assert!(ti3.text().starts_with("CTI3"), "{}", ti3.text());
+    // Calibration curves need a target, and say so.
+    let reply = get(&api, "/profile?format=cal").await;
+    assert_eq!(reply.status, 422);
+    assert!(reply.error_message().contains("target"), "{}", reply.text());
+    let reply = get(&api, "/profile?format=cal&white=D65&tone=srgb&luminance=80").await;
+    assert_eq!(reply.status, 200, "{}", reply.text());
+    assert!(reply.text().starts_with("CAL"));
+    let reply = get(&api, "/profile?format=cal&white=purple").await;
+    assert_eq!(reply.status, 400);
+    assert!(reply.error_message().contains("purple"), "{}", reply.text());
+    let reply = get(&api, "/profile?format=gif").await;
+    assert_eq!(reply.status, 400);
+    assert!(reply.error_message().contains("icc4"), "{}", reply.text());
+
+    // The client command writes what the API serves.
+    let file = dir.path().join("client.icc");
+    let out = common::chromacal()
+        .args(["profile", "current", "--format", "icc2", "--socket"])
+        .arg(&daemon.socket)
+        .arg("-o")
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(&std::fs::read(&file).unwrap()[8..10], &[2, 0x40]);
+}

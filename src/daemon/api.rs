@@ -8,7 +8,7 @@
 //! | `POST /jobs` `{"kind": "calibrate"\|"verify"\|"uniformity"}` | start a job: 202, or 409 while one runs |
 //! | `POST /jobs/cancel` | stop the running job after its reading: 202, or 404 |
 //! | `GET /events` | server-sent events (`events.rs`) |
-//! | `GET /profile[?format=toml\|json]` | the current profile |
+//! | `GET /profile[?format=toml\|json\|icc4\|icc2\|ti3\|cal\|psychopy&white=…&tone=…&luminance=…]` | the current profile, in any export format |
 //! | `GET /history` | profiles made current, and every verification |
 //! | `POST /rollback` `{"to": ID}` (or `{}`) | make an earlier profile current |
 //!
@@ -413,23 +413,80 @@ async fn events(State(state): State<Shared>) -> Response {
 }
 
 #[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct ProfileQuery {
     format: Option<String>,
+    /// Calibration target, as `chromacal export` takes it (for `cal` and `vcgt`).
+    white: Option<String>,
+    tone: Option<String>,
+    luminance: Option<String>,
 }
 
+/// `GET /profile[?format=…&white=…&tone=…&luminance=…]`: the current profile in any
+/// export format. What the format cannot carry is listed in `x-chromacal-not-carried`.
 async fn profile(State(state): State<Shared>, Query(query): Query<ProfileQuery>) -> Response {
+    use crate::export::{ExportOptions, Format, export, parse_target};
     let (profile, text) = match read_current(&state.daemon) {
         Ok(Some(c)) => c,
         Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
         Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
     };
-    match query.format.as_deref().unwrap_or("toml") {
-        "toml" => ([(header::CONTENT_TYPE, "application/toml")], text).into_response(),
-        "json" => axum::Json(profile).into_response(),
-        other => refusal(
-            StatusCode::BAD_REQUEST,
-            format!("format '{other}' is not one of toml, json"),
-        ),
+    let format = match Format::parse(query.format.as_deref().unwrap_or("toml")) {
+        Ok(f) => f,
+        Err(e) => return refusal(StatusCode::BAD_REQUEST, e.to_string()),
+    };
+    if format == Format::Toml {
+        return ([(header::CONTENT_TYPE, "application/toml")], text).into_response();
+    }
+    let target = match parse_target(
+        query.white.as_deref(),
+        query.tone.as_deref(),
+        query.luminance.as_deref(),
+    ) {
+        Ok(t) => t,
+        Err(e) => return refusal(StatusCode::BAD_REQUEST, e.to_string()),
+    };
+    let options = ExportOptions {
+        target,
+        measurements: None,
+    };
+    let id = profile.id.clone();
+    let exported = tokio::task::spawn_blocking(move || export(&profile, format, &options)).await;
+    match exported {
+        Ok(Ok(exported)) => {
+            let notes: String = exported
+                .not_carried
+                .iter()
+                .chain(&exported.warnings)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join("; ")
+                .chars()
+                .map(|c| {
+                    if c.is_ascii() && !c.is_ascii_control() {
+                        c
+                    } else {
+                        '?'
+                    }
+                })
+                .collect();
+            let disposition = format!("attachment; filename=\"{id}.{}\"", format.extension());
+            let mut response = exported.bytes.into_response();
+            let headers = response.headers_mut();
+            let mut set = |name: &'static str, value: &str| {
+                if let Ok(v) = header::HeaderValue::from_str(value) {
+                    headers.insert(name, v);
+                }
+            };
+            set("content-type", format.content_type());
+            set("content-disposition", &disposition);
+            if !notes.is_empty() {
+                set("x-chromacal-not-carried", &notes);
+            }
+            response
+        }
+        Ok(Err(e)) => refusal(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()),
+        Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
 }
 
