@@ -477,7 +477,11 @@ async fn the_api_serves_every_export_format_of_the_current_profile() {
             .output()
             .unwrap();
         assert!(out.status.success());
-        assert_eq!(reply.body.as_ref(), std::fs::read(&file).unwrap().as_slice(), "{format}");
+        assert_eq!(
+            reply.body.as_ref(),
+            std::fs::read(&file).unwrap().as_slice(),
+            "{format}"
+        );
     }
     let icc = get(&api, "/profile?format=icc4").await;
     assert_eq!(&icc.body[36..40], b"acsp");
@@ -507,6 +511,10 @@ async fn the_api_serves_every_export_format_of_the_current_profile() {
         .arg(&file)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(&std::fs::read(&file).unwrap()[8..10], &[2, 0x40]);
 }

@@ -266,8 +266,26 @@ async fn a_uniformity_job_gives_the_profile_a_new_spatial_map() {
         corner / p.model.forward([1.0; 3], ScreenPosition::CENTRE).y
     };
     let (a, b) = (falloff(&calibrated), falloff(&updated));
-    eprintln!("corner/centre: {a:.4} calibrated, {b:.4} after the uniformity job");
-    assert!((a - b).abs() < 0.01 && b < 0.95, "{a} vs {b}");
+    // What the virtual monitor really does there.
+    let truth = {
+        let monitor = chromacal::sim::monitor::VirtualMonitor::new(
+            chromacal::sim::presets::preset("crt").unwrap(),
+            std::sync::Arc::new(chromacal::sim::clock::VirtualClock::new(None)),
+        )
+        .unwrap();
+        let model = monitor.true_model();
+        let corner = ScreenPosition::new(0.1, 0.1);
+        let lit: f64 = (0..3)
+            .map(|c| model.matrix[(1, c)] * monitor.true_gain(c, corner))
+            .sum();
+        let full: f64 = (0..3).map(|c| model.matrix[(1, c)]).sum();
+        (lit + model.black.y) / (full + model.black.y)
+    };
+    eprintln!("corner/centre: {a:.4} calibrated, {b:.4} after the uniformity job, {truth:.4} true");
+    // The uniformity job reads the grid with centre references between positions; the
+    // calibration's map comes from one reading per position, so it is let be noisier.
+    assert!((b - truth).abs() < 0.01, "{b} vs {truth}");
+    assert!((a - truth).abs() < 0.025, "{a} vs {truth}");
     assert_eq!(updated.model.matrix, calibrated.model.matrix);
     let history = get(&api, "/history").await.json().unwrap();
     assert_eq!(history["profiles"][1]["how"], "uniformity");
