@@ -43,5 +43,9 @@ command -v iccdump >/dev/null || need_package argyll
 command -v transicc >/dev/null || need_package liblcms2-utils
 /usr/bin/python3 -c "import json_tricks, numpy" 2>/dev/null ||
     need_package "python3-json-tricks python3-numpy"
+# Registration with colord is tested against a real colord on a private system bus.
+[ -x /usr/libexec/colord ] || need_package colord
+command -v dbus-daemon >/dev/null || need_package dbus-daemon
+command -v gdbus >/dev/null || need_package libglib2.0-bin
 
 cargo test --locked "$@"

@@ -214,6 +214,11 @@ enum Command {
         /// Calibration target white luminance in cd/m², or max [default: max].
         #[arg(long)]
         luminance: Option<String>,
+        /// Also make the ICC file the default profile of this display in colord
+        /// (e.g. xrandr-Dell-U2713HM-SN123, the id GNOME or KDE gave it), over the system
+        /// D-Bus ($DBUS_SYSTEM_BUS_ADDRESS). Exit 4 when colord cannot be reached.
+        #[arg(long, value_name = "DEVICE_ID")]
+        register_colord: Option<String>,
     },
     /// Work with profiles.
     Profile {
@@ -567,12 +572,14 @@ fn main() -> ExitCode {
             white,
             tone,
             luminance,
+            register_colord,
         } => export(
             &profile,
             &format,
             &output,
             measurements.as_deref(),
             [white, tone, luminance],
+            register_colord.as_deref(),
         ),
         Command::Bench { quick, data } => bench::run(quick, data).map_err(Failure::from),
         Command::Daemon {
@@ -607,10 +614,16 @@ fn export(
     output: &Path,
     measurements: Option<&Path>,
     target: [Option<String>; 3],
+    register_colord: Option<&str>,
 ) -> Result<(), Failure> {
     use chromacal::export::{ExportOptions, Format, parse_target};
     let profile = Profile::read(profile_path).map_err(Failure::from)?;
     let format = Format::parse(format).map_err(|e| Failure::from(e.to_string()))?;
+    if register_colord.is_some() && !matches!(format, Format::Icc4 | Format::Icc2) {
+        return Err(Failure::from(
+            "--register-colord needs an ICC format (icc4 or icc2)".to_string(),
+        ));
+    }
     let [white, tone, luminance] = target;
     let target = parse_target(white.as_deref(), tone.as_deref(), luminance.as_deref())
         .map_err(|e| Failure::from(e.to_string()))?;
@@ -649,8 +662,33 @@ fn export(
     for warning in &exported.warnings {
         println!("warning: {warning}");
     }
+    if let Some(device) = register_colord {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?;
+        let registered = runtime
+            .block_on(chromacal::export::colord::register(output, device))
+            .map_err(|e| Failure {
+                message: format!("colord: {e}"),
+                code: COLORD_UNAVAILABLE,
+            })?;
+        println!(
+            "colord: {} is the default profile of {} ({}{})",
+            registered.profile_id,
+            device,
+            registered.device_object,
+            if registered.device_existed {
+                ""
+            } else {
+                ", a device chromacal created"
+            }
+        );
+    }
     Ok(())
 }
+
+/// Exit code when an export was written but colord could not take it.
+const COLORD_UNAVAILABLE: u8 = 4;
 
 fn daemon(
     config: Option<&Path>,

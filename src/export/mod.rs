@@ -9,6 +9,7 @@
 //! description and returned as notes.
 
 pub mod cal;
+pub mod colord;
 pub mod icc;
 pub mod matrix_trc;
 pub mod psychopy;
