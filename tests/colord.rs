@@ -24,17 +24,6 @@ impl Drop for Services {
     }
 }
 
-fn need(tool: &str) {
-    assert!(
-        Path::new(tool).exists()
-            || Command::new("sh")
-                .args(["-c", &format!("command -v {tool}")])
-                .output()
-                .is_ok_and(|o| o.status.success()),
-        "{tool} is missing: scripts/test.sh installs Debian's colord and dbus"
-    );
-}
-
 const BUS_CONFIG: &str = r#"<!DOCTYPE busconfig PUBLIC "-//freedesktop//DTD D-Bus Bus Configuration 1.0//EN"
  "http://www.freedesktop.org/standards/dbus/1.0/busconfig.dtd">
 <busconfig><type>system</type>
@@ -48,14 +37,14 @@ const BUS_CONFIG: &str = r#"<!DOCTYPE busconfig PUBLIC "-//freedesktop//DTD D-Bu
 
 /// A system bus and colord on it; returns the bus address.
 fn start_colord(dir: &Path) -> (Services, String) {
-    for tool in [
-        "dbus-daemon",
-        "/usr/libexec/colord",
-        "colormgr",
-        "gdbus",
-        "unshare",
+    for (tool, package) in [
+        ("dbus-daemon", "dbus-daemon"),
+        ("/usr/libexec/colord", "colord"),
+        ("colormgr", "colord"),
+        ("gdbus", "libglib2.0-bin"),
+        ("unshare", "util-linux"),
     ] {
-        need(tool);
+        common::need_tool(tool, package);
     }
     let uid = Command::new("id").arg("-u").output().unwrap();
     assert_eq!(

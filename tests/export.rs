@@ -72,21 +72,10 @@ fn test_codes() -> Vec<[f64; 3]> {
     codes
 }
 
-fn need(tool: &str) {
-    let found = Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    assert!(
-        found,
-        "{tool} is missing: scripts/test.sh installs it (Debian packages argyll, liblcms2-utils, python3-json-tricks)"
-    );
-}
-
 /// L*a*b* (D50) of `codes` through an ICC profile, by Little CMS's `transicc`,
 /// relative colorimetric, without a precalculated transform (-c0).
 fn transicc_lab(icc: &Path, codes: &[[f64; 3]]) -> Vec<Lab> {
-    need("transicc");
+    common::need_tool("transicc", "liblcms2-utils");
     let mut child = Command::new("transicc")
         .args(["-t1", "-c0", "-n", "-o", "*Lab"])
         .arg(format!("-i{}", icc.display()))
@@ -280,7 +269,7 @@ fn icc_profiles_read_back_by_lcms_and_moxcms_match_the_model() {
 }
 
 fn argyll(tool: &str, args: &[&str], dir: &Path) -> String {
-    need(tool);
+    common::need_tool(tool, "argyll");
     let out = Command::new(tool)
         .args(args)
         .current_dir(dir)
@@ -434,7 +423,7 @@ print(json.dumps(out))
 
 #[test]
 fn psychopy_loads_the_monitor_file_with_json_tricks() {
-    need("/usr/bin/python3");
+    common::need_tool("/usr/bin/python3", "python3");
     let dir = tempfile::tempdir().unwrap();
     for (name, profile, path) in monitors(dir.path()).into_iter().take(2) {
         let file = dir.path().join(format!("{name}.json"));

@@ -237,3 +237,17 @@ pub fn assert_each_planned_patch_once(
     let planned: Vec<usize> = header.plan.patches.iter().map(|p| p.index).collect();
     assert_eq!(seen, planned, "a patch was lost or measured twice");
 }
+
+/// Fail with what installs `tool` (a path or a command) when it is missing:
+/// `scripts/test.sh` installs every Debian package the tests drive.
+pub fn need_tool(tool: &str, package: &str) {
+    let found = std::path::Path::new(tool).exists()
+        || std::process::Command::new("sh")
+            .args(["-c", &format!("command -v {tool}")])
+            .output()
+            .is_ok_and(|o| o.status.success());
+    assert!(
+        found,
+        "{tool} is missing: scripts/test.sh installs it (Debian package {package})"
+    );
+}
