@@ -199,6 +199,9 @@ pub struct Config {
     pub schedule: ScheduleConfig,
     #[serde(default)]
     pub warmup: WarmupConfig,
+    /// Calibration curves to a target, measured into place after the fit.
+    #[serde(default)]
+    pub target: Option<crate::calibrate::refine::TargetConfig>,
 }
 
 /// A configuration with the text it came from.
@@ -243,6 +246,9 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     config.daemon.check()?;
     config.schedule.check()?;
     config.warmup.check()?;
+    if let Some(target) = &config.target {
+        target.check()?;
+    }
     if !(config.display.settle_s >= 0.0) {
         return Err("display.settle_s must not be negative".into());
     }

@@ -648,13 +648,21 @@ fn export(
         format.name(),
         exported.bytes.len()
     );
-    if let Some(k) = &exported.calibration {
-        println!(
-            "calibration curves to {}: predicted white ΔE00 {:.3}, tone within {:.2} % at 9 levels",
+    match (&options.target, &profile.calibration, &exported.calibration) {
+        (None, Some(stored), Some(_)) => println!(
+            "calibration curves to {} (the profile's, measured into place): measured white ΔE00 {:.3}, tone within {:.2} % at {} levels",
+            stored.curves.target.describe(),
+            stored.measured_white_de00,
+            100.0 * stored.measured_tone_error,
+            stored.levels.len()
+        ),
+        (_, _, Some(k)) => println!(
+            "calibration curves to {} (from the model): predicted white ΔE00 {:.3}, tone within {:.2} % at 9 levels",
             k.target.describe(),
             k.predicted_white_de00,
             100.0 * k.predicted_tone_error
-        );
+        ),
+        _ => {}
     }
     for note in &exported.not_carried {
         println!("not carried: {note}");
@@ -797,6 +805,12 @@ fn calibrate(
             report::duration(outcome.fit_seconds)
         );
         out += &report::fit_summary(&outcome.fitted.report);
+        if let Some(c) = &outcome.profile.calibration {
+            out += &report::calibration_summary(c);
+        }
+        if let Some(why) = &outcome.calibration_error {
+            out += &format!("\ncalibration curves: none ({why})\n");
+        }
         out += &format!("\njournal: {}\n", outcome.journal_path.display());
         match &outcome.rejection {
             None => {
@@ -894,6 +908,7 @@ fn fit(
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
         },
         report: fitted.report.clone(),
+        calibration: None,
     };
     profile.write(output)?;
     if json {

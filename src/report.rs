@@ -307,6 +307,45 @@ pub fn describe_model(model: &MonitorModel, units: &str) -> String {
 }
 
 /// `chromacal profile show`.
+/// The calibration curves' target and their measured check, level by level.
+pub fn calibration_summary(c: &crate::calibrate::refine::StoredCalibration) -> String {
+    let mut out = format!(
+        "\ncalibration curves to {} ({} correction passes, {} readings, {}):\n",
+        c.curves.target.describe(),
+        c.passes,
+        c.readings,
+        duration(c.instrument_s)
+    );
+    out += &format!(
+        "  measured white ΔE00 {:.3}, tone within {:.2} % at {} levels above black (predicted from the model alone: {:.3}, {:.2} %)\n",
+        c.measured_white_de00,
+        100.0 * c.measured_tone_error,
+        c.levels.len(),
+        c.curves.predicted_white_de00,
+        100.0 * c.curves.predicted_tone_error
+    );
+    let rows: Vec<Vec<String>> = c
+        .levels
+        .iter()
+        .map(|l| {
+            vec![
+                format!("{:.3}", l.input),
+                format!("{:.4}", l.target_luminance),
+                format!("{:.4}", l.measured_luminance),
+                format!(
+                    "{:+.2} %",
+                    100.0 * (l.measured_luminance / l.target_luminance - 1.0)
+                ),
+            ]
+        })
+        .collect();
+    out += &table(&["input", "target Y", "measured Y", "off"], &rows);
+    if c.curves.luminance_limited {
+        out += "  (the white point allowed less luminance than asked for)\n";
+    }
+    out
+}
+
 pub fn describe_profile(profile: &Profile) -> String {
     let mut out = String::new();
     let _ = writeln!(

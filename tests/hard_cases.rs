@@ -36,6 +36,7 @@ fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
             program: "test".into(),
         },
         report: fit.report.clone(),
+        calibration: None,
     };
     let text = profile.to_toml().unwrap();
     fn all_finite(value: &toml::Value, path: &str) {

@@ -3,6 +3,7 @@
 pub mod devices;
 pub mod journal;
 pub mod plan;
+pub mod refine;
 pub mod run;
 pub mod session;
 pub mod warmup;

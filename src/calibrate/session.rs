@@ -106,6 +106,8 @@ pub struct CalibrationOutcome {
     /// stability check's extra readings (those of this call only, on a resume).
     pub instrument_seconds: f64,
     pub display: String,
+    /// Why `[target]`'s calibration curves could not be made (the profile is fine).
+    pub calibration_error: Option<String>,
 }
 
 pub(crate) fn now_rfc3339() -> String {
@@ -274,13 +276,35 @@ pub async fn finish_run(
     )
     .await?;
 
+    // Calibration curves, measured into place on the devices still held. A failure
+    // here costs the curves, not the profile: it is published without them.
+    let (calibration, calibration_error) = match &config.target {
+        None => (None, None),
+        Some(target) => match crate::calibrate::refine::refine_curves(
+            &fitted.model,
+            target,
+            config.plan.bit_depth,
+            config.plan.patch_size,
+            &mut devices.display,
+            &mut devices.instrument,
+        )
+        .await
+        {
+            Ok(c) => (Some(c), None),
+            Err(e) => {
+                tracing::warn!(error = %e, "no calibration curves");
+                (None, Some(e.to_string()))
+            }
+        },
+    };
     let header = journal.header().clone();
     let instrument_seconds = journal
         .entries()
         .iter()
         .map(|m| m.reading.integration_s + config.display.settle_s)
         .sum::<f64>()
-        + summary.extra_read_s;
+        + summary.extra_read_s
+        + calibration.as_ref().map_or(0.0, |c| c.instrument_s);
     let profile = Profile {
         schema_version: SCHEMA_VERSION,
         id: run.run_id.clone(),
@@ -295,6 +319,7 @@ pub async fn finish_run(
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
         },
         report: fitted.report.clone(),
+        calibration,
     };
     let text = profile.to_toml()?;
     let rejection = publish_rejection(&fitted, &config.publish);
@@ -343,6 +368,7 @@ pub async fn finish_run(
         fit_seconds,
         instrument_seconds,
         display: display_name,
+        calibration_error,
     })
 }
 

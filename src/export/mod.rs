@@ -90,7 +90,9 @@ impl Format {
 pub enum ExportError {
     #[error("unknown format '{0}': one of {names}", names = Format::NAMES)]
     UnknownFormat(String),
-    #[error("calibration curves need a target: give a white point, a tone curve or a luminance")]
+    #[error(
+        "calibration curves need a target: give a white point, a tone curve or a luminance (or calibrate with [target])"
+    )]
     NoTarget,
     #[error("{0}")]
     Target(#[from] TargetError),
@@ -236,9 +238,11 @@ pub fn export(
 ) -> Result<Exported, ExportError> {
     let mut notes = limitations(profile);
     let mut warnings = Vec::new();
+    // A target given now is computed from the model; otherwise the curves the
+    // calibration measured into place, if it made any.
     let calibration = match &options.target {
         Some(target) => Some(calibration_curves(&profile.model, target)?),
-        None => None,
+        None => profile.calibration.as_ref().map(|c| c.curves.clone()),
     };
     if let Some(k) = &calibration
         && k.luminance_limited

@@ -67,6 +67,9 @@ pub struct Profile {
     pub provenance: Provenance,
     /// Uncertainties, diagnostics, assumption checks and held-out errors.
     pub report: FitReport,
+    /// Calibration curves to a target, with their measured check (`[target]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<crate::calibrate::refine::StoredCalibration>,
 }
 
 /// Line and column (1-based) of a byte offset in `text`.

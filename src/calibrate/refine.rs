@@ -1,0 +1,291 @@
+//! Calibration curves measured into place. The curves from the model's inverse
+//! (`model::target`) are only as good as the fitted laws: a law chosen for ΔE00 can be
+//! 1 % off in luminance at some level, which ΔE00 does not see and a tone-curve target
+//! does. So, as ArgyllCMS's dispcal iterates, the grey ramp is shown through the
+//! curves and measured at a few levels; the XYZ missing at each level, taken into
+//! excitations (Δe = M⁻¹ (XYZ_target − XYZ_measured)), gives each channel a gain that
+//! is interpolated over the input and applied to the curve's excitations. A last pass
+//! measures the result, so the figures reported are measured, not predicted.
+
+use serde::{Deserialize, Serialize};
+
+use super::run::RunError;
+use crate::color::Xyz;
+use crate::display::{Codes, Geometry, Patch, PatchDisplay};
+use crate::instrument::Instrument;
+use crate::model::MonitorModel;
+use crate::model::target::{
+    CalibrationCurves, Target, TargetError, calibration_curves, parse_tone, parse_white,
+    target_luminance, white_error,
+};
+
+/// `[target]`: calibrate the display to this after the profile is fitted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetConfig {
+    /// native, D50, D55, D65, D75, a temperature such as "6500K", or "x,y".
+    #[serde(default = "native")]
+    pub white: String,
+    /// "gamma:2.2", "srgb", "bt1886" or "lstar".
+    #[serde(default = "gamma22")]
+    pub tone: String,
+    /// White luminance, cd/m² (unset: the most the white point allows).
+    pub luminance: Option<f64>,
+    /// Measured correction passes (0: the model's curves as they are).
+    #[serde(default = "two")]
+    pub refine_passes: usize,
+    /// Grey levels measured in each pass, black to white inclusive.
+    #[serde(default = "nine")]
+    pub levels: usize,
+    /// Bit depth the curves' output is shown at while refining (the video card's
+    /// output; default: the plan's).
+    pub bit_depth: Option<u32>,
+}
+
+fn native() -> String {
+    "native".into()
+}
+fn gamma22() -> String {
+    "gamma:2.2".into()
+}
+fn two() -> usize {
+    2
+}
+fn nine() -> usize {
+    9
+}
+
+impl TargetConfig {
+    pub fn target(&self) -> Result<Target, TargetError> {
+        Ok(Target {
+            white: parse_white(&self.white)?,
+            tone: parse_tone(&self.tone)?,
+            luminance: self.luminance,
+        })
+    }
+
+    pub fn check(&self) -> Result<(), String> {
+        self.target().map_err(|e| format!("target: {e}"))?;
+        if !(3..=33).contains(&self.levels) {
+            return Err("target.levels must be 3 to 33".into());
+        }
+        if self.refine_passes > 5 {
+            return Err("target.refine_passes must be at most 5".into());
+        }
+        if self.luminance.is_some_and(|l| !(l > 0.0 && l.is_finite())) {
+            return Err("target.luminance must be a positive number".into());
+        }
+        if self.bit_depth.is_some_and(|d| !(8..=16).contains(&d)) {
+            return Err("target.bit_depth must be 8 to 16".into());
+        }
+        Ok(())
+    }
+}
+
+/// One grey level as measured through the final curves.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LevelCheck {
+    pub input: f64,
+    pub target_luminance: f64,
+    pub measured_luminance: f64,
+}
+
+/// Calibration curves and how well they did, measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StoredCalibration {
+    pub curves: CalibrationCurves,
+    /// Correction passes made before the check.
+    pub passes: usize,
+    /// The check: every level measured through the final curves.
+    pub levels: Vec<LevelCheck>,
+    /// ΔE00 of the measured white against the target white.
+    pub measured_white_de00: f64,
+    /// Largest |Y / Y_target − 1| over the levels above black.
+    pub measured_tone_error: f64,
+    /// Readings taken, and the instrument time they took, s.
+    pub readings: usize,
+    pub instrument_s: f64,
+}
+
+/// Why the curves could not be measured into place.
+#[derive(Debug, thiserror::Error)]
+pub enum RefineError {
+    #[error("{0}")]
+    Target(#[from] TargetError),
+    #[error("while refining the calibration curves: {0}")]
+    Run(#[from] RunError),
+    #[error(
+        "the instrument gave no XYZ for grey level {input:.3} (a colorimeter or spectroradiometer is needed)"
+    )]
+    NoXyz { input: f64 },
+}
+
+/// Show the grey of input `x` through `curves` and read it.
+async fn read_level<D: PatchDisplay, I: Instrument>(
+    curves: &CalibrationCurves,
+    x: f64,
+    bit_depth: u32,
+    geometry: Geometry,
+    display: &mut D,
+    instrument: &mut I,
+) -> Result<(Xyz, [f64; 3], f64), RefineError> {
+    let codes = Codes::from_drive(curves.apply([x; 3]), bit_depth);
+    let patch = Patch {
+        codes,
+        background: Codes::from_drive([0.0; 3], bit_depth),
+        geometry,
+    };
+    display.show(&patch).await.map_err(RunError::from)?;
+    let reading = instrument
+        .measure()
+        .await
+        .map_err(|source| RunError::Instrument {
+            index: 0,
+            attempts: 1,
+            source,
+        })?;
+    let xyz = reading
+        .xyz
+        .filter(|v| v.iter().all(|c| c.is_finite()))
+        .ok_or(RefineError::NoXyz { input: x })?;
+    Ok((xyz, codes.drive(), reading.integration_s))
+}
+
+/// Piecewise-linear interpolation through `(x, y)` points sorted by x, constant
+/// beyond the ends.
+fn through(points: &[(f64, f64)], x: f64) -> f64 {
+    match points {
+        [] => 1.0,
+        [only] => only.1,
+        _ => {
+            if x <= points[0].0 {
+                return points[0].1;
+            }
+            for w in points.windows(2) {
+                if x <= w[1].0 {
+                    let t = (x - w[0].0) / (w[1].0 - w[0].0);
+                    return w[0].1 * (1.0 - t) + w[1].1 * t;
+                }
+            }
+            points[points.len() - 1].1
+        }
+    }
+}
+
+/// The model's curves for `config`, measured into place on `display` and `instrument`.
+pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
+    model: &MonitorModel,
+    config: &TargetConfig,
+    plan_bit_depth: u32,
+    patch_size: f64,
+    display: &mut D,
+    instrument: &mut I,
+) -> Result<StoredCalibration, RefineError> {
+    let target = config.target()?;
+    let mut curves = calibration_curves(model, &target)?;
+    let bit_depth = config.bit_depth.unwrap_or(plan_bit_depth);
+    let geometry = Geometry::centred(patch_size);
+    let inputs: Vec<f64> = (1..config.levels)
+        .map(|k| k as f64 / (config.levels - 1) as f64)
+        .collect();
+    let inverse = model.matrix.try_inverse().ok_or(TargetError::Singular)?;
+    let black = model.black;
+    let white = Xyz::new(curves.white[0], curves.white[1], curves.white[2]);
+    let want = |x: f64| black + (white - black) * target.tone.relative(x, black.y, white.y);
+    let (mut readings, mut instrument_s) = (0, 0.0);
+    for _ in 0..config.refine_passes {
+        // Each channel's gain at each level: what its excitation should have been over
+        // what it was.
+        let mut gains: [Vec<(f64, f64)>; 3] = Default::default();
+        for &x in &inputs {
+            let (measured, drive, seconds) =
+                read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
+            readings += 1;
+            instrument_s += seconds;
+            let e = model.excitations(drive);
+            let missing = inverse * (want(x) - measured);
+            for c in 0..3 {
+                if e[c] > 1e-6 * model.laws[c].full_drive_excitation() {
+                    gains[c].push((x, ((e[c] + missing[c]) / e[c]).clamp(0.5, 2.0)));
+                }
+            }
+        }
+        for ((curve, law), gain) in curves.curves.iter_mut().zip(&model.laws).zip(&gains) {
+            let top = law.full_drive_excitation();
+            let n = curve.len();
+            // Kept non-decreasing, as a lookup table must be.
+            let mut floor: f64 = 0.0;
+            for (i, drive) in curve.iter_mut().enumerate().skip(1) {
+                let x = i as f64 / (n - 1) as f64;
+                let e = law.excitation(*drive) * through(gain, x);
+                *drive = law.drive(e.clamp(0.0, top)).max(floor);
+                floor = *drive;
+            }
+        }
+    }
+    // The check, through the final curves.
+    let mut levels = Vec::new();
+    let mut measured_white = white;
+    for &x in &inputs {
+        let (measured, _, seconds) =
+            read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
+        readings += 1;
+        instrument_s += seconds;
+        levels.push(LevelCheck {
+            input: x,
+            target_luminance: target_luminance(target.tone, x, black.y, white.y),
+            measured_luminance: measured.y,
+        });
+        if x == 1.0 {
+            measured_white = measured;
+        }
+    }
+    let _ = display.blank().await;
+    let measured_tone_error = levels
+        .iter()
+        .map(|l| (l.measured_luminance / l.target_luminance - 1.0).abs())
+        .fold(0.0, f64::max);
+    Ok(StoredCalibration {
+        measured_white_de00: white_error(&measured_white, &white),
+        curves,
+        passes: config.refine_passes,
+        levels,
+        measured_tone_error,
+        readings,
+        instrument_s,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gains_are_interpolated_and_held_beyond_the_ends() {
+        let points = [(0.25, 1.1), (0.5, 0.9), (1.0, 1.0)];
+        assert_eq!(through(&points, 0.0), 1.1);
+        assert!((through(&points, 0.375) - 1.0).abs() < 1e-12);
+        assert_eq!(through(&points, 1.0), 1.0);
+        assert_eq!(through(&[], 0.3), 1.0);
+    }
+
+    #[test]
+    fn bad_targets_name_the_key() {
+        let config = TargetConfig {
+            white: "purple".into(),
+            tone: "srgb".into(),
+            luminance: None,
+            refine_passes: 2,
+            levels: 9,
+            bit_depth: None,
+        };
+        let err = config.check().unwrap_err();
+        assert!(err.starts_with("target:") && err.contains("purple"), "{err}");
+        let config = TargetConfig {
+            white: "D65".into(),
+            levels: 2,
+            ..config
+        };
+        assert!(config.check().unwrap_err().contains("target.levels"));
+    }
+}
