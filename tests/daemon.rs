@@ -518,3 +518,30 @@ async fn the_api_serves_every_export_format_of_the_current_profile() {
     );
     assert_eq!(&std::fs::read(&file).unwrap()[8..10], &[2, 0x40]);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_daemon_calibration_with_a_target_publishes_curves_measured_into_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = format!("{FAST}[target]\nwhite = \"D65\"\ntone = \"srgb\"\nluminance = 80.0\n");
+    let daemon = start_daemon(dir.path(), &config);
+    let api = daemon.endpoint();
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let id = start_job(&api, "calibrate").await;
+    let (_, outcome) = events_of_job(&mut events, &id, Duration::from_secs(60)).await;
+    assert!(outcome.published, "{outcome:?}");
+    let profile = Profile::read(&daemon.state.join("current.toml")).unwrap();
+    let stored = profile.calibration.expect("curves in the profile");
+    assert!(
+        stored.measured_white_de00 < 1.0 && stored.measured_tone_error < 0.02,
+        "{stored:?}"
+    );
+    // With curves in the profile, the .cal needs no target.
+    let reply = get(&api, "/profile?format=cal").await;
+    assert_eq!(reply.status, 200, "{}", reply.text());
+    assert!(
+        reply
+            .text()
+            .contains("TARGET_DESCRIPTION \"white x 0.3127 y 0.3290, sRGB tone")
+    );
+}

@@ -280,7 +280,10 @@ mod tests {
             bit_depth: None,
         };
         let err = config.check().unwrap_err();
-        assert!(err.starts_with("target:") && err.contains("purple"), "{err}");
+        assert!(
+            err.starts_with("target:") && err.contains("purple"),
+            "{err}"
+        );
         let config = TargetConfig {
             white: "D65".into(),
             levels: 2,
