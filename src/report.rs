@@ -398,6 +398,9 @@ pub fn describe_profile(profile: &Profile) -> String {
     }
     let _ = writeln!(out);
     out.push_str(&fit_summary(&profile.report));
+    if let Some(c) = &profile.calibration {
+        out.push_str(&calibration_summary(c));
+    }
     out
 }
 

@@ -522,7 +522,11 @@ async fn the_api_serves_every_export_format_of_the_current_profile() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_daemon_calibration_with_a_target_publishes_curves_measured_into_place() {
     let dir = tempfile::tempdir().unwrap();
-    let config = format!("{FAST}[target]\nwhite = \"D65\"\ntone = \"srgb\"\nluminance = 80.0\n");
+    // A 10-bit path to the panel: at 8 bits one code step at the darkest level
+    // measured is several percent of its luminance on this CRT.
+    let config = format!(
+        "{FAST}[monitor]\npreset = \"crt\"\nbit_depth = 10\n[target]\nwhite = \"D65\"\ntone = \"srgb\"\nluminance = 80.0\nbit_depth = 10\n"
+    );
     let daemon = start_daemon(dir.path(), &config);
     let api = daemon.endpoint();
     let mut events = subscribe(&api);

@@ -2,10 +2,14 @@
 //! (`model::target`) are only as good as the fitted laws: a law chosen for ΔE00 can be
 //! 1 % off in luminance at some level, which ΔE00 does not see and a tone-curve target
 //! does. So, as ArgyllCMS's dispcal iterates, the grey ramp is shown through the
-//! curves and measured at a few levels; the XYZ missing at each level, taken into
-//! excitations (Δe = M⁻¹ (XYZ_target − XYZ_measured)), gives each channel a gain that
-//! is interpolated over the input and applied to the curve's excitations. A last pass
-//! measures the result, so the figures reported are measured, not predicted.
+//! curves and measured at a few levels; the luminance missing at each level,
+//! Y_target / Y_measured, is interpolated over the input and applied to all three
+//! channels' excitations alike. The correction is of luminance only: the grey's
+//! chromaticity is the model's, which rests on many readings, while one reading's
+//! chromaticity carries the instrument's noise (0.2 % per band moves the white by
+//! about 0.5 ΔE00) and would be written into the curves. A last pass measures the
+//! result (white read three times), so the figures reported are measured, not
+//! predicted.
 
 use serde::{Deserialize, Serialize};
 
@@ -88,6 +92,8 @@ pub struct LevelCheck {
     pub input: f64,
     pub target_luminance: f64,
     pub measured_luminance: f64,
+    /// The whole reading, in the profile's units.
+    pub measured_xyz: [f64; 3],
 }
 
 /// Calibration curves and how well they did, measured.
@@ -188,53 +194,55 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
     let inputs: Vec<f64> = (1..config.levels)
         .map(|k| k as f64 / (config.levels - 1) as f64)
         .collect();
-    let inverse = model.matrix.try_inverse().ok_or(TargetError::Singular)?;
     let black = model.black;
     let white = Xyz::new(curves.white[0], curves.white[1], curves.white[2]);
-    let want = |x: f64| black + (white - black) * target.tone.relative(x, black.y, white.y);
+    let want = |x: f64| target_luminance(target.tone, x, black.y, white.y);
     let (mut readings, mut instrument_s) = (0, 0.0);
     for _ in 0..config.refine_passes {
-        // Each channel's gain at each level: what its excitation should have been over
-        // what it was.
-        let mut gains: [Vec<(f64, f64)>; 3] = Default::default();
+        // The gain of the light above black at each level: what it should have been
+        // over what it was.
+        let mut gains: Vec<(f64, f64)> = Vec::new();
         for &x in &inputs {
-            let (measured, drive, seconds) =
+            let (measured, _, seconds) =
                 read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
             readings += 1;
             instrument_s += seconds;
-            let e = model.excitations(drive);
-            let missing = inverse * (want(x) - measured);
-            for c in 0..3 {
-                if e[c] > 1e-6 * model.laws[c].full_drive_excitation() {
-                    gains[c].push((x, ((e[c] + missing[c]) / e[c]).clamp(0.5, 2.0)));
-                }
+            let above = measured.y - black.y;
+            if above > 0.0 {
+                gains.push((x, ((want(x) - black.y) / above).clamp(0.5, 2.0)));
             }
         }
-        for ((curve, law), gain) in curves.curves.iter_mut().zip(&model.laws).zip(&gains) {
+        for (curve, law) in curves.curves.iter_mut().zip(&model.laws) {
             let top = law.full_drive_excitation();
             let n = curve.len();
             // Kept non-decreasing, as a lookup table must be.
             let mut floor: f64 = 0.0;
             for (i, drive) in curve.iter_mut().enumerate().skip(1) {
                 let x = i as f64 / (n - 1) as f64;
-                let e = law.excitation(*drive) * through(gain, x);
+                let e = law.excitation(*drive) * through(&gains, x);
                 *drive = law.drive(e.clamp(0.0, top)).max(floor);
                 floor = *drive;
             }
         }
     }
-    // The check, through the final curves.
+    // The check, through the final curves; white three times, for its chromaticity.
     let mut levels = Vec::new();
     let mut measured_white = white;
     for &x in &inputs {
-        let (measured, _, seconds) =
-            read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
-        readings += 1;
-        instrument_s += seconds;
+        let reads = if x == 1.0 { 3 } else { 1 };
+        let mut measured = Xyz::zeros();
+        for _ in 0..reads {
+            let (xyz, _, seconds) =
+                read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
+            readings += 1;
+            instrument_s += seconds;
+            measured += xyz / reads as f64;
+        }
         levels.push(LevelCheck {
             input: x,
             target_luminance: target_luminance(target.tone, x, black.y, white.y),
             measured_luminance: measured.y,
+            measured_xyz: [measured.x, measured.y, measured.z],
         });
         if x == 1.0 {
             measured_white = measured;
