@@ -674,3 +674,60 @@ fn measured_refinement_corrects_what_the_fitted_law_gets_wrong() {
     let icc = std::fs::read(dir.path().join("refined.icc")).unwrap();
     assert!(icc.windows(4).any(|w| w == b"vcgt"));
 }
+
+#[test]
+fn export_errors_name_what_was_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, path) = calibrate(dir.path(), "crt", "[monitor]\npreset = \"crt\"\n");
+    let run = |profile: &Path, args: &[&str]| {
+        let out = chromacal()
+            .arg("export")
+            .arg(profile)
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?} should fail");
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    let out = dir.path().join("x");
+    let out = out.to_str().unwrap();
+    // A profile whose journal has gone: the .ti3 says which file and how to go on.
+    let text = std::fs::read_to_string(&path).unwrap();
+    let moved = dir.path().join("moved.toml");
+    let source = text
+        .lines()
+        .find(|l| l.starts_with("source = "))
+        .unwrap()
+        .to_string();
+    std::fs::write(
+        &moved,
+        text.replace(&source, "source = \"/nowhere/journal.jsonl\""),
+    )
+    .unwrap();
+    let message = run(&moved, &["--format", "ti3", "-o", out]);
+    assert!(
+        message.contains("/nowhere/journal.jsonl") && message.contains("--measurements"),
+        "{message}"
+    );
+    // Curves without a target; a white outside the gamut; a bad tone curve.
+    assert!(run(&path, &["--format", "cal", "-o", out]).contains("need a target"));
+    let message = run(&path, &["--format", "cal", "-o", out, "--white", "0.2,0.7"]);
+    assert!(message.contains("outside the display's gamut"), "{message}");
+    let message = run(&path, &["--format", "icc4", "-o", out, "--tone", "gamma:9"]);
+    assert!(
+        message.contains("gamma:9") && message.contains("srgb"),
+        "{message}"
+    );
+    // A damaged profile names file, line and column.
+    std::fs::write(
+        &moved,
+        text.replacen("schema_version = 1", "schema_version = 1\nbogus = 2", 1),
+    )
+    .unwrap();
+    let message = run(&moved, &["--format", "icc4", "-o", out]);
+    assert!(
+        message.contains("moved.toml:2:1") && message.contains("bogus"),
+        "{message}"
+    );
+    assert!(!Path::new(out).exists(), "nothing is written on an error");
+}

@@ -97,11 +97,9 @@ pub enum ExportError {
     #[error("{0}")]
     Target(#[from] TargetError),
     #[error(
-        "a .ti3 needs the run's measurements, and {0} cannot be read; give them with --measurements"
+        "a .ti3 needs the run's measurements, and {path} cannot be read ({reason}); give them with --measurements"
     )]
-    NoMeasurements(String),
-    #[error("{0}")]
-    Measurements(String),
+    NoMeasurements { path: String, reason: String },
     #[error("the profile's model has a singular primary matrix")]
     Singular,
     #[error("cannot write the profile: {0}")]
@@ -202,7 +200,10 @@ fn measurements(profile: &Profile, options: &ExportOptions) -> Result<Measuremen
         return Ok(set.clone());
     }
     let source = &profile.provenance.source;
-    read_measurements(Path::new(source)).map_err(|_| ExportError::NoMeasurements(source.clone()))
+    read_measurements(Path::new(source)).map_err(|e| ExportError::NoMeasurements {
+        path: source.clone(),
+        reason: e.to_string(),
+    })
 }
 
 /// A one-line description for ICC `desc`.
