@@ -166,6 +166,11 @@ fn an_exported_profile_becomes_the_default_of_a_display_in_colord() {
         "{shown}"
     );
     assert!(shown.contains("Gamma Table:   Yes"), "{shown}");
+    // colord read the profile's own `meta` dict (this key is in no D-Bus call).
+    assert!(
+        shown.contains(&format!("CMF_version={}", env!("CARGO_PKG_VERSION"))),
+        "{shown}"
+    );
     let bytes = std::fs::read(&icc).unwrap();
     let id = chromacal::export::colord::colord_profile_id(&bytes);
     assert!(shown.contains(&id), "{shown}");

@@ -14,8 +14,9 @@
 //!   display's own white (Y = 1) and there is no `chad` (readers derive Bradford from
 //!   `wtpt`, as Little CMS and ArgyllCMS do); TRCs are `curv` only; `bkpt` is written.
 //!
-//! Both carry the colorants adapted to D50, `lumi` and, with calibration curves, the
-//! Apple `vcgt` tag (3 × 256 16-bit entries, as ArgyllCMS writes it).
+//! Both carry the colorants adapted to D50, `lumi`, the `meta` dict with colord's
+//! metadata keys and, with calibration curves, the Apple `vcgt` tag (3 × 256 16-bit
+//! entries, as ArgyllCMS writes it).
 
 use md5::{Digest, Md5};
 use nalgebra::Matrix3;
@@ -176,6 +177,27 @@ fn text_type(text: &str) -> Vec<u8> {
     out
 }
 
+/// `dict` (dictType, ICC.1:2022 §10.8) of name/value pairs, as the `meta` tag that
+/// colord reads a profile's metadata from: records of four offsets and sizes from the
+/// start of the tag, then the strings in UTF-16BE.
+fn dict(pairs: &[(&str, &str)]) -> Vec<u8> {
+    let mut out = element(b"dict");
+    u32_be(&mut out, pairs.len() as u32);
+    u32_be(&mut out, 16);
+    let mut strings: Vec<u8> = Vec::new();
+    let strings_start = 16 + 16 * pairs.len();
+    for (name, value) in pairs {
+        for text in [name, value] {
+            let bytes: Vec<u8> = text.encode_utf16().flat_map(u16::to_be_bytes).collect();
+            u32_be(&mut out, (strings_start + strings.len()) as u32);
+            u32_be(&mut out, bytes.len() as u32);
+            strings.extend_from_slice(&bytes);
+        }
+    }
+    out.extend_from_slice(&strings);
+    out
+}
+
 /// Apple's `vcgt`, table form: 3 channels × 256 entries × 2 bytes, channel by channel.
 fn vcgt(curves: &[Vec<f64>; 3]) -> Vec<u8> {
     let mut out = element(b"vcgt");
@@ -223,6 +245,18 @@ pub fn encode(profile: &MatrixTrc, text: &IccText, version: IccVersion) -> Vec<u
     if let Some(calibration) = &profile.calibration {
         tags.push((*b"vcgt", vcgt(&calibration.curves)));
     }
+    // colord's metadata keys (its metadata-spec; DisplayCAL writes them in v2 too).
+    let version_text = env!("CARGO_PKG_VERSION");
+    tags.push((
+        *b"meta",
+        dict(&[
+            ("prefix", "CMF_,DATA_"),
+            ("DATA_source", "calib"),
+            ("CMF_product", "chromacal"),
+            ("CMF_binary", "chromacal"),
+            ("CMF_version", version_text),
+        ]),
+    ));
     assemble(&tags, text, version)
 }
 
