@@ -134,7 +134,7 @@ async fn read_level<D: PatchDisplay, I: Instrument>(
     geometry: Geometry,
     display: &mut D,
     instrument: &mut I,
-) -> Result<(Xyz, [f64; 3], f64), RefineError> {
+) -> Result<(Xyz, f64), RefineError> {
     let codes = Codes::from_drive(curves.apply([x; 3]), bit_depth);
     let patch = Patch {
         codes,
@@ -154,7 +154,7 @@ async fn read_level<D: PatchDisplay, I: Instrument>(
         .xyz
         .filter(|v| v.iter().all(|c| c.is_finite()))
         .ok_or(RefineError::NoXyz { input: x })?;
-    Ok((xyz, codes.drive(), reading.integration_s))
+    Ok((xyz, reading.integration_s))
 }
 
 /// Piecewise-linear interpolation through `(x, y)` points sorted by x, constant
@@ -203,7 +203,7 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         // over what it was.
         let mut gains: Vec<(f64, f64)> = Vec::new();
         for &x in &inputs {
-            let (measured, _, seconds) =
+            let (measured, seconds) =
                 read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
             readings += 1;
             instrument_s += seconds;
@@ -232,7 +232,7 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         let reads = if x == 1.0 { 3 } else { 1 };
         let mut measured = Xyz::zeros();
         for _ in 0..reads {
-            let (xyz, _, seconds) =
+            let (xyz, seconds) =
                 read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
             readings += 1;
             instrument_s += seconds;

@@ -276,11 +276,22 @@ pub async fn finish_run(
     )
     .await?;
 
+    // A run stopped between publishing and marking itself done is already current:
+    // its published profile, curves included, stands.
+    let already_current = store
+        .history()
+        .ok()
+        .and_then(|h| h.current)
+        .is_some_and(|id| id == run.run_id);
+    let published = (already_current && config.target.is_some())
+        .then(|| Profile::read(&store.profile_path(&run.run_id)).ok())
+        .flatten();
     // Calibration curves, measured into place on the devices still held. A failure
     // here costs the curves, not the profile: it is published without them.
-    let (calibration, calibration_error) = match &config.target {
-        None => (None, None),
-        Some(target) => match crate::calibrate::refine::refine_curves(
+    let (calibration, calibration_error) = match (&config.target, published) {
+        (None, _) => (None, None),
+        (Some(_), Some(published)) => (published.calibration, None),
+        (Some(target), None) => match crate::calibrate::refine::refine_curves(
             &fitted.model,
             target,
             config.plan.bit_depth,
@@ -327,12 +338,6 @@ pub async fn finish_run(
         path: store.root().to_path_buf(),
         source,
     };
-    // A run stopped between publishing and marking itself done is already current.
-    let already_current = store
-        .history()
-        .ok()
-        .and_then(|h| h.current)
-        .is_some_and(|id| id == run.run_id);
     let profile_path = if already_current {
         store.profile_path(&run.run_id)
     } else if rejection.is_none() {

@@ -20,14 +20,46 @@ pub fn cal_text(curves: &CalibrationCurves, created: &str) -> String {
     out += "\nNUMBER_OF_FIELDS 4\nBEGIN_DATA_FORMAT\nRGB_I RGB_R RGB_G RGB_B\nEND_DATA_FORMAT\n\n";
     out += &format!("NUMBER_OF_SETS {CURVE_ENTRIES}\nBEGIN_DATA\n");
     for i in 0..CURVE_ENTRIES {
-        out += &format!(
-            "{:.7} {:.7} {:.7} {:.7}\n",
-            i as f64 / (CURVE_ENTRIES - 1) as f64,
-            curves.curves[0][i],
-            curves.curves[1][i],
-            curves.curves[2][i]
-        );
+        // Resampled, so that curves of another length read from a profile file cannot
+        // index past their end (for chromacal's own curves this is the identity).
+        let x = i as f64 / (CURVE_ENTRIES - 1) as f64;
+        let [r, g, b] = curves.apply([x; 3]);
+        out += &format!("{x:.7} {r:.7} {g:.7} {b:.7}\n");
     }
     out += "END_DATA\n";
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::target::{Target, ToneCurve, WhiteTarget};
+
+    #[test]
+    fn curves_of_another_length_are_resampled_to_256_rows() {
+        // As a hand-edited profile might hold them.
+        let ramp = vec![0.0, 0.25, 0.5, 0.75, 1.0];
+        let curves = CalibrationCurves {
+            target: Target {
+                white: WhiteTarget::Native,
+                tone: ToneCurve::Power(2.2),
+                luminance: None,
+            },
+            curves: [ramp.clone(), ramp.clone(), ramp],
+            white: [95.0, 100.0, 108.0],
+            black: [0.1, 0.1, 0.1],
+            luminance_limited: false,
+            predicted_white_de00: 0.0,
+            predicted_tone_error: 0.0,
+        };
+        let text = cal_text(&curves, "now");
+        let rows: Vec<&str> = text
+            .lines()
+            .skip_while(|l| *l != "BEGIN_DATA")
+            .skip(1)
+            .take_while(|l| *l != "END_DATA")
+            .collect();
+        assert_eq!(rows.len(), CURVE_ENTRIES);
+        assert_eq!(rows[128], "0.5019608 0.5019608 0.5019608 0.5019608");
+    }
 }

@@ -199,6 +199,8 @@ fn dict(pairs: &[(&str, &str)]) -> Vec<u8> {
 }
 
 /// Apple's `vcgt`, table form: 3 channels × 256 entries × 2 bytes, channel by channel.
+/// Each curve is resampled at i/255 (the identity for chromacal's own 256-entry curves),
+/// so a curve of another length read from a profile file still makes a valid tag.
 fn vcgt(curves: &[Vec<f64>; 3]) -> Vec<u8> {
     let mut out = element(b"vcgt");
     u32_be(&mut out, 0); // gammaType 0: table

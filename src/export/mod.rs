@@ -167,12 +167,16 @@ pub fn limitations(profile: &Profile) -> Vec<String> {
     notes
 }
 
-/// Split an RFC 3339 time into the six numbers ICC headers use (UTC).
-fn created_fields(created: &str) -> [u16; 6] {
-    let parsed = humantime::parse_rfc3339_weak(created.trim_end_matches('Z'))
+/// When the profile was made (its RFC 3339 `created`; now if that cannot be read).
+fn created_time(created: &str) -> std::time::SystemTime {
+    humantime::parse_rfc3339_weak(created.trim_end_matches('Z'))
         .or_else(|_| humantime::parse_rfc3339(created))
-        .unwrap_or_else(|_| std::time::SystemTime::now());
-    let text = humantime::format_rfc3339_seconds(parsed).to_string();
+        .unwrap_or_else(|_| std::time::SystemTime::now())
+}
+
+/// The six numbers ICC headers use for a time (UTC).
+fn icc_date_time(time: std::time::SystemTime) -> [u16; 6] {
+    let text = humantime::format_rfc3339_seconds(time).to_string();
     let number = |range: std::ops::Range<usize>| -> u16 {
         text.get(range).and_then(|s| s.parse().ok()).unwrap_or(0)
     };
@@ -184,13 +188,6 @@ fn created_fields(created: &str) -> [u16; 6] {
         number(14..16),
         number(17..19),
     ]
-}
-
-fn epoch_seconds(created: &str) -> f64 {
-    humantime::parse_rfc3339_weak(created.trim_end_matches('Z'))
-        .ok()
-        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-        .map_or(0.0, |d| d.as_secs_f64())
 }
 
 /// The profile's own measurements: `options.measurements`, else the journal its
@@ -254,7 +251,8 @@ pub fn export(
             units_name(profile.units)
         ));
     }
-    let created = created_fields(&profile.created);
+    let created_at = created_time(&profile.created);
+    let created = icc_date_time(created_at);
     let bytes = match format {
         Format::Icc4 | Format::Icc2 => {
             if profile.model.matrix.try_inverse().is_none() {
@@ -295,7 +293,9 @@ pub fn export(
                 &profile.model,
                 set.as_ref(),
                 &psychopy::calibration_name(&created),
-                epoch_seconds(&profile.created),
+                created_at
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0.0, |d| d.as_secs_f64()),
                 &text,
             )
             .into_bytes()
