@@ -18,17 +18,43 @@ use chromacal::instrument::minolta;
 use chromacal::sim::clock::VirtualClock;
 use chromacal::sim::monitor::VirtualMonitor;
 
+// The arguments of `chromacal emulate`.
+#[derive(clap::Args)]
 pub struct EmulateArgs {
+    /// pr650, pr655, pr670, k10a, specbos1211, ls100, ls110, cs100a, colorcal2.
+    #[arg(long)]
     pub instrument: String,
+    /// Virtual monitor preset (crt, lcd) [default: the config's monitor].
+    #[arg(long)]
     pub monitor: Option<String>,
+    /// Take [monitor] and [instrument.simulated] (noise, seed) from this config.
+    #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Faults to inject, e.g. "no_reply=0.05,garbage=0.02,low_light=0.1,seed=7".
+    #[arg(long, default_value = "")]
     pub faults: String,
+    /// Record the session, byte for byte, to this transcript file.
+    #[arg(long)]
     pub record: Option<PathBuf>,
+    /// Real seconds per instrument second (0.01 answers a hundred times faster).
+    #[arg(long, default_value_t = 1.0)]
     pub time_scale: f64,
+    /// Where to put the screen socket [default: a file in the temporary directory].
+    #[arg(long)]
     pub screen: Option<PathBuf>,
+    /// Emulate a Minolta meter that was switched on without F held (not in remote mode).
+    #[arg(long)]
     pub not_remote: bool,
+    /// Also be a Resolve pattern generator: connect to chromacal's Resolve server at
+    /// ADDR and show what it sends on the virtual monitor (reconnecting when the
+    /// connection drops).
+    #[arg(long, value_name = "ADDR")]
     pub resolve: Option<String>,
+    /// A fault for tests: drop the generator's connection once, after N patterns.
+    #[arg(long, value_name = "N", requires = "resolve")]
     pub resolve_drop_after: Option<usize>,
+    /// The generator reads video levels (16–235) rather than full range.
+    #[arg(long, requires = "resolve")]
     pub video_levels: bool,
 }
 

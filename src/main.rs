@@ -132,43 +132,7 @@ enum Command {
     /// Emulate a serial instrument on a pseudo-terminal: prints the device path to open
     /// and the screen socket to show patches on, then answers as the instrument would,
     /// measuring a virtual monitor, until stopped.
-    Emulate {
-        /// pr650, pr655, pr670, k10a, specbos1211, ls100, ls110, cs100a, colorcal2.
-        #[arg(long)]
-        instrument: String,
-        /// Virtual monitor preset (crt, lcd) [default: the config's monitor].
-        #[arg(long)]
-        monitor: Option<String>,
-        /// Take [monitor] and [instrument.simulated] (noise, seed) from this config.
-        #[arg(long)]
-        config: Option<PathBuf>,
-        /// Faults to inject, e.g. "no_reply=0.05,garbage=0.02,low_light=0.1,seed=7".
-        #[arg(long, default_value = "")]
-        faults: String,
-        /// Record the session, byte for byte, to this transcript file.
-        #[arg(long)]
-        record: Option<PathBuf>,
-        /// Real seconds per instrument second (0.01 answers a hundred times faster).
-        #[arg(long, default_value_t = 1.0)]
-        time_scale: f64,
-        /// Where to put the screen socket [default: a file in the temporary directory].
-        #[arg(long)]
-        screen: Option<PathBuf>,
-        /// Emulate a Minolta meter that was switched on without F held (not in remote mode).
-        #[arg(long)]
-        not_remote: bool,
-        /// Also be a Resolve pattern generator: connect to chromacal's Resolve server at
-        /// ADDR and show what it sends on the virtual monitor (reconnecting when the
-        /// connection drops).
-        #[arg(long, value_name = "ADDR")]
-        resolve: Option<String>,
-        /// A fault for tests: drop the generator's connection once, after N patterns.
-        #[arg(long, value_name = "N", requires = "resolve")]
-        resolve_drop_after: Option<usize>,
-        /// The generator reads video levels (16–235) rather than full range.
-        #[arg(long, requires = "resolve")]
-        video_levels: bool,
-    },
+    Emulate(emulate::EmulateArgs),
     /// Measure what the display shows now with a serial instrument.
     Measure {
         /// KIND:PORT, e.g. pr670:/dev/ttyACM0.
@@ -486,32 +450,7 @@ fn main() -> ExitCode {
                 overrides,
             )
         }),
-        Command::Emulate {
-            instrument,
-            monitor,
-            config,
-            faults,
-            record,
-            time_scale,
-            screen,
-            not_remote,
-            resolve,
-            resolve_drop_after,
-            video_levels,
-        } => emulate::run(emulate::EmulateArgs {
-            instrument,
-            monitor,
-            config,
-            faults,
-            record,
-            time_scale,
-            screen,
-            not_remote,
-            resolve,
-            resolve_drop_after,
-            video_levels,
-        })
-        .map_err(Failure::from),
+        Command::Emulate(args) => emulate::run(args).map_err(Failure::from),
         Command::Measure {
             instrument,
             count,
