@@ -19,7 +19,8 @@ use chromacal::fit::validate::evaluate;
 use chromacal::fit::{FitOptions, fit_monitor};
 use chromacal::instrument::devices::DeviceKind;
 use chromacal::instrument::driver::DriverOptions;
-use chromacal::measurement::{Units, read_measurements};
+use chromacal::measurement::Units;
+use chromacal::measurement_file::read_measurements;
 use chromacal::model::ScreenPosition;
 use chromacal::model::transfer::LawKind;
 use chromacal::numeric_csv::NumericTable;
@@ -569,7 +570,7 @@ fn export(
         .map_err(|e| Failure::from(e.to_string()))?;
     let measurements = match measurements {
         Some(path) => Some(
-            chromacal::measurement::read_measurements(path)
+            chromacal::measurement_file::read_measurements(path)
                 .map_err(|e| Failure::from(e.to_string()))?,
         ),
         None => None,

@@ -4,9 +4,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::color::Xyz;
-use crate::display::Codes;
 use crate::instrument::{InstrumentInfo, Reading, ReadingStatus};
 use crate::model::{Drive, ScreenPosition};
+use crate::screen::Codes;
 
 /// What a patch was measured for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -118,44 +118,6 @@ pub struct MeasurementSet {
 impl MeasurementSet {
     pub fn with_role(&self, role: Role) -> impl Iterator<Item = &Measurement> {
         self.measurements.iter().filter(move |m| m.role == role)
-    }
-}
-
-/// Why a measurement file could not be read.
-#[derive(Debug, thiserror::Error)]
-pub enum ReadMeasurementsError {
-    #[error("{path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
-    #[error(transparent)]
-    Journal(#[from] crate::calibrate::journal::JournalError),
-    #[error(transparent)]
-    Cgats(#[from] crate::cgats::CgatsError),
-}
-
-/// Read measurements from a run journal (JSON Lines) or an ArgyllCMS `.ti3` file,
-/// told apart by their first line.
-pub fn read_measurements(path: &std::path::Path) -> Result<MeasurementSet, ReadMeasurementsError> {
-    let bytes = std::fs::read(path).map_err(|source| ReadMeasurementsError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    let text = String::from_utf8_lossy(&bytes);
-    if text.trim_start().starts_with('{') {
-        let (header, entries, recovery) = crate::calibrate::journal::Journal::read(path)?;
-        if let Some((line, _)) = recovery.dropped_tail {
-            tracing::warn!(line, "the journal's last line was cut short and is ignored");
-        }
-        Ok(crate::calibrate::journal::to_measurement_set(
-            path, &header, entries,
-        ))
-    } else {
-        Ok(crate::cgats::ti3_from_text(
-            &text,
-            &path.display().to_string(),
-        )?)
     }
 }
 

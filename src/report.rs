@@ -3,7 +3,6 @@
 
 use std::fmt::Write as _;
 
-use crate::calibrate::plan::BudgetBreakdown;
 use crate::color::spaces::xyz_to_xyy;
 use crate::fit::FitReport;
 use crate::fit::checks::Verdict;
@@ -11,6 +10,7 @@ use crate::fit::stats::ErrorStats;
 use crate::fit::validate::Evaluation;
 use crate::model::spatial::SpatialMap;
 use crate::model::{CHANNELS, MonitorModel};
+use crate::plan::BudgetBreakdown;
 use crate::profile::Profile;
 
 /// Columns aligned: the first to the left, the others to the right.
@@ -308,7 +308,7 @@ pub fn describe_model(model: &MonitorModel, units: &str) -> String {
 
 /// `chromacal profile show`.
 /// The calibration curves' target and their measured check, level by level.
-pub fn calibration_summary(c: &crate::calibrate::refine::StoredCalibration) -> String {
+pub fn calibration_summary(c: &crate::profile::StoredCalibration) -> String {
     let mut out = format!(
         "\ncalibration curves to {} ({} correction passes, {} readings, {}):\n",
         c.curves.target.describe(),

@@ -345,7 +345,7 @@ async fn sigterm_finishes_the_reading_exits_zero_and_the_run_resumes() {
     );
     let runs = common::daemon_runs(&daemon.state);
     assert_eq!(runs.len(), 1);
-    let (_, before, recovery) = chromacal::calibrate::journal::Journal::read(&runs[0]).unwrap();
+    let (_, before, recovery) = chromacal::journal::Journal::read(&runs[0]).unwrap();
     assert!(
         recovery.dropped_tail.is_none(),
         "SIGTERM leaves no torn line"
@@ -360,7 +360,7 @@ async fn sigterm_finishes_the_reading_exits_zero_and_the_run_resumes() {
     let status = get(&api, "/status").await.json().unwrap();
     assert_eq!(status["last_job"][0]["origin"], "resume", "{status}");
     assert_eq!(status["last_job"][1]["result"], "ok", "{status}");
-    let (header, after, _) = chromacal::calibrate::journal::Journal::read(&runs[0]).unwrap();
+    let (header, after, _) = chromacal::journal::Journal::read(&runs[0]).unwrap();
     assert_eq!(&after[..before.len()], &before[..]);
     common::assert_each_planned_patch_once(&header, &after);
 }

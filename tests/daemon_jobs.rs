@@ -7,8 +7,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
-use chromacal::calibrate::journal::Journal;
 use chromacal::daemon::events::Event;
+use chromacal::journal::Journal;
 use chromacal::model::ScreenPosition;
 use chromacal::profile::Profile;
 

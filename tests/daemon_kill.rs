@@ -7,7 +7,7 @@
 
 use std::time::Duration;
 
-use chromacal::calibrate::journal::Journal;
+use chromacal::journal::Journal;
 use rand::{Rng, SeedableRng};
 
 mod common;

@@ -4,9 +4,9 @@
 use std::io::Write;
 use std::process::Stdio;
 
-use chromacal::calibrate::journal::Journal;
 use chromacal::calibrate::session::{CalibrateOptions, calibrate};
 use chromacal::config::{LoadedConfig, parse_config};
+use chromacal::journal::Journal;
 
 mod common;
 use common::chromacal;

@@ -4,10 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
-use chromacal::calibrate::journal::Journal;
 use chromacal::calibrate::session::{block_on, measure_simulated};
 use chromacal::cgats::to_ti3;
 use chromacal::config::{DEFAULT_CONFIG, parse_config};
+use chromacal::journal::Journal;
 
 mod common;
 use common::{LCD_CONFIG, fixture};

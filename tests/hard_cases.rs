@@ -5,7 +5,8 @@ use std::path::Path;
 
 use chromacal::fit::{FitError, FitOptions, fit_monitor};
 use chromacal::instrument::ReadingStatus;
-use chromacal::measurement::{Role, read_measurements};
+use chromacal::measurement::Role;
+use chromacal::measurement_file::read_measurements;
 use chromacal::model::ScreenPosition;
 use chromacal::model::transfer::LawKind;
 use chromacal::profile::{Profile, Provenance, SCHEMA_VERSION};

@@ -3,7 +3,7 @@
 //! emulated PR-670 → pty → driver. The profile must be the in-process run's, within
 //! noise, also when the generator drops its connection in the middle of the run.
 
-use chromacal::calibrate::journal::Journal;
+use chromacal::journal::Journal;
 use chromacal::profile::Profile;
 
 mod common;

@@ -5,10 +5,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use chromacal::display::PatchDisplay;
 use chromacal::display::resolve::{
     ClientOptions, Flavour, ResolveConfig, ResolveDisplay, run_client,
 };
-use chromacal::display::{Codes, Geometry, Patch, PatchDisplay, ScreenContent};
+use chromacal::screen::{Codes, Geometry, Patch, ScreenContent};
 use chromacal::sim::monitor::VirtualMonitor;
 
 mod common;

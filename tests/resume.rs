@@ -5,9 +5,9 @@ use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use chromacal::calibrate::journal::Journal;
 use chromacal::calibrate::session::{CalibrateOptions, calibrate, measure_simulated};
 use chromacal::config::{load_config, parse_config};
+use chromacal::journal::Journal;
 use chromacal::profile::Profile;
 
 mod common;

@@ -6,11 +6,11 @@
 use std::time::Instant;
 
 use chromacal::calibrate::devices::open_devices;
-use chromacal::calibrate::journal::Journal;
 use chromacal::config::parse_config;
 use chromacal::fit::{FitError, FitOptions, fit_monitor};
 use chromacal::instrument::Instrument;
 use chromacal::instrument::transcript::{Direction, read_transcript};
+use chromacal::journal::Journal;
 use chromacal::profile::Profile;
 
 mod common;
@@ -284,7 +284,7 @@ fn a_light_meter_run_needs_the_primaries_chromaticities() {
         .unwrap()
         .path()
         .join("journal.jsonl");
-    let set = chromacal::measurement::read_measurements(&journal).unwrap();
+    let set = chromacal::measurement_file::read_measurements(&journal).unwrap();
     assert!(matches!(
         fit_monitor(&set, &FitOptions::default()),
         Err(FitError::NeedChromaticities)

@@ -8,8 +8,9 @@ mod browser;
 use std::time::Duration;
 
 use browser::{Browser, Image};
+use chromacal::display::PatchDisplay;
 use chromacal::display::web::{WebConfig, WebDisplay};
-use chromacal::display::{Codes, Geometry, Patch, PatchDisplay};
+use chromacal::screen::{Codes, Geometry, Patch};
 
 fn codes(rgb: [u32; 3]) -> Codes {
     Codes { rgb, bit_depth: 8 }

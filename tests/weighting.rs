@@ -6,7 +6,7 @@ use chromacal::color::Xyz;
 use chromacal::fit::laws::fit_law;
 use chromacal::fit::primaries::{ChannelRamp, RampPoint};
 use chromacal::fit::{FitOptions, fit_monitor};
-use chromacal::measurement::read_measurements;
+use chromacal::measurement_file::read_measurements;
 use chromacal::model::transfer::LawKind;
 use nalgebra::Vector3;
 use rand::SeedableRng;

@@ -7,19 +7,20 @@ use std::sync::Arc;
 
 use nalgebra::Matrix3;
 
+use crate::calibrate::rig::SimulatedRig;
 use crate::config::{Config, Sink};
 use crate::display::emulator_link::EmulatorScreen;
 use crate::display::resolve::ResolveDisplay;
 use crate::display::simulated::SimulatedDisplay;
 use crate::display::web::WebDisplay;
-use crate::display::{DisplayError, Patch, PatchDisplay};
+use crate::display::{DisplayError, PatchDisplay};
 use crate::instrument::devices::DeviceKind;
 use crate::instrument::driver::AsyncSerialInstrument;
 use crate::instrument::simulated::SimulatedInstrument;
 use crate::instrument::{Capability, Instrument, InstrumentError, InstrumentInfo, Reading};
+use crate::screen::Patch;
 use crate::sim::clock::VirtualClock;
 use crate::sim::monitor::SimError;
-use crate::sim::rig::SimulatedRig;
 use crate::time::{TimeSource, WallClock};
 
 /// Why the devices of a run could not be opened.

@@ -11,107 +11,17 @@
 //! result (white read three times), so the figures reported are measured, not
 //! predicted.
 
-use serde::{Deserialize, Serialize};
-
 use super::run::RunError;
 use crate::color::Xyz;
-use crate::display::{Codes, Geometry, Patch, PatchDisplay};
+use crate::config::TargetConfig;
+use crate::display::PatchDisplay;
 use crate::instrument::Instrument;
 use crate::model::MonitorModel;
 use crate::model::target::{
-    CalibrationCurves, Target, TargetError, calibration_curves, parse_tone, parse_white,
-    target_luminance, white_error,
+    CalibrationCurves, TargetError, calibration_curves, target_luminance, white_error,
 };
-
-/// `[target]`: calibrate the display to this after the profile is fitted.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TargetConfig {
-    /// native, D50, D55, D65, D75, a temperature such as "6500K", or "x,y".
-    #[serde(default = "native")]
-    pub white: String,
-    /// "gamma:2.2", "srgb", "bt1886" or "lstar".
-    #[serde(default = "gamma22")]
-    pub tone: String,
-    /// White luminance, cd/m² (unset: the most the white point allows).
-    pub luminance: Option<f64>,
-    /// Measured correction passes (0: the model's curves as they are).
-    #[serde(default = "two")]
-    pub refine_passes: usize,
-    /// Grey levels measured in each pass, black to white inclusive.
-    #[serde(default = "nine")]
-    pub levels: usize,
-    /// Bit depth the curves' output is shown at while refining (the video card's
-    /// output; default: the plan's).
-    pub bit_depth: Option<u32>,
-}
-
-fn native() -> String {
-    "native".into()
-}
-fn gamma22() -> String {
-    "gamma:2.2".into()
-}
-fn two() -> usize {
-    2
-}
-fn nine() -> usize {
-    9
-}
-
-impl TargetConfig {
-    pub fn target(&self) -> Result<Target, TargetError> {
-        Ok(Target {
-            white: parse_white(&self.white)?,
-            tone: parse_tone(&self.tone)?,
-            luminance: self.luminance,
-        })
-    }
-
-    pub fn check(&self) -> Result<(), String> {
-        self.target().map_err(|e| format!("target: {e}"))?;
-        if !(3..=33).contains(&self.levels) {
-            return Err("target.levels must be 3 to 33".into());
-        }
-        if self.refine_passes > 5 {
-            return Err("target.refine_passes must be at most 5".into());
-        }
-        if self.luminance.is_some_and(|l| !(l > 0.0 && l.is_finite())) {
-            return Err("target.luminance must be a positive number".into());
-        }
-        if self.bit_depth.is_some_and(|d| !(8..=16).contains(&d)) {
-            return Err("target.bit_depth must be 8 to 16".into());
-        }
-        Ok(())
-    }
-}
-
-/// One grey level as measured through the final curves.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct LevelCheck {
-    pub input: f64,
-    pub target_luminance: f64,
-    pub measured_luminance: f64,
-    /// The whole reading, in the profile's units.
-    pub measured_xyz: [f64; 3],
-}
-
-/// Calibration curves and how well they did, measured.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StoredCalibration {
-    pub curves: CalibrationCurves,
-    /// Correction passes made before the check.
-    pub passes: usize,
-    /// The check: every level measured through the final curves.
-    pub levels: Vec<LevelCheck>,
-    /// ΔE00 of the measured white against the target white.
-    pub measured_white_de00: f64,
-    /// Largest |Y / Y_target − 1| over the levels above black.
-    pub measured_tone_error: f64,
-    /// Readings taken, and the instrument time they took, s.
-    pub readings: usize,
-    pub instrument_s: f64,
-}
+use crate::profile::{LevelCheck, StoredCalibration};
+use crate::screen::{Codes, Geometry, Patch};
 
 /// Why the curves could not be measured into place.
 #[derive(Debug, thiserror::Error)]

@@ -2,61 +2,16 @@
 //! let it settle, measure it, and append the reading to the journal (durably) before
 //! the next patch. Killed at any point, a run loses at most the reading under way.
 
-use serde::{Deserialize, Serialize};
-
-use super::journal::{Journal, JournalError};
+use crate::config::Stability;
 use crate::display::{DisplayError, PatchDisplay};
 use crate::instrument::{Instrument, InstrumentError, Reading, ReadingStatus};
+use crate::journal::{Journal, JournalError};
 use crate::measurement::{Measurement, Role};
 use crate::model::ScreenPosition;
 use crate::time::TimeSource;
 
 /// Attempts per patch before a run gives up on an instrument error.
 pub const DEFAULT_ATTEMPTS: usize = 3;
-
-/// `[display.stability]`: after the settle time, read again until two readings in a
-/// row agree, for displays whose settle time is not known well enough (slow LCD
-/// response, CRT persistence, a generator whose frame latency varies). The second
-/// reading of the agreeing pair is kept.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Stability {
-    /// Relative agreement asked of each of X, Y, Z (each relative to itself: a blue
-    /// patch's Z is ten times its Y): set it to about three times the
-    /// instrument's repeatability (the difference of two readings has √2 times its
-    /// noise).
-    pub tolerance: f64,
-    /// Absolute agreement (cd/m²) for dim patches, where the instrument's noise floor
-    /// dominates.
-    pub floor: f64,
-    /// Readings per patch at most; the last is kept, with a warning, if none agree.
-    pub max_reads: usize,
-}
-
-impl Default for Stability {
-    fn default() -> Self {
-        Stability {
-            tolerance: 0.01,
-            floor: 0.005,
-            max_reads: 6,
-        }
-    }
-}
-
-impl Stability {
-    /// Do two readings agree? Tristimulus values where both have them, else luminance.
-    pub fn agree(&self, a: &Reading, b: &Reading) -> bool {
-        let close =
-            |u: f64, v: f64, scale: f64| (u - v).abs() <= self.tolerance * scale + self.floor;
-        match (a.xyz, b.xyz) {
-            (Some(p), Some(q)) => (0..3).all(|i| close(p[i], q[i], p[i].abs().max(q[i].abs()))),
-            _ => match (a.luminance(), b.luminance()) {
-                (Some(p), Some(q)) => close(p, q, p.abs().max(q.abs())),
-                _ => false,
-            },
-        }
-    }
-}
 
 /// How the loop measures.
 #[derive(Debug, Clone, Copy, PartialEq)]

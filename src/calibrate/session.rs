@@ -5,18 +5,19 @@ use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
 
 use super::devices::{Devices, DevicesError, Overrides, open_devices};
-use super::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, JournalHeader};
-use super::plan::{Plan, PlanError, make_plan};
 use super::run::{PositionPrompt, Progress, RunError, RunHooks, RunOptions, RunSummary, run_plan};
+use crate::calibrate::rig::SimulatedRig;
+use crate::config::digest;
 use crate::config::{Config, ConfigError, LoadedConfig, PublishConfig, check_config, parse_config};
 use crate::display::PatchDisplay;
 use crate::fit::{FitError, FittedModel, fit_monitor};
 use crate::instrument::Instrument;
+use crate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, JournalHeader};
 use crate::measurement::Units;
+use crate::plan::{Plan, PlanError, make_plan};
 use crate::profile::store::ProfileStore;
 use crate::profile::{Profile, ProfileError, Provenance, SCHEMA_VERSION};
 use crate::sim::monitor::SimError;
-use crate::sim::rig::SimulatedRig;
 
 /// Name of the file in a run's directory that says the run ended in a profile.
 const DONE_MARKER: &str = "profile";
@@ -67,15 +68,6 @@ pub struct CalibrateOptions {
     pub realtime_scale: Option<f64>,
     /// Command-line settings that win over the config's.
     pub overrides: Overrides,
-}
-
-/// SHA-256 of a text, hex.
-pub fn digest(text: &str) -> String {
-    use sha2::{Digest, Sha256};
-    Sha256::digest(text.as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
 }
 
 /// Check a config again once the command line changed it.

@@ -8,51 +8,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::display::{Codes, Geometry, Patch, PatchDisplay};
+use crate::config::WarmupConfig;
+use crate::display::PatchDisplay;
 use crate::instrument::Instrument;
-
-/// `[warmup]`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct WarmupConfig {
-    /// Wait for warm-up before every job.
-    pub enabled: bool,
-    /// Seconds between readings of the white patch.
-    pub interval_s: f64,
-    /// Readings the slope is fitted over.
-    pub window: usize,
-    /// Go on when |slope| of luminance is below this, relative per minute.
-    pub max_slope_per_min: f64,
-    /// Go on anyway after this many seconds (with a warning).
-    pub max_s: f64,
-}
-
-impl Default for WarmupConfig {
-    fn default() -> Self {
-        WarmupConfig {
-            enabled: false,
-            interval_s: 30.0,
-            window: 5,
-            max_slope_per_min: 0.001,
-            max_s: 3600.0,
-        }
-    }
-}
-
-impl WarmupConfig {
-    pub fn check(&self) -> Result<(), String> {
-        if !(self.interval_s > 0.0 && self.max_s >= 0.0 && self.max_slope_per_min > 0.0) {
-            return Err(
-                "warmup: interval_s and max_slope_per_min must be positive, max_s not negative"
-                    .into(),
-            );
-        }
-        if self.window < 3 {
-            return Err("warmup.window must be at least 3 readings".into());
-        }
-        Ok(())
-    }
-}
+use crate::screen::{Codes, Geometry, Patch};
 
 /// One reading of the warm-up.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

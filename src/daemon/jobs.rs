@@ -10,8 +10,6 @@ use std::time::{Duration, Instant, SystemTime};
 use super::Daemon;
 use super::events::{Event, JobKind, JobOutcome, LastReading};
 use crate::calibrate::devices::{Devices, open_devices};
-use crate::calibrate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalHeader};
-use crate::calibrate::plan::{Plan, make_uniformity_plan, make_verification_plan};
 use crate::calibrate::run::{Progress, RunError, RunHooks, RunOptions, run_plan};
 use crate::calibrate::session::{
     CalibrateError, discard_run, finish_run, new_run_id, now_rfc3339, reopen_run, start_run,
@@ -24,8 +22,10 @@ use crate::fit::spatial::choose_spatial_map;
 use crate::fit::stats::ErrorStats;
 use crate::fit::validate::{delta_e00_xyz, evaluate};
 use crate::instrument::{Instrument, ReadingStatus};
+use crate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalHeader};
 use crate::measurement::{Role, Units};
 use crate::model::{MonitorModel, ScreenPosition};
+use crate::plan::{Plan, make_uniformity_plan, make_verification_plan};
 use crate::profile::store::VerificationRecord;
 use crate::profile::{Profile, Provenance, SCHEMA_VERSION};
 

@@ -18,151 +18,19 @@ pub mod events;
 pub mod jobs;
 pub mod notify;
 
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use serde::{Deserialize, Serialize};
 use tokio::sync::broadcast;
 
 use crate::calibrate::devices::Devices;
 use crate::calibrate::session::{discard_run, unfinished_run};
 use crate::config::LoadedConfig;
+use crate::config::OnStart;
 use crate::profile::store::ProfileStore;
 use events::{Event, JobKind, JobStatus};
-
-/// What to do at start with a calibration a stop cut short.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum OnStart {
-    /// Go on measuring where it stopped.
-    #[default]
-    Resume,
-    /// Give it up (its journal is kept, marked discarded).
-    Discard,
-}
-
-/// `[daemon]`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct DaemonConfig {
-    /// The API's unix socket [default: `$RUNTIME_DIRECTORY/api.sock` under systemd,
-    /// else `<state>/api.sock`]. Created with mode 0600.
-    pub socket: Option<PathBuf>,
-    /// Also serve the API on this TCP address (loopback; a bearer token is required).
-    pub tcp: Option<String>,
-    /// Let `tcp` be an address other machines can reach (warned about at start).
-    pub allow_remote: bool,
-    /// The bearer token for TCP clients [default: `<state>/api.token`, made at first
-    /// start with mode 0600].
-    pub token_file: Option<PathBuf>,
-    pub on_start: OnStart,
-    /// Seconds SIGTERM waits for the reading under way before the daemon exits.
-    pub stop_timeout_s: f64,
-    /// Real seconds per simulated second, for the simulated monitor and instrument.
-    pub simulated_time_scale: f64,
-    /// The simulated monitor ages while no job runs (warm-up fades, drift goes on), as
-    /// a real one does. Off, its readings depend on nothing but the seeds.
-    pub simulated_idle_ages: bool,
-    /// Profiles kept in the history (at least 2).
-    pub keep_profiles: usize,
-    /// Largest request body, bytes.
-    pub max_body_bytes: usize,
-    /// Sustained requests per second, and the burst above it.
-    pub requests_per_s: f64,
-    pub burst: usize,
-    /// Event streams open at once.
-    pub max_event_streams: usize,
-}
-
-impl Default for DaemonConfig {
-    fn default() -> Self {
-        DaemonConfig {
-            socket: None,
-            tcp: None,
-            allow_remote: false,
-            token_file: None,
-            on_start: OnStart::Resume,
-            stop_timeout_s: 20.0,
-            simulated_time_scale: 1.0,
-            simulated_idle_ages: true,
-            keep_profiles: crate::profile::store::DEFAULT_KEEP,
-            max_body_bytes: 64 * 1024,
-            requests_per_s: 50.0,
-            burst: 200,
-            max_event_streams: 32,
-        }
-    }
-}
-
-impl DaemonConfig {
-    pub fn check(&self) -> Result<(), String> {
-        if !(self.stop_timeout_s >= 0.0 && self.simulated_time_scale > 0.0) {
-            return Err(
-                "daemon: stop_timeout_s must not be negative and simulated_time_scale must be positive"
-                    .into(),
-            );
-        }
-        if !(self.requests_per_s > 0.0) || self.burst == 0 || self.max_event_streams == 0 {
-            return Err(
-                "daemon: requests_per_s, burst and max_event_streams must be positive".into(),
-            );
-        }
-        if let Some(address) = &self.tcp {
-            let addr: SocketAddr = address
-                .parse()
-                .map_err(|_| format!("daemon.tcp = \"{address}\" is not an IP address and port"))?;
-            if !addr.ip().is_loopback() && !self.allow_remote {
-                return Err(format!(
-                    "daemon.tcp = \"{address}\" can be reached from other machines: set daemon.allow_remote = true if that is meant"
-                ));
-            }
-        }
-        Ok(())
-    }
-}
-
-/// `[schedule]`: verification on a timer.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ScheduleConfig {
-    /// Seconds between verifications (none: only on request).
-    pub verify_every_s: Option<f64>,
-    /// Patches a verification measures (at least 5).
-    pub verify_patches: usize,
-    /// Mean ΔE00 past which a verification starts a recalibration.
-    pub threshold_de00: f64,
-    /// Start the recalibration (false: only record and report).
-    pub escalate: bool,
-}
-
-impl Default for ScheduleConfig {
-    fn default() -> Self {
-        ScheduleConfig {
-            verify_every_s: None,
-            verify_patches: 8,
-            threshold_de00: 1.0,
-            escalate: true,
-        }
-    }
-}
-
-impl ScheduleConfig {
-    pub fn check(&self) -> Result<(), String> {
-        if self.verify_every_s.is_some_and(|s| !(s > 0.0)) {
-            return Err("schedule.verify_every_s must be positive".into());
-        }
-        if self.verify_patches < 5 {
-            return Err("schedule.verify_patches must be at least 5".into());
-        }
-        if !(self.threshold_de00 > 0.0) {
-            return Err("schedule.threshold_de00 must be positive".into());
-        }
-        Ok(())
-    }
-}
 
 /// Why the daemon could not start or run.
 #[derive(Debug, thiserror::Error)]

@@ -5,8 +5,9 @@ use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 
-use super::{DisplayError, Patch, PatchDisplay, ScreenContent};
+use super::{DisplayError, PatchDisplay};
 use crate::instrument::emulator::screen::ScreenMessage;
+use crate::screen::{Patch, ScreenContent};
 
 /// The emulator's virtual monitor, as a display.
 pub struct EmulatorScreen {

@@ -19,7 +19,8 @@ use serde::{Deserialize, Serialize};
 use tokio::io::AsyncWriteExt;
 use tokio::net::{TcpListener, TcpStream as AsyncTcpStream};
 
-use super::{Codes, DisplayError, Geometry, Patch, PatchDisplay, ScreenContent};
+use super::{DisplayError, PatchDisplay};
+use crate::screen::{Codes, Geometry, Patch, ScreenContent};
 use crate::sim::monitor::VirtualMonitor;
 
 /// Which XML the messages use.
@@ -358,8 +359,8 @@ impl PatchDisplay for ResolveDisplay {
     async fn blank(&mut self) -> Result<(), DisplayError> {
         if let Some(_s) = &self.stream {
             let black = Patch {
-                codes: super::Codes::from_drive([0.0; 3], 8),
-                background: super::Codes::from_drive([0.0; 3], 8),
+                codes: crate::screen::Codes::from_drive([0.0; 3], 8),
+                background: crate::screen::Codes::from_drive([0.0; 3], 8),
                 geometry: Geometry {
                     x: 0.0,
                     y: 0.0,

@@ -3,7 +3,8 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::{DisplayError, Patch, PatchDisplay, ScreenContent};
+use super::{DisplayError, PatchDisplay};
+use crate::screen::{Patch, ScreenContent};
 use crate::sim::clock::VirtualClock;
 use crate::sim::monitor::VirtualMonitor;
 

@@ -32,7 +32,8 @@ use tokio_stream::StreamExt;
 use tokio_stream::wrappers::WatchStream;
 
 use super::resolve::code_value;
-use super::{Codes, DisplayError, Geometry, Patch, PatchDisplay};
+use super::{DisplayError, PatchDisplay};
+use crate::screen::{Codes, Geometry, Patch};
 
 /// `[display.web]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -17,7 +17,8 @@ pub mod psychopy;
 use std::path::Path;
 
 use crate::fit::checks::Verdict;
-use crate::measurement::{MeasurementSet, Units, read_measurements};
+use crate::measurement::{MeasurementSet, Units};
+use crate::measurement_file::read_measurements;
 use crate::model::target::{CalibrationCurves, Target, TargetError, calibration_curves};
 use crate::profile::Profile;
 use icc::{IccText, IccVersion};

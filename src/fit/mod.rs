@@ -163,7 +163,7 @@ fn code_step(set: &MeasurementSet) -> f64 {
         .iter()
         .find_map(|m| m.codes)
         .map_or(1.0 / 255.0, |c| {
-            1.0 / crate::display::Codes::max(c.bit_depth) as f64
+            1.0 / crate::screen::Codes::max(c.bit_depth) as f64
         })
 }
 

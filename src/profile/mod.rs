@@ -15,6 +15,7 @@ use crate::fit::FitReport;
 use crate::instrument::InstrumentInfo;
 use crate::measurement::Units;
 use crate::model::MonitorModel;
+use crate::model::target::CalibrationCurves;
 
 /// Version of the profile file format. Readers refuse other versions.
 pub const SCHEMA_VERSION: u32 = 1;
@@ -69,7 +70,7 @@ pub struct Profile {
     pub report: FitReport,
     /// Calibration curves to a target, with their measured check (`[target]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub calibration: Option<crate::calibrate::refine::StoredCalibration>,
+    pub calibration: Option<StoredCalibration>,
 }
 
 /// Line and column (1-based) of a byte offset in `text`.
@@ -130,14 +131,41 @@ impl Profile {
         toml::to_string(self).map_err(|e| ProfileError::Serialize(e.to_string()))
     }
 
-    /// Write to `path` atomically (see [`store::write_atomic`]).
+    /// Write to `path` atomically (see [`crate::durable::write_atomic`]).
     pub fn write(&self, path: &Path) -> Result<(), ProfileError> {
         let text = self.to_toml()?;
-        store::write_atomic(path, text.as_bytes()).map_err(|source| ProfileError::Io {
+        crate::durable::write_atomic(path, text.as_bytes()).map_err(|source| ProfileError::Io {
             path: path.display().to_string(),
             source,
         })
     }
+}
+
+/// One grey level as measured through the final curves.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LevelCheck {
+    pub input: f64,
+    pub target_luminance: f64,
+    pub measured_luminance: f64,
+    /// The whole reading, in the profile's units.
+    pub measured_xyz: [f64; 3],
+}
+
+/// Calibration curves and how well they did, measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StoredCalibration {
+    pub curves: CalibrationCurves,
+    /// Correction passes made before the check.
+    pub passes: usize,
+    /// The check: every level measured through the final curves.
+    pub levels: Vec<LevelCheck>,
+    /// ΔE00 of the measured white against the target white.
+    pub measured_white_de00: f64,
+    /// Largest |Y / Y_target − 1| over the levels above black.
+    pub measured_tone_error: f64,
+    /// Readings taken, and the instrument time they took, s.
+    pub readings: usize,
+    pub instrument_s: f64,
 }
 
 #[cfg(test)]

@@ -13,13 +13,13 @@
 //! the store as it was before or after a change, and `current.toml` is always a whole
 //! profile that passed the publishing limits.
 
-use std::fs::{self, File, OpenOptions};
+use std::fs::{self, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::calibrate::journal::sync_directory;
+use crate::durable::write_atomic;
 use crate::fit::stats::ErrorStats;
 
 /// Why the store could not do what was asked.
@@ -83,33 +83,6 @@ pub struct VerificationRecord {
 
 fn now_rfc3339() -> String {
     humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string()
-}
-
-/// Write `bytes` to `path` so that a crash leaves either the old file or the new one,
-/// never a mix: write a temporary file in the same directory, fsync it, rename it over
-/// `path`, fsync the directory.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    fs::create_dir_all(dir)?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "file".into());
-    let temporary = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    {
-        let mut f = File::create(&temporary)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-    }
-    if let Err(e) = fs::rename(&temporary, path) {
-        let _ = fs::remove_file(&temporary);
-        return Err(e);
-    }
-    sync_directory(dir);
-    Ok(())
 }
 
 /// Profiles kept in the history unless configured otherwise.

@@ -5,4 +5,3 @@
 pub mod clock;
 pub mod monitor;
 pub mod presets;
-pub mod rig;

@@ -27,10 +27,10 @@ use super::clock::VirtualClock;
 use crate::color::Xyz;
 use crate::color::spectrum::{Illuminant, Observer, Spectrum, SpectrumError, emission_to_xyz};
 use crate::color::tables;
-use crate::display::{Geometry, ScreenContent};
 use crate::model::transfer::{Table, TransferLaw};
 use crate::model::{Drive, MonitorModel, ScreenPosition, SpatialMap};
 use crate::numeric_csv::{CsvError, NumericTable};
+use crate::screen::{Geometry, ScreenContent};
 
 /// Why a virtual monitor could not be built.
 #[derive(Debug, thiserror::Error)]

@@ -229,7 +229,7 @@ pub fn daemon_runs(state: &std::path::Path) -> Vec<PathBuf> {
 
 /// Every patch the journal's plan has is in it exactly once.
 pub fn assert_each_planned_patch_once(
-    header: &chromacal::calibrate::journal::JournalHeader,
+    header: &chromacal::journal::JournalHeader,
     entries: &[chromacal::measurement::Measurement],
 ) {
     let mut seen: Vec<usize> = entries.iter().map(|m| m.index).collect();

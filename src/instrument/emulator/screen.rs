@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 
 use serde::{Deserialize, Serialize};
 
-use crate::display::ScreenContent;
+use crate::screen::ScreenContent;
 use crate::sim::monitor::VirtualMonitor;
 
 /// One message: what to show, and how long the display takes to settle.

@@ -14,9 +14,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::plan::Plan;
+use crate::durable::sync_directory;
 use crate::instrument::InstrumentInfo;
 use crate::measurement::{Measurement, MeasurementSet, Units};
+use crate::plan::Plan;
 
 /// Written in the header so other files are not mistaken for journals.
 pub const JOURNAL_FORMAT: &str = "chromacal-journal";
@@ -320,21 +321,13 @@ fn parse(
     Ok((header, entries, recovery, good_len))
 }
 
-/// fsync a directory so a new or renamed entry in it survives a power cut. Best
-/// effort: not every file system lets a directory be opened for this.
-pub fn sync_directory(dir: &Path) {
-    if let Ok(d) = File::open(dir) {
-        let _ = d.sync_all();
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calibrate::plan::{PlanConfig, make_plan};
     use crate::color::Xyz;
     use crate::instrument::{Capability, Reading, ReadingStatus};
     use crate::measurement::Role;
+    use crate::plan::{PlanConfig, make_plan};
 
     fn header() -> JournalHeader {
         JournalHeader {

@@ -16,9 +16,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::color::spaces::lightness_to_luminance;
-use crate::display::{Codes, Geometry, Patch};
 use crate::measurement::Role;
 use crate::model::{Drive, ScreenPosition};
+use crate::screen::{Codes, Geometry, Patch};
 
 /// Nominal gamma used only to space the ramp levels before anything is measured.
 const NOMINAL_GAMMA: f64 = 2.2;

@@ -4,25 +4,28 @@
 //! `config/default.toml` is compiled into the program and used when no `--config` is
 //! given: a calibration of the simulated CRT with a simulated spectroradiometer.
 
+pub mod calibration;
+pub mod daemon;
+
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::calibrate::plan::PlanConfig;
-use crate::calibrate::run::Stability;
-use crate::calibrate::warmup::WarmupConfig;
-use crate::daemon::{DaemonConfig, ScheduleConfig};
+pub use calibration::{Stability, TargetConfig, WarmupConfig};
+pub use daemon::{DaemonConfig, OnStart, ScheduleConfig};
+
 use crate::display::resolve::ResolveConfig;
 use crate::display::web::WebConfig;
 use crate::fit::FitOptions;
 use crate::instrument::devices::DeviceKind;
 use crate::instrument::driver::DriverOptions;
 use crate::instrument::simulated::SimulatedInstrumentSpec;
+use crate::plan::PlanConfig;
 use crate::profile::toml_error_position;
 use crate::sim::presets::MonitorConfig;
 
 /// The default configuration, as shipped.
-pub const DEFAULT_CONFIG: &str = include_str!("../config/default.toml");
+pub const DEFAULT_CONFIG: &str = include_str!("../../config/default.toml");
 
 /// Why a configuration could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -201,7 +204,7 @@ pub struct Config {
     pub warmup: WarmupConfig,
     /// Calibration curves to a target, measured into place after the fit.
     #[serde(default)]
-    pub target: Option<crate::calibrate::refine::TargetConfig>,
+    pub target: Option<TargetConfig>,
 }
 
 /// A configuration with the text it came from.
@@ -218,8 +221,17 @@ pub struct LoadedConfig {
 impl LoadedConfig {
     /// SHA-256 of the text, hex.
     pub fn digest(&self) -> String {
-        crate::calibrate::session::digest(&self.text)
+        digest(&self.text)
     }
+}
+
+/// SHA-256 of a text, hex.
+pub fn digest(text: &str) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(text.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// Parse configuration text; `origin` names it in errors.

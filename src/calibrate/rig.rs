@@ -3,10 +3,10 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::clock::VirtualClock;
-use super::monitor::{MonitorSpec, SimError, VirtualMonitor};
 use crate::display::simulated::SimulatedDisplay;
 use crate::instrument::simulated::{SimulatedInstrument, SimulatedInstrumentSpec};
+use crate::sim::clock::VirtualClock;
+use crate::sim::monitor::{MonitorSpec, SimError, VirtualMonitor};
 
 /// Everything a simulated calibration needs.
 #[derive(Debug, Clone)]

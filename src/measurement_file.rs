@@ -1,0 +1,42 @@
+//! Reading a measurement file: a run journal (JSON Lines, `journal`) or an ArgyllCMS
+//! `.ti3` (CGATS, `cgats`), told apart by their first line. This sits above both
+//! formats so that `measurement` holds only the data they are read into.
+
+use std::path::Path;
+
+use crate::cgats::{CgatsError, ti3_from_text};
+use crate::journal::{Journal, JournalError, to_measurement_set};
+use crate::measurement::MeasurementSet;
+
+/// Why a measurement file could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadMeasurementsError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    #[error(transparent)]
+    Cgats(#[from] CgatsError),
+}
+
+/// Read measurements from a run journal (JSON Lines) or an ArgyllCMS `.ti3` file,
+/// told apart by their first line.
+pub fn read_measurements(path: &Path) -> Result<MeasurementSet, ReadMeasurementsError> {
+    let bytes = std::fs::read(path).map_err(|source| ReadMeasurementsError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let text = String::from_utf8_lossy(&bytes);
+    if text.trim_start().starts_with('{') {
+        let (header, entries, recovery) = Journal::read(path)?;
+        if let Some((line, _)) = recovery.dropped_tail {
+            tracing::warn!(line, "the journal's last line was cut short and is ignored");
+        }
+        Ok(to_measurement_set(path, &header, entries))
+    } else {
+        Ok(ti3_from_text(&text, &path.display().to_string())?)
+    }
+}
