@@ -182,27 +182,71 @@ pub fn choose_law(
     kinds.dedup();
     let mut candidates: Vec<LawCandidate> = kinds
         .iter()
-        .map(|kind| {
-            let fits = [0, 1, 2].map(|c| fit_law(*kind, &ramps[c], toe));
-            let (cv_errors, cv_note) = if fits.iter().all(|f| f.is_ok()) {
-                match cross_validate(*kind, ramps, black, white, noise, toe) {
-                    Ok(e) => (Some(e), None),
-                    Err(note) => (None, Some(format!("not cross-validated: {note}"))),
-                }
-            } else {
-                (None, None)
-            };
-            let grey_errors = grey_errors(&fits, ramps, greys, black, white);
-            LawCandidate {
-                kind: *kind,
-                fits,
-                cv_errors,
-                grey_errors,
-                cv_note,
-                score: None,
-            }
-        })
+        .map(|kind| fit_candidate(*kind, ramps, greys, black, white, noise, toe))
         .collect();
+    let (basis, held) = score_candidates(&mut candidates, ramps, greys);
+    let scores: Vec<Option<Vec<f64>>> = candidates.iter().map(|c| c.score.clone()).collect();
+    let tolerance = noise_delta_e00(&held, noise, white);
+    let (chosen, rule) = match simplest_within_noise(&scores, tolerance) {
+        Some(k) => (
+            candidates[k].kind,
+            format!(
+                "simplest law whose ΔE00 on {basis} exceeds the best's by no more than one standard error (paired) or than noise alone ({tolerance:.3})"
+            ),
+        ),
+        None => (
+            simplest_by_akaike(&candidates)?,
+            "too few levels to cross-validate and no greys: the simplest law within 2 of the lowest Akaike criterion (χ² + 2k)"
+                .to_string(),
+        ),
+    };
+    Some(LawSelection {
+        candidates,
+        chosen,
+        rule,
+    })
+}
+
+/// One law fitted to all three channels, cross-validated where every channel fits, and
+/// scored on the greys.
+fn fit_candidate(
+    kind: LawKind,
+    ramps: &[ChannelRamp; 3],
+    greys: &[(f64, Xyz)],
+    black: &Xyz,
+    white: &Xyz,
+    noise: &NoiseModel,
+    toe: f64,
+) -> LawCandidate {
+    let fits = [0, 1, 2].map(|c| fit_law(kind, &ramps[c], toe));
+    let (cv_errors, cv_note) = if fits.iter().all(|f| f.is_ok()) {
+        match cross_validate(kind, ramps, black, white, noise, toe) {
+            Ok(e) => (Some(e), None),
+            Err(note) => (None, Some(format!("not cross-validated: {note}"))),
+        }
+    } else {
+        (None, None)
+    };
+    let grey_errors = grey_errors(&fits, ramps, greys, black, white);
+    LawCandidate {
+        kind,
+        fits,
+        cv_errors,
+        grey_errors,
+        cv_note,
+        score: None,
+    }
+}
+
+/// Give every fitted candidate the errors it is compared on: its cross-validated ramp
+/// errors and the greys when every candidate could be cross-validated, the greys alone
+/// otherwise (so the comparison stays like with like). Returns what the scores rest on,
+/// in words, and the XYZ of the readings scored (for the noise tolerance).
+fn score_candidates(
+    candidates: &mut [LawCandidate],
+    ramps: &[ChannelRamp; 3],
+    greys: &[(f64, Xyz)],
+) -> (&'static str, Vec<Xyz>) {
     let fitted: Vec<&LawCandidate> = candidates.iter().filter(|c| c.fitted()).collect();
     let all_cross_validated = !fitted.is_empty() && fitted.iter().all(|c| c.cv_errors.is_some());
     let (basis, mut held): (&str, Vec<Xyz>) = if all_cross_validated {
@@ -231,46 +275,29 @@ pub fn choose_law(
             None
         };
     }
-    let scores: Vec<Option<Vec<f64>>> = candidates.iter().map(|c| c.score.clone()).collect();
-    let tolerance = noise_delta_e00(&held, noise, white);
-    let (chosen, rule) = match simplest_within_noise(&scores, tolerance) {
-        Some(k) => (
-            candidates[k].kind,
-            format!(
-                "simplest law whose ΔE00 on {basis} exceeds the best's by no more than one standard error (paired) or than noise alone ({tolerance:.3})"
-            ),
-        ),
-        None => {
-            // Nothing to score on: Akaike's criterion, χ² + 2k summed over the channels
-            // (Akaike 1974), with the run's own noise model behind χ²; the simplest
-            // law within 2 of the lowest (Burnham & Anderson 2002) is kept.
-            let aic: Vec<Option<f64>> = candidates
+    (basis, held)
+}
+
+/// With nothing held out to score on: Akaike's criterion, χ² + 2k summed over the
+/// channels (Akaike 1974), with the run's own noise model behind χ²; the simplest law
+/// within 2 of the lowest (Burnham & Anderson 2002) is kept.
+fn simplest_by_akaike(candidates: &[LawCandidate]) -> Option<LawKind> {
+    let aic: Vec<Option<f64>> = candidates
+        .iter()
+        .map(|c| {
+            c.fits
                 .iter()
-                .map(|c| {
-                    c.fits
-                        .iter()
-                        .map(|f| {
-                            f.as_ref()
-                                .ok()
-                                .map(|f| f.chi2 + 2.0 * f.free_parameters as f64)
-                        })
-                        .sum()
+                .map(|f| {
+                    f.as_ref()
+                        .ok()
+                        .map(|f| f.chi2 + 2.0 * f.free_parameters as f64)
                 })
-                .collect();
-            let best = aic.iter().flatten().copied().fold(f64::INFINITY, f64::min);
-            let k = aic
-                .iter()
-                .position(|a| a.is_some_and(|a| a <= best + 2.0))?;
-            (
-                candidates[k].kind,
-                "too few levels to cross-validate and no greys: the simplest law within 2 of the lowest Akaike criterion (χ² + 2k)"
-                    .to_string(),
-            )
-        }
-    };
-    Some(LawSelection {
-        candidates,
-        chosen,
-        rule,
-    })
+                .sum()
+        })
+        .collect();
+    let best = aic.iter().flatten().copied().fold(f64::INFINITY, f64::min);
+    let k = aic
+        .iter()
+        .position(|a| a.is_some_and(|a| a <= best + 2.0))?;
+    Some(candidates[k].kind)
 }

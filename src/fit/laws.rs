@@ -254,24 +254,51 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     let pinned = ramp.pinned;
     let points = Points::from_ramp(ramp, !pinned);
     need_levels(kind, &points, if pinned { 2 } else { 3 })?;
-    // θ = [γ, v₀] (+ amplitude): E = a·((v − v₀)/(1 − v₀))^γ above v₀.
-    let curve = move |t: &[f64], v: f64, g: &mut [f64]| {
-        let (gamma, cutoff) = (t[0], t[1].min(0.95));
-        let amplitude = if pinned { 1.0 } else { t[2] };
-        let base = (v - cutoff) / (1.0 - cutoff);
-        if base <= 0.0 {
-            g.iter_mut().for_each(|x| *x = 0.0);
-            return 0.0;
-        }
-        let p = base.powf(gamma);
-        g[0] = amplitude * p * base.ln();
-        g[1] = amplitude * gamma * base.powf(gamma - 1.0) * (v - 1.0) / (1.0 - cutoff).powi(2);
-        if !pinned {
-            g[2] = p;
-        }
-        amplitude * p
-    };
-    // Start from the best of a few cut-offs, each with its log-linear gamma.
+    let curve = move |t: &[f64], v: f64, g: &mut [f64]| gog_curve(pinned, t, v, g);
+    let start = gog_start(&points, pinned, &curve);
+    let fit = points.fit(kind, &curve, &start)?;
+    if fit.params[1] < 0.0 {
+        return gog_with_cutoff_at_zero(ramp, fit.params[1]);
+    }
+    let ses = standard_errors_with_pin(&fit, &points, ramp);
+    let (gamma, cutoff) = (fit.params[0], fit.params[1]);
+    let amplitude = if pinned { 1.0 } else { fit.params[2] };
+    let law = TransferLaw::GainOffsetGamma(GainOffsetGamma::from_cutoff(cutoff, gamma));
+    law.monotonicity()
+        .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
+    Ok(LawFit {
+        law,
+        amplitude,
+        parameters: gog_parameters(gamma, cutoff, amplitude, &ses, pinned),
+        chi2: fit.chi2,
+        dof: fit.dof,
+        free_parameters: fit.params.len(),
+        notes: Vec::new(),
+    })
+}
+
+/// The gain-offset-gamma curve and its gradient, θ = [γ, v₀] (+ amplitude):
+/// E = a·((v − v₀)/(1 − v₀))^γ above the cut-off v₀, 0 below it (Berns 1996).
+fn gog_curve(pinned: bool, t: &[f64], v: f64, g: &mut [f64]) -> f64 {
+    let (gamma, cutoff) = (t[0], t[1].min(0.95));
+    let amplitude = if pinned { 1.0 } else { t[2] };
+    let base = (v - cutoff) / (1.0 - cutoff);
+    if base <= 0.0 {
+        g.iter_mut().for_each(|x| *x = 0.0);
+        return 0.0;
+    }
+    let p = base.powf(gamma);
+    g[0] = amplitude * p * base.ln();
+    g[1] = amplitude * gamma * base.powf(gamma - 1.0) * (v - 1.0) / (1.0 - cutoff).powi(2);
+    if !pinned {
+        g[2] = p;
+    }
+    amplitude * p
+}
+
+/// A start for the gain-offset-gamma fit: the best (least χ²) of a few cut-offs, each
+/// with its log-linear gamma.
+fn gog_start(points: &Points, pinned: bool, curve: Curve<'_>) -> Vec<f64> {
     let mut best: Option<(f64, Vec<f64>)> = None;
     for cutoff in [0.0, 0.02, 0.05, 0.1, 0.15] {
         let shifted = Points {
@@ -304,50 +331,29 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
             best = Some((chi2, start));
         }
     }
-    let start = best.map(|b| b.1).unwrap_or_else(|| vec![2.2, 0.0, 1.0]);
-    let fit = points.fit(kind, &curve, &start)?;
-    let mut notes = Vec::new();
-    let (fit, gamma, cutoff, amplitude, ses) = if fit.params[1] < 0.0 {
-        // A negative cut-off means light at zero drive above the measured black: not a
-        // law of light above black. Hold the cut-off at zero (the power law).
-        notes.push(format!(
-            "the unconstrained cut-off was negative ({:.4}); held at 0",
-            fit.params[1]
-        ));
-        let power = fit_power(ramp)?;
-        let gamma = power.parameters[0].value;
-        let ses: Vec<Option<f64>> = vec![
-            power.parameters[0].standard_error,
-            None,
-            power.parameters.get(1).and_then(|p| p.standard_error),
-        ];
-        let chi2 = power.chi2;
-        let dof = power.dof;
-        return Ok(LawFit {
-            law: TransferLaw::GainOffsetGamma(GainOffsetGamma::from_cutoff(0.0, gamma)),
-            amplitude: power.amplitude,
-            parameters: gog_parameters(gamma, 0.0, power.amplitude, &ses, pinned),
-            chi2,
-            dof,
-            free_parameters: power.free_parameters,
-            notes,
-        });
-    } else {
-        let ses = standard_errors_with_pin(&fit, &points, ramp);
-        let amplitude = if pinned { 1.0 } else { fit.params[2] };
-        (fit.clone(), fit.params[0], fit.params[1], amplitude, ses)
-    };
-    let law = TransferLaw::GainOffsetGamma(GainOffsetGamma::from_cutoff(cutoff, gamma));
-    law.monotonicity()
-        .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
+    best.map(|b| b.1).unwrap_or_else(|| vec![2.2, 0.0, 1.0])
+}
+
+/// A negative cut-off means light at zero drive above the measured black: not a law of
+/// light above black. The cut-off is held at zero, which is the power law.
+fn gog_with_cutoff_at_zero(ramp: &ChannelRamp, unconstrained: f64) -> Result<LawFit, LawFitError> {
+    let power = fit_power(ramp)?;
+    let gamma = power.parameters[0].value;
+    let ses: Vec<Option<f64>> = vec![
+        power.parameters[0].standard_error,
+        None,
+        power.parameters.get(1).and_then(|p| p.standard_error),
+    ];
     Ok(LawFit {
-        law,
-        amplitude,
-        parameters: gog_parameters(gamma, cutoff, amplitude, &ses, pinned),
-        chi2: fit.chi2,
-        dof: fit.dof,
-        free_parameters: fit.params.len(),
-        notes,
+        law: TransferLaw::GainOffsetGamma(GainOffsetGamma::from_cutoff(0.0, gamma)),
+        amplitude: power.amplitude,
+        parameters: gog_parameters(gamma, 0.0, power.amplitude, &ses, ramp.pinned),
+        chi2: power.chi2,
+        dof: power.dof,
+        free_parameters: power.free_parameters,
+        notes: vec![format!(
+            "the unconstrained cut-off was negative ({unconstrained:.4}); held at 0"
+        )],
     })
 }
 
@@ -416,15 +422,8 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
     };
     let fit = points.fit(kind, &curve, &start)?;
     let ses = standard_errors_with_pin(&fit, &points, ramp);
-    let build = |a: f64, b: f64, c: f64| -> (TransferLaw, f64) {
-        if three {
-            (TransferLaw::ThreeTerm(ThreeTerm { a, b, c, toe }), 1.0)
-        } else {
-            (TransferLaw::Cowan(Cowan { a, b, toe }), c.exp())
-        }
-    };
     let c = if free_scale { fit.params[2] } else { 0.0 };
-    let (law, amplitude) = build(fit.params[0], fit.params[1], c);
+    let (law, amplitude) = log_law(kind, fit.params[0], fit.params[1], c, toe);
     match law.monotonicity() {
         Ok(()) => Ok(LawFit {
             law,
@@ -438,62 +437,82 @@ fn fit_log_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
         Err(TransferError::TurnsBack { at, .. })
             if fit.params[1] > 0.0 && fit.params[0] > TOE_SLOPE =>
         {
-            // Hold the slope at the toe: A + 2B ln(toe) = TOE_SLOPE, so B = (TOE_SLOPE − A) / (2 ln toe).
-            let ln_toe = toe.ln();
-            let db_da = -1.0 / (2.0 * ln_toe);
-            let b_of = move |a: f64| (TOE_SLOPE - a) / (2.0 * ln_toe);
-            let curve = move |t: &[f64], v: f64, g: &mut [f64]| {
-                let u = v.ln();
-                let c = if free_scale { t[1] } else { 0.0 };
-                let f = clamp_exp(t[0] * u + b_of(t[0]) * u * u + c);
-                g[0] = f * (u + u * u * db_da);
-                if free_scale {
-                    g[1] = f;
-                }
-                f
-            };
-            let start: Vec<f64> = if free_scale {
-                vec![fit.params[0], fit.params[2]]
-            } else {
-                vec![fit.params[0]]
-            };
-            let constrained = points.fit(kind, &curve, &start)?;
-            let cses = standard_errors_with_pin(&constrained, &points, ramp);
-            let a = constrained.params[0];
-            let b = b_of(a);
-            let c = if free_scale {
-                constrained.params[1]
-            } else {
-                0.0
-            };
-            let (law, amplitude) = build(a, b, c);
-            law.monotonicity()
-                .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
-            let full = if free_scale {
-                vec![a, b, c]
-            } else {
-                vec![a, b]
-            };
-            let b_se = cses[0].map(|s| s * db_da.abs());
-            let full_ses = if free_scale {
-                vec![cses[0], b_se, cses[1]]
-            } else {
-                vec![cses[0], b_se]
-            };
-            Ok(LawFit {
-                law,
-                amplitude,
-                parameters: log_parameters(kind, &full, &full_ses, pinned),
-                chi2: constrained.chi2,
-                dof: constrained.dof,
-                free_parameters: constrained.params.len(),
-                notes: vec![format!(
-                    "the unconstrained fit turned back at drive {at:.4} (B > 0); refitted with the slope at the toe held at {TOE_SLOPE}"
-                )],
-            })
+            let mut refit = log_law_with_toe_slope_held(kind, ramp, &points, &fit.params, toe)?;
+            refit.notes.push(format!(
+                "the unconstrained fit turned back at drive {at:.4} (B > 0); refitted with the slope at the toe held at {TOE_SLOPE}"
+            ));
+            Ok(refit)
         }
         Err(source) => Err(LawFitError::NotMonotone { law: kind, source }),
     }
+}
+
+/// The law of `kind` with ln E = A u + B u² (+ C for three-term), and the amplitude
+/// (e^C for an unpinned Cowan, whose law is stored without it; 1 otherwise).
+fn log_law(kind: LawKind, a: f64, b: f64, c: f64, toe: f64) -> (TransferLaw, f64) {
+    if kind == LawKind::ThreeTerm {
+        (TransferLaw::ThreeTerm(ThreeTerm { a, b, c, toe }), 1.0)
+    } else {
+        (TransferLaw::Cowan(Cowan { a, b, toe }), c.exp())
+    }
+}
+
+/// Refit a log law that turned back near zero (B > 0) with its slope at the toe held:
+/// A + 2B ln(toe) = TOE_SLOPE, so B = (TOE_SLOPE − A) / (2 ln toe) and only A (and C)
+/// are free. `unconstrained` is the fit that turned back, the start.
+fn log_law_with_toe_slope_held(
+    kind: LawKind,
+    ramp: &ChannelRamp,
+    points: &Points,
+    unconstrained: &[f64],
+    toe: f64,
+) -> Result<LawFit, LawFitError> {
+    let free_scale = kind == LawKind::ThreeTerm || !ramp.pinned;
+    let ln_toe = toe.ln();
+    let db_da = -1.0 / (2.0 * ln_toe);
+    let b_of = move |a: f64| (TOE_SLOPE - a) / (2.0 * ln_toe);
+    let curve = move |t: &[f64], v: f64, g: &mut [f64]| {
+        let u = v.ln();
+        let c = if free_scale { t[1] } else { 0.0 };
+        let f = clamp_exp(t[0] * u + b_of(t[0]) * u * u + c);
+        g[0] = f * (u + u * u * db_da);
+        if free_scale {
+            g[1] = f;
+        }
+        f
+    };
+    let start: Vec<f64> = if free_scale {
+        vec![unconstrained[0], unconstrained[2]]
+    } else {
+        vec![unconstrained[0]]
+    };
+    let constrained = points.fit(kind, &curve, &start)?;
+    let cses = standard_errors_with_pin(&constrained, points, ramp);
+    let a = constrained.params[0];
+    let b = b_of(a);
+    let c = if free_scale {
+        constrained.params[1]
+    } else {
+        0.0
+    };
+    let (law, amplitude) = log_law(kind, a, b, c, toe);
+    law.monotonicity()
+        .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
+    let b_se = cses[0].map(|s| s * db_da.abs());
+    let (full, full_ses) = if free_scale {
+        (vec![a, b, c], vec![cses[0], b_se, cses[1]])
+    } else {
+        (vec![a, b], vec![cses[0], b_se])
+    };
+    Ok(LawFit {
+        law,
+        amplitude,
+        parameters: log_parameters(kind, &full, &full_ses, ramp.pinned),
+        chi2: constrained.chi2,
+        dof: constrained.dof,
+        free_parameters: constrained.params.len(),
+        notes: Vec::new(),
+    })
 }
 
 fn log_parameters(

@@ -15,6 +15,34 @@ use crate::instrument::ReadingStatus;
 use crate::measurement::{Measurement, MeasurementSet, Role};
 use crate::model::MonitorModel;
 
+use super::{FitError, FitOptions, FittedModel, fit_measurements};
+
+/// The whole luminance-meter path: give every reading an XYZ from the configured
+/// primaries' chromaticities and a nominal model, fit, give the readings the fitted
+/// model's chromaticities, fit again, and say in the report what was given.
+pub fn fit_luminance_only(
+    set: &MeasurementSet,
+    options: &FitOptions,
+) -> Result<FittedModel, FitError> {
+    let primaries = options.primaries_xy.ok_or(FitError::NeedChromaticities)?;
+    let white = options.white_xy.unwrap_or([0.3127, 0.3290]);
+    let first = fit_measurements(&synthesize(set, &primaries, white, None), options)?;
+    let mut second = fit_measurements(
+        &synthesize(set, &primaries, white, Some(&first.model)),
+        options,
+    )?;
+    second.report.luminance_only = Some(format!(
+        "measured with a luminance meter: the primaries' chromaticities are the configured ({:.4}, {:.4}), ({:.4}, {:.4}), ({:.4}, {:.4}), not measured; only luminance was fitted, and the ΔE00 figures compare luminance only",
+        primaries[0][0],
+        primaries[0][1],
+        primaries[1][0],
+        primaries[1][1],
+        primaries[2][0],
+        primaries[2][1]
+    ));
+    Ok(second)
+}
+
 /// True when the readings carry luminance but no XYZ.
 pub fn is_luminance_only(set: &MeasurementSet) -> bool {
     let usable: Vec<&Measurement> = set

@@ -1,17 +1,21 @@
 //! Fitting the monitor model to measurements, choosing among its candidate parts on
 //! held-out data, and testing the assumptions it rests on.
 //!
-//! [`fit_monitor`] runs the whole chain:
+//! [`fit_monitor`] runs the whole chain, one function a step, in this file:
 //! 1. black (`primaries::estimate_black`);
-//! 2. drift of the reference white and the run's noise (`noise`); every reading is
-//!    corrected for drift to the end of the run;
-//! 3. each channel's direction and excitations from its ramp (`primaries`);
+//! 2. drift of the reference white (`drift_of_reference_white`), the run's noise
+//!    (`noise_of_run`), and every reading corrected for drift to the end of the run
+//!    (`correct_for_drift`);
+//! 3. each channel's direction and excitations from its ramp (`channel_ramps`);
 //! 4. every candidate law fitted and cross-validated, the simplest within noise of the
-//!    best kept (`laws`, `law_selection`);
-//! 5. the primary matrix, refused if too ill-conditioned to invert;
+//!    best kept (`select_law`; `laws`, `law_selection`);
+//! 5. the primary matrix, refused if too ill-conditioned to invert (`primary_matrix`);
 //! 6. the spatial map from the uniformity grid, chosen the same way (`spatial`);
-//! 7. held-out error on the verification patches (`validate`), and the assumption
-//!    checks (`checks`).
+//! 7. held-out error on the verification patches (`validate_on_held_out`), and the
+//!    assumption checks (`checks`).
+//!
+//! Readings of luminance alone (a light meter) go through `light_meter`, which gives
+//! them chromaticities and runs the same chain twice.
 
 pub mod checks;
 pub mod law_selection;
@@ -31,17 +35,17 @@ use serde::{Deserialize, Serialize};
 use crate::color::Xyz;
 use crate::color::spaces::xyz_to_xyy;
 use crate::instrument::ReadingStatus;
-use crate::measurement::{MeasurementSet, Role, Units};
+use crate::measurement::{Measurement, MeasurementSet, Role, Units};
 use crate::model::monitor::matrix_condition_number;
 use crate::model::transfer::LawKind;
 use crate::model::{CHANNELS, MonitorModel, SpatialMap};
 use checks::{AssumptionChecks, check_assumptions};
-use law_selection::{LawReport, choose_law};
-use noise::{NoiseModel, estimate_drift, estimate_noise};
+use law_selection::{LawReport, LawSelection, choose_law};
+use noise::{DriftModel, DriftReport, NoiseModel, estimate_drift, estimate_noise};
 use primaries::{BlackEstimate, ChannelRamp, Corrected, RampError, channel_ramp, estimate_black};
 use spatial::{SpatialReport, choose_spatial_map};
 use stats::ErrorStats;
-use validate::{PatchError, evaluate};
+use validate::{Evaluation, PatchError, evaluate};
 
 /// Default largest condition number of the primary matrix that a profile may have.
 /// Real displays sit near 3 to 10; beyond 1000 the inverse model turns a 0.1 %
@@ -167,57 +171,101 @@ fn code_step(set: &MeasurementSet) -> f64 {
         })
 }
 
-/// Fit the monitor model to `set`.
+/// Fit the monitor model to `set`. Readings of luminance alone (a light meter) take
+/// their own path, which gives them chromaticities first (`light_meter`).
 pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedModel, FitError> {
-    if !light_meter::is_luminance_only(set) {
-        return fit_measurements(set, options);
+    if light_meter::is_luminance_only(set) {
+        light_meter::fit_luminance_only(set, options)
+    } else {
+        fit_measurements(set, options)
     }
-    let primaries = options.primaries_xy.ok_or(FitError::NeedChromaticities)?;
-    let white = options.white_xy.unwrap_or([0.3127, 0.3290]);
-    let first = fit_measurements(
-        &light_meter::synthesize(set, &primaries, white, None),
-        options,
-    )?;
-    let mut second = fit_measurements(
-        &light_meter::synthesize(set, &primaries, white, Some(&first.model)),
-        options,
-    )?;
-    second.report.luminance_only = Some(format!(
-        "measured with a luminance meter: the primaries' chromaticities are the configured ({:.4}, {:.4}), ({:.4}, {:.4}), ({:.4}, {:.4}), not measured; only luminance was fitted, and the ΔE00 figures compare luminance only",
-        primaries[0][0],
-        primaries[0][1],
-        primaries[1][0],
-        primaries[1][1],
-        primaries[2][0],
-        primaries[2][1]
-    ));
-    Ok(second)
 }
 
+/// The chain of the module documentation, one step a call, on readings with XYZ.
 fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<FittedModel, FitError> {
     let all = &set.measurements;
-    let standard = |m: &&crate::measurement::Measurement| m.is_standard_condition();
+    let black = estimate_black(&standard_readings(all, Role::Black));
+    let (drift_model, drift) = drift_of_reference_white(all, &black, options.correct_drift);
+    let noise = noise_of_run(all, &black, &drift);
+    let corrected = correct_for_drift(all, &black, drift_model.as_ref())?;
+    let ramps = channel_ramps(&corrected, &black, &noise)?;
+    let white_reference = reference_white(&corrected, &black, &ramps);
+    let selection = select_law(
+        options,
+        &ramps,
+        &corrected,
+        &black,
+        &white_reference,
+        &noise,
+        code_step(set),
+    )?;
+    let (base, condition_number) = primary_matrix(&ramps, &selection, &black, options)?;
+    let grid = readings_of_role(&corrected, Role::Uniformity);
+    let (spatial_map, spatial) = choose_spatial_map(&base, &grid, &noise);
+    let model = MonitorModel {
+        spatial: spatial_map,
+        ..base
+    };
+    let (evaluation, held_out) = validate_on_held_out(&model, &corrected);
+    let checks = check_assumptions(
+        &corrected,
+        &ramps,
+        &black.xyz,
+        &noise,
+        &drift,
+        &white_reference,
+    );
+    Ok(FittedModel {
+        report: FitReport {
+            units: set.units,
+            noise,
+            black,
+            primaries: primary_reports(&model, &ramps),
+            condition_number,
+            law_rule: selection.rule.clone(),
+            laws: selection.reports(),
+            spatial,
+            checks,
+            held_out: evaluation.stats,
+            held_out_patches: evaluation.patches,
+            counts: count_readings(all, corrected.len(), held_out, grid.len()),
+            luminance_only: None,
+        },
+        model,
+    })
+}
 
-    // 1. Black.
-    let blacks: Vec<_> = all
-        .iter()
-        .filter(|m| m.role == Role::Black)
-        .filter(standard)
-        .collect();
-    let black = estimate_black(&blacks);
+/// The readings of `role` taken under standard conditions (centre, usual surround).
+fn standard_readings(all: &[Measurement], role: Role) -> Vec<&Measurement> {
+    all.iter()
+        .filter(|m| m.role == role && m.is_standard_condition())
+        .collect()
+}
 
-    // 2. Drift from the reference white, then the noise model.
-    let is_white =
-        |m: &&crate::measurement::Measurement| m.drive == [1.0; 3] && m.is_standard_condition();
+/// Is this the full white under standard conditions?
+fn is_standard_white(m: &Measurement) -> bool {
+    m.drive == [1.0; 3] && m.is_standard_condition()
+}
+
+/// Step 2a: the drift of the reference white (its signal above black) over the run.
+fn drift_of_reference_white(
+    all: &[Measurement],
+    black: &BlackEstimate,
+    correct: bool,
+) -> (Option<DriftModel>, DriftReport) {
     let references: Vec<(f64, f64)> = all
         .iter()
-        .filter(|m| m.role == Role::Reference)
-        .filter(is_white)
+        .filter(|m| m.role == Role::Reference && is_standard_white(m))
         .filter_map(|m| Some((m.time_s?, m.usable_xyz()?.y - black.xyz.y)))
         .collect();
-    let (drift_model, drift) = estimate_drift(&references, options.correct_drift);
-    // White's luminance sets the scale of the assumed noise floor. Without a white
-    // reading, the brightest reading of each channel stands in for its share.
+    estimate_drift(&references, correct)
+}
+
+/// Step 2b: the run's noise model, from the scatter of the references about the drift
+/// and of the blacks. White's luminance sets the scale of the assumed noise floor;
+/// without a white reading, the brightest reading of each channel stands in for its
+/// share.
+fn noise_of_run(all: &[Measurement], black: &BlackEstimate, drift: &DriftReport) -> NoiseModel {
     let brightest = |c: usize| {
         all.iter()
             .filter(|m| m.role == Role::Ramp && m.drive[c] > 0.0)
@@ -227,27 +275,35 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     };
     let white_y = all
         .iter()
-        .filter(is_white)
+        .filter(|m| is_standard_white(m))
         .filter_map(|m| m.usable_xyz())
         .map(|x| x.y)
         .fold(0.0, f64::max)
         .max(brightest(0) + brightest(1) + brightest(2));
-    let black_ys: Vec<f64> = blacks
+    let black_ys: Vec<f64> = standard_readings(all, Role::Black)
         .iter()
         .filter_map(|m| m.usable_xyz())
         .map(|x| x.y)
         .collect();
-    let noise = estimate_noise(
+    estimate_noise(
         drift.residual_relative_sd.map(|s| (s, drift.residual_dof)),
         &black_ys,
         white_y.max(black.xyz.y),
-    );
+    )
+}
 
+/// Step 2c: every usable reading brought to the end of the run (the light above black
+/// divided by the drift's gain at its time).
+fn correct_for_drift<'a>(
+    all: &'a [Measurement],
+    black: &BlackEstimate,
+    drift: Option<&DriftModel>,
+) -> Result<Vec<Corrected<'a>>, FitError> {
     let corrected: Vec<Corrected<'_>> = all
         .iter()
         .filter_map(|m| {
             let xyz = m.usable_xyz()?;
-            let gain = match (&drift_model, m.time_s) {
+            let gain = match (drift, m.time_s) {
                 (Some(d), Some(t)) => d.gain(t),
                 _ => 1.0,
             };
@@ -260,44 +316,71 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     if corrected.is_empty() {
         return Err(FitError::NoUsableReadings);
     }
+    Ok(corrected)
+}
 
-    // 3. Ramps.
+/// Step 3: each channel's direction in XYZ and its excitations, from its ramp.
+fn channel_ramps(
+    corrected: &[Corrected<'_>],
+    black: &BlackEstimate,
+    noise: &NoiseModel,
+) -> Result<[ChannelRamp; 3], FitError> {
     let ramp_readings: Vec<Corrected<'_>> = corrected
         .iter()
         .filter(|r| r.measurement.role == Role::Ramp && r.measurement.is_standard_condition())
         .cloned()
         .collect();
-    let ramps: [ChannelRamp; 3] = [
-        channel_ramp(0, &ramp_readings, &black.xyz, &noise)?,
-        channel_ramp(1, &ramp_readings, &black.xyz, &noise)?,
-        channel_ramp(2, &ramp_readings, &black.xyz, &noise)?,
-    ];
+    Ok([
+        channel_ramp(0, &ramp_readings, &black.xyz, noise)?,
+        channel_ramp(1, &ramp_readings, &black.xyz, noise)?,
+        channel_ramp(2, &ramp_readings, &black.xyz, noise)?,
+    ])
+}
+
+/// The white ΔE00 is taken against: the mean of the white readings, else black plus the
+/// three channels at full drive.
+fn reference_white(
+    corrected: &[Corrected<'_>],
+    black: &BlackEstimate,
+    ramps: &[ChannelRamp; 3],
+) -> Xyz {
     let whites: Vec<Xyz> = corrected
         .iter()
-        .filter(|r| is_white(&r.measurement))
+        .filter(|r| is_standard_white(r.measurement))
         .map(|r| r.xyz)
         .collect();
-    let white_reference = if whites.is_empty() {
+    if whites.is_empty() {
         black.xyz + ramps.iter().map(|r| r.column(1.0)).sum::<Xyz>()
     } else {
         whites.iter().sum::<Xyz>() / whites.len() as f64
-    };
+    }
+}
 
-    // 4. Laws.
+/// Step 4: every candidate law fitted to every channel and scored on readings it was
+/// not fitted on (the ramps left out level by level, and the greys below full drive).
+fn select_law(
+    options: &FitOptions,
+    ramps: &[ChannelRamp; 3],
+    corrected: &[Corrected<'_>],
+    black: &BlackEstimate,
+    white_reference: &Xyz,
+    noise: &NoiseModel,
+    toe: f64,
+) -> Result<LawSelection, FitError> {
     let greys: Vec<(f64, Xyz)> = corrected
         .iter()
         .filter(|r| r.measurement.role == Role::Grey && r.measurement.is_standard_condition())
         .filter(|r| r.measurement.drive[0] < 1.0)
         .map(|r| (r.measurement.drive[0], r.xyz))
         .collect();
-    let selection = choose_law(
+    choose_law(
         &options.laws,
-        &ramps,
+        ramps,
         &greys,
         &black.xyz,
-        &white_reference,
-        &noise,
-        code_step(set),
+        white_reference,
+        noise,
+        toe,
     )
     .ok_or_else(|| {
         FitError::NoLaw(
@@ -309,7 +392,18 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
                 .join(", ")
                 + " all failed on at least one channel",
         )
-    })?;
+    })
+}
+
+/// Step 5: the primary matrix (each channel's direction scaled by its law's amplitude)
+/// with the chosen laws, refused when too ill-conditioned to invert. Returns the model
+/// without a spatial map and the matrix's condition number.
+fn primary_matrix(
+    ramps: &[ChannelRamp; 3],
+    selection: &LawSelection,
+    black: &BlackEstimate,
+    options: &FitOptions,
+) -> Result<(MonitorModel, f64), FitError> {
     let chosen = selection
         .chosen_candidate()
         .ok_or_else(|| FitError::NoLaw("the chosen law has no fit".into()))?;
@@ -325,8 +419,6 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let laws: [_; 3] = laws
         .try_into()
         .map_err(|_| FitError::NoLaw("a channel is missing".into()))?;
-
-    // 5. The matrix must be invertible in practice.
     let condition_number = matrix_condition_number(&matrix);
     if !(condition_number <= options.max_condition_number) {
         return Err(FitError::IllConditioned {
@@ -334,41 +426,40 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
             limit: options.max_condition_number,
         });
     }
-    let base = MonitorModel {
+    let model = MonitorModel {
         matrix,
         black: black.xyz,
         laws,
         spatial: SpatialMap::Uniform,
     };
+    Ok((model, condition_number))
+}
 
-    // 6. Spatial map.
-    let grid: Vec<Corrected<'_>> = corrected
+/// The corrected readings of one role.
+fn readings_of_role<'a>(corrected: &[Corrected<'a>], role: Role) -> Vec<Corrected<'a>> {
+    corrected
         .iter()
-        .filter(|r| r.measurement.role == Role::Uniformity)
+        .filter(|r| r.measurement.role == role)
         .cloned()
-        .collect();
-    let (spatial_map, spatial) = choose_spatial_map(&base, &grid, &noise);
-    let model = MonitorModel {
-        spatial: spatial_map,
-        ..base
-    };
+        .collect()
+}
 
-    // 7. Held-out error and checks.
+/// Step 7: the model's error on the patches held out of every fit (verification
+/// patches and mixtures), and how many there were.
+fn validate_on_held_out(model: &MonitorModel, corrected: &[Corrected<'_>]) -> (Evaluation, usize) {
     let held: Vec<&Corrected<'_>> = corrected
         .iter()
         .filter(|r| matches!(r.measurement.role, Role::Verification | Role::Mixture))
         .collect();
-    let evaluation = evaluate(&model, held.iter().map(|r| (r.measurement, r.xyz)));
-    let checks = check_assumptions(
-        &corrected,
-        &ramps,
-        &black.xyz,
-        &noise,
-        &drift,
-        &white_reference,
-    );
+    (
+        evaluate(model, held.iter().map(|r| (r.measurement, r.xyz))),
+        held.len(),
+    )
+}
 
-    let primaries = ramps
+/// Each primary as fitted, for the report.
+fn primary_reports(model: &MonitorModel, ramps: &[ChannelRamp; 3]) -> Vec<PrimaryReport> {
+    ramps
         .iter()
         .map(|ramp| {
             let column = model.matrix.column(ramp.channel).into_owned();
@@ -382,11 +473,20 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
                 levels: ramp.levels().len(),
             }
         })
-        .collect();
+        .collect()
+}
+
+/// How many readings went where.
+fn count_readings(
+    all: &[Measurement],
+    usable: usize,
+    held_out: usize,
+    uniformity: usize,
+) -> Counts {
     let count_status = |s: ReadingStatus| all.iter().filter(|m| m.reading.status == s).count();
-    let counts = Counts {
+    Counts {
         readings: all.len(),
-        usable: corrected.len(),
+        usable,
         below_range: count_status(ReadingStatus::BelowRange),
         overload: count_status(ReadingStatus::Overload),
         budget_readings: all
@@ -398,25 +498,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
                 )
             })
             .count(),
-        held_out: held.len(),
-        uniformity: grid.len(),
-    };
-    Ok(FittedModel {
-        report: FitReport {
-            units: set.units,
-            noise,
-            black,
-            primaries,
-            condition_number,
-            law_rule: selection.rule.clone(),
-            laws: selection.reports(),
-            spatial,
-            checks,
-            held_out: evaluation.stats,
-            held_out_patches: evaluation.patches,
-            counts,
-            luminance_only: None,
-        },
-        model,
-    })
+        held_out,
+        uniformity,
+    }
 }

@@ -174,38 +174,11 @@ pub fn estimate_drift(
     if !(level > 0.0) {
         return not_followed("the reference gave no light above black".into());
     }
-    let fit = |points: &[(f64, f64)], degree: usize| {
-        let design = DMatrix::from_fn(points.len(), degree + 1, |i, k| {
-            ((points[i].0 - t_first) / span).powi(k as i32)
-        });
-        let y: Vec<f64> = points.iter().map(|p| p.1).collect();
-        fit_linear(&design, &y, &vec![1.0; points.len()]).ok()
-    };
-    let max_degree = 3.min(n - 3);
-    let mut errors = Vec::new();
-    for degree in 0..=max_degree {
-        let mut e = Vec::with_capacity(n);
-        for held in 0..n {
-            let training: Vec<(f64, f64)> = references
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| *i != held)
-                .map(|(_, p)| *p)
-                .collect();
-            let Some(f) = fit(&training, degree) else {
-                break;
-            };
-            let model = DriftModel {
-                t_first,
-                t_last,
-                coefficients: f.params,
-            };
-            e.push((model.level(references[held].0) - references[held].1).abs() / level);
-        }
-        errors.push((e.len() == n).then_some(e));
-    }
+    let errors: Vec<Option<Vec<f64>>> = (0..=3.min(n - 3))
+        .map(|degree| leave_one_out_drift_errors(references, degree, t_first, t_last, level))
+        .collect();
     let degree = simplest_within_noise(&errors, 0.0).unwrap_or(0);
-    let Some(f) = fit(references, degree) else {
+    let Some(coefficients) = fit_drift_polynomial(references, degree, t_first, span) else {
         return not_followed("the drift fit failed".into());
     };
     // Leave-one-out errors are honest even when the polynomial nearly interpolates
@@ -217,7 +190,7 @@ pub fn estimate_drift(
     let model = DriftModel {
         t_first,
         t_last,
-        coefficients: f.params,
+        coefficients,
     };
     let amplitude = references
         .iter()
@@ -245,6 +218,50 @@ pub fn estimate_drift(
         correct.then_some(model),
         report(Some(degree), amplitude, correct, sd, note),
     )
+}
+
+/// Least-squares polynomial of `degree` in normalised time through `points`.
+fn fit_drift_polynomial(
+    points: &[(f64, f64)],
+    degree: usize,
+    t_first: f64,
+    span: f64,
+) -> Option<Vec<f64>> {
+    let design = DMatrix::from_fn(points.len(), degree + 1, |i, k| {
+        ((points[i].0 - t_first) / span).powi(k as i32)
+    });
+    let y: Vec<f64> = points.iter().map(|p| p.1).collect();
+    fit_linear(&design, &y, &vec![1.0; points.len()])
+        .ok()
+        .map(|f| f.params)
+}
+
+/// Each reference predicted by the polynomial of `degree` fitted to the others, as a
+/// relative error; `None` if some fit failed.
+fn leave_one_out_drift_errors(
+    references: &[(f64, f64)],
+    degree: usize,
+    t_first: f64,
+    t_last: f64,
+    level: f64,
+) -> Option<Vec<f64>> {
+    let span = (t_last - t_first).max(f64::MIN_POSITIVE);
+    (0..references.len())
+        .map(|held| {
+            let training: Vec<(f64, f64)> = references
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != held)
+                .map(|(_, p)| *p)
+                .collect();
+            let model = DriftModel {
+                t_first,
+                t_last,
+                coefficients: fit_drift_polynomial(&training, degree, t_first, span)?,
+            };
+            Some((model.level(references[held].0) - references[held].1).abs() / level)
+        })
+        .collect()
 }
 
 #[cfg(test)]
