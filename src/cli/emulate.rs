@@ -18,7 +18,11 @@ use chromacal::instrument::minolta;
 use chromacal::sim::clock::VirtualClock;
 use chromacal::sim::monitor::VirtualMonitor;
 
-// The arguments of `chromacal emulate`.
+use super::shared::Failure;
+
+/// Emulate a serial instrument on a pseudo-terminal: prints the device path to open
+/// and the screen socket to show patches on, then answers as the instrument would,
+/// measuring a virtual monitor, until stopped.
 #[derive(clap::Args)]
 pub struct EmulateArgs {
     /// pr650, pr655, pr670, k10a, specbos1211, ls100, ls110, cs100a, colorcal2.
@@ -58,7 +62,11 @@ pub struct EmulateArgs {
     pub video_levels: bool,
 }
 
-pub fn run(args: EmulateArgs) -> Result<(), String> {
+pub fn run(args: EmulateArgs) -> Result<(), Failure> {
+    emulate(args).map_err(Failure::from)
+}
+
+fn emulate(args: EmulateArgs) -> Result<(), String> {
     let kind = DeviceKind::parse(&args.instrument)?;
     let loaded = load_config(args.config.as_deref()).map_err(|e| e.to_string())?;
     let mut monitor_config = loaded.config.monitor.clone();

@@ -22,6 +22,8 @@ use chromacal::measurement::MeasurementSet;
 use chromacal::model::transfer::{GainOffsetGamma, LawKind};
 use chromacal::report::table;
 
+use super::shared::Failure;
+
 /// A virtual monitor to measure, as a `[monitor]` config section.
 struct Monitor {
     name: String,
@@ -126,7 +128,24 @@ fn synthetic_ramp(n: usize) -> ChannelRamp {
     }
 }
 
-pub fn run(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
+/// Speed against error: fit time per law against readings, and held-out ΔE00
+/// against patch budget, on simulated monitors (and on real measured displays when
+/// ../shared/data is present).
+#[derive(clap::Args)]
+pub struct BenchArgs {
+    /// Fewer repeats, for a quick look.
+    #[arg(long)]
+    quick: bool,
+    /// Directory of the shared reference data [default: ../shared/data].
+    #[arg(long)]
+    data: Option<PathBuf>,
+}
+
+pub fn run(args: BenchArgs) -> Result<(), Failure> {
+    bench(args.quick, args.data).map_err(Failure::from)
+}
+
+fn bench(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
     let data = data.unwrap_or_else(|| PathBuf::from("../shared/data"));
     let repeats = if quick { 5 } else { 30 };
     let seeds: Vec<u64> = if quick {

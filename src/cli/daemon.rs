@@ -1,15 +1,163 @@
-//! The commands that talk to a running daemon: `status`, `job start|watch|cancel`,
-//! `history`, `rollback`, `profile current`.
+//! `chromacal daemon`, the service, and the commands that talk to a running one:
+//! `status`, `job start|watch|cancel`, `history`, `rollback` (and `profile current`,
+//! whose arguments are with `profile`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use bytes::Bytes;
+use chromacal::config::load_config;
 use chromacal::daemon::api::StatusReply;
 use chromacal::daemon::client::{Endpoint, Reply, follow_events, request};
 use chromacal::daemon::default_socket;
 use chromacal::daemon::events::{Event, JobKind, JobOutcome, JobStatus};
 use chromacal::profile::store::default_state_dir;
+use clap::Subcommand;
+
+use super::shared::Failure;
+
+/// Run as a service: hold the instrument and the display, run one job at a time,
+/// verify on a schedule and recalibrate when the screen moved, and answer the
+/// control API (HTTP on a unix socket, mode 0600; optionally loopback TCP with a
+/// token): GET /status, POST /jobs {"kind": …}, POST /jobs/cancel, GET /events
+/// (server-sent events), GET /profile[?format=json|icc4|icc2|ti3|cal|psychopy],
+/// GET /history, POST /rollback.
+/// Stops on SIGTERM after the reading under way; an interrupted calibration
+/// resumes at the next start.
+#[derive(clap::Args)]
+pub struct DaemonArgs {
+    /// Configuration file [default: the built-in one].
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Profile store, journals, history [default: as for calibrate].
+    #[arg(long)]
+    state_dir: Option<PathBuf>,
+    /// The API's unix socket [default: $RUNTIME_DIRECTORY/api.sock, else <state>/api.sock].
+    #[arg(long)]
+    socket: Option<PathBuf>,
+    /// Also serve the API on this loopback TCP address (token in <state>/api.token).
+    #[arg(long, value_name = "ADDR")]
+    tcp: Option<String>,
+    /// Real seconds per simulated second for the simulated monitor and instrument
+    /// (`daemon.simulated_time_scale`; 0.01 runs a 5-minute calibration in 3 s).
+    #[arg(long, value_name = "S")]
+    time_scale: Option<f64>,
+}
+
+/// Ask a running daemon how it is.
+#[derive(clap::Args)]
+pub struct StatusArgs {
+    #[command(flatten)]
+    api: ApiArgs,
+    #[arg(long)]
+    json: bool,
+}
+
+/// Start, follow or cancel a daemon's job.
+#[derive(clap::Args)]
+pub struct JobArgs {
+    #[command(subcommand)]
+    command: JobCommand,
+    #[command(flatten)]
+    api: ApiArgs,
+}
+
+/// The daemon's profiles (made current, oldest first) and verifications.
+#[derive(clap::Args)]
+pub struct HistoryArgs {
+    #[command(flatten)]
+    api: ApiArgs,
+    #[arg(long)]
+    json: bool,
+}
+
+/// Make an earlier profile current again (default: the one before the current).
+#[derive(clap::Args)]
+pub struct RollbackArgs {
+    /// The profile id to go back to.
+    to: Option<String>,
+    #[command(flatten)]
+    api: ApiArgs,
+}
+
+#[derive(Subcommand)]
+enum JobCommand {
+    /// Start a job: calibrate, verify or uniformity.
+    Start {
+        /// calibrate (a whole calibration, published if it passes), verify (a few
+        /// patches against the current profile's prediction) or uniformity (the grid
+        /// alone: a new spatial map for the current profile).
+        #[arg(value_parser = ["calibrate", "verify", "uniformity"])]
+        kind: String,
+        /// Follow it to its end with a progress bar.
+        #[arg(long)]
+        watch: bool,
+    },
+    /// Follow the running job to its end.
+    Watch,
+    /// Stop the running job after the reading under way (a cancelled calibration is
+    /// not resumed).
+    Cancel,
+}
+
+fn daemon(
+    config: Option<&Path>,
+    state_dir: Option<PathBuf>,
+    socket: Option<PathBuf>,
+    tcp: Option<String>,
+    time_scale: Option<f64>,
+) -> Result<(), Failure> {
+    let mut loaded = load_config(config)?;
+    if let Some(scale) = time_scale {
+        loaded.config.daemon.simulated_time_scale = scale;
+        loaded.config.daemon.check().map_err(Failure::from)?;
+    }
+    let options = chromacal::daemon::DaemonOptions {
+        state_dir: state_dir.unwrap_or_else(default_state_dir),
+        socket,
+        tcp,
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let result = runtime.block_on(chromacal::daemon::run(loaded, options));
+    // The daemon has stopped its job and left its devices; connections still open
+    // (event streams) are simply dropped.
+    runtime.shutdown_timeout(std::time::Duration::from_millis(200));
+    result.map_err(|e| Failure::from(e.to_string()))
+}
+
+pub fn run(args: DaemonArgs) -> Result<(), Failure> {
+    daemon(
+        args.config.as_deref(),
+        args.state_dir,
+        args.socket,
+        args.tcp,
+        args.time_scale,
+    )
+}
+
+pub fn run_status(args: StatusArgs) -> Result<(), Failure> {
+    status(&args.api, args.json).map_err(Failure::from)
+}
+
+pub fn run_job(args: JobArgs) -> Result<(), Failure> {
+    match args.command {
+        JobCommand::Start { kind, watch } => job_start(&args.api, &kind, watch),
+        JobCommand::Watch => job_watch(&args.api),
+        JobCommand::Cancel => job_cancel(&args.api),
+    }
+    .map_err(Failure::from)
+}
+
+pub fn run_history(args: HistoryArgs) -> Result<(), Failure> {
+    history(&args.api, args.json).map_err(Failure::from)
+}
+
+pub fn run_rollback(args: RollbackArgs) -> Result<(), Failure> {
+    rollback(&args.api, args.to).map_err(Failure::from)
+}
 
 /// How to reach the daemon.
 #[derive(clap::Args, Debug, Clone, Default)]

@@ -1,0 +1,200 @@
+//! `chromacal calibrate`: plan, measure, fit, validate and publish, with a progress bar
+//! and a summary.
+
+use std::path::{Path, PathBuf};
+
+use chromacal::calibrate::devices::Overrides;
+use chromacal::calibrate::run::Progress;
+use chromacal::calibrate::session::{CalibrateOptions, calibrate as calibrate_session};
+use chromacal::config::{LoadedConfig, Sink, check_config, load_config};
+use chromacal::model::ScreenPosition;
+use chromacal::profile::store::default_state_dir;
+use chromacal::report;
+
+use super::shared::{DeviceArgs, Failure, NOT_PUBLISHED};
+
+/// Run a calibration (by default of the simulated CRT, no hardware needed) and
+/// publish the profile to the state directory.
+#[derive(clap::Args)]
+pub struct CalibrateArgs {
+    /// Configuration file (TOML); the built-in config/default.toml when absent.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Profile store and run journals [default: $STATE_DIRECTORY, else
+    /// $XDG_STATE_HOME/chromacal, else ~/.local/state/chromacal].
+    #[arg(long)]
+    state_dir: Option<PathBuf>,
+    /// Resume the newest unfinished run, measuring only what it lacks.
+    #[arg(long)]
+    resume: bool,
+    /// Take the simulated instrument's time for real (scaled by --time-scale).
+    #[arg(long)]
+    realtime: bool,
+    /// Real seconds per simulated second with --realtime.
+    #[arg(long, default_value_t = 1.0, requires = "realtime")]
+    time_scale: f64,
+    /// Print the profile's report as JSON instead of the summary.
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    devices: DeviceArgs,
+}
+
+pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
+    let overrides = args.devices.overrides()?;
+    calibrate(
+        args.config.as_deref(),
+        args.state_dir,
+        args.resume,
+        args.realtime.then_some(args.time_scale),
+        args.json,
+        overrides,
+    )
+}
+
+fn calibrate(
+    config: Option<&Path>,
+    state_dir: Option<PathBuf>,
+    resume: bool,
+    realtime_scale: Option<f64>,
+    json: bool,
+    overrides: Overrides,
+) -> Result<(), Failure> {
+    let loaded = load_config(config)?;
+    let options = CalibrateOptions {
+        state_dir: state_dir.unwrap_or_else(default_state_dir),
+        resume,
+        realtime_scale,
+        overrides,
+    };
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} measuring [{bar:40}] {pos}/{len} patches  {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let mut on_progress = |p: &Progress| {
+        bar.set_length(p.total as u64);
+        bar.set_position(p.done as u64);
+        bar.set_message(match p.luminance {
+            Some(y) => format!("{:?} Y {y:.3}", p.role).to_lowercase(),
+            None => format!("{:?} {:?}", p.role, p.status).to_lowercase(),
+        });
+    };
+    announce_display(&loaded, &options);
+    let mut ask = |position: ScreenPosition| aim_prompt(&bar, position);
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let outcome = runtime.block_on(calibrate_session(
+        &loaded,
+        &options,
+        &mut on_progress,
+        Some(&mut ask),
+    ));
+    bar.finish_and_clear();
+    let outcome = outcome?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&outcome.profile.report)?);
+    } else {
+        let mut out = format!(
+            "chromacal: calibrated {} with {}\n",
+            outcome.display,
+            outcome
+                .profile
+                .provenance
+                .instrument
+                .as_ref()
+                .map_or("an instrument", |i| i.name.as_str())
+        );
+        out += &format!(
+            "  patches measured: {}\n",
+            report::budget_line(&outcome.plan.budget)
+        );
+        if outcome.run.extra_reads > 0 || outcome.run.unsettled > 0 {
+            out += &format!(
+                "  stability check: {} extra readings; {} patches never agreed (last reading kept)\n",
+                outcome.run.extra_reads, outcome.run.unsettled
+            );
+        }
+        if outcome.run.already_measured > 0 {
+            out += &format!(
+                "  resumed: {} patches were in the journal, {} measured now\n",
+                outcome.run.already_measured, outcome.run.measured_now
+            );
+        }
+        out += &format!(
+            "  simulated instrument time {} (integration and settling), fit time {}\n\n",
+            report::duration(outcome.instrument_seconds),
+            report::duration(outcome.fit_seconds)
+        );
+        out += &report::fit_summary(&outcome.fitted.report);
+        if let Some(c) = &outcome.profile.calibration {
+            out += &report::calibration_summary(c);
+        }
+        if let Some(why) = &outcome.calibration_error {
+            out += &format!("\ncalibration curves: none ({why})\n");
+        }
+        out += &format!("\njournal: {}\n", outcome.journal_path.display());
+        match &outcome.rejection {
+            None => {
+                out += &format!(
+                    "profile: {} (published as current)\n",
+                    outcome.profile_path.display()
+                )
+            }
+            Some(why) => {
+                out += &format!(
+                    "profile: {} (NOT published: {why})\n",
+                    outcome.profile_path.display()
+                )
+            }
+        }
+        print!("{out}");
+    }
+    match outcome.rejection {
+        None => Ok(()),
+        Some(why) => Err(Failure {
+            message: format!("the profile was not published: {why}"),
+            code: NOT_PUBLISHED,
+        }),
+    }
+}
+
+/// Tell the user where the patches will be, for the sinks that wait for a peer.
+fn announce_display(loaded: &LoadedConfig, options: &CalibrateOptions) {
+    let mut config = loaded.config.clone();
+    options.overrides.apply(&mut config);
+    if options.resume || check_config(&config).is_err() {
+        return; // the session reports the error, or resumes with the journal's config
+    }
+    match config.display.sink() {
+        Sink::Web => eprintln!(
+            "chromacal: open http://{}/ full-screen on the display to measure (e.g. chromium --kiosk)",
+            config.display.web.address
+        ),
+        Sink::Resolve => eprintln!(
+            "chromacal: waiting for a Resolve pattern generator to connect to {}",
+            config.display.resolve.address
+        ),
+        Sink::Simulated | Sink::Emulator => {}
+    }
+}
+
+/// Ask on the terminal to aim the instrument at `position`; Enter goes on.
+fn aim_prompt(bar: &indicatif::ProgressBar, position: ScreenPosition) -> Result<(), String> {
+    bar.suspend(|| {
+        eprintln!(
+            "chromacal: aim the instrument at the patch now shown at ({:.3}, {:.3}) (fractions of the screen's width and height from the top left), then press Enter",
+            position.x, position.y
+        );
+        let mut line = String::new();
+        match std::io::stdin().read_line(&mut line) {
+            Ok(0) => Err("the terminal closed while waiting for the instrument to be aimed".into()),
+            Ok(_) => Ok(()),
+            Err(e) => Err(format!("cannot read the terminal: {e}")),
+        }
+    })
+}

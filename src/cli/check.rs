@@ -1,0 +1,95 @@
+//! `chromacal check`: predict every measured patch from a profile.
+
+use std::path::{Path, PathBuf};
+
+use chromacal::fit::validate::{Evaluation, evaluate};
+use chromacal::measurement::Units;
+use chromacal::measurement_file::read_measurements;
+use chromacal::profile::Profile;
+use chromacal::report;
+
+use super::shared::Failure;
+
+/// Predict every measured patch from a profile and report the ΔE00.
+#[derive(clap::Args)]
+pub struct CheckArgs {
+    profile: PathBuf,
+    measurements: PathBuf,
+    /// Machine-readable output with every patch's prediction.
+    #[arg(long)]
+    json: bool,
+    /// How many of the worst patches to list.
+    #[arg(long, default_value_t = 10)]
+    worst: usize,
+}
+
+pub fn run(args: CheckArgs) -> Result<(), Failure> {
+    check(&args.profile, &args.measurements, args.json, args.worst)
+}
+
+fn check(
+    profile_path: &Path,
+    measurements: &Path,
+    json: bool,
+    worst: usize,
+) -> Result<(), Failure> {
+    let profile = Profile::read(profile_path)?;
+    let set = read_measurements(measurements)?;
+    let mut model = profile.model.clone();
+    let mut note = None;
+    if profile.units != set.units {
+        // Compare like with like: bring the profile to the measurements' scale.
+        if set.units == Units::Relative {
+            let y = model.white().y;
+            if y > 0.0 {
+                model = model.scaled(100.0 / y);
+            }
+        } else {
+            return Err(Failure::from(
+                "the profile is relative (white Y = 100) but the measurements are in cd/m²; \
+                 fit the profile from measurements in cd/m², or check against relative ones",
+            ));
+        }
+        note = Some(
+            "the profile is in cd/m² and the measurements relative: the profile was scaled to white Y = 100",
+        );
+    }
+    let evaluation = evaluate(
+        &model,
+        set.measurements
+            .iter()
+            .filter_map(|m| Some((m, m.usable_xyz()?))),
+    );
+    if json {
+        #[derive(serde::Serialize)]
+        struct Output<'a> {
+            profile: String,
+            measurements: String,
+            note: Option<&'a str>,
+            #[serde(flatten)]
+            evaluation: &'a Evaluation,
+        }
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&Output {
+                profile: profile_path.display().to_string(),
+                measurements: measurements.display().to_string(),
+                note,
+                evaluation: &evaluation,
+            })?
+        );
+    } else {
+        println!(
+            "chromacal: {} against {} ({} usable readings of {})",
+            profile_path.display(),
+            measurements.display(),
+            evaluation.patches.len(),
+            set.measurements.len()
+        );
+        if let Some(n) = note {
+            println!("  note: {n}");
+        }
+        print!("{}", report::check_summary(&evaluation, worst));
+    }
+    Ok(())
+}

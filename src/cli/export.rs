@@ -1,0 +1,136 @@
+//! `chromacal export`: the profile for other tools (ICC, .ti3, .cal, PsychoPy, JSON,
+//! TOML), optionally registered with colord.
+
+use std::path::{Path, PathBuf};
+
+use chromacal::export::{ExportOptions, Format, parse_target};
+use chromacal::measurement_file::read_measurements;
+use chromacal::profile::Profile;
+
+use super::shared::{COLORD_UNAVAILABLE, Failure};
+
+/// Write a profile for other tools: ICC v4 or v2 display profiles (with vcgt when a
+/// target is given), ArgyllCMS .ti3 (the run's measurements) and .cal (calibration
+/// curves to a target), a PsychoPy monitor file, or the profile as JSON or TOML.
+#[derive(clap::Args)]
+pub struct ExportArgs {
+    /// The profile (a chromacal .toml).
+    profile: PathBuf,
+    #[arg(long, value_parser = ["icc4", "icc2", "ti3", "cal", "psychopy", "json", "toml"])]
+    format: String,
+    /// Where to write it.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// The measurements for .ti3 and PsychoPy spectra [default: the run journal the
+    /// profile names].
+    #[arg(long)]
+    measurements: Option<PathBuf>,
+    /// Calibration target white: native, D50, D55, D65, D75, 6500K or x,y.
+    #[arg(long)]
+    white: Option<String>,
+    /// Calibration target tone curve: gamma:G, srgb, bt1886 or lstar [default: gamma:2.2].
+    #[arg(long)]
+    tone: Option<String>,
+    /// Calibration target white luminance in cd/m², or max [default: max].
+    #[arg(long)]
+    luminance: Option<String>,
+    /// Also make the ICC file the default profile of this display in colord
+    /// (e.g. xrandr-Dell-U2713HM-SN123, the id GNOME or KDE gave it), over the system
+    /// D-Bus ($DBUS_SYSTEM_BUS_ADDRESS). Exit 4 when colord cannot be reached.
+    #[arg(long, value_name = "DEVICE_ID")]
+    register_colord: Option<String>,
+}
+
+pub fn run(args: ExportArgs) -> Result<(), Failure> {
+    export(
+        &args.profile,
+        &args.format,
+        &args.output,
+        args.measurements.as_deref(),
+        [args.white, args.tone, args.luminance],
+        args.register_colord.as_deref(),
+    )
+}
+
+fn export(
+    profile_path: &Path,
+    format: &str,
+    output: &Path,
+    measurements: Option<&Path>,
+    target: [Option<String>; 3],
+    register_colord: Option<&str>,
+) -> Result<(), Failure> {
+    let profile = Profile::read(profile_path).map_err(Failure::from)?;
+    let format = Format::parse(format).map_err(|e| Failure::from(e.to_string()))?;
+    if register_colord.is_some() && !matches!(format, Format::Icc4 | Format::Icc2) {
+        return Err(Failure::from(
+            "--register-colord needs an ICC format (icc4 or icc2)".to_string(),
+        ));
+    }
+    let [white, tone, luminance] = target;
+    let target = parse_target(white.as_deref(), tone.as_deref(), luminance.as_deref())
+        .map_err(|e| Failure::from(e.to_string()))?;
+    let measurements = match measurements {
+        Some(path) => Some(read_measurements(path).map_err(|e| Failure::from(e.to_string()))?),
+        None => None,
+    };
+    let options = ExportOptions {
+        target,
+        measurements,
+    };
+    let exported = chromacal::export::export(&profile, format, &options)
+        .map_err(|e| Failure::from(e.to_string()))?;
+    std::fs::write(output, &exported.bytes)
+        .map_err(|e| Failure::from(format!("{}: {e}", output.display())))?;
+    println!(
+        "wrote {} ({}, {} bytes)",
+        output.display(),
+        format.name(),
+        exported.bytes.len()
+    );
+    match (&options.target, &profile.calibration, &exported.calibration) {
+        (None, Some(stored), Some(_)) => println!(
+            "calibration curves to {} (the profile's, measured into place): measured white ΔE00 {:.3}, tone within {:.2} % at {} levels",
+            stored.curves.target.describe(),
+            stored.measured_white_de00,
+            100.0 * stored.measured_tone_error,
+            stored.levels.len()
+        ),
+        (_, _, Some(k)) => println!(
+            "calibration curves to {} (from the model): predicted white ΔE00 {:.3}, tone within {:.2} % at 9 levels",
+            k.target.describe(),
+            k.predicted_white_de00,
+            100.0 * k.predicted_tone_error
+        ),
+        _ => {}
+    }
+    for note in &exported.not_carried {
+        println!("not carried: {note}");
+    }
+    for warning in &exported.warnings {
+        println!("warning: {warning}");
+    }
+    if let Some(device) = register_colord {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?;
+        let registered = runtime
+            .block_on(chromacal::export::colord::register(output, device))
+            .map_err(|e| Failure {
+                message: format!("colord: {e}"),
+                code: COLORD_UNAVAILABLE,
+            })?;
+        println!(
+            "colord: {} is the default profile of {} ({}{})",
+            registered.profile_id,
+            device,
+            registered.device_object,
+            if registered.device_existed {
+                ""
+            } else {
+                ", a device chromacal created"
+            }
+        );
+    }
+    Ok(())
+}

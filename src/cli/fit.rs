@@ -1,0 +1,121 @@
+//! `chromacal fit`: a profile from recorded measurements (a run journal or a .ti3).
+
+use std::path::{Path, PathBuf};
+
+use clap::ValueEnum;
+
+use chromacal::config::load_config;
+use chromacal::fit::{FitOptions, fit_monitor};
+use chromacal::measurement_file::read_measurements;
+use chromacal::model::transfer::LawKind;
+use chromacal::profile::{Profile, Provenance, SCHEMA_VERSION};
+use chromacal::report;
+
+use super::shared::Failure;
+
+/// Fit a profile to recorded measurements: a run journal or an ArgyllCMS .ti3.
+#[derive(clap::Args)]
+pub struct FitArgs {
+    measurements: PathBuf,
+    /// Where to write the profile (TOML).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Take the [fit] options from this configuration file.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Candidate laws (comma-separated), instead of the config's.
+    #[arg(long, value_delimiter = ',')]
+    laws: Option<Vec<LawArg>>,
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: FitArgs) -> Result<(), Failure> {
+    fit(
+        &args.measurements,
+        &args.output,
+        args.config.as_deref(),
+        args.laws,
+        args.json,
+    )
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum LawArg {
+    Power,
+    GainOffsetGamma,
+    Cowan,
+    ThreeTerm,
+    Table,
+}
+
+impl From<LawArg> for LawKind {
+    fn from(l: LawArg) -> Self {
+        match l {
+            LawArg::Power => LawKind::Power,
+            LawArg::GainOffsetGamma => LawKind::GainOffsetGamma,
+            LawArg::Cowan => LawKind::Cowan,
+            LawArg::ThreeTerm => LawKind::ThreeTerm,
+            LawArg::Table => LawKind::Table,
+        }
+    }
+}
+
+fn fit(
+    measurements: &Path,
+    output: &Path,
+    config: Option<&Path>,
+    laws: Option<Vec<LawArg>>,
+    json: bool,
+) -> Result<(), Failure> {
+    let mut options = match config {
+        Some(path) => load_config(Some(path))?.config.fit,
+        None => FitOptions::default(),
+    };
+    if let Some(laws) = laws {
+        options.laws = laws.into_iter().map(LawKind::from).collect();
+    }
+    let set = read_measurements(measurements)?;
+    let started = std::time::Instant::now();
+    let fitted = fit_monitor(&set, &options)?;
+    let fit_seconds = started.elapsed().as_secs_f64();
+    let id = output
+        .file_stem()
+        .map_or_else(|| "profile".into(), |s| s.to_string_lossy().into_owned());
+    let profile = Profile {
+        schema_version: SCHEMA_VERSION,
+        id,
+        created: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
+        units: set.units,
+        model: fitted.model.clone(),
+        provenance: Provenance {
+            source: measurements.display().to_string(),
+            display: set.display.clone(),
+            instrument: set.instrument.clone(),
+            config_digest: None,
+            program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
+        },
+        report: fitted.report.clone(),
+        calibration: None,
+    };
+    profile.write(output)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&fitted.report)?);
+    } else {
+        let c = &fitted.report.counts;
+        print!(
+            "chromacal: fitted {} ({} readings, {} usable; {} in the fit's budgeted kinds, {} held out, {} uniformity; XYZ {})\n  fit time {}\n\n{}\nprofile: {}\n",
+            measurements.display(),
+            c.readings,
+            c.usable,
+            c.budget_readings,
+            c.held_out,
+            c.uniformity,
+            set.units,
+            report::duration(fit_seconds),
+            report::fit_summary(&fitted.report),
+            output.display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,77 @@
+//! `chromacal measure`: read what the screen shows now with a serial instrument.
+
+use chromacal::color::spaces::xyz_to_xyy;
+use chromacal::instrument::driver::DriverOptions;
+
+use super::shared::{Failure, parse_instrument};
+
+/// Measure what the display shows now with a serial instrument.
+#[derive(clap::Args)]
+pub struct MeasureArgs {
+    /// KIND:PORT, e.g. pr670:/dev/ttyACM0.
+    #[arg(long)]
+    instrument: String,
+    #[arg(long, default_value_t = 1)]
+    count: usize,
+    /// Multiplies the protocol's timeouts (for emulators run faster than real time).
+    #[arg(long, default_value_t = 1.0)]
+    timing_scale: f64,
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: MeasureArgs) -> Result<(), Failure> {
+    measure(&args.instrument, args.count, args.timing_scale, args.json)
+}
+
+fn measure(spec: &str, count: usize, timing_scale: f64, json: bool) -> Result<(), Failure> {
+    let (kind, port) = parse_instrument(spec)?;
+    let options = DriverOptions {
+        timing_scale,
+        ..DriverOptions::default()
+    };
+    let mut instrument = kind.open(&port, options)?;
+    let info = instrument.info().clone();
+    if !json {
+        println!(
+            "{} (serial {}) on {port}",
+            info.name,
+            info.serial.as_deref().unwrap_or("unknown")
+        );
+    }
+    let mut readings = Vec::new();
+    for _ in 0..count.max(1) {
+        let reading = instrument.measure()?;
+        if !json {
+            let status = format!("{:?}", reading.status).to_lowercase();
+            match (reading.xyz, reading.luminance()) {
+                (Some(xyz), _) => {
+                    let xyy = xyz_to_xyy(&xyz, [0.0, 0.0]);
+                    println!(
+                        "  XYZ {:.4} {:.4} {:.4}  x {:.4} y {:.4}  [{status}, code {}]",
+                        xyz.x,
+                        xyz.y,
+                        xyz.z,
+                        xyy.x,
+                        xyy.y,
+                        reading.device_code.as_deref().unwrap_or("-")
+                    )
+                }
+                (None, Some(y)) => println!(
+                    "  Y {y:.4} cd/m²  [{status}, code {}]",
+                    reading.device_code.as_deref().unwrap_or("-")
+                ),
+                (None, None) => println!(
+                    "  no value  [{status}, code {}]",
+                    reading.device_code.as_deref().unwrap_or("-")
+                ),
+            }
+        }
+        readings.push(reading);
+    }
+    instrument.close();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&readings)?);
+    }
+    Ok(())
+}

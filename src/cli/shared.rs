@@ -1,0 +1,101 @@
+//! What the commands share: the failure they end with and its exit code, logging, the
+//! arguments that name an instrument and a display, and a runtime for the commands
+//! that talk to devices or the daemon.
+
+use std::path::PathBuf;
+
+use chromacal::calibrate::devices::Overrides;
+use chromacal::config::Sink;
+use chromacal::instrument::devices::DeviceKind;
+
+/// A failure to report and the exit code to leave with.
+pub struct Failure {
+    pub message: String,
+    pub code: u8,
+}
+
+impl<E: std::fmt::Display> From<E> for Failure {
+    fn from(e: E) -> Self {
+        Failure {
+            message: e.to_string(),
+            code: 1,
+        }
+    }
+}
+
+/// Exit code when a profile was made but did not pass the publishing limits.
+pub const NOT_PUBLISHED: u8 = 3;
+
+/// Exit code when an export was written but colord could not take it.
+pub const COLORD_UNAVAILABLE: u8 = 4;
+
+/// Log through tracing to stderr. A service logs what it does; a command only what went
+/// wrong. One line per event, without colour when stderr is not a terminal (the
+/// systemd journal). `CHROMACAL_LOG` overrides the level.
+pub fn init_logging(service: bool) {
+    let default_level = if service { "info" } else { "warn" };
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("CHROMACAL_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level)),
+        )
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_writer(std::io::stderr)
+        .init();
+}
+
+/// Which instrument and display a calibration uses, when not the config's.
+#[derive(clap::Args, Default)]
+pub struct DeviceArgs {
+    /// A serial instrument as KIND:PORT, e.g. pr670:/dev/ttyACM0 (see `chromacal instruments`).
+    #[arg(long)]
+    instrument: Option<String>,
+    /// The screen socket of `chromacal emulate`, whose virtual monitor shows the patches.
+    #[arg(long)]
+    screen: Option<PathBuf>,
+    /// Multiplies the instrument protocol's timeouts (for emulators run faster than real time).
+    #[arg(long)]
+    timing_scale: Option<f64>,
+    /// Where patches go: resolve (a pattern generator connects to chromacal), web (a
+    /// browser opens chromacal's patch page), emulator or simulated.
+    #[arg(long, value_name = "SINK")]
+    display: Option<String>,
+    /// Address the Resolve server or the web page listens on, e.g. 127.0.0.1:20002.
+    #[arg(long, value_name = "ADDR")]
+    listen: Option<String>,
+    /// Ask on the terminal to aim the instrument each time the patch moves.
+    #[arg(long)]
+    prompt_positions: bool,
+}
+
+impl DeviceArgs {
+    pub fn overrides(&self) -> Result<Overrides, Failure> {
+        Ok(Overrides {
+            instrument: match &self.instrument {
+                Some(spec) => Some(parse_instrument(spec)?),
+                None => None,
+            },
+            screen: self.screen.clone(),
+            timing_scale: self.timing_scale,
+            sink: match &self.display {
+                Some(text) => Some(Sink::parse(text).map_err(Failure::from)?),
+                None => None,
+            },
+            listen: self.listen.clone(),
+            prompt_positions: self.prompt_positions,
+        })
+    }
+}
+
+/// KIND:PORT.
+pub fn parse_instrument(spec: &str) -> Result<(DeviceKind, String), Failure> {
+    let (kind, port) = spec.split_once(':').ok_or_else(|| {
+        Failure::from(format!(
+            "--instrument wants KIND:PORT, e.g. pr670:/dev/ttyACM0, not '{spec}'"
+        ))
+    })?;
+    Ok((
+        DeviceKind::parse(kind).map_err(Failure::from)?,
+        port.to_string(),
+    ))
+}

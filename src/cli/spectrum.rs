@@ -1,0 +1,244 @@
+//! `chromacal spectrum`: spectra to XYZ, xyY, u′v′, L*a*b* and L*u*v*.
+
+use std::path::{Path, PathBuf};
+
+use clap::ValueEnum;
+
+use chromacal::color::spaces::{Xyz, xyz_to_luv, xyz_to_uv_prime, xyz_to_xyy};
+use chromacal::color::spectrum::{
+    Illuminant, Observer, Spectrum, SpectrumError, emission_to_relative_xyz, emission_to_xyz,
+    photopic_luminance, reflectance_to_xyz, scotopic_luminance, white_point,
+};
+use chromacal::color::{UvPrime, xyz_to_lab};
+use chromacal::numeric_csv::NumericTable;
+use chromacal::report;
+
+use super::shared::Failure;
+
+/// Integrate spectra to XYZ, xyY, u′v′, L*a*b* and L*u*v*.
+///
+/// The CSV's first column is `wavelength_nm`, each further column a sample. A
+/// sample on a uniform grid of whole nanometres (1, 4, 5, 10 nm …) is summed on
+/// its own grid, the colour-matching functions read at its wavelengths and Δλ its
+/// step (CIE 15 weighted ordinates). Any other grid (uneven, or steps such as
+/// 3.333 nm) is interpolated linearly onto the CMFs' 1 nm grid and summed with
+/// Δλ = 1 nm. Sums run only where the sample, the CMFs (360–830 nm) and the
+/// illuminant are all defined; nothing is extrapolated.
+#[derive(clap::Args)]
+pub struct SpectrumArgs {
+    file: PathBuf,
+    /// Columns are radiance spectra (the default).
+    #[arg(long, conflicts_with = "reflectance")]
+    emission: bool,
+    /// Columns are reflectance factors (0–1) under --illuminant, with Y of the
+    /// illuminant = 100.
+    #[arg(long)]
+    reflectance: bool,
+    /// Emission: scale each sample to Y = 100 instead of absolute Y = 683 Σ S ȳ Δλ.
+    #[arg(long)]
+    relative: bool,
+    /// Illuminant for --reflectance; for emission, the chromaticity of the
+    /// reference white of L*a*b* and L*u*v*.
+    #[arg(long, value_enum, default_value = "d65")]
+    illuminant: IlluminantArg,
+    /// Emission: luminance of the reference white [default: the brightest sample's].
+    #[arg(long)]
+    white_y: Option<f64>,
+    /// Standard observer: 2 (CIE 1931) or 10 (CIE 1964).
+    #[arg(long, default_value = "2", value_parser = ["2", "10"])]
+    observer: String,
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: SpectrumArgs) -> Result<(), Failure> {
+    spectrum(
+        &args.file,
+        args.reflectance,
+        args.relative,
+        args.illuminant.into(),
+        args.white_y,
+        &args.observer,
+        args.json,
+    )
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum IlluminantArg {
+    A,
+    C,
+    D50,
+    D65,
+    F2,
+    F7,
+    F11,
+}
+
+impl From<IlluminantArg> for Illuminant {
+    fn from(i: IlluminantArg) -> Self {
+        match i {
+            IlluminantArg::A => Illuminant::A,
+            IlluminantArg::C => Illuminant::C,
+            IlluminantArg::D50 => Illuminant::D50,
+            IlluminantArg::D65 => Illuminant::D65,
+            IlluminantArg::F2 => Illuminant::F2,
+            IlluminantArg::F7 => Illuminant::F7,
+            IlluminantArg::F11 => Illuminant::F11,
+        }
+    }
+}
+
+#[derive(serde::Serialize)]
+struct SpectrumResult {
+    sample: String,
+    xyz: [f64; 3],
+    x: f64,
+    y: f64,
+    u_prime: f64,
+    v_prime: f64,
+    lab: [f64; 3],
+    luv: [f64; 3],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    photopic_cd_m2: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    scotopic_cd_m2: Option<f64>,
+}
+
+fn spectrum(
+    file: &Path,
+    reflectance: bool,
+    relative: bool,
+    illuminant: Illuminant,
+    white_y: Option<f64>,
+    observer: &str,
+    json: bool,
+) -> Result<(), Failure> {
+    let observer = if observer == "10" {
+        Observer::Cie1964TenDegree
+    } else {
+        Observer::Cie1931TwoDegree
+    };
+    let table = NumericTable::read(file)?;
+    if !table.header[0].eq_ignore_ascii_case("wavelength_nm") {
+        return Err(Failure::from(format!(
+            "{}: the first column must be wavelength_nm, not '{}'",
+            file.display(),
+            table.header[0]
+        )));
+    }
+    if table.header.len() < 2 {
+        return Err(Failure::from(format!(
+            "{}: no sample columns",
+            file.display()
+        )));
+    }
+    let wavelengths = table.column(0);
+    let mut results = Vec::new();
+    let mut absolute = Vec::new();
+    for (k, name) in table.header.iter().enumerate().skip(1) {
+        let sample = Spectrum::new(wavelengths.clone(), table.column(k))
+            .map_err(|e| Failure::from(format!("{}, column '{name}': {e}", file.display())))?;
+        let in_column =
+            |e: SpectrumError| Failure::from(format!("{}, column '{name}': {e}", file.display()));
+        let xyz = if reflectance {
+            reflectance_to_xyz(&sample, illuminant, observer).map_err(in_column)?
+        } else if relative {
+            emission_to_relative_xyz(&sample, observer).map_err(in_column)?
+        } else {
+            emission_to_xyz(&sample, observer).map_err(in_column)?
+        };
+        let luminances = if !reflectance && !relative {
+            Some((
+                photopic_luminance(&sample).map_err(in_column)?,
+                scotopic_luminance(&sample).ok(),
+            ))
+        } else {
+            None
+        };
+        absolute.push(luminances);
+        results.push((name.clone(), xyz));
+    }
+    // The reference white for L*a*b* and L*u*v*.
+    let white_xyz = white_point(illuminant, observer)?;
+    let white_luminance = if reflectance || relative {
+        100.0
+    } else {
+        white_y.unwrap_or_else(|| results.iter().map(|r| r.1.y).fold(0.0, f64::max))
+    };
+    let white: Xyz = white_xyz * (white_luminance / 100.0);
+    let out: Vec<SpectrumResult> = results
+        .iter()
+        .zip(&absolute)
+        .map(|((name, xyz), lum)| {
+            let xyy = xyz_to_xyy(xyz, [0.0, 0.0]);
+            let uv = xyz_to_uv_prime(xyz, UvPrime { u: 0.0, v: 0.0 });
+            let lab = xyz_to_lab(xyz, &white);
+            let luv = xyz_to_luv(xyz, &white);
+            SpectrumResult {
+                sample: name.clone(),
+                xyz: [xyz.x, xyz.y, xyz.z],
+                x: xyy.x,
+                y: xyy.y,
+                u_prime: uv.u,
+                v_prime: uv.v,
+                lab: [lab.l, lab.a, lab.b],
+                luv: [luv.l, luv.u, luv.v],
+                photopic_cd_m2: lum.map(|l| l.0),
+                scotopic_cd_m2: lum.and_then(|l| l.1),
+            }
+        })
+        .collect();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    let mode = if reflectance {
+        format!("reflectance under {illuminant:?}, Y of the illuminant = 100")
+    } else if relative {
+        "emission, each sample scaled to Y = 100".into()
+    } else {
+        "emission, absolute (Y in cd/m² for radiance in W·sr⁻¹·m⁻²·nm⁻¹)".into()
+    };
+    println!(
+        "{} ({mode}; {} observer; L*a*b*/L*u*v* against {illuminant:?} white, Y = {white_luminance:.4})",
+        file.display(),
+        observer
+    );
+    let rows: Vec<Vec<String>> = out
+        .iter()
+        .map(|r| {
+            vec![
+                r.sample.clone(),
+                format!("{:.4}", r.xyz[0]),
+                format!("{:.4}", r.xyz[1]),
+                format!("{:.4}", r.xyz[2]),
+                format!("{:.4}", r.x),
+                format!("{:.4}", r.y),
+                format!("{:.4}", r.u_prime),
+                format!("{:.4}", r.v_prime),
+                format!("{:.2}", r.lab[0]),
+                format!("{:.2}", r.lab[1]),
+                format!("{:.2}", r.lab[2]),
+                format!("{:.2}", r.luv[1]),
+                format!("{:.2}", r.luv[2]),
+            ]
+        })
+        .collect();
+    print!(
+        "{}",
+        report::table(
+            &[
+                "sample", "X", "Y", "Z", "x", "y", "u′", "v′", "L*", "a*", "b*", "u*", "v*"
+            ],
+            &rows
+        )
+    );
+    if out.iter().any(|r| r.scotopic_cd_m2.is_some()) {
+        for r in &out {
+            if let Some(s) = r.scotopic_cd_m2 {
+                println!("  {}: scotopic luminance {s:.4} scotopic cd/m²", r.sample);
+            }
+        }
+    }
+    Ok(())
+}
