@@ -21,15 +21,15 @@ pub enum OnStart {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DaemonConfig {
-    /// The API's unix socket [default: `$RUNTIME_DIRECTORY/api.sock` under systemd,
-    /// else `<state>/api.sock`]. Created with mode 0600.
+    /// The API's unix socket (default: `$RUNTIME_DIRECTORY/api.sock` under systemd,
+    /// else `<state>/api.sock`). Created with mode 0600.
     pub socket: Option<PathBuf>,
     /// Also serve the API on this TCP address (loopback; a bearer token is required).
     pub tcp: Option<String>,
     /// Let `tcp` be an address other machines can reach (warned about at start).
     pub allow_remote: bool,
-    /// The bearer token for TCP clients [default: `<state>/api.token`, made at first
-    /// start with mode 0600].
+    /// The bearer token for TCP clients (default: `<state>/api.token`, made at first
+    /// start with mode 0600).
     pub token_file: Option<PathBuf>,
     pub on_start: OnStart,
     /// Seconds SIGTERM waits for the reading under way before the daemon exits.
