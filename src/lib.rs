@@ -15,9 +15,11 @@
 // must fail every such check, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod argyll;
 pub mod calibrate;
 pub mod cgats;
 pub mod color;
+pub mod comparison;
 pub mod config;
 pub mod daemon;
 pub mod display;

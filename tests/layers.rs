@@ -29,15 +29,15 @@ const LAYERS: &[&[&str]] = &[
     &["plan"],
     // The two measurement file formats.
     &["journal", "cgats"],
-    // Reading either of them.
-    &["measurement_file"],
+    // Reading either of them; ArgyllCMS as a yardstick, fed the same files.
+    &["measurement_file", "argyll"],
     &["fit"],
     &["profile"],
     &["export"],
     &["config"],
     &["calibrate"],
-    // The service, and the text a command prints.
-    &["daemon", "report"],
+    // The service, the text a command prints, and comparisons with other tools.
+    &["daemon", "report", "comparison"],
 ];
 
 fn src() -> PathBuf {

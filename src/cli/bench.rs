@@ -14,9 +14,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use chromacal::calibrate::session::{block_on, measure_simulated};
+use chromacal::cgats::read_ti3;
+use chromacal::comparison::{MAX_TRAIN, compare_with_argyll};
 use chromacal::config::{Config, parse_config};
 use chromacal::fit::laws::fit_law;
 use chromacal::fit::primaries::{ChannelRamp, RampPoint};
+use chromacal::fit::stats::ErrorStats;
 use chromacal::fit::{FitOptions, fit_monitor};
 use chromacal::measurement::MeasurementSet;
 use chromacal::model::transfer::{GainOffsetGamma, LawKind};
@@ -139,14 +142,24 @@ pub struct BenchArgs {
     /// Directory of the shared reference data [default: ../shared/data].
     #[arg(long)]
     data: Option<PathBuf>,
+    /// Only these tables (comma-separated): fit-time, budget, argyll.
+    #[arg(long, value_delimiter = ',', value_parser = ["fit-time", "budget", "argyll"])]
+    only: Vec<String>,
 }
 
 pub fn run(args: BenchArgs) -> Result<(), Failure> {
-    bench(args.quick, args.data).map_err(Failure::from)
+    let data = args.data.unwrap_or_else(|| PathBuf::from("../shared/data"));
+    let wanted = |table: &str| args.only.is_empty() || args.only.iter().any(|o| o == table);
+    if wanted("fit-time") || wanted("budget") {
+        bench(args.quick, &data, wanted("fit-time"), wanted("budget"))?;
+    }
+    if wanted("argyll") {
+        against_argyll(&data)?;
+    }
+    Ok(())
 }
 
-fn bench(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
-    let data = data.unwrap_or_else(|| PathBuf::from("../shared/data"));
+fn bench(quick: bool, data: &Path, fit_time: bool, budget: bool) -> Result<(), String> {
     let repeats = if quick { 5 } else { 30 };
     let seeds: Vec<u64> = if quick {
         vec![1, 2]
@@ -155,6 +168,17 @@ fn bench(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
     };
 
     // 1. Fit time per law against readings.
+    if fit_time {
+        fit_time_table(repeats);
+    }
+    if !budget {
+        return Ok(());
+    }
+    budget_tables(data, &seeds)
+}
+
+/// Fit time per law against readings per channel.
+fn fit_time_table(repeats: usize) {
     println!(
         "fit time per channel, microseconds (median of {repeats}), against readings per channel:"
     );
@@ -181,8 +205,10 @@ fn bench(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
         .collect();
     let header_refs: Vec<&str> = headers.iter().map(String::as_str).collect();
     print!("{}", table(&header_refs, &rows));
+}
 
-    // 2. Held-out ΔE00 against budget.
+/// Held-out ΔE00 against budget, per law and for the law chosen, on each monitor.
+fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
     let dir = std::env::temp_dir().join(format!("chromacal-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let budgets = [12usize, 24, 48, 96];
@@ -191,7 +217,7 @@ fn bench(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
         .map(|k| (k.name().to_string(), vec![*k]))
         .collect();
     choices.push(("chosen by CV".into(), LawKind::ALL.to_vec()));
-    for monitor in monitors(&data) {
+    for monitor in monitors(data) {
         println!(
             "\n{}: held-out ΔE00 on 24 verification patches, mean / p95 (mean over {} seeds), and fit time, against counted patches:",
             monitor.name,
@@ -202,7 +228,7 @@ fn bench(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
         let mut instrument_time = Vec::new();
         for budget in budgets {
             let mut sets = Vec::new();
-            for seed in &seeds {
+            for seed in seeds {
                 let config = config_for(&monitor, budget, *seed)?;
                 let tag = format!("{}-{budget}-{seed}", monitor.name.replace(' ', "_"));
                 let set = simulate(&config, &dir, &tag)?;
@@ -281,5 +307,99 @@ fn bench(quick: bool, data: Option<PathBuf>) -> Result<(), String> {
         );
     }
     let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
+
+/// The real measurement sets in `data` that have mixtures to hold out: the three
+/// ArgyllCMS `.ti3` files, and the Psychtoolbox OLED's two files as one set.
+pub fn real_sets(data: &Path) -> Vec<(String, MeasurementSet)> {
+    let dir = data.join("measurements");
+    let read = |name: &str| read_ti3(&dir.join(name)).ok();
+    let mut sets = Vec::new();
+    for (label, file) in [
+        ("Dell U2713HM (IPS)", "dell_u2713hm_i1d3_912.ti3"),
+        (
+            "MacBook Pro 15 (IPS)",
+            "macbookpro15_2014_colormunki_spectral_57.ti3",
+        ),
+        (
+            "Samsung S24A350H (TN)",
+            "samsung_s24a350h_colormunki_spectral_57.ti3",
+        ),
+    ] {
+        if let Some(set) = read(file) {
+            sets.push((label.to_string(), set));
+        }
+    }
+    if let (Some(mut train), Some(test)) = (
+        read("psychtoolbox/split/ptb_sony_pvm2541_oled_train.ti3"),
+        read("psychtoolbox/split/ptb_sony_pvm2541_oled_test.ti3"),
+    ) {
+        train.measurements.extend(test.measurements);
+        sets.push(("Sony PVM-2541 (OLED)".to_string(), train));
+    }
+    sets
+}
+
+/// chromacal against ArgyllCMS's `colprof -qm -as` on every real set, one split.
+fn against_argyll(data: &Path) -> Result<(), String> {
+    let sets = real_sets(data);
+    if sets.is_empty() {
+        println!("\nno real measurement sets under {}", data.display());
+        return Ok(());
+    }
+    println!(
+        "\nreal displays: held-out ΔE00 (train: black, greys and single-channel ramps, at most {MAX_TRAIN}; test: every mixture), chromacal against ArgyllCMS colprof -qm -as, mean / p95 / max:"
+    );
+    let work = std::env::temp_dir().join(format!("chromacal-argyll-{}", std::process::id()));
+    let mut rows = Vec::new();
+    let mut ratios = Vec::new();
+    for (k, (name, set)) in sets.iter().enumerate() {
+        let c = compare_with_argyll(set, &FitOptions::default(), &work.join(k.to_string()))
+            .map_err(|e| format!("{name}: {e}"))?;
+        let stats = |s: &ErrorStats| format!("{:.3} / {:.3} / {:.3}", s.mean, s.p95, s.max);
+        ratios.extend(c.ratio());
+        rows.push(vec![
+            name.clone(),
+            format!("{} / {}", c.train, c.test),
+            stats(&c.chromacal),
+            match &c.argyll {
+                Ok(s) => stats(s),
+                Err(why) => format!("not run: {why}"),
+            },
+            c.ratio().map_or("-".into(), |r| format!("{r:.2}")),
+            c.fitted
+                .report
+                .chosen_law()
+                .map_or("-".into(), |l| l.name().to_string()),
+            chromacal::report::duration(c.fit_seconds),
+        ]);
+    }
+    let _ = std::fs::remove_dir_all(&work);
+    print!(
+        "{}",
+        table(
+            &[
+                "display",
+                "train / test",
+                "chromacal",
+                "ArgyllCMS",
+                "ratio",
+                "law",
+                "fit time"
+            ],
+            &rows
+        )
+    );
+    if !ratios.is_empty() {
+        ratios.sort_by(|a, b| a.total_cmp(b));
+        let n = ratios.len();
+        let median = if n % 2 == 1 {
+            ratios[n / 2]
+        } else {
+            (ratios[n / 2 - 1] + ratios[n / 2]) / 2.0
+        };
+        println!("  median ratio chromacal / ArgyllCMS: {median:.2}");
+    }
     Ok(())
 }

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::noise::NoiseModel;
 use super::stats::ErrorStats;
 use crate::color::{Xyz, delta_e_2000, xyz_to_lab};
-use crate::measurement::{Measurement, Role};
+use crate::measurement::{Measurement, MeasurementSet, Role};
 use crate::model::{Drive, MonitorModel, ScreenPosition};
 
 /// One patch, measured and predicted.
@@ -87,4 +87,50 @@ pub fn evaluate<'a>(
         stats: ErrorStats::of(&errors),
         patches,
     }
+}
+/// The split on which chromacal is compared with other tools on a real measurement set:
+/// the fit sees the blacks, the greys and the single-channel ramps, at most `max_train`
+/// readings (the greys below white thinned evenly over their levels when there are
+/// more), and every mixture of two or three channels is held out. Roles are read from
+/// the drives, so a journal splits as a `.ti3` does. Returns (train, test).
+pub fn ramps_and_greys_split(
+    set: &MeasurementSet,
+    max_train: usize,
+) -> (MeasurementSet, MeasurementSet) {
+    let role = |m: &Measurement| Role::from_drive(m.drive);
+    let (mut train, test): (Vec<Measurement>, Vec<Measurement>) = set
+        .measurements
+        .iter()
+        .filter(|m| m.is_standard_condition())
+        .cloned()
+        .partition(|m| role(m) != Role::Mixture);
+    let is_thinnable = |m: &Measurement| role(m) == Role::Grey && m.drive[0] < 1.0;
+    let fixed = train.iter().filter(|m| !is_thinnable(m)).count();
+    let mut greys: Vec<Measurement> = train.iter().filter(|m| is_thinnable(m)).cloned().collect();
+    let room = max_train.saturating_sub(fixed);
+    if greys.len() > room {
+        greys.sort_by(|a, b| a.drive[0].total_cmp(&b.drive[0]));
+        let n = greys.len();
+        // Indices spread evenly from the darkest grey to the brightest.
+        let kept: Vec<Measurement> = (0..room)
+            .map(|k| {
+                let at = if room > 1 {
+                    k * (n - 1) / (room - 1)
+                } else {
+                    n / 2
+                };
+                greys[at].clone()
+            })
+            .collect();
+        train.retain(|m| !is_thinnable(m));
+        train.extend(kept);
+    }
+    let part = |measurements: Vec<Measurement>, what: &str| MeasurementSet {
+        source: format!("{} ({what})", set.source),
+        units: set.units,
+        instrument: set.instrument.clone(),
+        display: set.display.clone(),
+        measurements,
+    };
+    (part(train, "train"), part(test, "test"))
 }
