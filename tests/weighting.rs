@@ -43,6 +43,7 @@ fn ramp(rng: &mut rand_chacha::ChaCha8Rng, weighted: bool) -> ChannelRamp {
         normaliser_se: 1e-9,
         pinned: true,
         points,
+        grey_points: Vec::new(),
     }
 }
 

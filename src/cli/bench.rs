@@ -25,6 +25,7 @@ use chromacal::measurement::MeasurementSet;
 use chromacal::model::transfer::{GainOffsetGamma, LawKind};
 use chromacal::report::table;
 
+use super::fit::LawArg;
 use super::shared::Failure;
 
 /// A virtual monitor to measure, as a `[monitor]` config section.
@@ -128,6 +129,7 @@ fn synthetic_ramp(n: usize) -> ChannelRamp {
         normaliser_se: 0.05,
         pinned: true,
         points,
+        grey_points: Vec::new(),
     }
 }
 
@@ -142,6 +144,9 @@ pub struct BenchArgs {
     /// Directory of the shared reference data [default: ../shared/data].
     #[arg(long)]
     data: Option<PathBuf>,
+    /// Candidate laws for the ArgyllCMS comparison (comma-separated) [default: all].
+    #[arg(long, value_delimiter = ',')]
+    laws: Option<Vec<LawArg>>,
     /// Only these tables (comma-separated): fit-time, budget, argyll.
     #[arg(long, value_delimiter = ',', value_parser = ["fit-time", "budget", "argyll"])]
     only: Vec<String>,
@@ -154,7 +159,11 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
         bench(args.quick, &data, wanted("fit-time"), wanted("budget"))?;
     }
     if wanted("argyll") {
-        against_argyll(&data)?;
+        let mut options = FitOptions::default();
+        if let Some(laws) = args.laws {
+            options.laws = laws.into_iter().map(LawKind::from).collect();
+        }
+        against_argyll(&data, &options)?;
     }
     Ok(())
 }
@@ -342,7 +351,7 @@ pub fn real_sets(data: &Path) -> Vec<(String, MeasurementSet)> {
 }
 
 /// chromacal against ArgyllCMS's `colprof -qm -as` on every real set, one split.
-fn against_argyll(data: &Path) -> Result<(), String> {
+fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
     let sets = real_sets(data);
     if sets.is_empty() {
         println!("\nno real measurement sets under {}", data.display());
@@ -355,7 +364,7 @@ fn against_argyll(data: &Path) -> Result<(), String> {
     let mut rows = Vec::new();
     let mut ratios = Vec::new();
     for (k, (name, set)) in sets.iter().enumerate() {
-        let c = compare_with_argyll(set, &FitOptions::default(), &work.join(k.to_string()))
+        let c = compare_with_argyll(set, options, &work.join(k.to_string()))
             .map_err(|e| format!("{name}: {e}"))?;
         let stats = |s: &ErrorStats| format!("{:.3} / {:.3} / {:.3}", s.mean, s.p95, s.max);
         ratios.extend(c.ratio());

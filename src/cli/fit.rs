@@ -40,8 +40,9 @@ pub fn run(args: FitArgs) -> Result<(), Failure> {
     )
 }
 
+/// A transfer law named on the command line.
 #[derive(Clone, Copy, ValueEnum)]
-enum LawArg {
+pub enum LawArg {
     Power,
     GainOffsetGamma,
     Cowan,

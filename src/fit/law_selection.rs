@@ -1,13 +1,13 @@
 //! Which transfer law to keep. Every candidate law is scored on readings it was not
-//! fitted on, in ΔE00 against the display's white:
-//! * leave-one-level-out cross-validation on the ramps: each level below full drive is
-//!   left out in turn, the channel's direction, normaliser and law are fitted again
-//!   without it, and the left-out readings are predicted;
-//! * the greys, which no law is fitted on, predicted from all three channels.
+//! fitted on, in ΔE00 against the display's white, by cross-validation over drive
+//! levels: the levels below full drive (of the ramps and of the greys, whose channel
+//! shares the laws are fitted to as well) are dealt into at most `MAX_FOLDS` folds; each
+//! fold is left out in turn, every channel's direction, normaliser and law are fitted
+//! again without it, and its ramp readings and greys are predicted.
 //!
-//! When some law cannot be cross-validated (too few levels to leave one out), all are
-//! compared on the greys alone, so the comparison stays like with like. The simplest
-//! law within noise of the best is kept (`select`).
+//! When some law cannot be cross-validated (too few levels to leave one out), the laws
+//! are compared by Akaike's criterion instead, so the comparison stays like with like.
+//! The simplest law within noise of the best is kept (`select`).
 //!
 //! One law family is kept for all three channels, so the profile says one thing.
 
@@ -28,9 +28,9 @@ pub struct LawCandidate {
     pub kind: LawKind,
     /// The fit to each channel on all levels.
     pub fits: [Result<LawFit, LawFitError>; 3],
-    /// Held-out ΔE00 of each left-out ramp reading, all channels.
+    /// Cross-validated ΔE00 of each left-out ramp reading and grey, all channels.
     pub cv_errors: Option<Vec<f64>>,
-    /// ΔE00 of each grey, predicted from the fits on all ramp readings.
+    /// The greys' share of `cv_errors`.
     pub grey_errors: Option<Vec<f64>>,
     /// The errors the law was compared on.
     pub score: Option<Vec<f64>>,
@@ -63,9 +63,9 @@ impl LawSelection {
 pub struct LawReport {
     pub law: LawKind,
     pub chosen: bool,
-    /// Leave-one-level-out ΔE00 on the ramps.
+    /// Cross-validated ΔE00 on the ramps and greys, left out by level.
     pub cross_validation: Option<ErrorStats>,
-    /// ΔE00 of the greys (never fitted on).
+    /// The greys' part of it.
     pub greys: Option<ErrorStats>,
     /// Parameters of R, G, B (empty for a channel the law could not fit).
     pub parameters: [Vec<FittedParameter>; 3],
@@ -106,62 +106,55 @@ impl LawSelection {
     }
 }
 
-/// Cross-validated error of one law over all three channels, or why there is none.
+/// Most cross-validation folds: beyond ten, more folds cost fits and change little.
+pub const MAX_FOLDS: usize = 10;
+
+/// Cross-validated errors of one law (see the module documentation): the ΔE00 of each
+/// left-out ramp reading and of each left-out grey, or why there are none.
 fn cross_validate(
     kind: LawKind,
-    ramps: &[ChannelRamp; 3],
-    black: &Xyz,
-    white: &Xyz,
-    noise: &NoiseModel,
-    toe: f64,
-) -> Result<Vec<f64>, String> {
-    let mut errors = Vec::new();
-    for ramp in ramps {
-        let held_levels: Vec<f64> = ramp.levels().into_iter().filter(|l| *l < 1.0).collect();
-        if held_levels.is_empty() {
-            return Err("no level below full drive to hold out".into());
-        }
-        for level in held_levels {
-            let Some(training) = ramp.without_level(level, black, noise) else {
-                return Err("a training fold had no light".into());
-            };
-            let fit = fit_law(kind, &training, toe).map_err(|e| format!("a training fold: {e}"))?;
-            let column = training.column(fit.amplitude);
-            let predicted = black + column * fit.law.excitation(level);
-            for p in ramp.points.iter().filter(|p| p.drive == level) {
-                errors.push(delta_e00_xyz(&p.xyz, &predicted, white));
-            }
-        }
-    }
-    Ok(errors)
-}
-
-/// ΔE00 of each grey predicted by a candidate fitted on all ramp readings.
-fn grey_errors(
-    fits: &[Result<LawFit, LawFitError>; 3],
     ramps: &[ChannelRamp; 3],
     greys: &[(f64, Xyz)],
     black: &Xyz,
     white: &Xyz,
-) -> Option<Vec<f64>> {
-    let fits: Vec<&LawFit> = fits
+    noise: &NoiseModel,
+    toe: f64,
+) -> Result<(Vec<f64>, Vec<f64>), String> {
+    if ramps.iter().any(|r| r.law_points().all(|p| p.drive >= 1.0)) {
+        return Err("no level below full drive to hold out".into());
+    }
+    let mut levels: Vec<f64> = ramps
         .iter()
-        .map(|f| f.as_ref().ok())
-        .collect::<Option<_>>()?;
-    Some(
-        greys
-            .iter()
-            .map(|(level, measured)| {
-                let predicted = black
-                    + (0..3)
-                        .map(|c| {
-                            ramps[c].column(fits[c].amplitude) * fits[c].law.excitation(*level)
-                        })
-                        .sum::<Xyz>();
-                delta_e00_xyz(measured, &predicted, white)
-            })
-            .collect(),
-    )
+        .flat_map(|r| r.law_points().map(|p| p.drive))
+        .chain(greys.iter().map(|g| g.0))
+        .filter(|l| *l < 1.0)
+        .collect();
+    levels.sort_by(|a, b| a.total_cmp(b));
+    levels.dedup();
+    let folds = levels.len().min(MAX_FOLDS);
+    let (mut ramp_errors, mut grey_errors) = (Vec::new(), Vec::new());
+    for fold in 0..folds {
+        let held: Vec<f64> = levels.iter().skip(fold).step_by(folds).copied().collect();
+        let mut curves = Vec::with_capacity(3);
+        for ramp in ramps {
+            let training = ramp
+                .without_levels(&held, black, noise)
+                .ok_or("a training fold had no light")?;
+            let fit = fit_law(kind, &training, toe).map_err(|e| format!("a training fold: {e}"))?;
+            curves.push((training.column(fit.amplitude), fit.law));
+        }
+        let light = |c: usize, level: f64| curves[c].0 * curves[c].1.excitation(level);
+        for (c, ramp) in ramps.iter().enumerate() {
+            for p in ramp.points.iter().filter(|p| held.contains(&p.drive)) {
+                ramp_errors.push(delta_e00_xyz(&p.xyz, &(black + light(c, p.drive)), white));
+            }
+        }
+        for (level, measured) in greys.iter().filter(|g| held.contains(&g.0)) {
+            let predicted = black + (0..3).map(|c| light(c, *level)).sum::<Xyz>();
+            grey_errors.push(delta_e00_xyz(measured, &predicted, white));
+        }
+    }
+    Ok((ramp_errors, grey_errors))
 }
 
 /// Fit every law in `kinds` to every channel, score each on held-out readings (see the
@@ -207,8 +200,7 @@ pub fn choose_law(
     })
 }
 
-/// One law fitted to all three channels, cross-validated where every channel fits, and
-/// scored on the greys.
+/// One law fitted to all three channels, and cross-validated where every channel fits.
 fn fit_candidate(
     kind: LawKind,
     ramps: &[ChannelRamp; 3],
@@ -219,15 +211,17 @@ fn fit_candidate(
     toe: f64,
 ) -> LawCandidate {
     let fits = [0, 1, 2].map(|c| fit_law(kind, &ramps[c], toe));
-    let (cv_errors, cv_note) = if fits.iter().all(|f| f.is_ok()) {
-        match cross_validate(kind, ramps, black, white, noise, toe) {
-            Ok(e) => (Some(e), None),
-            Err(note) => (None, Some(format!("not cross-validated: {note}"))),
+    let (cv_errors, grey_errors, cv_note) = if fits.iter().all(|f| f.is_ok()) {
+        match cross_validate(kind, ramps, greys, black, white, noise, toe) {
+            Ok((ramp_errors, grey_errors)) => {
+                let all = ramp_errors.iter().chain(&grey_errors).copied().collect();
+                (Some(all), Some(grey_errors), None)
+            }
+            Err(note) => (None, None, Some(format!("not cross-validated: {note}"))),
         }
     } else {
-        (None, None)
+        (None, None, None)
     };
-    let grey_errors = grey_errors(&fits, ramps, greys, black, white);
     LawCandidate {
         kind,
         fits,
@@ -238,10 +232,10 @@ fn fit_candidate(
     }
 }
 
-/// Give every fitted candidate the errors it is compared on: its cross-validated ramp
-/// errors and the greys when every candidate could be cross-validated, the greys alone
-/// otherwise (so the comparison stays like with like). Returns what the scores rest on,
-/// in words, and the XYZ of the readings scored (for the noise tolerance).
+/// Give every fitted candidate the errors it is compared on, its cross-validated errors,
+/// when every candidate could be cross-validated (so the comparison stays like with
+/// like). Returns what the scores rest on, in words, and the XYZ of the readings
+/// scored (for the noise tolerance).
 fn score_candidates(
     candidates: &mut [LawCandidate],
     ramps: &[ChannelRamp; 3],
@@ -249,33 +243,21 @@ fn score_candidates(
 ) -> (&'static str, Vec<Xyz>) {
     let fitted: Vec<&LawCandidate> = candidates.iter().filter(|c| c.fitted()).collect();
     let all_cross_validated = !fitted.is_empty() && fitted.iter().all(|c| c.cv_errors.is_some());
-    let (basis, mut held): (&str, Vec<Xyz>) = if all_cross_validated {
-        (
-            "leave-one-level-out ramp readings and the greys",
-            ramps
-                .iter()
-                .flat_map(|r| r.points.iter().filter(|p| p.drive < 1.0).map(|p| p.xyz))
-                .collect(),
-        )
-    } else {
-        (
-            "the greys alone (some law could not be cross-validated)",
+    if !all_cross_validated {
+        return (
+            "nothing (some law could not be cross-validated)",
             Vec::new(),
-        )
-    };
-    held.extend(greys.iter().map(|g| g.1));
-    for c in candidates.iter_mut().filter(|c| c.fitted()) {
-        c.score = if all_cross_validated {
-            let mut e = c.cv_errors.clone().unwrap_or_default();
-            e.extend(c.grey_errors.clone().unwrap_or_default());
-            Some(e)
-        } else if !greys.is_empty() {
-            c.grey_errors.clone()
-        } else {
-            None
-        };
+        );
     }
-    (basis, held)
+    let held: Vec<Xyz> = ramps
+        .iter()
+        .flat_map(|r| r.points.iter().filter(|p| p.drive < 1.0).map(|p| p.xyz))
+        .chain(greys.iter().filter(|g| g.0 < 1.0).map(|g| g.1))
+        .collect();
+    for c in candidates.iter_mut().filter(|c| c.fitted()) {
+        c.score = c.cv_errors.clone();
+    }
+    ("ramp readings and greys left out by level", held)
 }
 
 /// With nothing held out to score on: Akaike's criterion, χ² + 2k summed over the

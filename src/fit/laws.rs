@@ -79,8 +79,7 @@ struct Points {
 impl Points {
     fn from_ramp(ramp: &ChannelRamp, include_full: bool) -> Self {
         let chosen: Vec<_> = ramp
-            .points
-            .iter()
+            .law_points()
             .filter(|p| include_full || p.drive < 1.0)
             .collect();
         Points {
@@ -554,6 +553,9 @@ pub fn isotonic_regression(values: &[f64], weights: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// The table law: one knot per level of the ramp and of the greys' channel shares, the
+/// weighted mean of its points, pooled to be monotone and joined by the monotone cubic
+/// of `Table`.
 fn fit_table(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     let kind = LawKind::Table;
     if !ramp.pinned {
@@ -561,7 +563,7 @@ fn fit_table(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     }
     // One knot per level: the weighted mean of its readings.
     let mut levels: Vec<(f64, f64, f64)> = Vec::new(); // drive, Σ w e, Σ w
-    for p in &ramp.points {
+    for p in ramp.law_points() {
         let w = 1.0 / (p.sigma * p.sigma);
         match levels.iter_mut().find(|l| l.0 == p.drive) {
             Some(l) => {
@@ -633,6 +635,7 @@ mod tests {
             normaliser_se: 0.1,
             pinned,
             points,
+            grey_points: Vec::new(),
         }
     }
 

@@ -6,7 +6,9 @@
 //! 2. drift of the reference white (`drift_of_reference_white`), the run's noise
 //!    (`noise_of_run`), and every reading corrected for drift to the end of the run
 //!    (`correct_for_drift`);
-//! 3. each channel's direction and excitations from its ramp (`channel_ramps`);
+//! 3. each channel's direction and excitations from its ramp (`channel_ramps`), and its
+//!    share of each grey (`grey_readings`, `primaries::add_grey_excitations`), so the
+//!    greys shape the curves where the ramps are sparse;
 //! 4. every candidate law fitted and cross-validated, the simplest within noise of the
 //!    best kept (`select_law`; `laws`, `law_selection`);
 //! 5. the primary matrix, refused if too ill-conditioned to invert (`primary_matrix`);
@@ -42,7 +44,10 @@ use crate::model::{CHANNELS, MonitorModel, SpatialMap};
 use checks::{AssumptionChecks, check_assumptions};
 use law_selection::{LawReport, LawSelection, choose_law};
 use noise::{DriftModel, DriftReport, NoiseModel, estimate_drift, estimate_noise};
-use primaries::{BlackEstimate, ChannelRamp, Corrected, RampError, channel_ramp, estimate_black};
+use primaries::{
+    BlackEstimate, ChannelRamp, Corrected, RampError, add_grey_excitations, channel_ramp,
+    estimate_black,
+};
 use spatial::{SpatialReport, choose_spatial_map};
 use stats::ErrorStats;
 use validate::{Evaluation, PatchError, evaluate};
@@ -188,7 +193,14 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let (drift_model, drift) = drift_of_reference_white(all, &black, options.correct_drift);
     let noise = noise_of_run(all, &black, &drift);
     let corrected = correct_for_drift(all, &black, drift_model.as_ref())?;
-    let ramps = channel_ramps(&corrected, &black, &noise)?;
+    let mut ramps = channel_ramps(&corrected, &black, &noise)?;
+    add_grey_excitations(
+        &mut ramps,
+        &grey_readings(&corrected),
+        &black.xyz,
+        &noise,
+        options.max_condition_number,
+    );
     let white_reference = reference_white(&corrected, &black, &ramps);
     let selection = select_law(
         options,
@@ -335,6 +347,17 @@ fn channel_ramps(
         channel_ramp(1, &ramp_readings, &black.xyz, noise)?,
         channel_ramp(2, &ramp_readings, &black.xyz, noise)?,
     ])
+}
+
+/// Step 3b: the greys below white as (index, level, XYZ), for the channels' curves to
+/// follow (`primaries::add_grey_excitations`).
+fn grey_readings(corrected: &[Corrected<'_>]) -> Vec<(usize, f64, Xyz)> {
+    corrected
+        .iter()
+        .filter(|r| r.measurement.role == Role::Grey && r.measurement.is_standard_condition())
+        .filter(|r| r.measurement.drive[0] < 1.0)
+        .map(|r| (r.measurement.index, r.measurement.drive[0], r.xyz))
+        .collect()
 }
 
 /// The white ΔE00 is taken against: the mean of the white readings, else black plus the

@@ -97,6 +97,9 @@ pub struct ChannelRamp {
     /// True when `normaliser` is the full-drive reading.
     pub pinned: bool,
     pub points: Vec<RampPoint>,
+    /// This channel's share of each grey reading below white (`grey_excitations`):
+    /// more levels for the law to follow where the ramp is sparse. `xyz` is the grey's.
+    pub grey_points: Vec<RampPoint>,
 }
 
 impl ChannelRamp {
@@ -114,6 +117,12 @@ impl ChannelRamp {
         })
     }
 
+    /// Every point a law is fitted to: the ramp's own readings and the channel's share
+    /// of the greys.
+    pub fn law_points(&self) -> impl Iterator<Item = &RampPoint> {
+        self.points.iter().chain(&self.grey_points)
+    }
+
     /// Distinct drive levels above zero, ascending.
     pub fn levels(&self) -> Vec<f64> {
         let mut v: Vec<f64> = self.points.iter().map(|p| p.drive).collect();
@@ -122,20 +131,28 @@ impl ChannelRamp {
         v
     }
 
-    /// The same ramp without the readings at drive `level` (for cross-validation).
-    pub fn without_level(
+    /// The same ramp without its readings and grey shares at the drives `levels` (for
+    /// cross-validation).
+    pub fn without_levels(
         &self,
-        level: f64,
+        levels: &[f64],
         black: &Xyz,
         noise: &NoiseModel,
     ) -> Option<ChannelRamp> {
         let kept: Vec<(usize, f64, Xyz)> = self
             .points
             .iter()
-            .filter(|p| p.drive != level)
+            .filter(|p| !levels.contains(&p.drive))
             .map(|p| (p.index, p.drive, p.xyz))
             .collect();
-        reduce_ramp(self.channel, &kept, black, noise)
+        let mut ramp = reduce_ramp(self.channel, &kept, black, noise)?;
+        ramp.grey_points = self
+            .grey_points
+            .iter()
+            .filter(|p| !levels.contains(&p.drive))
+            .cloned()
+            .collect();
+        Some(ramp)
     }
 }
 
@@ -244,7 +261,47 @@ fn reduce_ramp(
         normaliser_se,
         pinned,
         points,
+        grey_points: Vec::new(),
     })
+}
+
+/// Each channel's share of each grey reading below white, added to its ramp so that the
+/// greys shape the curves where the ramps are sparse (ArgyllCMS's shapers learn from
+/// the greys too). Through the additive model a grey at level v reads
+/// XYZ − black = M·e(v), so e(v) = M⁻¹(XYZ − black), with M the ramps' columns at their
+/// normalising level; the noise of the reading reaches e_c through row c of M⁻¹. Nothing
+/// is added when M cannot be inverted (its condition number is above `max_condition`).
+pub fn add_grey_excitations(
+    ramps: &mut [ChannelRamp; 3],
+    greys: &[(usize, f64, Xyz)],
+    black: &Xyz,
+    noise: &NoiseModel,
+    max_condition: f64,
+) {
+    let matrix = Matrix3::from_columns(&[
+        ramps[0].column(1.0),
+        ramps[1].column(1.0),
+        ramps[2].column(1.0),
+    ]);
+    if !(crate::model::monitor::matrix_condition_number(&matrix) <= max_condition) {
+        return;
+    }
+    let Some(inverse) = matrix.try_inverse() else {
+        return;
+    };
+    for (index, level, xyz) in greys.iter().filter(|g| g.1 > 0.0 && g.1 < 1.0) {
+        let e = inverse * (xyz - black);
+        let sigma = noise.sigma(xyz.norm());
+        for (c, ramp) in ramps.iter_mut().enumerate() {
+            ramp.grey_points.push(RampPoint {
+                index: *index,
+                drive: *level,
+                excitation: e[c],
+                sigma: sigma * inverse.row(c).norm(),
+                xyz: *xyz,
+            });
+        }
+    }
 }
 
 #[cfg(test)]
