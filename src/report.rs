@@ -185,7 +185,22 @@ pub fn fit_summary(report: &FitReport) -> String {
             "additivity" => c
                 .additivity
                 .iter()
-                .map(|a| format!("{:.2}: {:+.2} %", a.drive, a.luminance_departure_percent))
+                .map(|a| {
+                    // The tristimulus value furthest off the sum, and what it costs.
+                    let (j, d) = a
+                        .xyz_departure_percent
+                        .iter()
+                        .enumerate()
+                        .fold((1, a.luminance_departure_percent), |w, (j, d)| {
+                            if d.abs() > w.1.abs() { (j, *d) } else { w }
+                        });
+                    format!(
+                        "{:.2}: {} {d:+.2} % (ΔE00 {:.2})",
+                        a.drive,
+                        ["X", "Y", "Z"][j],
+                        a.delta_e00
+                    )
+                })
                 .collect::<Vec<_>>()
                 .join(", "),
             "spatial independence" => c

@@ -5,7 +5,8 @@
 //!   against full drive; and, where spectra exist, how much of the ramp's spectra one
 //!   spectral shape explains (first singular value of the normalised spectra);
 //! * additivity: each grey against the sum of its channels measured alone at the same
-//!   drive, and white against the sum of the primaries (no model involved);
+//!   drive, and white against the sum of the primaries (no model involved), in each of
+//!   X, Y and Z against its noise, with the ΔE00 the departure costs;
 //! * spatial independence: the same patch on a black and on a white surround;
 //! * temporal stability: the drift of the reference white (see `noise`);
 //! * monotonicity: levels whose excitation falls below a dimmer level's by more than
@@ -101,6 +102,10 @@ pub struct GreyAdditivity {
     pub delta_e00: f64,
     /// Grey luminance over the sum of the channels' luminances, minus one, percent.
     pub luminance_departure_percent: f64,
+    /// The same for X, Y and Z, each above black: a display can add up in luminance
+    /// and still fall short in Z.
+    #[serde(default)]
+    pub xyz_departure_percent: [f64; 3],
     pub verdict: Verdict,
 }
 
@@ -254,19 +259,25 @@ fn additivity(
                 sum += channel - black;
                 worst_n = worst_n.min(n);
             }
-            let departure = (grey.y - black.y) / (sum.y - black.y) - 1.0;
+            let departures: [f64; 3] =
+                std::array::from_fn(|j| (grey[j] - black[j]) / (sum[j] - black[j]) - 1.0);
             let de = delta_e00_xyz(&grey, &sum, white_reference);
-            // Noise of the ratio: the grey's and the three channels' relative noise.
-            let rel = |y: f64, n: usize| {
-                noise.sigma(y) / y.abs().max(f64::MIN_POSITIVE) / (n as f64).sqrt()
+            // Noise of each ratio: the grey's and the three channels' relative noise,
+            // the noise model read at each tristimulus value.
+            let rel = |v: f64, n: usize| {
+                noise.sigma(v.abs()) / v.abs().max(f64::MIN_POSITIVE) / (n as f64).sqrt()
             };
-            let noise_ratio =
-                (rel(grey.y, n_grey).powi(2) + rel(sum.y, worst_n).powi(2) * 3.0).sqrt();
+            let within_noise = (0..3).all(|j| {
+                let noise_ratio =
+                    (rel(grey[j], n_grey).powi(2) + rel(sum[j], worst_n).powi(2) * 3.0).sqrt();
+                departures[j].abs() <= 3.0 * noise_ratio
+            });
             Some(GreyAdditivity {
                 drive: level,
                 delta_e00: de,
-                luminance_departure_percent: departure * 100.0,
-                verdict: Verdict::judge(departure.abs() <= 3.0 * noise_ratio, de < DE00_VISIBILITY),
+                luminance_departure_percent: departures[1] * 100.0,
+                xyz_departure_percent: departures.map(|d| d * 100.0),
+                verdict: Verdict::judge(within_noise, de < DE00_VISIBILITY),
             })
         })
         .collect()
@@ -390,5 +401,79 @@ pub fn check_assumptions(
         temporal_stability: drift.clone(),
         temporal_stability_verdict,
         monotonicity,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::instrument::{Reading, ReadingStatus};
+    use crate::measurement::Measurement;
+
+    fn reading(drive: [f64; 3], xyz: Xyz) -> Measurement {
+        Measurement {
+            index: 0,
+            role: Role::from_drive(drive),
+            drive,
+            codes: None,
+            position: Default::default(),
+            background: [0.0; 3],
+            time_s: None,
+            reading: Reading {
+                xyz: Some(xyz),
+                spectrum: None,
+                status: ReadingStatus::Ok,
+                integration_s: 1.0,
+                ..Default::default()
+            },
+        }
+    }
+
+    /// Black, the three primaries and white, whose Z is `z_factor` of the sum's.
+    fn additivity_of_white(z_factor: f64) -> GreyAdditivity {
+        let black = Xyz::new(0.2, 0.2, 0.3);
+        let primaries = [
+            Xyz::new(41.0, 21.0, 2.0),
+            Xyz::new(36.0, 72.0, 12.0),
+            Xyz::new(18.0, 7.0, 95.0),
+        ];
+        let sum: Xyz = black + primaries.iter().sum::<Xyz>();
+        let white = Xyz::new(sum.x, sum.y, black.z + (sum.z - black.z) * z_factor);
+        let mut measurements = vec![reading([0.0; 3], black), reading([1.0; 3], white)];
+        for (c, p) in primaries.iter().enumerate() {
+            let mut d = [0.0; 3];
+            d[c] = 1.0;
+            measurements.push(reading(d, black + p));
+        }
+        let corrected: Vec<Corrected<'_>> = measurements
+            .iter()
+            .map(|m| Corrected {
+                measurement: m,
+                xyz: m.reading.xyz.unwrap(),
+            })
+            .collect();
+        let noise = NoiseModel {
+            relative: 0.003,
+            floor: 0.005,
+            relative_from: String::new(),
+            floor_from: String::new(),
+        };
+        let checks = additivity(&corrected, &black, &noise, &white);
+        assert_eq!(checks.len(), 1);
+        checks[0].clone()
+    }
+
+    #[test]
+    fn additivity_is_judged_in_x_y_and_z_not_luminance_alone() {
+        // 6.7 % short in Z at full drive: luminance adds up, the colour does not.
+        let short = additivity_of_white(0.933);
+        assert!(short.luminance_departure_percent.abs() < 1e-9);
+        assert!((short.xyz_departure_percent[2] + 6.7).abs() < 1e-6);
+        assert!(short.delta_e00 > 1.0, "{short:?}");
+        assert_eq!(short.verdict, Verdict::Fails);
+        // An additive display stays within noise.
+        let additive = additivity_of_white(1.0);
+        assert_eq!(additive.verdict, Verdict::WithinNoise);
+        assert!(additive.delta_e00 < 1e-9);
     }
 }
