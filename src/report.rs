@@ -187,13 +187,12 @@ pub fn fit_summary(report: &FitReport) -> String {
                 .iter()
                 .map(|a| {
                     // The tristimulus value furthest off the sum, and what it costs.
-                    let (j, d) = a
-                        .xyz_departure_percent
-                        .iter()
-                        .enumerate()
-                        .fold((1, a.luminance_departure_percent), |w, (j, d)| {
+                    let (j, d) = a.xyz_departure_percent.iter().enumerate().fold(
+                        (1, a.luminance_departure_percent),
+                        |w, (j, d)| {
                             if d.abs() > w.1.abs() { (j, *d) } else { w }
-                        });
+                        },
+                    );
                     format!(
                         "{:.2}: {} {d:+.2} % (ΔE00 {:.2})",
                         a.drive,
