@@ -55,6 +55,30 @@ pub fn compare_with_argyll(
     work: &Path,
 ) -> Result<Comparison, ComparisonError> {
     let (train, test) = ramps_and_greys_split(set, MAX_TRAIN);
+    compare_on_split(&train, &test, options, work)
+}
+
+/// A set measured as two (the Psychtoolbox OLED's calibration and, in another session,
+/// its linearity check): the split's training side of `train`, its held-out side of
+/// `test`.
+pub fn compare_with_argyll_across(
+    train: &MeasurementSet,
+    test: &MeasurementSet,
+    options: &FitOptions,
+    work: &Path,
+) -> Result<Comparison, ComparisonError> {
+    let (train, _) = ramps_and_greys_split(train, MAX_TRAIN);
+    let (_, test) = ramps_and_greys_split(test, MAX_TRAIN);
+    compare_on_split(&train, &test, options, work)
+}
+
+/// Fit both tools on `train` and score them on the usable readings of `test`.
+fn compare_on_split(
+    train: &MeasurementSet,
+    test: &MeasurementSet,
+    options: &FitOptions,
+    work: &Path,
+) -> Result<Comparison, ComparisonError> {
     let held: Vec<_> = test
         .measurements
         .iter()
@@ -64,9 +88,9 @@ pub fn compare_with_argyll(
         return Err(ComparisonError::Empty("mixture to hold out"));
     }
     let started = Instant::now();
-    let fitted = fit_monitor(&train, options)?;
+    let fitted = fit_monitor(train, options)?;
     let fit_seconds = started.elapsed().as_secs_f64();
-    let white = measured_white(&train).unwrap_or_else(|| fitted.model.white());
+    let white = measured_white(train).unwrap_or_else(|| fitted.model.white());
     let score = |predicted: &[Xyz]| {
         let errors: Vec<f64> = held
             .iter()
@@ -81,7 +105,7 @@ pub fn compare_with_argyll(
         .collect();
     let chromacal = score(&ours).ok_or(ComparisonError::Empty("prediction"))?;
     let drives: Vec<_> = held.iter().map(|h| h.0).collect();
-    let argyll = matrix_shaper_predictions(&train, &drives, work)
+    let argyll = matrix_shaper_predictions(train, &drives, work)
         .map_err(|e: ArgyllError| e.to_string())
         .and_then(|p| score(&p).ok_or_else(|| "no prediction".to_string()));
     Ok(Comparison {

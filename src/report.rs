@@ -179,7 +179,12 @@ pub fn fit_summary(report: &FitReport) -> String {
             "primary constancy" => c
                 .primary_constancy
                 .iter()
-                .map(|p| format!("{} Δu′v′ {:.4}", p.channel, p.max_delta_uv))
+                .map(|p| {
+                    format!(
+                        "{} Δu′v′ {:.4} (ΔE00 {:.2})",
+                        p.channel, p.max_delta_uv, p.delta_e00
+                    )
+                })
                 .collect::<Vec<_>>()
                 .join(", "),
             "additivity" => c

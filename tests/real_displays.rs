@@ -79,3 +79,64 @@ fn psychtoolbox_calibrations_predict_their_test_splits() {
         assert!(stats.mean < max_mean, "{name}: {stats:?}");
     }
 }
+
+#[test]
+fn fit_and_check_on_a_ti3_give_each_verdict_with_the_delta_e_it_costs() {
+    let dir = tempfile::tempdir().unwrap();
+    let ti3 = shared_path("measurements/samsung_s24a350h_colormunki_spectral_57.ti3");
+    let profile = dir.path().join("samsung.toml");
+    let out = common::chromacal()
+        .arg("fit")
+        .arg(&ti3)
+        .arg("-o")
+        .arg(&profile)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = |name: &str| {
+        text.lines()
+            .find(|l| l.contains(name) && l.contains("FAILS"))
+            .unwrap_or_else(|| panic!("no failing {name} line in:\n{text}"))
+            .to_string()
+    };
+    // The TN panel's grey at half drive is 4.9 % above its channels' sum.
+    assert!(line("additivity").contains("0.50: Y +4.9"), "{text}");
+    assert!(line("additivity").contains("ΔE00 1.0"), "{text}");
+    assert!(
+        line("primary constancy").contains("blue Δu′v′ 0.01"),
+        "{text}"
+    );
+
+    let out = common::chromacal()
+        .arg("check")
+        .arg(&profile)
+        .arg(&ti3)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let checks = &json["assumptions"];
+    assert_eq!(checks["additivity_verdict"], "fails");
+    assert_eq!(checks["primary_constancy_verdict"], "fails");
+    let costs = |key: &str| -> Vec<f64> {
+        checks[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["delta_e00"].as_f64().unwrap())
+            .collect()
+    };
+    assert!(costs("additivity").iter().any(|d| *d > 1.0), "{checks}");
+    assert!(
+        costs("primary_constancy").iter().any(|d| *d > 1.0),
+        "{checks}"
+    );
+    let xyz = &checks["additivity"][0]["xyz_departure_percent"];
+    assert_eq!(xyz.as_array().map(Vec::len), Some(3), "{checks}");
+}

@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use chromacal::calibrate::session::{block_on, measure_simulated};
 use chromacal::cgats::read_ti3;
-use chromacal::comparison::{MAX_TRAIN, compare_with_argyll};
+use chromacal::comparison::{MAX_TRAIN, compare_with_argyll, compare_with_argyll_across};
 use chromacal::config::{Config, parse_config};
 use chromacal::fit::laws::fit_law;
 use chromacal::fit::primaries::{ChannelRamp, RampPoint};
@@ -319,9 +319,17 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
     Ok(())
 }
 
+/// A real measurement set: one file split in two, or a set measured in two sessions
+/// (training readings from the first, held-out mixtures from the second).
+pub enum RealSet {
+    One(MeasurementSet),
+    Two(MeasurementSet, MeasurementSet),
+}
+
 /// The real measurement sets in `data` that have mixtures to hold out: the three
-/// ArgyllCMS `.ti3` files, and the Psychtoolbox OLED's two files as one set.
-pub fn real_sets(data: &Path) -> Vec<(String, MeasurementSet)> {
+/// ArgyllCMS `.ti3` files, and the Psychtoolbox OLED's split (calibration, then
+/// linearity check).
+pub fn real_sets(data: &Path) -> Vec<(String, RealSet)> {
     let dir = data.join("measurements");
     let read = |name: &str| read_ti3(&dir.join(name)).ok();
     let mut sets = Vec::new();
@@ -337,15 +345,17 @@ pub fn real_sets(data: &Path) -> Vec<(String, MeasurementSet)> {
         ),
     ] {
         if let Some(set) = read(file) {
-            sets.push((label.to_string(), set));
+            sets.push((label.to_string(), RealSet::One(set)));
         }
     }
-    if let (Some(mut train), Some(test)) = (
+    if let (Some(train), Some(test)) = (
         read("psychtoolbox/split/ptb_sony_pvm2541_oled_train.ti3"),
         read("psychtoolbox/split/ptb_sony_pvm2541_oled_test.ti3"),
     ) {
-        train.measurements.extend(test.measurements);
-        sets.push(("Sony PVM-2541 (OLED)".to_string(), train));
+        sets.push((
+            "Sony PVM-2541 (OLED)".to_string(),
+            RealSet::Two(train, test),
+        ));
     }
     sets
 }
@@ -364,8 +374,12 @@ fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
     let mut rows = Vec::new();
     let mut ratios = Vec::new();
     for (k, (name, set)) in sets.iter().enumerate() {
-        let c = compare_with_argyll(set, options, &work.join(k.to_string()))
-            .map_err(|e| format!("{name}: {e}"))?;
+        let dir = work.join(k.to_string());
+        let c = match set {
+            RealSet::One(set) => compare_with_argyll(set, options, &dir),
+            RealSet::Two(train, test) => compare_with_argyll_across(train, test, options, &dir),
+        }
+        .map_err(|e| format!("{name}: {e}"))?;
         let stats = |s: &ErrorStats| format!("{:.3} / {:.3} / {:.3}", s.mean, s.p95, s.max);
         ratios.extend(c.ratio());
         rows.push(vec![

@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use chromacal::fit::checks::AssumptionChecks;
 use chromacal::fit::validate::{Evaluation, evaluate};
 use chromacal::measurement::Units;
 use chromacal::measurement_file::read_measurements;
@@ -68,6 +69,8 @@ fn check(
             note: Option<&'a str>,
             #[serde(flatten)]
             evaluation: &'a Evaluation,
+            /// The profile's assumption checks, each with the ΔE00 it costs.
+            assumptions: &'a AssumptionChecks,
         }
         println!(
             "{}",
@@ -76,6 +79,7 @@ fn check(
                 measurements: measurements.display().to_string(),
                 note,
                 evaluation: &evaluation,
+                assumptions: &profile.report.checks,
             })?
         );
     } else {

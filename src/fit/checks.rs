@@ -92,6 +92,10 @@ pub struct ChannelConstancy {
     pub noise_delta_uv: f64,
     /// Fraction of the ramp's spectral energy in its first singular vector.
     pub spectral_first_component: Option<f64>,
+    /// What assuming constancy costs: the largest ΔE00 between a level's reading and
+    /// the same luminance at full drive's chromaticity.
+    #[serde(default)]
+    pub delta_e00: f64,
     pub verdict: Verdict,
 }
 
@@ -153,6 +157,7 @@ fn primary_constancy(
     black: &Xyz,
     black_spectrum: Option<&[f64]>,
     noise: &NoiseModel,
+    white: &Xyz,
 ) -> Vec<ChannelConstancy> {
     ramps
         .iter()
@@ -160,6 +165,7 @@ fn primary_constancy(
             let full_above = ramp.column(1.0);
             let reference = xyz_to_uv_prime(&full_above, UvPrime { u: 0.0, v: 0.0 });
             let mut max_delta: f64 = 0.0;
+            let mut max_cost: f64 = 0.0;
             let mut noise_at_dimmest: f64 = 0.0;
             let mut levels = 0;
             for level in ramp.levels() {
@@ -172,6 +178,9 @@ fn primary_constancy(
                 levels += 1;
                 let uv = xyz_to_uv_prime(&above, reference);
                 max_delta = max_delta.max((uv.u - reference.u).hypot(uv.v - reference.v));
+                let constant = full_above * (above.y / full_above.y);
+                max_cost =
+                    max_cost.max(delta_e00_xyz(&(black + above), &(black + constant), white));
                 // Relative errors of the tristimulus values move u′v′ by about their size
                 // times the chromaticity (≈ 0.5); three standard deviations, two readings.
                 let relative = sigma / above.y.max(f64::MIN_POSITIVE);
@@ -206,6 +215,7 @@ fn primary_constancy(
                 max_delta_uv: max_delta,
                 noise_delta_uv: noise_at_dimmest,
                 spectral_first_component,
+                delta_e00: max_cost,
                 verdict: if levels < 2 {
                     Verdict::NotMeasured
                 } else {
@@ -377,8 +387,14 @@ pub fn check_assumptions(
             })
             .collect()
     });
-    let primary_constancy =
-        primary_constancy(ramps, readings, black, black_spectrum.as_deref(), noise);
+    let primary_constancy = primary_constancy(
+        ramps,
+        readings,
+        black,
+        black_spectrum.as_deref(),
+        noise,
+        white_reference,
+    );
     let additivity = additivity(readings, black, noise, white_reference);
     let spatial_independence = spatial_independence(readings, noise, white_reference);
     let monotonicity = monotonicity(ramps);
