@@ -28,7 +28,11 @@ pub struct LawCandidate {
     pub kind: LawKind,
     /// The fit to each channel on all levels.
     pub fits: [Result<LawFit, LawFitError>; 3],
-    /// Cross-validated ΔE00 of each left-out ramp reading and grey, all channels.
+    /// Each fold's errors, `None` where the law could not be fitted without it (empty
+    /// when it was not cross-validated at all).
+    pub folds: Vec<Option<FoldErrors>>,
+    /// Cross-validated ΔE00 of each left-out ramp reading and grey, all channels, when
+    /// every fold could be fitted.
     pub cv_errors: Option<Vec<f64>>,
     /// The greys' share of `cv_errors`.
     pub grey_errors: Option<Vec<f64>>,
@@ -109,8 +113,12 @@ impl LawSelection {
 /// Most cross-validation folds: beyond ten, more folds cost fits and change little.
 pub const MAX_FOLDS: usize = 10;
 
-/// Cross-validated errors of one law (see the module documentation): the ΔE00 of each
-/// left-out ramp reading and of each left-out grey, or why there are none.
+/// The ΔE00 of one fold's left-out ramp readings and of its left-out greys.
+pub type FoldErrors = (Vec<f64>, Vec<f64>);
+
+/// Cross-validated errors of one law (see the module documentation), fold by fold: a
+/// fold's errors, or why the law could not be fitted without it; `Err` when there is no
+/// level to leave out at all.
 fn cross_validate(
     kind: LawKind,
     ramps: &[ChannelRamp; 3],
@@ -119,7 +127,7 @@ fn cross_validate(
     white: &Xyz,
     noise: &NoiseModel,
     toe: f64,
-) -> Result<(Vec<f64>, Vec<f64>), String> {
+) -> Result<Vec<Result<FoldErrors, String>>, String> {
     if ramps.iter().any(|r| r.law_points().all(|p| p.drive >= 1.0)) {
         return Err("no level below full drive to hold out".into());
     }
@@ -132,28 +140,50 @@ fn cross_validate(
     levels.sort_by(|a, b| a.total_cmp(b));
     levels.dedup();
     let folds = levels.len().min(MAX_FOLDS);
-    let (mut ramp_errors, mut grey_errors) = (Vec::new(), Vec::new());
-    for fold in 0..folds {
-        let held: Vec<f64> = levels.iter().skip(fold).step_by(folds).copied().collect();
-        let mut curves = Vec::with_capacity(3);
-        for ramp in ramps {
-            let training = ramp
-                .without_levels(&held, black, noise)
-                .ok_or("a training fold had no light")?;
-            let fit = fit_law(kind, &training, toe).map_err(|e| format!("a training fold: {e}"))?;
-            curves.push((training.column(fit.amplitude), fit.law));
-        }
-        let light = |c: usize, level: f64| curves[c].0 * curves[c].1.excitation(level);
-        for (c, ramp) in ramps.iter().enumerate() {
-            for p in ramp.points.iter().filter(|p| held.contains(&p.drive)) {
-                ramp_errors.push(delta_e00_xyz(&p.xyz, &(black + light(c, p.drive)), white));
-            }
-        }
-        for (level, measured) in greys.iter().filter(|g| held.contains(&g.0)) {
-            let predicted = black + (0..3).map(|c| light(c, *level)).sum::<Xyz>();
-            grey_errors.push(delta_e00_xyz(measured, &predicted, white));
+    Ok((0..folds)
+        .map(|fold| {
+            let held: Vec<f64> = levels.iter().skip(fold).step_by(folds).copied().collect();
+            fold_errors(kind, ramps, greys, &held, black, white, noise, toe)
+        })
+        .collect())
+}
+
+/// One fold: every channel fitted without the levels `held`, its readings there
+/// predicted.
+#[allow(clippy::too_many_arguments)]
+fn fold_errors(
+    kind: LawKind,
+    ramps: &[ChannelRamp; 3],
+    greys: &[(f64, Xyz)],
+    held: &[f64],
+    black: &Xyz,
+    white: &Xyz,
+    noise: &NoiseModel,
+    toe: f64,
+) -> Result<FoldErrors, String> {
+    let mut curves = Vec::with_capacity(3);
+    for ramp in ramps {
+        let training = ramp
+            .without_levels(held, black, noise)
+            .ok_or("a training fold had no light")?;
+        let fit = fit_law(kind, &training, toe).map_err(|e| format!("a training fold: {e}"))?;
+        curves.push((training.column(fit.amplitude), fit.law));
+    }
+    let light = |c: usize, level: f64| curves[c].0 * curves[c].1.excitation(level);
+    let mut ramp_errors = Vec::new();
+    for (c, ramp) in ramps.iter().enumerate() {
+        for p in ramp.points.iter().filter(|p| held.contains(&p.drive)) {
+            ramp_errors.push(delta_e00_xyz(&p.xyz, &(black + light(c, p.drive)), white));
         }
     }
+    let grey_errors = greys
+        .iter()
+        .filter(|g| held.contains(&g.0))
+        .map(|(level, measured)| {
+            let predicted = black + (0..3).map(|c| light(c, *level)).sum::<Xyz>();
+            delta_e00_xyz(measured, &predicted, white)
+        })
+        .collect();
     Ok((ramp_errors, grey_errors))
 }
 
@@ -211,20 +241,43 @@ fn fit_candidate(
     toe: f64,
 ) -> LawCandidate {
     let fits = [0, 1, 2].map(|c| fit_law(kind, &ramps[c], toe));
-    let (cv_errors, grey_errors, cv_note) = if fits.iter().all(|f| f.is_ok()) {
+    let (folds, cv_note) = if fits.iter().all(|f| f.is_ok()) {
         match cross_validate(kind, ramps, greys, black, white, noise, toe) {
-            Ok((ramp_errors, grey_errors)) => {
-                let all = ramp_errors.iter().chain(&grey_errors).copied().collect();
-                (Some(all), Some(grey_errors), None)
+            Ok(folds) => {
+                let failed: Vec<&String> = folds.iter().filter_map(|f| f.as_ref().err()).collect();
+                let note = failed.first().map(|why| {
+                    format!(
+                        "could not be fitted on {} of {} folds ({why})",
+                        failed.len(),
+                        folds.len()
+                    )
+                });
+                (folds.into_iter().map(Result::ok).collect(), note)
             }
-            Err(note) => (None, None, Some(format!("not cross-validated: {note}"))),
+            Err(note) => (Vec::new(), Some(format!("not cross-validated: {note}"))),
         }
     } else {
-        (None, None, None)
+        (Vec::new(), None)
+    };
+    let complete = !folds.is_empty() && folds.iter().all(Option::is_some);
+    let (cv_errors, grey_errors) = if complete {
+        let all: Vec<&FoldErrors> = folds.iter().flatten().collect();
+        (
+            Some(
+                all.iter()
+                    .flat_map(|f| f.0.iter().chain(&f.1))
+                    .copied()
+                    .collect(),
+            ),
+            Some(all.iter().flat_map(|f| f.1.iter()).copied().collect()),
+        )
+    } else {
+        (None, None)
     };
     LawCandidate {
         kind,
         fits,
+        folds,
         cv_errors,
         grey_errors,
         cv_note,
@@ -232,32 +285,65 @@ fn fit_candidate(
     }
 }
 
-/// Give every fitted candidate the errors it is compared on, its cross-validated errors,
-/// when every candidate could be cross-validated (so the comparison stays like with
-/// like). Returns what the scores rest on, in words, and the XYZ of the readings
-/// scored (for the noise tolerance).
+/// Give the candidates their scores, all on the same folds so the comparison stays like
+/// with like: the folds every cross-validated law could be fitted on (a law with many
+/// parameters may not fit where a fold leaves a channel few levels; its note says so).
+/// With no such fold nothing is scored and Akaike's criterion chooses. Returns what the
+/// scores rest on, in words, and the XYZ of the readings scored (for the noise
+/// tolerance).
 fn score_candidates(
     candidates: &mut [LawCandidate],
     ramps: &[ChannelRamp; 3],
     greys: &[(f64, Xyz)],
-) -> (&'static str, Vec<Xyz>) {
-    let fitted: Vec<&LawCandidate> = candidates.iter().filter(|c| c.fitted()).collect();
-    let all_cross_validated = !fitted.is_empty() && fitted.iter().all(|c| c.cv_errors.is_some());
-    if !all_cross_validated {
+) -> (String, Vec<Xyz>) {
+    let n_folds = candidates.iter().map(|c| c.folds.len()).max().unwrap_or(0);
+    let crossed: Vec<usize> = (0..candidates.len())
+        .filter(|k| candidates[*k].fitted() && !candidates[*k].folds.is_empty())
+        .collect();
+    if crossed.is_empty() {
         return (
-            "nothing (some law could not be cross-validated)",
+            "nothing (no law could be cross-validated)".into(),
             Vec::new(),
         );
     }
+    let common: Vec<usize> = (0..n_folds)
+        .filter(|f| {
+            crossed
+                .iter()
+                .all(|k| candidates[*k].folds.get(*f).is_some_and(Option::is_some))
+        })
+        .collect();
     let held: Vec<Xyz> = ramps
         .iter()
         .flat_map(|r| r.points.iter().filter(|p| p.drive < 1.0).map(|p| p.xyz))
         .chain(greys.iter().filter(|g| g.0 < 1.0).map(|g| g.1))
         .collect();
-    for c in candidates.iter_mut().filter(|c| c.fitted()) {
-        c.score = c.cv_errors.clone();
+    if common.is_empty() {
+        return (
+            "nothing (no fold could be fitted by every law)".into(),
+            Vec::new(),
+        );
     }
-    ("ramp readings and greys left out by level", held)
+    for k in crossed {
+        let c = &mut candidates[k];
+        c.score = Some(
+            common
+                .iter()
+                .filter_map(|f| c.folds[*f].as_ref())
+                .flat_map(|(ramp, grey)| ramp.iter().chain(grey))
+                .copied()
+                .collect(),
+        );
+    }
+    let basis = if common.len() == n_folds {
+        "ramp readings and greys left out by level".to_string()
+    } else {
+        format!(
+            "ramp readings and greys left out by level ({} of {n_folds} folds, those every law could be fitted on)",
+            common.len()
+        )
+    };
+    (basis, held)
 }
 
 /// With nothing held out to score on: Akaike's criterion, χ² + 2k summed over the
