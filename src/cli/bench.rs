@@ -15,13 +15,16 @@ use std::time::Instant;
 
 use chromacal::calibrate::session::{block_on, measure_simulated};
 use chromacal::cgats::read_ti3;
+use chromacal::color::Xyz;
 use chromacal::comparison::{MAX_TRAIN, compare_with_argyll, compare_with_argyll_across};
 use chromacal::config::{Config, parse_config};
 use chromacal::fit::laws::fit_law;
 use chromacal::fit::primaries::{ChannelRamp, RampPoint};
 use chromacal::fit::stats::ErrorStats;
+use chromacal::fit::validate::delta_e00_xyz;
 use chromacal::fit::{FitOptions, fit_monitor};
 use chromacal::measurement::MeasurementSet;
+use chromacal::measurement::Role;
 use chromacal::model::transfer::{GainOffsetGamma, LawKind};
 use chromacal::report::table;
 
@@ -101,6 +104,25 @@ fn simulate(config: &Config, dir: &Path, tag: &str) -> Result<MeasurementSet, St
     let set = journal.measurement_set();
     let _ = std::fs::remove_file(&path);
     Ok(set)
+}
+
+/// ΔE00 between consecutive readings of the reference white in one run (its own white
+/// as reference): what the instrument's noise alone does to a reading, the floor no
+/// fit can go below.
+fn white_repeat_differences(set: &MeasurementSet) -> Vec<f64> {
+    let whites: Vec<Xyz> = set
+        .measurements
+        .iter()
+        .filter(|m| m.role == Role::Reference && m.drive == [1.0; 3])
+        .filter_map(|m| m.usable_xyz())
+        .collect();
+    let Some(first) = whites.first() else {
+        return Vec::new();
+    };
+    whites
+        .windows(2)
+        .map(|w| delta_e00_xyz(&w[0], &w[1], first))
+        .collect()
 }
 
 /// A synthetic ramp of `n` levels with 0.3 % noise, for timing the law fits alone.
@@ -235,6 +257,7 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
         let mut rows: Vec<Vec<String>> = choices.iter().map(|c| vec![c.0.clone()]).collect();
         let mut chosen_names = Vec::new();
         let mut instrument_time = Vec::new();
+        let mut repeat_differences = Vec::new();
         for budget in budgets {
             let mut sets = Vec::new();
             for seed in seeds {
@@ -249,6 +272,7 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
                 .map(|m| m.reading.integration_s + 0.2)
                 .sum();
             instrument_time.push(seconds);
+            repeat_differences.extend(sets.iter().flat_map(white_repeat_differences));
             let mut picked = Vec::new();
             for (k, (_, laws)) in choices.iter().enumerate() {
                 let options = FitOptions {
@@ -305,6 +329,12 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
                 .collect::<Vec<_>>()
                 .join(", ")
         );
+        if let Some(floor) = ErrorStats::of(&repeat_differences) {
+            println!(
+                "  the instrument's repeatability, the floor: ΔE00 between consecutive readings of the reference white, mean {:.3} / p95 {:.3} ({} pairs)",
+                floor.mean, floor.p95, floor.n
+            );
+        }
         println!(
             "  instrument time per run (all patches incl. held-out and grid): {}",
             budgets
