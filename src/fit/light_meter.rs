@@ -15,19 +15,21 @@ use crate::instrument::ReadingStatus;
 use crate::measurement::{Measurement, MeasurementSet, Role};
 use crate::model::MonitorModel;
 
-use super::{FitError, FitOptions, FittedModel, fit_measurements};
+use super::{FitError, FitOptions, FittedModel};
 
 /// The whole luminance-meter path: give every reading an XYZ from the configured
-/// primaries' chromaticities and a nominal model, fit, give the readings the fitted
-/// model's chromaticities, fit again, and say in the report what was given.
+/// primaries' chromaticities and a nominal model, fit (`fit`: the ordinary chain), give
+/// the readings the fitted model's chromaticities, fit again, and say in the report
+/// what was given.
 pub fn fit_luminance_only(
     set: &MeasurementSet,
     options: &FitOptions,
+    fit: impl Fn(&MeasurementSet, &FitOptions) -> Result<FittedModel, FitError>,
 ) -> Result<FittedModel, FitError> {
     let primaries = options.primaries_xy.ok_or(FitError::NeedChromaticities)?;
     let white = options.white_xy.unwrap_or([0.3127, 0.3290]);
-    let first = fit_measurements(&synthesize(set, &primaries, white, None), options)?;
-    let mut second = fit_measurements(
+    let first = fit(&synthesize(set, &primaries, white, None), options)?;
+    let mut second = fit(
         &synthesize(set, &primaries, white, Some(&first.model)),
         options,
     )?;

@@ -180,7 +180,7 @@ fn code_step(set: &MeasurementSet) -> f64 {
 /// their own path, which gives them chromaticities first (`light_meter`).
 pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedModel, FitError> {
     if light_meter::is_luminance_only(set) {
-        light_meter::fit_luminance_only(set, options)
+        light_meter::fit_luminance_only(set, options, fit_measurements)
     } else {
         fit_measurements(set, options)
     }
@@ -380,7 +380,8 @@ fn reference_white(
 }
 
 /// Step 4: every candidate law fitted to every channel and scored on readings it was
-/// not fitted on (the ramps left out level by level, and the greys below full drive).
+/// not fitted on (folds of drive levels: the ramps' readings and the greys below full
+/// drive left out together).
 fn select_law(
     options: &FitOptions,
     ramps: &[ChannelRamp; 3],

@@ -146,11 +146,18 @@ impl ChannelRamp {
             .map(|p| (p.index, p.drive, p.xyz))
             .collect();
         let mut ramp = reduce_ramp(self.channel, &kept, black, noise)?;
+        // The grey shares are in units of this ramp's normaliser; without its top level
+        // (an unpinned ramp) the training ramp normalises by another.
+        let rescale = self.normaliser / ramp.normaliser;
         ramp.grey_points = self
             .grey_points
             .iter()
             .filter(|p| !levels.contains(&p.drive))
-            .cloned()
+            .map(|p| RampPoint {
+                excitation: p.excitation * rescale,
+                sigma: p.sigma * rescale,
+                ..p.clone()
+            })
             .collect();
         Some(ramp)
     }
