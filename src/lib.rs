@@ -8,8 +8,9 @@
 //! The modules stand in layers, each importing only from those below it (lowest
 //! first): `color`, `numeric_csv`, `time`, `durable` → `model` → `screen` → `sim` →
 //! `instrument` → `display` → `measurement` → `plan` → `journal`, `cgats` →
-//! `measurement_file` → `fit` → `profile` → `export` → `config` → `calibrate` →
-//! `daemon`, `report`. `tests/layers.rs` holds the list and checks it.
+//! `measurement_file`, `argyll` → `fit` → `profile` → `export` → `config` →
+//! `calibrate` → `daemon`, `report`, `comparison`. `tests/layers.rs` holds the list
+//! and checks it.
 
 // `!(x > 0.0)` is how this crate says "x is not positive, or not a number": NaN
 // must fail every such check, which `x <= 0.0` would let through.

@@ -179,11 +179,11 @@ pub fn fit_summary(report: &FitReport) -> String {
             "primary constancy" => c
                 .primary_constancy
                 .iter()
-                .map(|p| {
-                    format!(
-                        "{} Δu′v′ {:.4} (ΔE00 {:.2})",
-                        p.channel, p.max_delta_uv, p.delta_e00
-                    )
+                .map(|p| match p.delta_e00 {
+                    Some(cost) => {
+                        format!("{} Δu′v′ {:.4} (ΔE00 {cost:.2})", p.channel, p.max_delta_uv)
+                    }
+                    None => format!("{} Δu′v′ {:.4}", p.channel, p.max_delta_uv),
                 })
                 .collect::<Vec<_>>()
                 .join(", "),
@@ -192,7 +192,8 @@ pub fn fit_summary(report: &FitReport) -> String {
                 .iter()
                 .map(|a| {
                     // The tristimulus value furthest off the sum, and what it costs.
-                    let (j, d) = a.xyz_departure_percent.iter().enumerate().fold(
+                    let departures = a.xyz_departure_percent.unwrap_or([0.0; 3]);
+                    let (j, d) = departures.iter().enumerate().fold(
                         (1, a.luminance_departure_percent),
                         |w, (j, d)| {
                             if d.abs() > w.1.abs() { (j, *d) } else { w }

@@ -93,9 +93,10 @@ pub struct ChannelConstancy {
     /// Fraction of the ramp's spectral energy in its first singular vector.
     pub spectral_first_component: Option<f64>,
     /// What assuming constancy costs: the largest ΔE00 between a level's reading and
-    /// the same luminance at full drive's chromaticity.
-    #[serde(default)]
-    pub delta_e00: f64,
+    /// the same luminance at full drive's chromaticity. Absent from profiles made
+    /// before it was measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delta_e00: Option<f64>,
     pub verdict: Verdict,
 }
 
@@ -107,9 +108,9 @@ pub struct GreyAdditivity {
     /// Grey luminance over the sum of the channels' luminances, minus one, percent.
     pub luminance_departure_percent: f64,
     /// The same for X, Y and Z, each above black: a display can add up in luminance
-    /// and still fall short in Z.
-    #[serde(default)]
-    pub xyz_departure_percent: [f64; 3],
+    /// and still fall short in Z. Absent from profiles made before it was judged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub xyz_departure_percent: Option<[f64; 3]>,
     pub verdict: Verdict,
 }
 
@@ -215,7 +216,7 @@ fn primary_constancy(
                 max_delta_uv: max_delta,
                 noise_delta_uv: noise_at_dimmest,
                 spectral_first_component,
-                delta_e00: max_cost,
+                delta_e00: Some(max_cost),
                 verdict: if levels < 2 {
                     Verdict::NotMeasured
                 } else {
@@ -269,24 +270,32 @@ fn additivity(
                 sum += channel - black;
                 worst_n = worst_n.min(n);
             }
-            let departures: [f64; 3] =
-                std::array::from_fn(|j| (grey[j] - black[j]) / (sum[j] - black[j]) - 1.0);
-            let de = delta_e00_xyz(&grey, &sum, white_reference);
-            // Noise of each ratio: the grey's and the three channels' relative noise,
-            // the noise model read at each tristimulus value.
-            let rel = |v: f64, n: usize| {
-                noise.sigma(v.abs()) / v.abs().max(f64::MIN_POSITIVE) / (n as f64).sqrt()
-            };
-            let within_noise = (0..3).all(|j| {
+            // Each of X, Y, Z above black: the grey's over the channels' sum, against
+            // the noise of that ratio (the grey's, the three channels' and the black's
+            // noise, the noise model read at each tristimulus value). A value with no
+            // light above black (a channel's Z near zero) cannot be judged and passes.
+            let sigma = |v: f64, n: usize| noise.sigma(v.abs()) / (n as f64).sqrt();
+            let mut departures = [0.0; 3];
+            let mut within_noise = true;
+            for j in 0..3 {
+                let above = sum[j] - black[j];
+                let noise_above = (sigma(sum[j], worst_n).powi(2) * 3.0
+                    + sigma(black[j], 1).powi(2) * 4.0)
+                    .sqrt();
+                if !(above > 3.0 * noise_above) {
+                    continue;
+                }
+                departures[j] = (grey[j] - black[j]) / above - 1.0;
                 let noise_ratio =
-                    (rel(grey[j], n_grey).powi(2) + rel(sum[j], worst_n).powi(2) * 3.0).sqrt();
-                departures[j].abs() <= 3.0 * noise_ratio
-            });
+                    (sigma(grey[j], n_grey).powi(2) + noise_above.powi(2)).sqrt() / above;
+                within_noise &= departures[j].abs() <= 3.0 * noise_ratio;
+            }
+            let de = delta_e00_xyz(&grey, &sum, white_reference);
             Some(GreyAdditivity {
                 drive: level,
                 delta_e00: de,
                 luminance_departure_percent: departures[1] * 100.0,
-                xyz_departure_percent: departures.map(|d| d * 100.0),
+                xyz_departure_percent: Some(departures.map(|d| d * 100.0)),
                 verdict: Verdict::judge(within_noise, de < DE00_VISIBILITY),
             })
         })
@@ -484,7 +493,7 @@ mod tests {
         // 6.7 % short in Z at full drive: luminance adds up, the colour does not.
         let short = additivity_of_white(0.933);
         assert!(short.luminance_departure_percent.abs() < 1e-9);
-        assert!((short.xyz_departure_percent[2] + 6.7).abs() < 1e-6);
+        assert!((short.xyz_departure_percent.unwrap()[2] + 6.7).abs() < 1e-6);
         assert!(short.delta_e00 > 1.0, "{short:?}");
         assert_eq!(short.verdict, Verdict::Fails);
         // An additive display stays within noise.
