@@ -47,26 +47,35 @@ fn two_level_set(with_greys: bool, seed: u64) -> MeasurementSet {
         .map(|(index, drive)| {
             let light = primaries() * Vector3::from_fn(|c, _| truth(drive[c]));
             let xyz = (black + light).map(|v| v * (1.0 + noise.sample(&mut rng)));
-            Measurement {
-                index,
-                role: Role::from_drive(*drive),
-                drive: *drive,
-                codes: None,
-                position: Default::default(),
-                background: [0.0; 3],
-                time_s: None,
-                reading: Reading {
-                    xyz: Some(xyz),
-                    spectrum: None,
-                    status: ReadingStatus::Ok,
-                    integration_s: 1.0,
-                    ..Default::default()
-                },
-            }
+            measurement(index, *drive, xyz)
         })
         .collect();
+    measurement_set("two levels per channel", measurements)
+}
+
+/// One reading of XYZ at `drive`, at the centre on black, its role read from the drive.
+fn measurement(index: usize, drive: [f64; 3], xyz: Xyz) -> Measurement {
+    Measurement {
+        index,
+        role: Role::from_drive(drive),
+        drive,
+        codes: None,
+        position: Default::default(),
+        background: [0.0; 3],
+        time_s: None,
+        reading: Reading {
+            xyz: Some(xyz),
+            spectrum: None,
+            status: ReadingStatus::Ok,
+            integration_s: 1.0,
+            ..Default::default()
+        },
+    }
+}
+
+fn measurement_set(source: &str, measurements: Vec<Measurement>) -> MeasurementSet {
     MeasurementSet {
-        source: "two levels per channel".into(),
+        source: source.into(),
         units: Units::Absolute,
         instrument: None,
         display: None,
@@ -133,30 +142,12 @@ fn power_law_set(drives: &[[f64; 3]]) -> MeasurementSet {
     let measurements = drives
         .iter()
         .enumerate()
-        .map(|(index, drive)| Measurement {
-            index,
-            role: Role::from_drive(*drive),
-            drive: *drive,
-            codes: None,
-            position: Default::default(),
-            background: [0.0; 3],
-            time_s: None,
-            reading: Reading {
-                xyz: Some(black + primaries() * Vector3::from_fn(|c, _| drive[c].powf(2.2))),
-                spectrum: None,
-                status: ReadingStatus::Ok,
-                integration_s: 1.0,
-                ..Default::default()
-            },
+        .map(|(index, drive)| {
+            let light = primaries() * Vector3::from_fn(|c, _| drive[c].powf(2.2));
+            measurement(index, *drive, black + light)
         })
         .collect();
-    MeasurementSet {
-        source: "exact power law".into(),
-        units: Units::Absolute,
-        instrument: None,
-        display: None,
-        measurements,
-    }
+    measurement_set("exact power law", measurements)
 }
 
 #[test]

@@ -110,6 +110,19 @@ impl LawSelection {
     }
 }
 
+/// What every law is fitted to and scored on: the channels' ramps (with their grey
+/// shares), the greys below white as (level, XYZ), the black, the white ΔE00 is taken
+/// against, the run's noise, and the toe of the log laws.
+#[derive(Clone, Copy)]
+struct Evidence<'a> {
+    ramps: &'a [ChannelRamp; 3],
+    greys: &'a [(f64, Xyz)],
+    black: &'a Xyz,
+    white: &'a Xyz,
+    noise: &'a NoiseModel,
+    toe: f64,
+}
+
 /// Most cross-validation folds: beyond ten, more folds cost fits and change little.
 pub const MAX_FOLDS: usize = 10;
 
@@ -121,13 +134,9 @@ pub type FoldErrors = (Vec<f64>, Vec<f64>);
 /// level to leave out at all.
 fn cross_validate(
     kind: LawKind,
-    ramps: &[ChannelRamp; 3],
-    greys: &[(f64, Xyz)],
-    black: &Xyz,
-    white: &Xyz,
-    noise: &NoiseModel,
-    toe: f64,
+    evidence: &Evidence<'_>,
 ) -> Result<Vec<Result<FoldErrors, String>>, String> {
+    let Evidence { ramps, greys, .. } = *evidence;
     if ramps.iter().any(|r| r.law_points().all(|p| p.drive >= 1.0)) {
         return Err("no level below full drive to hold out".into());
     }
@@ -143,24 +152,22 @@ fn cross_validate(
     Ok((0..folds)
         .map(|fold| {
             let held: Vec<f64> = levels.iter().skip(fold).step_by(folds).copied().collect();
-            fold_errors(kind, ramps, greys, &held, black, white, noise, toe)
+            fold_errors(kind, evidence, &held)
         })
         .collect())
 }
 
 /// One fold: every channel fitted without the levels `held`, its readings there
 /// predicted.
-#[allow(clippy::too_many_arguments)]
-fn fold_errors(
-    kind: LawKind,
-    ramps: &[ChannelRamp; 3],
-    greys: &[(f64, Xyz)],
-    held: &[f64],
-    black: &Xyz,
-    white: &Xyz,
-    noise: &NoiseModel,
-    toe: f64,
-) -> Result<FoldErrors, String> {
+fn fold_errors(kind: LawKind, evidence: &Evidence<'_>, held: &[f64]) -> Result<FoldErrors, String> {
+    let Evidence {
+        ramps,
+        greys,
+        black,
+        white,
+        noise,
+        toe,
+    } = *evidence;
     let mut curves = Vec::with_capacity(3);
     for ramp in ramps {
         let training = ramp
@@ -200,12 +207,20 @@ pub fn choose_law(
     noise: &NoiseModel,
     toe: f64,
 ) -> Option<LawSelection> {
+    let evidence = Evidence {
+        ramps,
+        greys,
+        black,
+        white,
+        noise,
+        toe,
+    };
     let mut kinds = kinds.to_vec();
     kinds.sort();
     kinds.dedup();
     let mut candidates: Vec<LawCandidate> = kinds
         .iter()
-        .map(|kind| fit_candidate(*kind, ramps, greys, black, white, noise, toe))
+        .map(|kind| fit_candidate(*kind, &evidence))
         .collect();
     let (basis, held) = score_candidates(&mut candidates, ramps, greys);
     let scores: Vec<Option<Vec<f64>>> = candidates.iter().map(|c| c.score.clone()).collect();
@@ -231,18 +246,11 @@ pub fn choose_law(
 }
 
 /// One law fitted to all three channels, and cross-validated where every channel fits.
-fn fit_candidate(
-    kind: LawKind,
-    ramps: &[ChannelRamp; 3],
-    greys: &[(f64, Xyz)],
-    black: &Xyz,
-    white: &Xyz,
-    noise: &NoiseModel,
-    toe: f64,
-) -> LawCandidate {
+fn fit_candidate(kind: LawKind, evidence: &Evidence<'_>) -> LawCandidate {
+    let Evidence { ramps, toe, .. } = *evidence;
     let fits = [0, 1, 2].map(|c| fit_law(kind, &ramps[c], toe));
     let (folds, cv_note) = if fits.iter().all(|f| f.is_ok()) {
-        match cross_validate(kind, ramps, greys, black, white, noise, toe) {
+        match cross_validate(kind, evidence) {
             Ok(folds) => {
                 let failed: Vec<&String> = folds.iter().filter_map(|f| f.as_ref().err()).collect();
                 let note = failed.first().map(|why| {
