@@ -85,7 +85,7 @@ pub fn matrix_shaper_predictions(
     // Absolute colorimetric XYZ comes scaled to white Y = 100, as the .ti3 went in.
     let scale = match train.units {
         Units::Relative => 1.0,
-        Units::Absolute => white_y(train).ok_or(ArgyllError::NoWhite)? / 100.0,
+        Units::Absolute => train.mean_white().ok_or(ArgyllError::NoWhite)?.y / 100.0,
     };
     let predictions: Vec<Xyz> = output
         .lines()
@@ -104,17 +104,6 @@ pub fn matrix_shaper_predictions(
         });
     }
     Ok(predictions)
-}
-
-/// Mean Y of the white readings, as `to_ti3` normalises by.
-fn white_y(set: &MeasurementSet) -> Option<f64> {
-    let whites: Vec<f64> = set
-        .measurements
-        .iter()
-        .filter(|m| m.drive == [1.0; 3] && m.is_standard_condition())
-        .filter_map(|m| Some(m.usable_xyz()?.y))
-        .collect();
-    (!whites.is_empty()).then(|| whites.iter().sum::<f64>() / whites.len() as f64)
 }
 
 /// `0.5 0.5 0.5 [RGB] -> MatrixFwd -> 20.39 21.46 23.56 [XYZ]` → the XYZ.

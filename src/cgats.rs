@@ -377,12 +377,7 @@ pub fn to_ti3(set: &MeasurementSet) -> String {
         .filter(|m| m.is_standard_condition())
         .filter_map(|m| Some((m, m.usable_xyz()?)))
         .collect();
-    let whites: Vec<Xyz> = rows
-        .iter()
-        .filter(|(m, _)| m.drive == [1.0; 3])
-        .map(|r| r.1)
-        .collect();
-    let white = (!whites.is_empty()).then(|| whites.iter().sum::<Xyz>() / whites.len() as f64);
+    let white = set.mean_white();
     let (scale, luminance) = match (set.units, white) {
         (Units::Absolute, Some(w)) if w.y > 0.0 => (100.0 / w.y, Some(w)),
         _ => (1.0, None),

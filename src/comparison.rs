@@ -90,7 +90,7 @@ fn compare_on_split(
     let started = Instant::now();
     let fitted = fit_monitor(train, options)?;
     let fit_seconds = started.elapsed().as_secs_f64();
-    let white = measured_white(train).unwrap_or_else(|| fitted.model.white());
+    let white = train.mean_white().unwrap_or_else(|| fitted.model.white());
     let score = |predicted: &[Xyz]| {
         let errors: Vec<f64> = held
             .iter()
@@ -116,15 +116,4 @@ fn compare_on_split(
         fit_seconds,
         fitted,
     })
-}
-
-/// Mean of the white readings.
-fn measured_white(set: &MeasurementSet) -> Option<Xyz> {
-    let whites: Vec<Xyz> = set
-        .measurements
-        .iter()
-        .filter(|m| m.drive == [1.0; 3])
-        .filter_map(|m| m.usable_xyz())
-        .collect();
-    (!whites.is_empty()).then(|| whites.iter().sum::<Xyz>() / whites.len() as f64)
 }

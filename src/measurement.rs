@@ -116,6 +116,18 @@ pub struct MeasurementSet {
 }
 
 impl MeasurementSet {
+    /// Mean of the usable readings of full white at the standard condition (centre,
+    /// black surround), the white a set is normalised by and scored against.
+    pub fn mean_white(&self) -> Option<Xyz> {
+        let whites: Vec<Xyz> = self
+            .measurements
+            .iter()
+            .filter(|m| m.drive == [1.0; 3] && m.is_standard_condition())
+            .filter_map(|m| m.usable_xyz())
+            .collect();
+        (!whites.is_empty()).then(|| whites.iter().sum::<Xyz>() / whites.len() as f64)
+    }
+
     pub fn with_role(&self, role: Role) -> impl Iterator<Item = &Measurement> {
         self.measurements.iter().filter(move |m| m.role == role)
     }

@@ -194,9 +194,10 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let noise = noise_of_run(all, &black, &drift);
     let corrected = correct_for_drift(all, &black, drift_model.as_ref())?;
     let mut ramps = channel_ramps(&corrected, &black, &noise)?;
+    let greys = grey_readings(&corrected);
     add_grey_excitations(
         &mut ramps,
-        &grey_readings(&corrected),
+        &greys,
         &black.xyz,
         &noise,
         options.max_condition_number,
@@ -205,7 +206,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let selection = select_law(
         options,
         &ramps,
-        &corrected,
+        &greys,
         &black,
         &white_reference,
         &noise,
@@ -349,8 +350,8 @@ fn channel_ramps(
     ])
 }
 
-/// Step 3b: the greys below white as (index, level, XYZ), for the channels' curves to
-/// follow (`primaries::add_grey_excitations`).
+/// Step 3b: the greys below white as (index, level, XYZ): the channels' curves follow
+/// them (`primaries::add_grey_excitations`) and the laws are scored on them.
 fn grey_readings(corrected: &[Corrected<'_>]) -> Vec<(usize, f64, Xyz)> {
     corrected
         .iter()
@@ -385,18 +386,13 @@ fn reference_white(
 fn select_law(
     options: &FitOptions,
     ramps: &[ChannelRamp; 3],
-    corrected: &[Corrected<'_>],
+    greys: &[(usize, f64, Xyz)],
     black: &BlackEstimate,
     white_reference: &Xyz,
     noise: &NoiseModel,
     toe: f64,
 ) -> Result<LawSelection, FitError> {
-    let greys: Vec<(f64, Xyz)> = corrected
-        .iter()
-        .filter(|r| r.measurement.role == Role::Grey && r.measurement.is_standard_condition())
-        .filter(|r| r.measurement.drive[0] < 1.0)
-        .map(|r| (r.measurement.drive[0], r.xyz))
-        .collect();
+    let greys: Vec<(f64, Xyz)> = greys.iter().map(|g| (g.1, g.2)).collect();
     choose_law(
         &options.laws,
         ramps,
