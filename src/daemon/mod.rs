@@ -363,14 +363,20 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
         None => None,
     };
     let app = api::router(daemon.clone(), api::Access { owner, token });
+    // Both listeners are bound before either serves: a client that finds the unix
+    // socket answering may go straight to TCP.
+    let tcp =
+        match &config.tcp {
+            Some(address) => Some(tokio::net::TcpListener::bind(address).await.map_err(
+                |source| DaemonError::Io {
+                    path: PathBuf::from(address),
+                    source,
+                },
+            )?),
+            None => None,
+        };
     tokio::spawn(api::serve_unix(unix, app.clone()));
-    if let Some(address) = &config.tcp {
-        let listener = tokio::net::TcpListener::bind(address)
-            .await
-            .map_err(|source| DaemonError::Io {
-                path: PathBuf::from(address),
-                source,
-            })?;
+    if let Some(listener) = tcp {
         if let Ok(addr) = listener.local_addr() {
             if !addr.ip().is_loopback() {
                 tracing::warn!(%addr, "the control API listens beyond this machine (daemon.allow_remote)");
