@@ -349,6 +349,7 @@ mod tests {
             black,
             laws: [0, 1, 2].map(|_| TransferLaw::Power(Power { gamma: 2.2 })),
             spatial: SpatialMap::Uniform,
+            terms: Default::default(),
         };
         MatrixTrc::from_model(&model, None)
     }

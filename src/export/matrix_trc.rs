@@ -186,6 +186,7 @@ mod tests {
             black,
             laws,
             spatial: SpatialMap::Uniform,
+            terms: Default::default(),
         }
     }
 

@@ -451,6 +451,7 @@ fn primary_matrix(
         black: black.xyz,
         laws,
         spatial: SpatialMap::Uniform,
+        terms: Default::default(),
     };
     Ok((model, condition_number))
 }

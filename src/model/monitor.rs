@@ -5,6 +5,10 @@
 //! with M the primary matrix (Rougeron & Péroche eq. 3; its columns are the XYZ of
 //! each primary at full drive, black taken off), E the per-channel transfer laws,
 //! K the spatial gain map and XYZ_black the light at zero drive, flare included.
+//!
+//! Two optional terms (`AdditivityTerms`) model what the additive form misses, and are
+//! kept by the fit only where cross-validation shows they lower the error
+//! (`fit::terms`): channel interaction and primary chromaticity that moves with drive.
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -48,9 +52,147 @@ pub struct MonitorModel {
     /// Transfer law of R, G and B.
     pub laws: [TransferLaw; 3],
     pub spatial: SpatialMap,
+    /// What additivity and primary constancy miss, when the data showed it.
+    pub terms: AdditivityTerms,
+}
+
+/// Corrections to the additive model, each `None` unless the fit kept it. With
+/// l_c = K_c E_c the light of channel c in units of its primary, and ê_c = l_c / E_c(1)
+/// its share of full drive (clamped to [0, 1]), the light above black is
+///
+/// XYZ − XYZ_black = Σ_c m_c l_c (1 + γ_c Σ_{k≠c} ê_k) + Σ_c u_c ê_c (1 − ê_c)
+///
+/// γ (interaction): a channel's light changes in proportion to what the other channels
+/// give, as when a shared supply sags (Brainard 1989's channel independence failing);
+/// alone, a channel is unaffected, so the ramps still define the curves. u
+/// (chromaticity shift): the XYZ a channel adds besides its primary's direction,
+/// largest at mid drive and none at black and full drive, as a TN panel's or a CRT's
+/// blue moves in chromaticity with drive (the channel's own curve is still E_c).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AdditivityTerms {
+    /// γ of red, green and blue.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interaction: Option<[f64; 3]>,
+    /// u of red, green and blue, XYZ each.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chromaticity_shift: Option<[[f64; 3]; 3]>,
+}
+
+impl AdditivityTerms {
+    pub fn is_empty(&self) -> bool {
+        self.interaction.is_none() && self.chromaticity_shift.is_none()
+    }
+
+    /// Names of the terms present, for reports and export notes.
+    pub fn names(&self) -> Vec<&'static str> {
+        let mut names = Vec::new();
+        if self.interaction.is_some() {
+            names.push("channel interaction");
+        }
+        if self.chromaticity_shift.is_some() {
+            names.push("drive-dependent primary chromaticity");
+        }
+        names
+    }
+
+    /// Every coefficient is a finite number.
+    fn is_finite(&self) -> bool {
+        self.interaction.iter().flatten().all(|v| v.is_finite())
+            && self
+                .chromaticity_shift
+                .iter()
+                .flatten()
+                .flatten()
+                .all(|v| v.is_finite())
+    }
+}
+
+/// ê_c: each channel's light as a share of its full drive, clamped to [0, 1].
+pub fn drive_shares(light: &Vector3<f64>, full: &[f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|c| {
+        if full[c] > 0.0 {
+            (light[c] / full[c]).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    })
+}
+
+/// s_c = Σ_{k≠c} ê_k: what the other channels give, the multiplier of γ_c.
+pub fn interaction_basis(shares: &[f64; 3]) -> [f64; 3] {
+    let total: f64 = shares.iter().sum();
+    shares.map(|s| total - s)
+}
+
+/// ê_c (1 − ê_c): the weight of u_c.
+pub fn chromaticity_shift_basis(shares: &[f64; 3]) -> [f64; 3] {
+    shares.map(|s| s * (1.0 - s))
 }
 
 impl MonitorModel {
+    /// E(1) of each channel.
+    fn full_drive_excitations(&self) -> [f64; 3] {
+        [0, 1, 2].map(|c| self.laws[c].full_drive_excitation())
+    }
+
+    /// The light above black of channel lights `light` (l_c = K_c E_c), terms included.
+    pub fn light_above_black(&self, light: &Vector3<f64>) -> Xyz {
+        let mut xyz = self.matrix * light;
+        if self.terms.is_empty() {
+            return xyz;
+        }
+        let shares = drive_shares(light, &self.full_drive_excitations());
+        if let Some(gamma) = self.terms.interaction {
+            let s = interaction_basis(&shares);
+            for c in 0..3 {
+                xyz += self.matrix.column(c) * (light[c] * gamma[c] * s[c]);
+            }
+        }
+        if let Some(u) = self.terms.chromaticity_shift {
+            let w = chromaticity_shift_basis(&shares);
+            for c in 0..3 {
+                xyz += Xyz::from(u[c]) * w[c];
+            }
+        }
+        xyz
+    }
+
+    /// The channel lights l that give `above` (the light above black): M⁻¹ applied to
+    /// `above` for the additive model; with terms, the fixed point of
+    /// l_c = [M⁻¹(above − Σ u ê(1 − ê))]_c / (1 + γ_c s_c), which converges because
+    /// the terms are small next to the primaries (a few per cent).
+    fn light_of(&self, inverse: &Matrix3<f64>, above: &Xyz) -> Vector3<f64> {
+        let mut light = inverse * above;
+        if self.terms.is_empty() {
+            return light;
+        }
+        let full = self.full_drive_excitations();
+        for _ in 0..100 {
+            let shares = drive_shares(&light, &full);
+            let mut target = *above;
+            if let Some(u) = self.terms.chromaticity_shift {
+                let w = chromaticity_shift_basis(&shares);
+                for c in 0..3 {
+                    target -= Xyz::from(u[c]) * w[c];
+                }
+            }
+            let mut next = inverse * target;
+            if let Some(gamma) = self.terms.interaction {
+                let s = interaction_basis(&shares);
+                for c in 0..3 {
+                    next[c] /= (1.0 + gamma[c] * s[c]).max(1e-3);
+                }
+            }
+            let step = (next - light).abs().max();
+            light = next;
+            if step <= 1e-13 * full.iter().fold(0.0, |a: f64, b| a.max(b.abs())) {
+                break;
+            }
+        }
+        light
+    }
+
     /// E(d): the three excitations.
     pub fn excitations(&self, drive: Drive) -> Vector3<f64> {
         Vector3::new(
@@ -64,7 +206,7 @@ impl MonitorModel {
     pub fn forward(&self, drive: Drive, position: ScreenPosition) -> Xyz {
         let k = self.spatial.gains(position);
         let e = self.excitations(drive);
-        self.matrix * Vector3::new(k[0] * e[0], k[1] * e[1], k[2] * e[2]) + self.black
+        self.light_above_black(&Vector3::new(k[0] * e[0], k[1] * e[1], k[2] * e[2])) + self.black
     }
 
     /// XYZ of drive `d` at the centre of the screen.
@@ -77,8 +219,9 @@ impl MonitorModel {
         self.forward_centre([1.0; 3])
     }
 
-    /// The drive that reproduces `xyz` at `position`: E = diag(K)⁻¹ M⁻¹ (XYZ − black),
-    /// each excitation clipped to what its channel can give, then each law inverted.
+    /// The drive that reproduces `xyz` at `position`: E = diag(K)⁻¹ M⁻¹ (XYZ − black)
+    /// (with the terms, `light_of`), each excitation clipped to what its channel can
+    /// give, then each law inverted.
     pub fn inverse(
         &self,
         xyz: &Xyz,
@@ -89,7 +232,7 @@ impl MonitorModel {
             .try_inverse()
             .ok_or(InverseError::SingularMatrix)?;
         let k = self.spatial.gains(position);
-        let t = inverse * (xyz - self.black);
+        let t = self.light_of(&inverse, &(xyz - self.black));
         let mut excitation = [0.0; 3];
         let mut drive = [0.0; 3];
         let mut clipped = false;
@@ -112,9 +255,16 @@ impl MonitorModel {
     /// The same display with all light scaled by `factor` (to compare a profile in
     /// cd/m² with measurements relative to white, say).
     pub fn scaled(&self, factor: f64) -> MonitorModel {
+        let mut terms = self.terms.clone();
+        if let Some(u) = terms.chromaticity_shift.as_mut() {
+            for v in u.iter_mut().flatten() {
+                *v *= factor;
+            }
+        }
         MonitorModel {
             matrix: self.matrix * factor,
             black: self.black * factor,
+            terms,
             ..self.clone()
         }
     }
@@ -145,6 +295,8 @@ pub struct ModelFile {
     laws: PerChannel<TransferLaw>,
     #[serde(default)]
     spatial: SpatialMap,
+    #[serde(default, skip_serializing_if = "AdditivityTerms::is_empty")]
+    terms: AdditivityTerms,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -180,6 +332,7 @@ impl From<MonitorModel> for ModelFile {
             },
             laws: PerChannel { red, green, blue },
             spatial: m.spatial,
+            terms: m.terms,
         }
     }
 }
@@ -199,6 +352,9 @@ impl TryFrom<ModelFile> for MonitorModel {
         finite(&f.primaries.red, "primaries.red")?;
         finite(&f.primaries.green, "primaries.green")?;
         finite(&f.primaries.blue, "primaries.blue")?;
+        if !f.terms.is_finite() {
+            return Err(ModelFileError::NotFinite("terms"));
+        }
         let laws = [f.laws.red, f.laws.green, f.laws.blue];
         for (law, channel) in laws.iter().zip(CHANNELS) {
             law.monotonicity()
@@ -214,6 +370,7 @@ impl TryFrom<ModelFile> for MonitorModel {
             black: Xyz::from(f.black),
             laws,
             spatial: f.spatial,
+            terms: f.terms,
         })
     }
 }
@@ -243,6 +400,7 @@ mod tests {
                     coefficients: vec![0.0, 0.0, -0.1, 0.0, -0.1],
                 },
             },
+            terms: AdditivityTerms::default(),
         }
     }
 
@@ -266,6 +424,70 @@ mod tests {
                 }
             }
         }
+    }
+
+    fn with_terms() -> MonitorModel {
+        MonitorModel {
+            terms: AdditivityTerms {
+                interaction: Some([-0.03, -0.02, -0.05]),
+                chromaticity_shift: Some([[0.0, 0.5, 1.5], [0.8, 0.0, -0.4], [-1.0, 1.2, 0.0]]),
+            },
+            ..srgb_like()
+        }
+    }
+
+    #[test]
+    fn the_terms_leave_each_channel_alone_at_black_and_full_drive() {
+        let plain = srgb_like();
+        let m = with_terms();
+        for c in 0..3 {
+            let mut full = [0.0; 3];
+            full[c] = 1.0;
+            let p = ScreenPosition::CENTRE;
+            assert!((m.forward(full, p) - plain.forward(full, p)).norm() < 1e-12);
+            let mut half = [0.0; 3];
+            half[c] = 0.5;
+            // Mid drive carries the shift: u_c ê (1 − ê).
+            let shift = (m.forward(half, p) - plain.forward(half, p)).norm();
+            assert!(shift > 0.05, "channel {c}: {shift}");
+        }
+        // White: every channel loses γ_c times the two others' full drive.
+        let expected: Xyz = (0..3)
+            .map(|c| plain.matrix.column(c) * (2.0 * with_terms().terms.interaction.unwrap()[c]))
+            .sum();
+        let white_change = m.white() - plain.white();
+        assert!((white_change - expected).norm() < 1e-9, "{white_change:?}");
+    }
+
+    #[test]
+    fn forward_then_inverse_returns_the_drive_with_terms() {
+        let m = with_terms();
+        for pos in [ScreenPosition::CENTRE, ScreenPosition::new(0.1, 0.9)] {
+            for d in [
+                [0.5, 0.2, 0.9],
+                [0.01, 0.0, 0.3],
+                [1.0, 1.0, 1.0],
+                [0.7, 0.7, 0.7],
+            ] {
+                let xyz = m.forward(d, pos);
+                let back = m.inverse(&xyz, pos).unwrap();
+                assert!(!back.clipped, "{d:?}: {back:?}");
+                for c in 0..3 {
+                    assert!(
+                        (back.drive[c] - d[c]).abs() < 1e-6,
+                        "{d:?} at {pos:?}: {back:?}"
+                    );
+                }
+            }
+        }
+        let text = toml::to_string(&m).unwrap();
+        assert!(
+            text.contains("[terms]") && text.contains("interaction"),
+            "{text}"
+        );
+        let back: MonitorModel = toml::from_str(&text).unwrap();
+        assert_eq!(back, m);
+        assert!(!toml::to_string(&srgb_like()).unwrap().contains("[terms]"));
     }
 
     #[test]

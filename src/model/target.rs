@@ -385,6 +385,7 @@ mod tests {
             black: Xyz::new(0.19, 0.2, 0.22),
             laws: [2.2, 2.4, 2.0].map(|g| TransferLaw::Power(Power { gamma: g })),
             spatial: SpatialMap::Uniform,
+            terms: Default::default(),
         }
     }
 

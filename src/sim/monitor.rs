@@ -456,6 +456,7 @@ impl VirtualMonitor {
             black,
             laws,
             spatial: SpatialMap::Uniform,
+            terms: Default::default(),
         }
     }
 
