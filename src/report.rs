@@ -127,6 +127,27 @@ pub fn fit_summary(report: &FitReport) -> String {
             let _ = writeln!(out, "  note ({}): {n}", l.law);
         }
     }
+    if !report.terms.is_empty() {
+        let rows: Vec<Vec<String>> = report
+            .terms
+            .iter()
+            .map(|t| {
+                let mut row = vec![format!(
+                    "{}{}",
+                    t.terms.name(),
+                    if t.kept { "  ← kept" } else { "" }
+                )];
+                row.extend(stats_cells(t.cross_validation));
+                row
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "\nwhat additivity misses (ΔE00 on ramps, greys and whites left out by level):"
+        );
+        out.push_str(&table(&["terms", "CV mean", "CV p95", "CV max"], &rows));
+        let _ = writeln!(out, "  rule: {}", report.terms_rule);
+    }
     if report.spatial.positions > 0 {
         let rows: Vec<Vec<String>> = report
             .spatial

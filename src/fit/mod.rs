@@ -12,6 +12,10 @@
 //! 4. every candidate law fitted and cross-validated, the simplest within noise of the
 //!    best kept (`select_law`; `laws`, `law_selection`);
 //! 5. the primary matrix, refused if too ill-conditioned to invert (`primary_matrix`);
+//!    then the terms for what additivity misses (channel interaction, chromaticity that
+//!    moves with drive), each kept only if it lowers the cross-validated error
+//!    (`terms`), and if one is kept the curves fitted again with the greys corrected
+//!    by it (`refit_curves_for_terms`);
 //! 6. the spatial map from the uniformity grid, chosen the same way (`spatial`);
 //! 7. held-out error on the verification patches (`validate_on_held_out`), and the
 //!    assumption checks (`checks`).
@@ -29,6 +33,7 @@ pub mod primaries;
 pub mod select;
 pub mod spatial;
 pub mod stats;
+pub mod terms;
 pub mod validate;
 
 use nalgebra::Matrix3;
@@ -50,6 +55,7 @@ use primaries::{
 };
 use spatial::{SpatialReport, choose_spatial_map};
 use stats::ErrorStats;
+use terms::{TermChoice, TermReading, TermReport, choose_terms, with_terms};
 use validate::{Evaluation, PatchError, evaluate};
 
 /// Default largest condition number of the primary matrix that a profile may have.
@@ -72,6 +78,9 @@ pub struct FitOptions {
     pub primaries_xy: Option<[[f64; 2]; 3]>,
     /// x, y given to black with a luminance meter [default: D65, 0.3127, 0.3290].
     pub white_xy: Option<[f64; 2]>,
+    /// Try the terms for what additivity misses (`terms`); off, the model is the
+    /// additive one whatever the data show.
+    pub additivity_terms: bool,
 }
 
 impl Default for FitOptions {
@@ -82,6 +91,7 @@ impl Default for FitOptions {
             max_condition_number: DEFAULT_MAX_CONDITION_NUMBER,
             primaries_xy: None,
             white_xy: None,
+            additivity_terms: true,
         }
     }
 }
@@ -142,6 +152,12 @@ pub struct FitReport {
     pub condition_number: f64,
     pub law_rule: String,
     pub laws: Vec<LawReport>,
+    /// How the terms for what additivity misses were chosen (empty in profiles made
+    /// before there were terms).
+    #[serde(default)]
+    pub terms_rule: String,
+    #[serde(default)]
+    pub terms: Vec<TermReport>,
     pub spatial: SpatialReport,
     pub checks: AssumptionChecks,
     /// ΔE00 on patches held out of every fit.
@@ -212,7 +228,22 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
         &noise,
         code_step(set),
     )?;
-    let (base, condition_number) = primary_matrix(&ramps, &selection, &black, options)?;
+    let (additive, condition_number) = primary_matrix(&ramps, &selection, &black, options)?;
+    let readings = term_readings(&corrected);
+    let choice = if options.additivity_terms {
+        choose_terms(&additive, &readings, &noise, &white_reference)
+    } else {
+        TermChoice::additive("switched off (fit.additivity_terms = false)")
+    };
+    let base = refit_curves_for_terms(
+        &additive,
+        &choice,
+        &ramps,
+        &greys,
+        &readings,
+        &noise,
+        (options.max_condition_number, code_step(set)),
+    );
     let grid = readings_of_role(&corrected, Role::Uniformity);
     let (spatial_map, spatial) = choose_spatial_map(&base, &grid, &noise);
     let model = MonitorModel {
@@ -237,6 +268,8 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
             condition_number,
             law_rule: selection.rule.clone(),
             laws: selection.reports(),
+            terms_rule: choice.rule,
+            terms: choice.reports,
             spatial,
             checks,
             held_out: evaluation.stats,
@@ -454,6 +487,88 @@ fn primary_matrix(
         terms: Default::default(),
     };
     Ok((model, condition_number))
+}
+
+/// The readings the additivity terms are fitted to: single-channel ramp readings,
+/// greys and whites, at the standard condition.
+fn term_readings(corrected: &[Corrected<'_>]) -> Vec<TermReading> {
+    corrected
+        .iter()
+        .filter(|r| r.measurement.is_standard_condition())
+        .filter(|r| {
+            matches!(
+                r.measurement.role,
+                Role::Ramp | Role::Grey | Role::Reference
+            )
+        })
+        .filter_map(|r| {
+            let d = r.measurement.drive;
+            let lit: Vec<f64> = d.iter().copied().filter(|v| *v > 0.0).collect();
+            let grey = d[0] == d[1] && d[1] == d[2];
+            let level = match lit.len() {
+                1 => lit[0],
+                3 if grey => d[0],
+                _ => return None,
+            };
+            Some(TermReading {
+                level,
+                drive: d,
+                xyz: r.xyz,
+            })
+        })
+        .collect()
+}
+
+/// Step 5b: with a term kept, the curves again. The greys shaped them as if the display
+/// were additive (`add_grey_excitations`), so each grey is first corrected by what the
+/// terms add at its level; the law kept is fitted again to every channel, and the terms'
+/// coefficients again on the new curves. Without a term, or when a channel's law no
+/// longer fits, the model of `choice` is kept as it is.
+fn refit_curves_for_terms(
+    additive: &MonitorModel,
+    choice: &TermChoice,
+    ramps: &[ChannelRamp; 3],
+    greys: &[(usize, f64, Xyz)],
+    readings: &[TermReading],
+    noise: &NoiseModel,
+    (max_condition, toe): (f64, f64),
+) -> MonitorModel {
+    let kept = MonitorModel {
+        terms: choice.terms.clone(),
+        ..additive.clone()
+    };
+    if choice.terms.is_empty() {
+        return kept;
+    }
+    let corrected_greys: Vec<(usize, f64, Xyz)> = greys
+        .iter()
+        .map(|(index, level, xyz)| {
+            let added = kept.forward_centre([*level; 3]) - additive.forward_centre([*level; 3]);
+            (*index, *level, xyz - added)
+        })
+        .collect();
+    let mut ramps = ramps.clone();
+    for ramp in ramps.iter_mut() {
+        ramp.grey_points.clear();
+    }
+    add_grey_excitations(
+        &mut ramps,
+        &corrected_greys,
+        &additive.black,
+        noise,
+        max_condition,
+    );
+    let kind = additive.laws[0].kind();
+    let mut refitted = additive.clone();
+    for (c, ramp) in ramps.iter().enumerate() {
+        let Ok(fit) = laws::fit_law(kind, ramp, toe) else {
+            return kept;
+        };
+        refitted.matrix.set_column(c, &ramp.column(fit.amplitude));
+        refitted.laws[c] = fit.law;
+    }
+    let all: Vec<&TermReading> = readings.iter().collect();
+    with_terms(&refitted, choice.chosen, &all, noise).map_or(kept, |(model, _)| model)
 }
 
 /// The corrected readings of one role.

@@ -15,6 +15,18 @@ use super::stats::{mean, standard_deviation};
 /// held-out item (the same items, in the same order, for every candidate); `None`
 /// marks a candidate that could not be scored. `None` overall when no candidate was.
 pub fn simplest_within_noise(errors: &[Option<Vec<f64>>], noise_tolerance: f64) -> Option<usize> {
+    simplest_within(errors, noise_tolerance, 1.0)
+}
+
+/// As [`simplest_within_noise`], with the bound on the paired mean difference at
+/// `standard_errors` standard errors instead of one: a stricter test for a candidate
+/// that adds a term to the model rather than choosing among laws (two standard errors
+/// keep a useless term's chance of being kept near 2 %, one-sided).
+pub fn simplest_within(
+    errors: &[Option<Vec<f64>>],
+    noise_tolerance: f64,
+    standard_errors: f64,
+) -> Option<usize> {
     let best = errors
         .iter()
         .enumerate()
@@ -32,7 +44,7 @@ pub fn simplest_within_noise(errors: &[Option<Vec<f64>>], noise_tolerance: f64) 
             .zip(best_errors)
             .map(|(c, b)| c - b)
             .collect();
-        let se = standard_deviation(&d) / (d.len() as f64).sqrt();
+        let se = standard_errors * standard_deviation(&d) / (d.len() as f64).sqrt();
         if mean(&d) <= se.max(noise_tolerance) {
             return Some(k);
         }

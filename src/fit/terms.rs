@@ -1,0 +1,344 @@
+//! Which corrections to the additive model to keep (`model::monitor::AdditivityTerms`):
+//! channel interaction (γ, 3 coefficients) and drive-dependent primary chromaticity
+//! (u, 9 coefficients). Both are linear in their coefficients once the curves and the
+//! primary matrix are fitted, so each is a weighted least-squares fit (weights 1/σ²
+//! from the run's noise) to what the additive model leaves over: u of each channel on
+//! its own ramp (greys cannot tell one channel's shift from another's, and fitting
+//! nine coefficients to them is ill-posed), then γ on the greys and whites.
+//!
+//! "Model only what is needed": the four candidates (none, interaction, shift, both)
+//! are cross-validated over drive levels as the laws are (`law_selection`): the levels
+//! are dealt into at most `MAX_FOLDS` folds, each left out in turn, the coefficients
+//! fitted without it and its readings predicted, in ΔE00 against the display's white.
+//! The simplest candidate within noise of the best is kept (`select::simplest_within`),
+//! with a stricter bound than the laws' (two standard errors, and at least what noise
+//! does to one reading): on additive virtual monitors that keeps a term in under 5 % of
+//! runs (`tests/additivity_terms.rs`). The curves are
+//! held fixed in this comparison; when a term is kept the curves are fitted again with
+//! the greys corrected by it (`fit::refit_curves_for_terms`), since the greys shaped
+//! them as if the display were additive.
+
+use nalgebra::{DMatrix, DVector, Matrix3};
+use serde::{Deserialize, Serialize};
+
+use super::law_selection::MAX_FOLDS;
+use super::noise::NoiseModel;
+use super::select::simplest_within;
+use super::stats::ErrorStats;
+use super::validate::{delta_e00_xyz, noise_delta_e00};
+use crate::color::Xyz;
+use crate::model::monitor::{
+    AdditivityTerms, chromaticity_shift_basis, drive_shares, interaction_basis,
+};
+use crate::model::{Drive, MonitorModel};
+
+/// A reading the terms are fitted to: a ramp reading, a grey or a white, at the
+/// centre under the usual surround.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TermReading {
+    /// The drive level it is left out with (its channel's drive, or the grey's).
+    pub level: f64,
+    pub drive: Drive,
+    pub xyz: Xyz,
+}
+
+/// The candidates, in order of complexity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TermSet {
+    None,
+    Interaction,
+    ChromaticityShift,
+    Both,
+}
+
+impl TermSet {
+    pub const ALL: [TermSet; 4] = [
+        TermSet::None,
+        TermSet::Interaction,
+        TermSet::ChromaticityShift,
+        TermSet::Both,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            TermSet::None => "additive (no term)",
+            TermSet::Interaction => "channel interaction",
+            TermSet::ChromaticityShift => "drive-dependent chromaticity",
+            TermSet::Both => "interaction and chromaticity",
+        }
+    }
+
+    fn interaction(self) -> bool {
+        matches!(self, TermSet::Interaction | TermSet::Both)
+    }
+
+    fn shift(self) -> bool {
+        matches!(self, TermSet::ChromaticityShift | TermSet::Both)
+    }
+}
+
+/// One candidate as tried.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TermReport {
+    pub terms: TermSet,
+    pub kept: bool,
+    /// Cross-validated ΔE00 of the left-out readings.
+    pub cross_validation: Option<ErrorStats>,
+    /// Fitted on every reading (empty for none): γ of R, G, B, then u of R, G, B.
+    pub coefficients: Vec<f64>,
+}
+
+/// The terms kept and the comparison behind them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TermChoice {
+    pub terms: AdditivityTerms,
+    pub chosen: TermSet,
+    pub reports: Vec<TermReport>,
+    pub rule: String,
+}
+
+impl TermChoice {
+    /// The additive model, nothing tried, for `why`.
+    pub fn additive(why: &str) -> TermChoice {
+        TermChoice {
+            terms: AdditivityTerms::default(),
+            chosen: TermSet::None,
+            reports: Vec::new(),
+            rule: why.to_string(),
+        }
+    }
+}
+
+/// A term is kept when it lowers the cross-validated mean by more than this many
+/// standard errors of the paired differences...
+const STANDARD_ERRORS: f64 = 2.0;
+/// ...and by more than this share of what noise alone does to one reading.
+const TOLERANCE_SHARE: f64 = 1.0;
+
+/// Is `drive` a single channel's? Its index then.
+fn single_channel(drive: Drive) -> Option<usize> {
+    let lit: Vec<usize> = (0..3).filter(|c| drive[*c] > 0.0).collect();
+    (lit.len() == 1).then(|| lit[0])
+}
+
+/// m_c and u_c of each channel, from its own ramp only (a grey cannot tell one
+/// channel's shift from another's): weighted least squares of the ramp's light above
+/// black on l_c (the law's excitation) and w = ê (1 − ê), each XYZ component apart.
+/// The column is fitted again with u because the additive fit's column points along
+/// the ramp's mean direction, not full drive's, when the chromaticity moves. A channel
+/// whose ramp cannot separate the two (no reading between black and full drive) keeps
+/// its column and gets u_c = 0.
+fn fit_chromaticity_shift(
+    model: &MonitorModel,
+    readings: &[&TermReading],
+    noise: &NoiseModel,
+) -> ([Xyz; 3], [[f64; 3]; 3]) {
+    let full = [0, 1, 2].map(|c| model.laws[c].full_drive_excitation());
+    let mut columns = [0, 1, 2].map(|c| model.matrix.column(c).into_owned());
+    let mut shift = [[0.0; 3]; 3];
+    for c in 0..3 {
+        // Normal equations of [l, w] for all three components at once.
+        let (mut ll, mut lw, mut ww) = (0.0, 0.0, 0.0);
+        let (mut ly, mut wy) = (Xyz::zeros(), Xyz::zeros());
+        for r in readings
+            .iter()
+            .filter(|r| single_channel(r.drive) == Some(c))
+        {
+            let light = model.excitations(r.drive);
+            let w = chromaticity_shift_basis(&drive_shares(&light, &full))[c];
+            let l = light[c];
+            let weight = 1.0 / noise.sigma(r.xyz.norm()).powi(2);
+            let above = r.xyz - model.black;
+            ll += l * l * weight;
+            lw += l * w * weight;
+            ww += w * w * weight;
+            ly += above * (l * weight);
+            wy += above * (w * weight);
+        }
+        let determinant = ll * ww - lw * lw;
+        if !(determinant > 1e-9 * ll * ww) {
+            continue;
+        }
+        columns[c] = (ly * ww - wy * lw) / determinant;
+        shift[c] = ((wy * ll - ly * lw) / determinant).into();
+    }
+    (columns, shift)
+}
+
+/// γ from the readings with more than one channel lit (greys, whites), on what `model`
+/// (with its shift, if any) leaves over: weighted least squares on the columns
+/// m_c l_c s_c, one per channel, each XYZ component weighted by 1/σ. `None` when the
+/// readings cannot tell the three apart.
+fn fit_interaction(
+    model: &MonitorModel,
+    readings: &[&TermReading],
+    noise: &NoiseModel,
+) -> Option<[f64; 3]> {
+    let mixed: Vec<&&TermReading> = readings
+        .iter()
+        .filter(|r| single_channel(r.drive).is_none())
+        .collect();
+    if mixed.is_empty() {
+        return Some([0.0; 3]);
+    }
+    let full = [0, 1, 2].map(|c| model.laws[c].full_drive_excitation());
+    let mut a = DMatrix::zeros(3 * mixed.len(), 3);
+    let mut b = DVector::zeros(3 * mixed.len());
+    for (i, r) in mixed.iter().enumerate() {
+        let weight = 1.0 / noise.sigma(r.xyz.norm());
+        let light = model.excitations(r.drive);
+        let s = interaction_basis(&drive_shares(&light, &full));
+        let residual = r.xyz - model.forward_centre(r.drive);
+        for c in 0..3 {
+            let column = model.matrix.column(c) * (light[c] * s[c]);
+            for j in 0..3 {
+                a[(3 * i + j, c)] = column[j] * weight;
+            }
+        }
+        for j in 0..3 {
+            b[3 * i + j] = residual[j] * weight;
+        }
+    }
+    let svd = a.svd(true, true);
+    let x = svd.solve(&b, svd.singular_values.max() * 1e-6).ok()?;
+    let gamma = [x[0], x[1], x[2]];
+    gamma.iter().all(|v| v.is_finite()).then_some(gamma)
+}
+
+/// `model` (its additive part) with the terms of `set` fitted to `readings`: the shift
+/// first from the ramps (with the columns it moves), then the interaction from the
+/// greys and whites on top of it.
+fn fit_terms(
+    model: &MonitorModel,
+    set: TermSet,
+    readings: &[&TermReading],
+    noise: &NoiseModel,
+) -> Option<MonitorModel> {
+    let mut fitted = MonitorModel {
+        terms: AdditivityTerms::default(),
+        ..model.clone()
+    };
+    if set.shift() {
+        let (columns, shift) = fit_chromaticity_shift(model, readings, noise);
+        fitted.matrix = Matrix3::from_columns(&columns);
+        fitted.terms.chromaticity_shift = Some(shift);
+    }
+    if set.interaction() {
+        fitted.terms.interaction = Some(fit_interaction(&fitted, readings, noise)?);
+    }
+    Some(fitted)
+}
+
+/// The coefficients of `terms` in the order of `TermReport::coefficients`.
+fn coefficients(terms: &AdditivityTerms) -> Vec<f64> {
+    terms
+        .interaction
+        .into_iter()
+        .flatten()
+        .chain(terms.chromaticity_shift.into_iter().flatten().flatten())
+        .collect()
+}
+
+/// `model` with the terms of `set` fitted to `readings`, and their coefficients.
+pub fn with_terms(
+    model: &MonitorModel,
+    set: TermSet,
+    readings: &[&TermReading],
+    noise: &NoiseModel,
+) -> Option<(MonitorModel, Vec<f64>)> {
+    let fitted = fit_terms(model, set, readings, noise)?;
+    let coefficients = coefficients(&fitted.terms);
+    Some((fitted, coefficients))
+}
+
+/// Cross-validated errors of `set`: every fold's left-out readings in fold order, or
+/// `None` when some fold could not be fitted.
+fn cross_validate(
+    model: &MonitorModel,
+    set: TermSet,
+    readings: &[TermReading],
+    folds: &[Vec<f64>],
+    noise: &NoiseModel,
+    white: &Xyz,
+) -> Option<Vec<f64>> {
+    let mut errors = Vec::new();
+    for held in folds {
+        let training: Vec<&TermReading> = readings
+            .iter()
+            .filter(|r| !held.contains(&r.level))
+            .collect();
+        let (fitted, _) = with_terms(model, set, &training, noise)?;
+        for r in readings.iter().filter(|r| held.contains(&r.level)) {
+            errors.push(delta_e00_xyz(
+                &r.xyz,
+                &fitted.forward_centre(r.drive),
+                white,
+            ));
+        }
+    }
+    Some(errors)
+}
+
+/// Fit and cross-validate each candidate set of terms on `readings` with the curves
+/// and matrix of `model`, and keep the simplest within noise of the best.
+pub fn choose_terms(
+    model: &MonitorModel,
+    readings: &[TermReading],
+    noise: &NoiseModel,
+    white: &Xyz,
+) -> TermChoice {
+    let mut levels: Vec<f64> = readings.iter().map(|r| r.level).collect();
+    levels.sort_by(|a, b| a.total_cmp(b));
+    levels.dedup();
+    let n = levels.len().min(MAX_FOLDS);
+    let folds: Vec<Vec<f64>> = (0..n)
+        .map(|f| levels.iter().skip(f).step_by(n).copied().collect())
+        .collect();
+    let scores: Vec<Option<Vec<f64>>> = TermSet::ALL
+        .iter()
+        .map(|set| cross_validate(model, *set, readings, &folds, noise, white))
+        .collect();
+    let xyz: Vec<Xyz> = readings.iter().map(|r| r.xyz).collect();
+    let tolerance = noise_delta_e00(&xyz, noise, white);
+    let chosen = if n >= 2 {
+        simplest_within(&scores, tolerance * TOLERANCE_SHARE, STANDARD_ERRORS)
+            .map_or(TermSet::None, |k| TermSet::ALL[k])
+    } else {
+        TermSet::None
+    };
+    let all: Vec<&TermReading> = readings.iter().collect();
+    let fitted: Vec<Option<(MonitorModel, Vec<f64>)>> = TermSet::ALL
+        .iter()
+        .map(|set| with_terms(model, *set, &all, noise))
+        .collect();
+    let terms = fitted[TermSet::ALL.iter().position(|s| *s == chosen).unwrap_or(0)]
+        .as_ref()
+        .map(|(m, _)| m.terms.clone())
+        .unwrap_or_default();
+    let reports = TermSet::ALL
+        .iter()
+        .zip(&scores)
+        .zip(&fitted)
+        .map(|((set, score), fit)| TermReport {
+            terms: *set,
+            kept: *set == chosen,
+            cross_validation: score.as_deref().and_then(ErrorStats::of),
+            coefficients: fit.as_ref().map(|f| f.1.clone()).unwrap_or_default(),
+        })
+        .collect();
+    let rule = if n >= 2 {
+        format!(
+            "simplest of additive, interaction, chromaticity shift, both whose ΔE00 on ramp readings, greys and whites left out by level ({n} folds) exceeds the best's by no more than {STANDARD_ERRORS} standard errors (paired) or than noise alone ({:.3})",
+            tolerance * TOLERANCE_SHARE
+        )
+    } else {
+        "fewer than two drive levels to leave out: the additive model is kept".into()
+    };
+    TermChoice {
+        terms,
+        chosen,
+        reports,
+        rule,
+    }
+}
