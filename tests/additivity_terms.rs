@@ -78,6 +78,10 @@ fn additive_monitors_almost_never_get_a_term() {
             }
         }
     }
+    eprintln!(
+        "{} of {runs} additive runs kept a term: {with_a_term:?}",
+        with_a_term.len()
+    );
     assert!(
         (with_a_term.len() as f64) < 0.05 * runs as f64,
         "{} of {runs} additive runs kept a term: {with_a_term:?}",

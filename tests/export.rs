@@ -731,3 +731,51 @@ fn export_errors_name_what_was_wrong() {
     );
     assert!(!Path::new(out).exists(), "nothing is written on an error");
 }
+
+#[test]
+fn terms_an_icc_profile_cannot_carry_are_named_and_the_rest_is_exact() {
+    let dir = tempfile::tempdir().unwrap();
+    let (profile, path) = calibrate(
+        dir.path(),
+        "nonadditive",
+        "[monitor]\npreset = \"crt\"\n[monitor.failures]\nprimary_nonconstancy = 0.03\nchannel_interaction = 0.06\n",
+    );
+    let terms = &profile.model.terms;
+    assert!(
+        terms.interaction.is_some() && terms.chromaticity_shift.is_some(),
+        "{terms:?}"
+    );
+    let icc = dir.path().join("nonadditive.icc");
+    let said = export(&path, "icc4", &icc, &[]);
+    assert!(
+        said.contains("not carried: the model's channel-interaction term"),
+        "{said}"
+    );
+    assert!(
+        said.contains("not carried: the model's drive-dependent primary chromaticity term"),
+        "{said}"
+    );
+    // The warnings of failed checks are not repeated once a term models them.
+    assert!(
+        !said.contains("channel interaction (grey luminance"),
+        "{said}"
+    );
+    // What the profile can carry, the additive part, it carries exactly.
+    let additive = MonitorModel {
+        terms: Default::default(),
+        ..profile.model.clone()
+    };
+    let codes = test_codes();
+    let bytes = std::fs::read(&icc).unwrap();
+    let (worst, at) = worst_against_model(&additive, &codes, &moxcms_lab(&bytes, &codes));
+    assert!(worst < 0.1, "via moxcms: ΔE00 {worst} at {at:?}");
+    // The JSON and TOML exports carry the whole model, terms included.
+    let toml_out = dir.path().join("whole.toml");
+    let said = export(&path, "toml", &toml_out, &[]);
+    assert!(!said.contains("not carried"), "{said}");
+    let text = std::fs::read_to_string(&toml_out).unwrap();
+    assert!(
+        text.contains("chromaticity_shift") && text.contains("interaction"),
+        "{text}"
+    );
+}

@@ -143,7 +143,20 @@ pub fn limitations(profile: &Profile) -> Vec<String> {
         ));
     }
     let checks = &report.checks;
-    if checks.additivity_verdict == Verdict::Fails {
+    let terms = &profile.model.terms;
+    if let Some(gamma) = terms.interaction {
+        notes.push(format!(
+            "the model's channel-interaction term (each channel's light changes by γ = {:+.4}, {:+.4}, {:+.4} per full channel beside it); the curves and matrix are exact without it",
+            gamma[0], gamma[1], gamma[2]
+        ));
+    }
+    if terms.chromaticity_shift.is_some() {
+        notes.push(
+            "the model's drive-dependent primary chromaticity term (the primaries are those of full drive)"
+                .into(),
+        );
+    }
+    if checks.additivity_verdict == Verdict::Fails && terms.interaction.is_none() {
         let worst = checks
             .additivity
             .iter()
@@ -153,7 +166,7 @@ pub fn limitations(profile: &Profile) -> Vec<String> {
             "channel interaction (grey luminance {worst:+.1} % off the sum of its channels)"
         ));
     }
-    if checks.primary_constancy_verdict == Verdict::Fails {
+    if checks.primary_constancy_verdict == Verdict::Fails && terms.chromaticity_shift.is_none() {
         notes.push("primary chromaticities that change with drive".into());
     }
     if checks.spatial_independence_verdict == Verdict::Fails {
