@@ -201,6 +201,7 @@ fn bench(quick: bool, data: &Path, fit_time: bool, budget: bool) -> Result<(), S
     // 1. Fit time per law against readings.
     if fit_time {
         fit_time_table(repeats);
+        whole_fit_times(data, if quick { 3 } else { 11 });
     }
     if !budget {
         return Ok(());
@@ -236,6 +237,38 @@ fn fit_time_table(repeats: usize) {
         .collect();
     let header_refs: Vec<&str> = headers.iter().map(String::as_str).collect();
     print!("{}", table(&header_refs, &rows));
+}
+
+/// Time of the whole fit (black, drift, every law cross-validated, the additivity
+/// terms, the spatial map, the checks) on each real measurement set as it is.
+fn whole_fit_times(data: &Path, repeats: usize) {
+    let sets: Vec<(String, MeasurementSet)> = real_sets(data)
+        .into_iter()
+        .map(|(name, set)| match set {
+            RealSet::One(set) | RealSet::Two(set, _) => (name, set),
+        })
+        .collect();
+    if sets.is_empty() {
+        return;
+    }
+    println!("\nwhole fit on one core, every reading of each real set (median of {repeats}):");
+    let mut rows = Vec::new();
+    for (name, set) in sets {
+        let mut times: Vec<f64> = (0..repeats)
+            .map(|_| {
+                let t = Instant::now();
+                let _ = fit_monitor(&set, &FitOptions::default());
+                t.elapsed().as_secs_f64()
+            })
+            .collect();
+        times.sort_by(|a, b| a.total_cmp(b));
+        rows.push(vec![
+            name,
+            set.measurements.len().to_string(),
+            chromacal::report::duration(times[times.len() / 2]),
+        ]);
+    }
+    print!("{}", table(&["display", "readings", "fit time"], &rows));
 }
 
 /// Held-out ΔE00 against budget, per law and for the law chosen, on each monitor.
