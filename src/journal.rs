@@ -235,6 +235,12 @@ pub fn to_measurement_set(
     }
 }
 
+/// How many patches a sequential run may add beyond its seed plan (none for a fixed
+/// plan): they are numbered on from the plan's end, and never more than its budget.
+fn sequential_room(header: &JournalHeader) -> usize {
+    header.plan.sequential.as_ref().map_or(0, |s| s.budget)
+}
+
 /// Header, entries, what was repaired, and the byte length of the good part.
 fn parse(
     text: &str,
@@ -280,7 +286,7 @@ fn parse(
         }
         match serde_json::from_str::<Measurement>(piece.trim_end()) {
             Ok(m) if complete => {
-                if m.index >= header.plan.patches.len() {
+                if m.index >= header.plan.patches.len() + sequential_room(&header) {
                     return Err(JournalError::NotInPlan {
                         path: path.to_path_buf(),
                         line,

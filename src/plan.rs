@@ -42,6 +42,31 @@ pub struct PlanConfig {
     pub patch_size: f64,
     /// Seed of the patch order and of the verification set.
     pub seed: u64,
+    /// `fixed`: every patch planned before the run; `sequential`: a seed plan of
+    /// `seed_budget` patches, then each next patch where the model is least sure, until
+    /// the estimated held-out error meets `target_de00` or `budget` is spent.
+    pub strategy: Strategy,
+    /// Counted patches of a sequential run's seed plan.
+    pub seed_budget: usize,
+    /// A sequential run stops when its estimated held-out mean ΔE00 is at most this.
+    pub target_de00: f64,
+}
+
+/// How the patches of a run are chosen.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Strategy {
+    #[default]
+    Fixed,
+    Sequential,
+}
+
+/// The limits of a sequential run, kept in its plan (and so in its journal's header).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SequentialLimits {
+    /// Most counted patches, the seed plan's included.
+    pub budget: usize,
+    pub target_de00: f64,
 }
 
 impl Default for PlanConfig {
@@ -54,6 +79,9 @@ impl Default for PlanConfig {
             bit_depth: 8,
             patch_size: 0.2,
             seed: 7,
+            strategy: Strategy::Fixed,
+            seed_budget: 16,
+            target_de00: 0.2,
         }
     }
 }
@@ -71,6 +99,12 @@ pub enum PlanError {
     PatchSize(f64),
     #[error("plan.uniformity_grid is below 2: there is no grid to measure")]
     NoGrid,
+    #[error(
+        "plan.seed_budget ({seed}) is above plan.budget ({budget}): the seed plan is part of the budget"
+    )]
+    SeedAboveBudget { seed: usize, budget: usize },
+    #[error("plan.target_de00 must be a number of at least 0, not {0}")]
+    Target(f64),
 }
 
 /// One patch of the plan.
@@ -108,6 +142,10 @@ pub struct BudgetBreakdown {
 pub struct Plan {
     pub patches: Vec<PlannedPatch>,
     pub budget: BudgetBreakdown,
+    /// Set for a sequential run: `patches` is its seed plan, and the journal may hold
+    /// patches beyond it, numbered on from its end (`calibrate::sequential`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequential: Option<SequentialLimits>,
 }
 
 /// Drive levels for `n` ramp steps, evenly spaced in CIE L* of a nominal
@@ -248,6 +286,7 @@ pub fn make_verification_plan(config: &PlanConfig, n: usize) -> Result<Plan, Pla
     let patches = numbered(patches);
     let verification = patches.len();
     Ok(Plan {
+        sequential: None,
         patches,
         budget: BudgetBreakdown {
             black: 0,
@@ -288,6 +327,7 @@ pub fn make_uniformity_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
     }
     let references = patches.len() - uniformity;
     Ok(Plan {
+        sequential: None,
         patches: numbered(patches),
         budget: BudgetBreakdown {
             black: 0,
@@ -302,8 +342,36 @@ pub fn make_uniformity_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
     })
 }
 
-/// Build the patch sequence for `config`.
+/// Build the patch sequence for `config`: all of it for a fixed plan, the seed plan
+/// for a sequential one.
 pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
+    match config.strategy {
+        Strategy::Fixed => make_fixed_plan(config),
+        Strategy::Sequential => {
+            if config.seed_budget > config.budget {
+                return Err(PlanError::SeedAboveBudget {
+                    seed: config.seed_budget,
+                    budget: config.budget,
+                });
+            }
+            if !(config.target_de00 >= 0.0) {
+                return Err(PlanError::Target(config.target_de00));
+            }
+            let mut plan = make_fixed_plan(&PlanConfig {
+                budget: config.seed_budget,
+                ..config.clone()
+            })?;
+            plan.sequential = Some(SequentialLimits {
+                budget: config.budget,
+                target_de00: config.target_de00,
+            });
+            Ok(plan)
+        }
+    }
+}
+
+/// Build the whole patch sequence for `config`'s budget.
+fn make_fixed_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
     if !(1..=16).contains(&config.bit_depth) {
         return Err(PlanError::BitDepth(config.bit_depth));
     }
@@ -424,6 +492,7 @@ pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
         });
     }
     Ok(Plan {
+        sequential: None,
         patches,
         budget: BudgetBreakdown {
             black,

@@ -4,5 +4,6 @@ pub mod devices;
 pub mod refine;
 pub mod rig;
 pub mod run;
+pub mod sequential;
 pub mod session;
 pub mod warmup;

@@ -8,6 +8,7 @@ use crate::instrument::{Instrument, InstrumentError, Reading, ReadingStatus};
 use crate::journal::{Journal, JournalError};
 use crate::measurement::{Measurement, Role};
 use crate::model::ScreenPosition;
+use crate::plan::PlannedPatch;
 use crate::time::TimeSource;
 
 /// Attempts per patch before a run gives up on an instrument error.
@@ -92,7 +93,7 @@ pub struct Progress {
 }
 
 /// What a run did.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RunSummary {
     /// Patches measured by this call.
     pub measured_now: usize,
@@ -104,6 +105,10 @@ pub struct RunSummary {
     pub unsettled: usize,
     /// Integration seconds those extra readings took.
     pub extra_read_s: f64,
+    /// For a sequential plan: patches it added beyond its seed plan (in every call),
+    /// and why it stopped adding, in words.
+    pub sequential_added: usize,
+    pub sequential_stop: Option<String>,
 }
 
 /// One reading, retried on instrument errors and on non-finite values.
@@ -132,6 +137,32 @@ async fn read<I: Instrument>(
     })
 }
 
+/// What a run has done so far, across patches (and across the seed plan and the
+/// sequential patches of a sequential run).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Tally {
+    pub measured_now: usize,
+    pub extra_reads: usize,
+    pub unsettled: usize,
+    pub extra_read_s: f64,
+    /// Where the instrument was last aimed (asked again only when the patch moves).
+    aimed_at: Option<ScreenPosition>,
+}
+
+impl Tally {
+    pub fn summary(&self, already_measured: usize) -> RunSummary {
+        RunSummary {
+            measured_now: self.measured_now,
+            already_measured,
+            extra_reads: self.extra_reads,
+            unsettled: self.unsettled,
+            extra_read_s: self.extra_read_s,
+            sequential_added: 0,
+            sequential_stop: None,
+        }
+    }
+}
+
 /// Measure every patch of the journal's plan that it does not have yet.
 pub async fn run_plan<D: PatchDisplay, I: Instrument>(
     journal: &mut Journal,
@@ -152,103 +183,131 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
         .cloned()
         .collect();
     let total = journal.header().plan.patches.len();
-    let mut measured_now = 0;
-    let (mut extra_reads, mut unsettled, mut extra_read_s) = (0, 0, 0.0);
-    let mut aimed_at: Option<ScreenPosition> = None;
+    let mut tally = Tally::default();
     for planned in todo {
-        if hooks.stop.is_some_and(|stop| stop()) {
-            let _ = display.blank().await;
-            return Err(RunError::Stopped {
-                done: journal.entries().len(),
-                total,
-            });
-        }
-        let position = planned.patch.geometry.centre();
-        if let Err(e) = display.show(&planned.patch).await {
-            let _ = display.blank().await;
-            return Err(e.into());
-        }
-        // With the patch already where it will be read, so that it can be aimed at.
-        if let Some(prompt) = hooks.prompt.as_mut()
-            && aimed_at != Some(position)
-        {
-            if let Err(message) = prompt(position) {
-                let _ = display.blank().await;
-                return Err(RunError::Position {
-                    index: planned.index,
-                    message,
-                });
-            }
-            aimed_at = Some(position);
-        }
-        let mut reading = match read(instrument, options.attempts, planned.index).await {
-            Ok(r) => r,
-            Err(e) => {
-                let _ = display.blank().await;
-                return Err(e);
-            }
+        let devices = Devices {
+            display: &mut *display,
+            instrument: &mut *instrument,
+            clock,
         };
-        if let Some(stability) = options.stability {
-            let mut reads = 1;
-            let mut agreed = false;
-            while reads < stability.max_reads.max(2) {
-                let next = match read(instrument, options.attempts, planned.index).await {
-                    Ok(r) => r,
-                    Err(e) => {
-                        let _ = display.blank().await;
-                        return Err(e);
-                    }
-                };
-                reads += 1;
-                extra_read_s += reading.integration_s;
-                agreed = stability.agree(&reading, &next);
-                reading = next;
-                if agreed {
-                    break;
-                }
-            }
-            extra_reads += reads - 1;
-            if !agreed {
-                unsettled += 1;
-                tracing::warn!(
-                    index = planned.index,
-                    reads,
-                    "readings never agreed; kept the last"
-                );
-            }
-        }
-        let time_s = clock.now() - reading.integration_s / 2.0;
-        let progress = Progress {
-            done: journal.entries().len() + 1,
-            total,
-            index: planned.index,
-            role: planned.role,
-            luminance: reading.luminance(),
-            xyz: reading.xyz,
-            drive: planned.patch.codes.drive(),
-            position: planned.position(),
-            status: reading.status,
-        };
-        journal.append(Measurement {
-            index: planned.index,
-            role: planned.role,
-            drive: planned.patch.codes.drive(),
-            codes: Some(planned.patch.codes),
-            position: planned.position(),
-            background: planned.patch.background.drive(),
-            time_s: Some(time_s),
-            reading,
-        })?;
-        measured_now += 1;
-        tracing::debug!(index = planned.index, role = ?planned.role, "measured");
-        (hooks.progress)(&progress);
+        measure_patch(
+            &planned, total, journal, devices, options, hooks, &mut tally,
+        )
+        .await?;
     }
     display.blank().await?;
-    Ok(RunSummary {
-        measured_now,
-        already_measured,
-        extra_reads,
-        unsettled,
-        extra_read_s,
-    })
+    Ok(tally.summary(already_measured))
+}
+
+/// The display, instrument and clock a patch is measured with.
+pub struct Devices<'d, D, I> {
+    pub display: &'d mut D,
+    pub instrument: &'d mut I,
+    pub clock: &'d dyn TimeSource,
+}
+
+/// Show `planned`, let it settle, read it (again until two readings agree, with a
+/// stability check) and append the reading to the journal before returning. `total`
+/// is what progress reports count to. On an error the screen is blanked.
+pub async fn measure_patch<D: PatchDisplay, I: Instrument>(
+    planned: &PlannedPatch,
+    total: usize,
+    journal: &mut Journal,
+    devices: Devices<'_, D, I>,
+    options: &RunOptions,
+    hooks: &mut RunHooks<'_>,
+    tally: &mut Tally,
+) -> Result<(), RunError> {
+    let Devices {
+        display,
+        instrument,
+        clock,
+    } = devices;
+    if hooks.stop.is_some_and(|stop| stop()) {
+        let _ = display.blank().await;
+        return Err(RunError::Stopped {
+            done: journal.entries().len(),
+            total,
+        });
+    }
+    let position = planned.patch.geometry.centre();
+    if let Err(e) = display.show(&planned.patch).await {
+        let _ = display.blank().await;
+        return Err(e.into());
+    }
+    // With the patch already where it will be read, so that it can be aimed at.
+    if let Some(prompt) = hooks.prompt.as_mut()
+        && tally.aimed_at != Some(position)
+    {
+        if let Err(message) = prompt(position) {
+            let _ = display.blank().await;
+            return Err(RunError::Position {
+                index: planned.index,
+                message,
+            });
+        }
+        tally.aimed_at = Some(position);
+    }
+    let mut reading = match read(instrument, options.attempts, planned.index).await {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = display.blank().await;
+            return Err(e);
+        }
+    };
+    if let Some(stability) = options.stability {
+        let mut reads = 1;
+        let mut agreed = false;
+        while reads < stability.max_reads.max(2) {
+            let next = match read(instrument, options.attempts, planned.index).await {
+                Ok(r) => r,
+                Err(e) => {
+                    let _ = display.blank().await;
+                    return Err(e);
+                }
+            };
+            reads += 1;
+            tally.extra_read_s += reading.integration_s;
+            agreed = stability.agree(&reading, &next);
+            reading = next;
+            if agreed {
+                break;
+            }
+        }
+        tally.extra_reads += reads - 1;
+        if !agreed {
+            tally.unsettled += 1;
+            tracing::warn!(
+                index = planned.index,
+                reads,
+                "readings never agreed; kept the last"
+            );
+        }
+    }
+    let time_s = clock.now() - reading.integration_s / 2.0;
+    let progress = Progress {
+        done: journal.entries().len() + 1,
+        total,
+        index: planned.index,
+        role: planned.role,
+        luminance: reading.luminance(),
+        xyz: reading.xyz,
+        drive: planned.patch.codes.drive(),
+        position: planned.position(),
+        status: reading.status,
+    };
+    journal.append(Measurement {
+        index: planned.index,
+        role: planned.role,
+        drive: planned.patch.codes.drive(),
+        codes: Some(planned.patch.codes),
+        position: planned.position(),
+        background: planned.patch.background.drive(),
+        time_s: Some(time_s),
+        reading,
+    })?;
+    tally.measured_now += 1;
+    tracing::debug!(index = planned.index, role = ?planned.role, "measured");
+    (hooks.progress)(&progress);
+    Ok(())
 }

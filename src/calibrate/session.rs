@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
 
 use super::devices::{Devices, DevicesError, Overrides, open_devices};
-use super::run::{PositionPrompt, Progress, RunError, RunHooks, RunOptions, RunSummary, run_plan};
+use super::run::{PositionPrompt, Progress, RunError, RunHooks, RunOptions, RunSummary};
+use super::sequential::measure_run;
 use crate::calibrate::rig::SimulatedRig;
 use crate::config::digest;
 use crate::config::{Config, ConfigError, LoadedConfig, PublishConfig, check_config, parse_config};
@@ -162,7 +163,12 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
         stability: config.display.stability,
         ..RunOptions::default()
     };
-    let run = run_plan(journal, display, instrument, clock, &options, hooks)
+    let devices = super::run::Devices {
+        display,
+        instrument,
+        clock,
+    };
+    let run = measure_run(journal, config, devices, &options, hooks)
         .await
         .map_err(|source| CalibrateError::Run {
             source,
@@ -445,11 +451,15 @@ pub async fn measure_simulated(
         plan: make_plan(&config.plan)?,
     };
     let mut journal = Journal::create(journal_path, header)?;
-    run_plan(
+    let devices = super::run::Devices {
+        display: &mut rig.display,
+        instrument: &mut rig.instrument,
+        clock: rig.clock.as_ref(),
+    };
+    measure_run(
         &mut journal,
-        &mut rig.display,
-        &mut rig.instrument,
-        rig.clock.as_ref(),
+        config,
+        devices,
         &RunOptions::default(),
         &mut RunHooks::progress(&mut |_| {}),
     )

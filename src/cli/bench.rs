@@ -87,11 +87,87 @@ fn monitors(data: &Path) -> Vec<Monitor> {
 }
 
 fn config_for(monitor: &Monitor, budget: usize, seed: u64) -> Result<Config, String> {
+    plan_config(monitor, &format!("budget = {budget}"), seed)
+}
+
+/// The config of a run of `monitor` with `plan` (lines of its `[plan]` section).
+fn plan_config(monitor: &Monitor, plan: &str, seed: u64) -> Result<Config, String> {
     let text = format!(
-        "[monitor]\n{}\n[instrument.simulated]\nseed = {seed}\n[plan]\nbudget = {budget}\nseed = {seed}\n",
+        "[monitor]\n{}\n[instrument.simulated]\nseed = {seed}\n[plan]\n{plan}\nseed = {seed}\n",
         monitor.section
     );
     parse_config(&text, &monitor.name).map_err(|e| e.to_string())
+}
+
+/// Held-out ΔE00 against counted patches for fixed plans and for the sequential plan,
+/// on each virtual monitor, beside the instrument's repeatability.
+fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
+    let dir = std::env::temp_dir().join(format!("chromacal-sequential-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let plans: Vec<(String, String)> = [16usize, 24, 32, 48]
+        .iter()
+        .map(|b| (format!("fixed, {b}"), format!("budget = {b}")))
+        .chain([32usize, 48].iter().map(|b| {
+            (
+                format!("sequential, seed 16, up to {b}"),
+                format!(
+                    "strategy = \"sequential\"\nseed_budget = 16\nbudget = {b}\ntarget_de00 = 0.0"
+                ),
+            )
+        }))
+        .chain(std::iter::once((
+            "sequential to estimate 0.2, up to 64".to_string(),
+            "strategy = \"sequential\"\nseed_budget = 16\nbudget = 64\ntarget_de00 = 0.2"
+                .to_string(),
+        )))
+        .collect();
+    println!(
+        "\nfixed against sequential plans: held-out ΔE00 on 24 verification patches (mean over {} seeds), counted patches measured:",
+        seeds.len()
+    );
+    for monitor in monitors(data) {
+        let mut rows = Vec::new();
+        let mut floor = Vec::new();
+        for (name, plan) in &plans {
+            let (mut means, mut p95s, mut counts) = (Vec::new(), Vec::new(), Vec::new());
+            for seed in seeds {
+                let config = plan_config(&monitor, plan, *seed)?;
+                let tag = format!("{}-{seed}", monitor.name.replace(' ', "_"));
+                let set = simulate(&config, &dir, &tag)?;
+                floor.extend(white_repeat_differences(&set));
+                counts.push(chromacal::calibrate::sequential::counted(&set) as f64);
+                if let Some(s) = fit_monitor(&set, &config.fit)
+                    .ok()
+                    .and_then(|f| f.report.held_out)
+                {
+                    means.push(s.mean);
+                    p95s.push(s.p95);
+                }
+            }
+            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+            rows.push(vec![
+                name.clone(),
+                format!("{:.1}", mean(&counts)),
+                if means.len() == seeds.len() {
+                    format!("{:.3} / {:.3}", mean(&means), mean(&p95s))
+                } else {
+                    format!("fails ({}/{})", seeds.len() - means.len(), seeds.len())
+                },
+            ]);
+        }
+        let floor = ErrorStats::of(&floor).map_or(f64::NAN, |f| f.mean);
+        println!(
+            "\n{}: the instrument's repeatability (consecutive reference whites) {floor:.3}, 1.5 × that {:.3}",
+            monitor.name,
+            1.5 * floor
+        );
+        print!(
+            "{}",
+            table(&["plan", "counted patches", "held-out mean / p95"], &rows)
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
 }
 
 /// Measure a simulated run into a journal under `dir` and return its measurements.
@@ -169,8 +245,8 @@ pub struct BenchArgs {
     /// Candidate laws for the ArgyllCMS comparison (comma-separated) [default: all].
     #[arg(long, value_delimiter = ',')]
     laws: Option<Vec<LawArg>>,
-    /// Only these tables (comma-separated): fit-time, budget, argyll.
-    #[arg(long, value_delimiter = ',', value_parser = ["fit-time", "budget", "argyll"])]
+    /// Only these tables (comma-separated): fit-time, budget, sequential, argyll.
+    #[arg(long, value_delimiter = ',', value_parser = ["fit-time", "budget", "sequential", "argyll"])]
     only: Vec<String>,
 }
 
@@ -179,6 +255,14 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
     let wanted = |table: &str| args.only.is_empty() || args.only.iter().any(|o| o == table);
     if wanted("fit-time") || wanted("budget") {
         bench(args.quick, &data, wanted("fit-time"), wanted("budget"))?;
+    }
+    if wanted("sequential") {
+        let seeds: Vec<u64> = if args.quick {
+            vec![1, 2]
+        } else {
+            (1..=5).collect()
+        };
+        sequential_table(&data, &seeds)?;
     }
     if wanted("argyll") {
         let mut options = FitOptions::default();

@@ -113,6 +113,12 @@ fn calibrate(
             "  patches measured: {}\n",
             report::budget_line(&outcome.plan.budget)
         );
+        if let Some(stop) = &outcome.run.sequential_stop {
+            out += &format!(
+                "  sequential plan: {} patches added to the seed plan's; stopped: {stop}\n",
+                outcome.run.sequential_added
+            );
+        }
         if outcome.run.extra_reads > 0 || outcome.run.unsettled > 0 {
             out += &format!(
                 "  stability check: {} extra readings; {} patches never agreed (last reading kept)\n",

@@ -34,6 +34,7 @@ pub mod select;
 pub mod spatial;
 pub mod stats;
 pub mod terms;
+pub mod uncertainty;
 pub mod validate;
 
 use nalgebra::Matrix3;

@@ -1,0 +1,326 @@
+//! The sequential plan: after the seed plan, each next patch where the model is least
+//! sure, until the estimated held-out error meets the target or the budget is spent.
+//!
+//! Each step fits the model to everything in the journal (`fit::fit_monitor`), takes
+//! the chosen law's cross-validated mean ΔE00 as the estimate of its held-out error
+//! (the verification patches are never looked at: their error stays honest), and stops
+//! when it is at most `plan.target_de00`. Otherwise every candidate patch (each channel
+//! alone and the grey at 31 levels, 1/32 apart, not measured yet) is scored by the
+//! spread of models fitted without folds of levels (`fit::uncertainty`), and the one
+//! with the largest spread is measured and journaled before the next step.
+//!
+//! The choice depends on nothing but the journal, so a resumed run (`--resume`) goes
+//! on exactly as the run it resumes would have: the same next patch from the same
+//! readings.
+
+use super::run::{
+    Devices, RunError, RunHooks, RunOptions, RunSummary, Tally, measure_patch, run_plan,
+};
+use crate::color::Xyz;
+use crate::config::Config;
+use crate::display::PatchDisplay;
+use crate::fit::uncertainty::{fold_models, prediction_spread};
+use crate::fit::{FitError, FittedModel, fit_monitor};
+use crate::instrument::Instrument;
+use crate::journal::Journal;
+use crate::measurement::{MeasurementSet, Role};
+use crate::model::{Drive, MonitorModel};
+use crate::plan::{Plan, PlannedPatch};
+use crate::screen::{Codes, Geometry, Patch};
+
+/// Candidate levels: k / `GRID` for k = 1 … GRID − 1.
+const GRID: usize = 32;
+
+/// Why a sequential run stopped adding patches.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Stop {
+    /// The estimated held-out mean ΔE00 met the target.
+    TargetMet { estimate: f64 },
+    /// The counted patches reached the budget.
+    BudgetSpent { estimate: Option<f64> },
+    /// Every candidate has been measured.
+    NoCandidate { estimate: Option<f64> },
+    /// The readings so far could not be fitted; the run goes on to the fit, which says
+    /// why.
+    Unfitted(FitError),
+}
+
+impl std::fmt::Display for Stop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let said = |e: &Option<f64>| e.map_or(String::new(), |e| format!(" (estimate {e:.3})"));
+        match self {
+            Stop::TargetMet { estimate } => {
+                write!(f, "estimated held-out ΔE00 {estimate:.3} met the target")
+            }
+            Stop::BudgetSpent { estimate } => write!(f, "budget spent{}", said(estimate)),
+            Stop::NoCandidate { estimate } => {
+                write!(f, "every candidate level measured{}", said(estimate))
+            }
+            Stop::Unfitted(e) => write!(f, "the readings so far could not be fitted: {e}"),
+        }
+    }
+}
+
+/// The next step of a sequential run: a patch to measure, or why to stop.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Step {
+    Measure {
+        patch: PlannedPatch,
+        /// Its prediction spread, ΔE00.
+        spread: f64,
+        estimate: Option<f64>,
+    },
+    Stop(Stop),
+}
+
+/// What a sequential run did beyond its seed plan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SequentialSummary {
+    /// Patches added beyond the seed plan (in this call and before it).
+    pub added: usize,
+    /// Counted patches at the end (black, ramps, greys, surround, references).
+    pub counted: usize,
+    pub stop: Stop,
+}
+
+/// Readings of the kinds the budget counts.
+pub fn counted(set: &MeasurementSet) -> usize {
+    set.measurements
+        .iter()
+        .filter(|m| {
+            matches!(
+                m.role,
+                Role::Black | Role::Ramp | Role::Grey | Role::Surround | Role::Reference
+            )
+        })
+        .count()
+}
+
+/// The estimate of held-out error a sequential run stops on, the larger of two: the
+/// chosen law's cross-validated mean ΔE00 over ramps and greys left out by level, and
+/// the mean prediction spread (`fit::uncertainty`) at the drives of the plan's
+/// verification patches (their drives only: their readings are never looked at). The
+/// first alone is optimistic where mixtures sit between the levels measured.
+pub fn estimated_error(
+    fitted: &FittedModel,
+    folds: &[MonitorModel],
+    plan: &Plan,
+    white: &Xyz,
+) -> Option<f64> {
+    let cross_validated = fitted
+        .report
+        .laws
+        .iter()
+        .find(|l| l.chosen)
+        .and_then(|l| l.cross_validation)
+        .map(|s| s.mean)?;
+    let drives: Vec<Drive> = plan
+        .patches
+        .iter()
+        .filter(|p| p.role == Role::Verification)
+        .map(|p| p.patch.codes.drive())
+        .collect();
+    let spread = drives
+        .iter()
+        .map(|d| prediction_spread(&fitted.model, folds, *d, white))
+        .sum::<f64>()
+        / drives.len().max(1) as f64;
+    Some(cross_validated.max(spread))
+}
+
+/// The candidate drives: each channel alone and the grey at k / GRID, in that order,
+/// as codes of `bit_depth`, without those measured already.
+fn candidates(set: &MeasurementSet, bit_depth: u32) -> Vec<Codes> {
+    let measured: Vec<Codes> = set.measurements.iter().filter_map(|m| m.codes).collect();
+    let mut out: Vec<Codes> = Vec::new();
+    for which in 0..4 {
+        for k in 1..GRID {
+            let v = k as f64 / GRID as f64;
+            let drive: Drive = match which {
+                3 => [v; 3],
+                c => {
+                    let mut d = [0.0; 3];
+                    d[c] = v;
+                    d
+                }
+            };
+            let codes = Codes::from_drive(drive, bit_depth);
+            if !measured.contains(&codes) && !out.contains(&codes) {
+                out.push(codes);
+            }
+        }
+    }
+    out
+}
+
+/// The next step for the readings in `journal`, under `config`: deterministic in the
+/// journal's readings.
+pub fn next_step(journal: &Journal, config: &Config) -> Step {
+    let header = journal.header();
+    let Some(limits) = &header.plan.sequential else {
+        return Step::Stop(Stop::BudgetSpent { estimate: None });
+    };
+    let set = journal.measurement_set();
+    let fitted = match fit_monitor(&set, &config.fit) {
+        Ok(f) => f,
+        Err(e) => return Step::Stop(Stop::Unfitted(e)),
+    };
+    let Some(law) = fitted.report.chosen_law() else {
+        return Step::Stop(Stop::BudgetSpent { estimate: None });
+    };
+    let folds = fold_models(&set, &config.fit, law);
+    let white: Xyz = set.mean_white().unwrap_or_else(|| fitted.model.white());
+    let estimate = estimated_error(&fitted, &folds, &header.plan, &white);
+    if let Some(e) = estimate
+        && e <= limits.target_de00
+    {
+        return Step::Stop(Stop::TargetMet { estimate: e });
+    }
+    if counted(&set) >= limits.budget {
+        return Step::Stop(Stop::BudgetSpent { estimate });
+    }
+    let bit_depth = config.plan.bit_depth;
+    let best = candidates(&set, bit_depth)
+        .into_iter()
+        .map(|codes| {
+            let spread = prediction_spread(&fitted.model, &folds, codes.drive(), &white);
+            (codes, spread)
+        })
+        .fold(
+            None,
+            |best: Option<(Codes, f64)>, (codes, spread)| match best {
+                Some((_, s)) if s >= spread => best,
+                _ => Some((codes, spread)),
+            },
+        );
+    let Some((codes, spread)) = best else {
+        return Step::Stop(Stop::NoCandidate { estimate });
+    };
+    let drive = codes.drive();
+    let role = if drive[0] == drive[1] && drive[1] == drive[2] {
+        Role::Grey
+    } else {
+        Role::Ramp
+    };
+    let added = journal
+        .entries()
+        .iter()
+        .filter(|m| m.index >= header.plan.patches.len())
+        .count();
+    Step::Measure {
+        patch: PlannedPatch {
+            index: header.plan.patches.len() + added,
+            role,
+            patch: Patch {
+                codes,
+                background: Codes::from_drive([0.0; 3], bit_depth),
+                geometry: Geometry::centred(config.plan.patch_size),
+            },
+        },
+        spread,
+        estimate,
+    }
+}
+
+/// Measure patches chosen one at a time (`next_step`) until the run should stop. The
+/// seed plan must be measured first (`run::run_plan`).
+pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
+    journal: &mut Journal,
+    config: &Config,
+    devices: Devices<'_, D, I>,
+    options: &RunOptions,
+    hooks: &mut RunHooks<'_>,
+    tally: &mut Tally,
+) -> Result<SequentialSummary, RunError> {
+    let Devices {
+        display,
+        instrument,
+        clock,
+    } = devices;
+    let seed_plan = journal.header().plan.patches.len();
+    let budget = journal
+        .header()
+        .plan
+        .sequential
+        .as_ref()
+        .map_or(0, |s| s.budget);
+    loop {
+        let step = next_step(journal, config);
+        let patch = match step {
+            Step::Stop(stop) => {
+                display.blank().await?;
+                let set = journal.measurement_set();
+                return Ok(SequentialSummary {
+                    added: journal.entries().len().saturating_sub(seed_plan),
+                    counted: counted(&set),
+                    stop,
+                });
+            }
+            Step::Measure {
+                patch,
+                spread,
+                estimate,
+            } => {
+                tracing::info!(
+                    index = patch.index,
+                    drive = ?patch.patch.codes.drive(),
+                    spread,
+                    estimate,
+                    "sequential plan: next patch"
+                );
+                patch
+            }
+        };
+        let total =
+            journal.entries().len() + budget.saturating_sub(counted(&journal.measurement_set()));
+        let devices = Devices {
+            display: &mut *display,
+            instrument: &mut *instrument,
+            clock,
+        };
+        measure_patch(&patch, total, journal, devices, options, hooks, tally).await?;
+    }
+}
+
+/// Measure what the journal's plan lacks, then, for a sequential plan, the patches it
+/// chooses: the one measuring path of real and simulated runs.
+pub async fn measure_run<D: PatchDisplay, I: Instrument>(
+    journal: &mut Journal,
+    config: &Config,
+    devices: Devices<'_, D, I>,
+    options: &RunOptions,
+    hooks: &mut RunHooks<'_>,
+) -> Result<RunSummary, RunError> {
+    let Devices {
+        display,
+        instrument,
+        clock,
+    } = devices;
+    let mut summary = run_plan(journal, display, instrument, clock, options, hooks).await?;
+    if journal.header().plan.sequential.is_none() {
+        return Ok(summary);
+    }
+    let mut tally = Tally::default();
+    let devices = Devices {
+        display,
+        instrument,
+        clock,
+    };
+    let sequential = run_sequential(journal, config, devices, options, hooks, &mut tally).await?;
+    tracing::info!(
+        added = sequential.added,
+        counted = sequential.counted,
+        stop = %sequential.stop,
+        "sequential plan done"
+    );
+    summary.measured_now += tally.measured_now;
+    summary.extra_reads += tally.extra_reads;
+    summary.unsettled += tally.unsettled;
+    summary.extra_read_s += tally.extra_read_s;
+    summary.sequential_added = sequential.added;
+    summary.sequential_stop = Some(format!(
+        "{} ({} counted patches)",
+        sequential.stop, sequential.counted
+    ));
+    Ok(summary)
+}

@@ -1,0 +1,82 @@
+//! Where the model is least sure of its prediction, for a sequential plan to measure
+//! next. The measurement set's ramp readings and greys are dealt by drive level into a
+//! few folds, as for cross-validation (`law_selection`); the model is fitted again
+//! without each fold, with the law already chosen; the spread of those models'
+//! predictions of a drive about the full model's, in ΔE00 against the white, is its
+//! uncertainty (a delete-a-group jackknife: Efron & Tibshirani 1993, ch. 11). It is
+//! large between and beyond the levels measured, where the curves are interpolated or
+//! extrapolated, and small where readings sit close together.
+
+use super::{FitOptions, fit_monitor};
+use crate::color::Xyz;
+use crate::fit::validate::delta_e00_xyz;
+use crate::measurement::{Measurement, MeasurementSet, Role};
+use crate::model::transfer::LawKind;
+use crate::model::{Drive, MonitorModel};
+
+/// Most folds the set is fitted without: each costs a whole fit.
+pub const UNCERTAINTY_FOLDS: usize = 5;
+
+/// The drive level a ramp reading or a grey below full drive is left out with: its
+/// lit channel's drive, or the grey's. `None` for every other reading.
+fn level_of(m: &Measurement) -> Option<f64> {
+    if !matches!(m.role, Role::Ramp | Role::Grey) || !m.is_standard_condition() {
+        return None;
+    }
+    let lit: Vec<f64> = m.drive.iter().copied().filter(|v| *v > 0.0).collect();
+    let level = match lit.len() {
+        1 => lit[0],
+        3 if m.drive[0] == m.drive[1] && m.drive[1] == m.drive[2] => m.drive[0],
+        _ => return None,
+    };
+    (level < 1.0).then_some(level)
+}
+
+/// The model fitted without each fold of drive levels, with the law `law` only and
+/// without the additivity terms (the curves are what the next patch is for). Folds
+/// that cannot be fitted are left out.
+pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> Vec<MonitorModel> {
+    let mut levels: Vec<f64> = set.measurements.iter().filter_map(level_of).collect();
+    levels.sort_by(|a, b| a.total_cmp(b));
+    levels.dedup();
+    let n = levels.len().min(UNCERTAINTY_FOLDS);
+    let options = FitOptions {
+        laws: vec![law],
+        additivity_terms: false,
+        ..options.clone()
+    };
+    (0..n)
+        .filter_map(|fold| {
+            let held: Vec<f64> = levels.iter().skip(fold).step_by(n).copied().collect();
+            let kept = MeasurementSet {
+                measurements: set
+                    .measurements
+                    .iter()
+                    .filter(|m| level_of(m).is_none_or(|l| !held.contains(&l)))
+                    .cloned()
+                    .collect(),
+                ..set.clone()
+            };
+            fit_monitor(&kept, &options).ok().map(|f| f.model)
+        })
+        .collect()
+}
+
+/// Root-mean-square ΔE00 between the fold models' predictions of `drive` and the full
+/// model's, against `white`; 0 without fold models.
+pub fn prediction_spread(
+    full: &MonitorModel,
+    folds: &[MonitorModel],
+    drive: Drive,
+    white: &Xyz,
+) -> f64 {
+    if folds.is_empty() {
+        return 0.0;
+    }
+    let centre = full.forward_centre(drive);
+    let squares: f64 = folds
+        .iter()
+        .map(|m| delta_e00_xyz(&m.forward_centre(drive), &centre, white).powi(2))
+        .sum();
+    (squares / folds.len() as f64).sqrt()
+}
