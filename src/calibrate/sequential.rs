@@ -153,6 +153,12 @@ fn candidates(set: &MeasurementSet, bit_depth: u32) -> Vec<Codes> {
     out
 }
 
+/// 0, 1, 2 for a single channel's drive, 3 for a grey.
+fn kind_of(drive: Drive) -> usize {
+    let lit: Vec<usize> = (0..3).filter(|c| drive[*c] > 0.0).collect();
+    if lit.len() == 1 { lit[0] } else { 3 }
+}
+
 /// The next step for the readings in `journal`, under `config`: deterministic in the
 /// journal's readings.
 pub fn next_step(journal: &Journal, config: &Config) -> Step {
@@ -180,6 +186,11 @@ pub fn next_step(journal: &Journal, config: &Config) -> Step {
         return Step::Stop(Stop::BudgetSpent { estimate });
     }
     let bit_depth = config.plan.bit_depth;
+    let added = journal
+        .entries()
+        .iter()
+        .filter(|m| m.index >= header.plan.patches.len())
+        .count();
     let best = candidates(&set, bit_depth)
         .into_iter()
         .map(|codes| {
@@ -196,17 +207,11 @@ pub fn next_step(journal: &Journal, config: &Config) -> Step {
     let Some((codes, spread)) = best else {
         return Step::Stop(Stop::NoCandidate { estimate });
     };
-    let drive = codes.drive();
-    let role = if drive[0] == drive[1] && drive[1] == drive[2] {
+    let role = if kind_of(codes.drive()) == 3 {
         Role::Grey
     } else {
         Role::Ramp
     };
-    let added = journal
-        .entries()
-        .iter()
-        .filter(|m| m.index >= header.plan.patches.len())
-        .count();
     Step::Measure {
         patch: PlannedPatch {
             index: header.plan.patches.len() + added,
