@@ -150,6 +150,17 @@ pub struct Tally {
 }
 
 impl Tally {
+    /// What was counted after `before` (the tally it started from).
+    pub fn since(&self, before: &Tally) -> Tally {
+        Tally {
+            measured_now: self.measured_now - before.measured_now,
+            extra_reads: self.extra_reads - before.extra_reads,
+            unsettled: self.unsettled - before.unsettled,
+            extra_read_s: self.extra_read_s - before.extra_read_s,
+            aimed_at: self.aimed_at,
+        }
+    }
+
     pub fn summary(&self, already_measured: usize) -> RunSummary {
         RunSummary {
             measured_now: self.measured_now,
@@ -172,6 +183,27 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
     options: &RunOptions,
     hooks: &mut RunHooks<'_>,
 ) -> Result<RunSummary, RunError> {
+    let devices = Devices {
+        display,
+        instrument,
+        clock,
+    };
+    run_plan_with(journal, devices, options, hooks, &mut Tally::default()).await
+}
+
+/// [`run_plan`], counting into `tally` (which a sequential run goes on with).
+pub async fn run_plan_with<D: PatchDisplay, I: Instrument>(
+    journal: &mut Journal,
+    devices: Devices<'_, D, I>,
+    options: &RunOptions,
+    hooks: &mut RunHooks<'_>,
+    tally: &mut Tally,
+) -> Result<RunSummary, RunError> {
+    let Devices {
+        display,
+        instrument,
+        clock,
+    } = devices;
     let measured = journal.measured();
     let already_measured = measured.len();
     let todo: Vec<_> = journal
@@ -183,20 +215,17 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
         .cloned()
         .collect();
     let total = journal.header().plan.patches.len();
-    let mut tally = Tally::default();
+    let before = *tally;
     for planned in todo {
         let devices = Devices {
             display: &mut *display,
             instrument: &mut *instrument,
             clock,
         };
-        measure_patch(
-            &planned, total, journal, devices, options, hooks, &mut tally,
-        )
-        .await?;
+        measure_patch(&planned, total, journal, devices, options, hooks, tally).await?;
     }
     display.blank().await?;
-    Ok(tally.summary(already_measured))
+    Ok(tally.since(&before).summary(already_measured))
 }
 
 /// The display, instrument and clock a patch is measured with.

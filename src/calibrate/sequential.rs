@@ -14,17 +14,17 @@
 //! readings.
 
 use super::run::{
-    Devices, RunError, RunHooks, RunOptions, RunSummary, Tally, measure_patch, run_plan,
+    Devices, RunError, RunHooks, RunOptions, RunSummary, Tally, measure_patch, run_plan_with,
 };
 use crate::color::Xyz;
 use crate::config::Config;
 use crate::display::PatchDisplay;
-use crate::fit::uncertainty::{fold_models, prediction_spread};
+use crate::fit::uncertainty::{FoldModels, fold_models, prediction_spread};
 use crate::fit::{FitError, FittedModel, fit_monitor};
 use crate::instrument::Instrument;
 use crate::journal::Journal;
 use crate::measurement::{MeasurementSet, Role};
-use crate::model::{Drive, MonitorModel};
+use crate::model::Drive;
 use crate::plan::{Plan, PlannedPatch};
 use crate::screen::{Codes, Geometry, Patch};
 
@@ -103,7 +103,7 @@ pub fn counted(set: &MeasurementSet) -> usize {
 /// first alone is optimistic where mixtures sit between the levels measured.
 pub fn estimated_error(
     fitted: &FittedModel,
-    folds: &[MonitorModel],
+    folds: &FoldModels,
     plan: &Plan,
     white: &Xyz,
 ) -> Option<f64> {
@@ -122,7 +122,7 @@ pub fn estimated_error(
         .collect();
     let spread = drives
         .iter()
-        .map(|d| prediction_spread(&fitted.model, folds, *d, white))
+        .map(|d| prediction_spread(folds, *d, white))
         .sum::<f64>()
         / drives.len().max(1) as f64;
     Some(cross_validated.max(spread))
@@ -172,9 +172,13 @@ pub fn next_step(journal: &Journal, config: &Config) -> Step {
         Err(e) => return Step::Stop(Stop::Unfitted(e)),
     };
     let Some(law) = fitted.report.chosen_law() else {
-        return Step::Stop(Stop::BudgetSpent { estimate: None });
+        return Step::Stop(Stop::Unfitted(FitError::NoLaw("no law was chosen".into())));
     };
-    let folds = fold_models(&set, &config.fit, law);
+    let Some(folds) = fold_models(&set, &config.fit, law) else {
+        return Step::Stop(Stop::Unfitted(FitError::NoLaw(format!(
+            "{law} alone could not be fitted to the readings so far"
+        ))));
+    };
     let white: Xyz = set.mean_white().unwrap_or_else(|| fitted.model.white());
     let estimate = estimated_error(&fitted, &folds, &header.plan, &white);
     if let Some(e) = estimate
@@ -194,7 +198,7 @@ pub fn next_step(journal: &Journal, config: &Config) -> Step {
     let best = candidates(&set, bit_depth)
         .into_iter()
         .map(|codes| {
-            let spread = prediction_spread(&fitted.model, &folds, codes.drive(), &white);
+            let spread = prediction_spread(&folds, codes.drive(), &white);
             (codes, spread)
         })
         .fold(
@@ -301,11 +305,24 @@ pub async fn measure_run<D: PatchDisplay, I: Instrument>(
         instrument,
         clock,
     } = devices;
-    let mut summary = run_plan(journal, display, instrument, clock, options, hooks).await?;
+    // One tally for both phases: the instrument stays aimed, the counts add up.
+    let mut tally = Tally::default();
+    let mut summary = run_plan_with(
+        journal,
+        Devices {
+            display: &mut *display,
+            instrument: &mut *instrument,
+            clock,
+        },
+        options,
+        hooks,
+        &mut tally,
+    )
+    .await?;
     if journal.header().plan.sequential.is_none() {
         return Ok(summary);
     }
-    let mut tally = Tally::default();
+    let seed_tally = tally;
     let devices = Devices {
         display,
         instrument,
@@ -318,10 +335,11 @@ pub async fn measure_run<D: PatchDisplay, I: Instrument>(
         stop = %sequential.stop,
         "sequential plan done"
     );
-    summary.measured_now += tally.measured_now;
-    summary.extra_reads += tally.extra_reads;
-    summary.unsettled += tally.unsettled;
-    summary.extra_read_s += tally.extra_read_s;
+    let added = tally.since(&seed_tally);
+    summary.measured_now += added.measured_now;
+    summary.extra_reads += added.extra_reads;
+    summary.unsettled += added.unsettled;
+    summary.extra_read_s += added.extra_read_s;
     summary.sequential_added = sequential.added;
     summary.sequential_stop = Some(format!(
         "{} ({} counted patches)",

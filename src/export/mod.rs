@@ -156,6 +156,12 @@ pub fn limitations(profile: &Profile) -> Vec<String> {
                 .into(),
         );
     }
+    if !terms.is_empty() {
+        notes.push(
+            "the terms in calibration curves solved at export (they come from the additive part; a calibration run with [target] measures its curves into place)"
+                .into(),
+        );
+    }
     if checks.additivity_verdict == Verdict::Fails && terms.interaction.is_none() {
         let worst = checks
             .additivity

@@ -534,13 +534,9 @@ fn refit_curves_for_terms(
     noise: &NoiseModel,
     (max_condition, toe): (f64, f64),
 ) -> MonitorModel {
-    let kept = MonitorModel {
-        terms: choice.terms.clone(),
-        ..additive.clone()
+    let Some(kept) = choice.model.clone() else {
+        return additive.clone();
     };
-    if choice.terms.is_empty() {
-        return kept;
-    }
     let corrected_greys: Vec<(usize, f64, Xyz)> = greys
         .iter()
         .map(|(index, level, xyz)| {

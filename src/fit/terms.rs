@@ -92,7 +92,10 @@ pub struct TermReport {
 /// The terms kept and the comparison behind them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TermChoice {
-    pub terms: AdditivityTerms,
+    /// The model with the terms kept: its matrix too may differ from the additive
+    /// one's (the shift is fitted with the columns), so the two go together. `None`
+    /// when nothing was kept.
+    pub model: Option<MonitorModel>,
     pub chosen: TermSet,
     pub reports: Vec<TermReport>,
     pub rule: String,
@@ -102,7 +105,7 @@ impl TermChoice {
     /// The additive model, nothing tried, for `why`.
     pub fn additive(why: &str) -> TermChoice {
         TermChoice {
-            terms: AdditivityTerms::default(),
+            model: None,
             chosen: TermSet::None,
             reports: Vec::new(),
             rule: why.to_string(),
@@ -227,7 +230,24 @@ fn fit_terms(
     if set.interaction() {
         fitted.terms.interaction = Some(fit_interaction(&fitted, readings, noise)?);
     }
-    Some(fitted)
+    within_bounds(&fitted).then_some(fitted)
+}
+
+/// Largest |γ| and largest |u_c| as a share of |m_c| a term may have. Beyond them the
+/// "correction" is no longer small next to the primaries, the inverse's fixed point
+/// may not converge, and the readings say something the terms were not made for.
+pub const MAX_TERM: f64 = 0.25;
+
+/// Are the terms of `model` small next to its primaries?
+fn within_bounds(model: &MonitorModel) -> bool {
+    let gamma_ok = model
+        .terms
+        .interaction
+        .is_none_or(|g| g.iter().all(|v| v.abs() < MAX_TERM));
+    let shift_ok = model.terms.chromaticity_shift.is_none_or(|u| {
+        (0..3).all(|c| Xyz::from(u[c]).norm() < MAX_TERM * model.matrix.column(c).norm())
+    });
+    gamma_ok && shift_ok
 }
 
 /// The coefficients of `terms` in the order of `TermReport::coefficients`.
@@ -312,10 +332,10 @@ pub fn choose_terms(
         .iter()
         .map(|set| with_terms(model, *set, &all, noise))
         .collect();
-    let terms = fitted[TermSet::ALL.iter().position(|s| *s == chosen).unwrap_or(0)]
+    let model = fitted[TermSet::ALL.iter().position(|s| *s == chosen).unwrap_or(0)]
         .as_ref()
-        .map(|(m, _)| m.terms.clone())
-        .unwrap_or_default();
+        .filter(|(m, _)| !m.terms.is_empty())
+        .map(|(m, _)| m.clone());
     let reports = TermSet::ALL
         .iter()
         .zip(&scores)
@@ -336,7 +356,7 @@ pub fn choose_terms(
         "fewer than two drive levels to leave out: the additive model is kept".into()
     };
     TermChoice {
-        terms,
+        model,
         chosen,
         reports,
         rule,

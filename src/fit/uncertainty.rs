@@ -32,10 +32,17 @@ fn level_of(m: &Measurement) -> Option<f64> {
     (level < 1.0).then_some(level)
 }
 
-/// The model fitted without each fold of drive levels, with the law `law` only and
-/// without the additivity terms (the curves are what the next patch is for). Folds
-/// that cannot be fitted are left out.
-pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> Vec<MonitorModel> {
+/// Models fitted the same way (the law `law` only, without the additivity terms: the
+/// curves are what the next patch is for): one to the whole set, the reference the
+/// spread is taken about, and one without each fold of drive levels. `None` when the
+/// whole set cannot be fitted so; folds that cannot be are left out.
+pub struct FoldModels {
+    pub reference: MonitorModel,
+    pub folds: Vec<MonitorModel>,
+}
+
+/// See [`FoldModels`].
+pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> Option<FoldModels> {
     let mut levels: Vec<f64> = set.measurements.iter().filter_map(level_of).collect();
     levels.sort_by(|a, b| a.total_cmp(b));
     levels.dedup();
@@ -45,7 +52,8 @@ pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> 
         additivity_terms: false,
         ..options.clone()
     };
-    (0..n)
+    let reference = fit_monitor(set, &options).ok()?.model;
+    let folds = (0..n)
         .filter_map(|fold| {
             let held: Vec<f64> = levels.iter().skip(fold).step_by(n).copied().collect();
             let kept = MeasurementSet {
@@ -59,21 +67,18 @@ pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> 
             };
             fit_monitor(&kept, &options).ok().map(|f| f.model)
         })
-        .collect()
+        .collect();
+    Some(FoldModels { reference, folds })
 }
 
-/// Root-mean-square ΔE00 between the fold models' predictions of `drive` and the full
-/// model's, against `white`; 0 without fold models.
-pub fn prediction_spread(
-    full: &MonitorModel,
-    folds: &[MonitorModel],
-    drive: Drive,
-    white: &Xyz,
-) -> f64 {
+/// Root-mean-square ΔE00 between the fold models' predictions of `drive` and the
+/// reference's, against `white`; 0 without fold models.
+pub fn prediction_spread(models: &FoldModels, drive: Drive, white: &Xyz) -> f64 {
+    let folds = &models.folds;
     if folds.is_empty() {
         return 0.0;
     }
-    let centre = full.forward_centre(drive);
+    let centre = models.reference.forward_centre(drive);
     let squares: f64 = folds
         .iter()
         .map(|m| delta_e00_xyz(&m.forward_centre(drive), &centre, white).powi(2))

@@ -161,11 +161,12 @@ impl MonitorModel {
     /// The channel lights l that give `above` (the light above black): M⁻¹ applied to
     /// `above` for the additive model; with terms, the fixed point of
     /// l_c = [M⁻¹(above − Σ u ê(1 − ê))]_c / (1 + γ_c s_c), which converges because
-    /// the terms are small next to the primaries (a few per cent).
-    fn light_of(&self, inverse: &Matrix3<f64>, above: &Xyz) -> Vector3<f64> {
+    /// the terms are small next to the primaries (a few per cent; the fit keeps none
+    /// beyond `fit::terms::MAX_TERM`). Also says whether it converged.
+    fn light_of(&self, inverse: &Matrix3<f64>, above: &Xyz) -> (Vector3<f64>, bool) {
         let mut light = inverse * above;
         if self.terms.is_empty() {
-            return light;
+            return (light, true);
         }
         let full = self.full_drive_excitations();
         for _ in 0..100 {
@@ -187,10 +188,12 @@ impl MonitorModel {
             let step = (next - light).abs().max();
             light = next;
             if step <= 1e-13 * full.iter().fold(0.0, |a: f64, b| a.max(b.abs())) {
-                break;
+                return (light, true);
             }
         }
-        light
+        let reached = self.light_above_black(&light);
+        let converged = (reached - above).norm() <= 1e-6 * above.norm().max(f64::MIN_POSITIVE);
+        (light, converged)
     }
 
     /// E(d): the three excitations.
@@ -232,10 +235,11 @@ impl MonitorModel {
             .try_inverse()
             .ok_or(InverseError::SingularMatrix)?;
         let k = self.spatial.gains(position);
-        let t = self.light_of(&inverse, &(xyz - self.black));
+        // A colour the terms' fixed point cannot reach is flagged as out of reach.
+        let (t, converged) = self.light_of(&inverse, &(xyz - self.black));
         let mut excitation = [0.0; 3];
         let mut drive = [0.0; 3];
-        let mut clipped = false;
+        let mut clipped = !converged;
         for c in 0..3 {
             excitation[c] = t[c] / k[c];
             let top = self.laws[c].full_drive_excitation();
