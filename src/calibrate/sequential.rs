@@ -22,7 +22,7 @@ use crate::display::PatchDisplay;
 use crate::fit::uncertainty::{FoldModels, fold_models, prediction_spread};
 use crate::fit::{FitError, FittedModel, fit_monitor};
 use crate::instrument::Instrument;
-use crate::journal::Journal;
+use crate::journal::{Journal, JournalHeader};
 use crate::measurement::{MeasurementSet, Role};
 use crate::model::Drive;
 use crate::plan::{Plan, PlannedPatch};
@@ -162,19 +162,22 @@ fn kind_of(drive: Drive) -> usize {
 /// The next step for the readings in `journal`, under `config`: deterministic in the
 /// journal's readings.
 pub fn next_step(journal: &Journal, config: &Config) -> Step {
-    let header = journal.header();
+    next_step_for(journal.header(), &journal.measurement_set(), config)
+}
+
+/// [`next_step`] for a journal's header and its readings.
+fn next_step_for(header: &JournalHeader, set: &MeasurementSet, config: &Config) -> Step {
     let Some(limits) = &header.plan.sequential else {
         return Step::Stop(Stop::BudgetSpent { estimate: None });
     };
-    let set = journal.measurement_set();
-    let fitted = match fit_monitor(&set, &config.fit) {
+    let fitted = match fit_monitor(set, &config.fit) {
         Ok(f) => f,
         Err(e) => return Step::Stop(Stop::Unfitted(e)),
     };
     let Some(law) = fitted.report.chosen_law() else {
         return Step::Stop(Stop::Unfitted(FitError::NoLaw("no law was chosen".into())));
     };
-    let Some(folds) = fold_models(&set, &config.fit, law) else {
+    let Some(folds) = fold_models(set, &config.fit, law) else {
         return Step::Stop(Stop::Unfitted(FitError::NoLaw(format!(
             "{law} alone could not be fitted to the readings so far"
         ))));
@@ -186,16 +189,16 @@ pub fn next_step(journal: &Journal, config: &Config) -> Step {
     {
         return Step::Stop(Stop::TargetMet { estimate: e });
     }
-    if counted(&set) >= limits.budget {
+    if counted(set) >= limits.budget {
         return Step::Stop(Stop::BudgetSpent { estimate });
     }
     let bit_depth = config.plan.bit_depth;
-    let added = journal
-        .entries()
+    let added = set
+        .measurements
         .iter()
         .filter(|m| m.index >= header.plan.patches.len())
         .count();
-    let best = candidates(&set, bit_depth)
+    let best = candidates(set, bit_depth)
         .into_iter()
         .map(|codes| {
             let spread = prediction_spread(&folds, codes.drive(), &white);
@@ -254,7 +257,20 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
         .as_ref()
         .map_or(0, |s| s.budget);
     loop {
-        let step = next_step(journal, config);
+        // A step is half a dozen fits: off the async task, so that a daemon's other
+        // work (its API, its schedule) goes on meanwhile.
+        let (header, set, owned) = (
+            journal.header().clone(),
+            journal.measurement_set(),
+            config.clone(),
+        );
+        let step = tokio::task::spawn_blocking(move || next_step_for(&header, &set, &owned))
+            .await
+            .unwrap_or_else(|e| {
+                Step::Stop(Stop::Unfitted(FitError::NoLaw(format!(
+                    "choosing the next patch failed: {e}"
+                ))))
+            });
         let patch = match step {
             Step::Stop(stop) => {
                 display.blank().await?;
