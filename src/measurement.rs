@@ -44,6 +44,15 @@ impl Role {
     }
 }
 
+/// The level of a drive that shows one channel alone (that channel's drive) or a grey
+/// (the grey's); `None` for black and mixtures.
+pub fn drive_level(drive: Drive) -> Option<f64> {
+    match Role::from_drive(drive) {
+        Role::Ramp | Role::Grey => Some(drive.iter().copied().fold(0.0, f64::max)),
+        _ => None,
+    }
+}
+
 /// The unit of the XYZ values of a measurement set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

@@ -150,17 +150,6 @@ pub struct Tally {
 }
 
 impl Tally {
-    /// What was counted after `before` (the tally it started from).
-    pub fn since(&self, before: &Tally) -> Tally {
-        Tally {
-            measured_now: self.measured_now - before.measured_now,
-            extra_reads: self.extra_reads - before.extra_reads,
-            unsettled: self.unsettled - before.unsettled,
-            extra_read_s: self.extra_read_s - before.extra_read_s,
-            aimed_at: self.aimed_at,
-        }
-    }
-
     pub fn summary(&self, already_measured: usize) -> RunSummary {
         RunSummary {
             measured_now: self.measured_now,
@@ -191,7 +180,8 @@ pub async fn run_plan<D: PatchDisplay, I: Instrument>(
     run_plan_with(journal, devices, options, hooks, &mut Tally::default()).await
 }
 
-/// [`run_plan`], counting into `tally` (which a sequential run goes on with).
+/// [`run_plan`], counting into `tally` (which a sequential run goes on with); the
+/// summary is of everything `tally` holds.
 pub async fn run_plan_with<D: PatchDisplay, I: Instrument>(
     journal: &mut Journal,
     devices: Devices<'_, D, I>,
@@ -199,11 +189,7 @@ pub async fn run_plan_with<D: PatchDisplay, I: Instrument>(
     hooks: &mut RunHooks<'_>,
     tally: &mut Tally,
 ) -> Result<RunSummary, RunError> {
-    let Devices {
-        display,
-        instrument,
-        clock,
-    } = devices;
+    let mut devices = devices;
     let measured = journal.measured();
     let already_measured = measured.len();
     let todo: Vec<_> = journal
@@ -215,17 +201,12 @@ pub async fn run_plan_with<D: PatchDisplay, I: Instrument>(
         .cloned()
         .collect();
     let total = journal.header().plan.patches.len();
-    let before = *tally;
     for planned in todo {
-        let devices = Devices {
-            display: &mut *display,
-            instrument: &mut *instrument,
-            clock,
-        };
+        let devices = devices.reborrow();
         measure_patch(&planned, total, journal, devices, options, hooks, tally).await?;
     }
-    display.blank().await?;
-    Ok(tally.since(&before).summary(already_measured))
+    devices.display.blank().await?;
+    Ok(tally.summary(already_measured))
 }
 
 /// The display, instrument and clock a patch is measured with.
@@ -233,6 +214,17 @@ pub struct Devices<'d, D, I> {
     pub display: &'d mut D,
     pub instrument: &'d mut I,
     pub clock: &'d dyn TimeSource,
+}
+
+impl<D, I> Devices<'_, D, I> {
+    /// The same devices, lent for one call.
+    pub fn reborrow(&mut self) -> Devices<'_, D, I> {
+        Devices {
+            display: &mut *self.display,
+            instrument: &mut *self.instrument,
+            clock: self.clock,
+        }
+    }
 }
 
 /// Show `planned`, let it settle, read it (again until two readings agree, with a

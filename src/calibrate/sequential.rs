@@ -153,12 +153,6 @@ fn candidates(set: &MeasurementSet, bit_depth: u32) -> Vec<Codes> {
     out
 }
 
-/// 0, 1, 2 for a single channel's drive, 3 for a grey.
-fn kind_of(drive: Drive) -> usize {
-    let lit: Vec<usize> = (0..3).filter(|c| drive[*c] > 0.0).collect();
-    if lit.len() == 1 { lit[0] } else { 3 }
-}
-
 /// The next step for the readings in `journal`, under `config`: deterministic in the
 /// journal's readings.
 pub fn next_step(journal: &Journal, config: &Config) -> Step {
@@ -214,11 +208,7 @@ fn next_step_for(header: &JournalHeader, set: &MeasurementSet, config: &Config) 
     let Some((codes, spread)) = best else {
         return Step::Stop(Stop::NoCandidate { estimate });
     };
-    let role = if kind_of(codes.drive()) == 3 {
-        Role::Grey
-    } else {
-        Role::Ramp
-    };
+    let role = Role::from_drive(codes.drive());
     Step::Measure {
         patch: PlannedPatch {
             index: header.plan.patches.len() + added,
@@ -239,16 +229,11 @@ fn next_step_for(header: &JournalHeader, set: &MeasurementSet, config: &Config) 
 pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
     journal: &mut Journal,
     config: &Config,
-    devices: Devices<'_, D, I>,
+    mut devices: Devices<'_, D, I>,
     options: &RunOptions,
     hooks: &mut RunHooks<'_>,
     tally: &mut Tally,
 ) -> Result<SequentialSummary, RunError> {
-    let Devices {
-        display,
-        instrument,
-        clock,
-    } = devices;
     let seed_plan = journal.header().plan.patches.len();
     let budget = journal
         .header()
@@ -257,13 +242,11 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
         .as_ref()
         .map_or(0, |s| s.budget);
     loop {
+        let set = journal.measurement_set();
+        let counted_now = counted(&set);
         // A step is half a dozen fits: off the async task, so that a daemon's other
         // work (its API, its schedule) goes on meanwhile.
-        let (header, set, owned) = (
-            journal.header().clone(),
-            journal.measurement_set(),
-            config.clone(),
-        );
+        let (header, owned) = (journal.header().clone(), config.clone());
         let step = tokio::task::spawn_blocking(move || next_step_for(&header, &set, &owned))
             .await
             .unwrap_or_else(|e| {
@@ -273,11 +256,10 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
             });
         let patch = match step {
             Step::Stop(stop) => {
-                display.blank().await?;
-                let set = journal.measurement_set();
+                devices.display.blank().await?;
                 return Ok(SequentialSummary {
                     added: journal.entries().len().saturating_sub(seed_plan),
-                    counted: counted(&set),
+                    counted: counted_now,
                     stop,
                 });
             }
@@ -296,13 +278,8 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
                 patch
             }
         };
-        let total =
-            journal.entries().len() + budget.saturating_sub(counted(&journal.measurement_set()));
-        let devices = Devices {
-            display: &mut *display,
-            instrument: &mut *instrument,
-            clock,
-        };
+        let total = journal.entries().len() + budget.saturating_sub(counted_now);
+        let devices = devices.reborrow();
         measure_patch(&patch, total, journal, devices, options, hooks, tally).await?;
     }
 }
@@ -312,38 +289,16 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
 pub async fn measure_run<D: PatchDisplay, I: Instrument>(
     journal: &mut Journal,
     config: &Config,
-    devices: Devices<'_, D, I>,
+    mut devices: Devices<'_, D, I>,
     options: &RunOptions,
     hooks: &mut RunHooks<'_>,
 ) -> Result<RunSummary, RunError> {
-    let Devices {
-        display,
-        instrument,
-        clock,
-    } = devices;
     // One tally for both phases: the instrument stays aimed, the counts add up.
     let mut tally = Tally::default();
-    let mut summary = run_plan_with(
-        journal,
-        Devices {
-            display: &mut *display,
-            instrument: &mut *instrument,
-            clock,
-        },
-        options,
-        hooks,
-        &mut tally,
-    )
-    .await?;
+    let seed = run_plan_with(journal, devices.reborrow(), options, hooks, &mut tally).await?;
     if journal.header().plan.sequential.is_none() {
-        return Ok(summary);
+        return Ok(seed);
     }
-    let seed_tally = tally;
-    let devices = Devices {
-        display,
-        instrument,
-        clock,
-    };
     let sequential = run_sequential(journal, config, devices, options, hooks, &mut tally).await?;
     tracing::info!(
         added = sequential.added,
@@ -351,15 +306,12 @@ pub async fn measure_run<D: PatchDisplay, I: Instrument>(
         stop = %sequential.stop,
         "sequential plan done"
     );
-    let added = tally.since(&seed_tally);
-    summary.measured_now += added.measured_now;
-    summary.extra_reads += added.extra_reads;
-    summary.unsettled += added.unsettled;
-    summary.extra_read_s += added.extra_read_s;
-    summary.sequential_added = sequential.added;
-    summary.sequential_stop = Some(format!(
-        "{} ({} counted patches)",
-        sequential.stop, sequential.counted
-    ));
-    Ok(summary)
+    Ok(RunSummary {
+        sequential_added: sequential.added,
+        sequential_stop: Some(format!(
+            "{} ({} counted patches)",
+            sequential.stop, sequential.counted
+        )),
+        ..tally.summary(seed.already_measured)
+    })
 }

@@ -126,6 +126,17 @@ struct Evidence<'a> {
 /// Most cross-validation folds: beyond ten, more folds cost fits and change little.
 pub const MAX_FOLDS: usize = 10;
 
+/// Distinct `levels` dealt into at most `max_folds` folds, in turn from the lowest, so
+/// that each fold spans the range (what every cross-validation over levels leaves out).
+pub fn level_folds(mut levels: Vec<f64>, max_folds: usize) -> Vec<Vec<f64>> {
+    levels.sort_by(|a, b| a.total_cmp(b));
+    levels.dedup();
+    let n = levels.len().min(max_folds);
+    (0..n)
+        .map(|fold| levels.iter().skip(fold).step_by(n).copied().collect())
+        .collect()
+}
+
 /// The ΔE00 of one fold's left-out ramp readings and of its left-out greys.
 pub type FoldErrors = (Vec<f64>, Vec<f64>);
 
@@ -140,20 +151,15 @@ fn cross_validate(
     if ramps.iter().any(|r| r.law_points().all(|p| p.drive >= 1.0)) {
         return Err("no level below full drive to hold out".into());
     }
-    let mut levels: Vec<f64> = ramps
+    let levels: Vec<f64> = ramps
         .iter()
         .flat_map(|r| r.law_points().map(|p| p.drive))
         .chain(greys.iter().map(|g| g.0))
         .filter(|l| *l < 1.0)
         .collect();
-    levels.sort_by(|a, b| a.total_cmp(b));
-    levels.dedup();
-    let folds = levels.len().min(MAX_FOLDS);
-    Ok((0..folds)
-        .map(|fold| {
-            let held: Vec<f64> = levels.iter().skip(fold).step_by(folds).copied().collect();
-            fold_errors(kind, evidence, &held)
-        })
+    Ok(level_folds(levels, MAX_FOLDS)
+        .iter()
+        .map(|held| fold_errors(kind, evidence, held))
         .collect())
 }
 

@@ -43,7 +43,7 @@ use serde::{Deserialize, Serialize};
 use crate::color::Xyz;
 use crate::color::spaces::xyz_to_xyy;
 use crate::instrument::ReadingStatus;
-use crate::measurement::{Measurement, MeasurementSet, Role, Units};
+use crate::measurement::{Measurement, MeasurementSet, Role, Units, drive_level};
 use crate::model::monitor::matrix_condition_number;
 use crate::model::transfer::LawKind;
 use crate::model::{CHANNELS, MonitorModel, SpatialMap};
@@ -56,7 +56,7 @@ use primaries::{
 };
 use spatial::{SpatialReport, choose_spatial_map};
 use stats::ErrorStats;
-use terms::{TermChoice, TermReading, TermReport, choose_terms, with_terms};
+use terms::{TermChoice, TermReading, TermReport, choose_terms, fit_terms};
 use validate::{Evaluation, PatchError, evaluate};
 
 /// Default largest condition number of the primary matrix that a profile may have.
@@ -503,17 +503,9 @@ fn term_readings(corrected: &[Corrected<'_>]) -> Vec<TermReading> {
             )
         })
         .filter_map(|r| {
-            let d = r.measurement.drive;
-            let lit: Vec<f64> = d.iter().copied().filter(|v| *v > 0.0).collect();
-            let grey = d[0] == d[1] && d[1] == d[2];
-            let level = match lit.len() {
-                1 => lit[0],
-                3 if grey => d[0],
-                _ => return None,
-            };
             Some(TermReading {
-                level,
-                drive: d,
+                level: drive_level(r.measurement.drive)?,
+                drive: r.measurement.drive,
                 xyz: r.xyz,
             })
         })
@@ -565,7 +557,7 @@ fn refit_curves_for_terms(
         refitted.laws[c] = fit.law;
     }
     let all: Vec<&TermReading> = readings.iter().collect();
-    with_terms(&refitted, choice.chosen, &all, noise).map_or(kept, |(model, _)| model)
+    fit_terms(&refitted, choice.chosen, &all, noise).unwrap_or(kept)
 }
 
 /// The corrected readings of one role.

@@ -21,12 +21,13 @@
 use nalgebra::{DMatrix, DVector, Matrix3};
 use serde::{Deserialize, Serialize};
 
-use super::law_selection::MAX_FOLDS;
+use super::law_selection::{MAX_FOLDS, level_folds};
 use super::noise::NoiseModel;
 use super::select::simplest_within;
 use super::stats::ErrorStats;
 use super::validate::{delta_e00_xyz, noise_delta_e00};
 use crate::color::Xyz;
+use crate::measurement::Role;
 use crate::model::monitor::{
     AdditivityTerms, chromaticity_shift_basis, drive_shares, interaction_basis,
 };
@@ -119,10 +120,9 @@ const STANDARD_ERRORS: f64 = 2.0;
 /// ...and by more than this share of what noise alone does to one reading.
 const TOLERANCE_SHARE: f64 = 1.0;
 
-/// Is `drive` a single channel's? Its index then.
-fn single_channel(drive: Drive) -> Option<usize> {
-    let lit: Vec<usize> = (0..3).filter(|c| drive[*c] > 0.0).collect();
-    (lit.len() == 1).then(|| lit[0])
+/// Is `drive` channel `c`'s alone?
+fn channel_alone(drive: Drive, c: usize) -> bool {
+    Role::from_drive(drive) == Role::Ramp && drive[c] > 0.0
 }
 
 /// m_c and u_c of each channel, from its own ramp only (a grey cannot tell one
@@ -144,10 +144,7 @@ fn fit_chromaticity_shift(
         // Normal equations of [l, w] for all three components at once.
         let (mut ll, mut lw, mut ww) = (0.0, 0.0, 0.0);
         let (mut ly, mut wy) = (Xyz::zeros(), Xyz::zeros());
-        for r in readings
-            .iter()
-            .filter(|r| single_channel(r.drive) == Some(c))
-        {
+        for r in readings.iter().filter(|r| channel_alone(r.drive, c)) {
             let light = model.excitations(r.drive);
             let w = chromaticity_shift_basis(&drive_shares(&light, &full))[c];
             let l = light[c];
@@ -180,7 +177,7 @@ fn fit_interaction(
 ) -> Option<[f64; 3]> {
     let mixed: Vec<&&TermReading> = readings
         .iter()
-        .filter(|r| single_channel(r.drive).is_none())
+        .filter(|r| Role::from_drive(r.drive) != Role::Ramp)
         .collect();
     if mixed.is_empty() {
         return Some([0.0; 3]);
@@ -212,7 +209,7 @@ fn fit_interaction(
 /// `model` (its additive part) with the terms of `set` fitted to `readings`: the shift
 /// first from the ramps (with the columns it moves), then the interaction from the
 /// greys and whites on top of it.
-fn fit_terms(
+pub fn fit_terms(
     model: &MonitorModel,
     set: TermSet,
     readings: &[&TermReading],
@@ -260,18 +257,6 @@ fn coefficients(terms: &AdditivityTerms) -> Vec<f64> {
         .collect()
 }
 
-/// `model` with the terms of `set` fitted to `readings`, and their coefficients.
-pub fn with_terms(
-    model: &MonitorModel,
-    set: TermSet,
-    readings: &[&TermReading],
-    noise: &NoiseModel,
-) -> Option<(MonitorModel, Vec<f64>)> {
-    let fitted = fit_terms(model, set, readings, noise)?;
-    let coefficients = coefficients(&fitted.terms);
-    Some((fitted, coefficients))
-}
-
 /// Cross-validated errors of `set`: every fold's left-out readings in fold order, or
 /// `None` when some fold could not be fitted.
 fn cross_validate(
@@ -288,7 +273,7 @@ fn cross_validate(
             .iter()
             .filter(|r| !held.contains(&r.level))
             .collect();
-        let (fitted, _) = with_terms(model, set, &training, noise)?;
+        let fitted = fit_terms(model, set, &training, noise)?;
         for r in readings.iter().filter(|r| held.contains(&r.level)) {
             errors.push(delta_e00_xyz(
                 &r.xyz,
@@ -308,13 +293,8 @@ pub fn choose_terms(
     noise: &NoiseModel,
     white: &Xyz,
 ) -> TermChoice {
-    let mut levels: Vec<f64> = readings.iter().map(|r| r.level).collect();
-    levels.sort_by(|a, b| a.total_cmp(b));
-    levels.dedup();
-    let n = levels.len().min(MAX_FOLDS);
-    let folds: Vec<Vec<f64>> = (0..n)
-        .map(|f| levels.iter().skip(f).step_by(n).copied().collect())
-        .collect();
+    let folds = level_folds(readings.iter().map(|r| r.level).collect(), MAX_FOLDS);
+    let n = folds.len();
     let scores: Vec<Option<Vec<f64>>> = TermSet::ALL
         .iter()
         .map(|set| cross_validate(model, *set, readings, &folds, noise, white))
@@ -328,14 +308,14 @@ pub fn choose_terms(
         TermSet::None
     };
     let all: Vec<&TermReading> = readings.iter().collect();
-    let fitted: Vec<Option<(MonitorModel, Vec<f64>)>> = TermSet::ALL
+    let fitted: Vec<Option<MonitorModel>> = TermSet::ALL
         .iter()
-        .map(|set| with_terms(model, *set, &all, noise))
+        .map(|set| fit_terms(model, *set, &all, noise))
         .collect();
     let model = fitted[TermSet::ALL.iter().position(|s| *s == chosen).unwrap_or(0)]
         .as_ref()
-        .filter(|(m, _)| !m.terms.is_empty())
-        .map(|(m, _)| m.clone());
+        .filter(|m| !m.terms.is_empty())
+        .cloned();
     let reports = TermSet::ALL
         .iter()
         .zip(&scores)
@@ -344,7 +324,10 @@ pub fn choose_terms(
             terms: *set,
             kept: *set == chosen,
             cross_validation: score.as_deref().and_then(ErrorStats::of),
-            coefficients: fit.as_ref().map(|f| f.1.clone()).unwrap_or_default(),
+            coefficients: fit
+                .as_ref()
+                .map(|m| coefficients(&m.terms))
+                .unwrap_or_default(),
         })
         .collect();
     let rule = if n >= 2 {

@@ -7,10 +7,11 @@
 //! large between and beyond the levels measured, where the curves are interpolated or
 //! extrapolated, and small where readings sit close together.
 
+use super::law_selection::level_folds;
 use super::{FitOptions, fit_monitor};
 use crate::color::Xyz;
 use crate::fit::validate::delta_e00_xyz;
-use crate::measurement::{Measurement, MeasurementSet, Role};
+use crate::measurement::{Measurement, MeasurementSet, Role, drive_level};
 use crate::model::transfer::LawKind;
 use crate::model::{Drive, MonitorModel};
 
@@ -23,13 +24,7 @@ fn level_of(m: &Measurement) -> Option<f64> {
     if !matches!(m.role, Role::Ramp | Role::Grey) || !m.is_standard_condition() {
         return None;
     }
-    let lit: Vec<f64> = m.drive.iter().copied().filter(|v| *v > 0.0).collect();
-    let level = match lit.len() {
-        1 => lit[0],
-        3 if m.drive[0] == m.drive[1] && m.drive[1] == m.drive[2] => m.drive[0],
-        _ => return None,
-    };
-    (level < 1.0).then_some(level)
+    drive_level(m.drive).filter(|level| *level < 1.0)
 }
 
 /// Models fitted the same way (the law `law` only, without the additivity terms: the
@@ -43,19 +38,16 @@ pub struct FoldModels {
 
 /// See [`FoldModels`].
 pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> Option<FoldModels> {
-    let mut levels: Vec<f64> = set.measurements.iter().filter_map(level_of).collect();
-    levels.sort_by(|a, b| a.total_cmp(b));
-    levels.dedup();
-    let n = levels.len().min(UNCERTAINTY_FOLDS);
+    let levels = set.measurements.iter().filter_map(level_of).collect();
     let options = FitOptions {
         laws: vec![law],
         additivity_terms: false,
         ..options.clone()
     };
     let reference = fit_monitor(set, &options).ok()?.model;
-    let folds = (0..n)
-        .filter_map(|fold| {
-            let held: Vec<f64> = levels.iter().skip(fold).step_by(n).copied().collect();
+    let folds = level_folds(levels, UNCERTAINTY_FOLDS)
+        .iter()
+        .filter_map(|held| {
             let kept = MeasurementSet {
                 measurements: set
                     .measurements
@@ -63,7 +55,10 @@ pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> 
                     .filter(|m| level_of(m).is_none_or(|l| !held.contains(&l)))
                     .cloned()
                     .collect(),
-                ..set.clone()
+                source: set.source.clone(),
+                units: set.units,
+                instrument: set.instrument.clone(),
+                display: set.display.clone(),
             };
             fit_monitor(&kept, &options).ok().map(|f| f.model)
         })
