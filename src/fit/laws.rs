@@ -209,9 +209,11 @@ fn fit_power(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     need_levels(kind, &points, if pinned { 1 } else { 2 })?;
     let (fit, gamma, amplitude, ses) = if pinned {
         let start = log_linear_start(&points, &|u| vec![u], &[2.2]);
+        // v^γ as exp(γ ln v): one logarithm serves the value and the derivative.
         let curve = |t: &[f64], v: f64, g: &mut [f64]| {
-            let f = v.powf(t[0]);
-            g[0] = f * v.ln();
+            let ln_v = v.ln();
+            let f = (t[0] * ln_v).exp();
+            g[0] = f * ln_v;
             f
         };
         let fit = points.fit(kind, &curve, &start)?;
@@ -220,8 +222,9 @@ fn fit_power(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     } else {
         let start = log_linear_start(&points, &|u| vec![u, 1.0], &[2.2, 0.0]);
         let curve = |t: &[f64], v: f64, g: &mut [f64]| {
-            let p = v.powf(t[0]);
-            g[0] = t[1] * p * v.ln();
+            let ln_v = v.ln();
+            let p = (t[0] * ln_v).exp();
+            g[0] = t[1] * p * ln_v;
             g[1] = p;
             t[1] * p
         };
@@ -286,9 +289,11 @@ fn gog_curve(pinned: bool, t: &[f64], v: f64, g: &mut [f64]) -> f64 {
         g.iter_mut().for_each(|x| *x = 0.0);
         return 0.0;
     }
-    let p = base.powf(gamma);
-    g[0] = amplitude * p * base.ln();
-    g[1] = amplitude * gamma * base.powf(gamma - 1.0) * (v - 1.0) / (1.0 - cutoff).powi(2);
+    let ln_base = base.ln();
+    let p = (gamma * ln_base).exp();
+    g[0] = amplitude * p * ln_base;
+    // base^(γ−1) = p / base, without a second power.
+    g[1] = amplitude * gamma * (p / base) * (v - 1.0) / (1.0 - cutoff).powi(2);
     if !pinned {
         g[2] = p;
     }

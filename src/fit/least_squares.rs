@@ -62,6 +62,18 @@ struct Problem<'a> {
 }
 
 impl Problem<'_> {
+    /// The weighted residuals alone: what the line search asks for most often, without
+    /// building a Jacobian it would throw away.
+    fn residuals(&self, theta: &[f64]) -> DVector<f64> {
+        let mut gradient = vec![0.0; theta.len()];
+        DVector::from_iterator(
+            self.x.len(),
+            (0..self.x.len()).map(|i| {
+                ((self.curve)(theta, self.x[i], &mut gradient) - self.y[i]) / self.sigma[i]
+            }),
+        )
+    }
+
     fn residuals_and_jacobian(&self, theta: &[f64]) -> (DVector<f64>, DMatrix<f64>) {
         let n = self.x.len();
         let p = theta.len();
@@ -84,7 +96,7 @@ impl Operator for Problem<'_> {
     type Output = DVector<f64>;
 
     fn apply(&self, theta: &Self::Param) -> Result<Self::Output, ArgminError> {
-        let (r, _) = self.residuals_and_jacobian(theta.as_slice());
+        let r = self.residuals(theta.as_slice());
         // A non-finite residual would stall the line search; a huge one rejects the step.
         Ok(r.map(|v| if v.is_finite() { v } else { 1e150 }))
     }
