@@ -171,6 +171,35 @@ async fn history_rollback_and_a_verification_are_recorded() {
     assert!(reply.error_message().contains("no-such-profile"));
     let current = Profile::read(&daemon.state.join("current.toml")).unwrap();
     assert_eq!(current.id, ids[1]);
+
+    // Ids that would leave the store: a readable profile planted outside it, by a
+    // relative path and by an absolute one, and the store's own current profile. Each
+    // is refused as an id (400), and the current profile stays as it was.
+    let outside = dir.path().join("outside");
+    std::fs::create_dir_all(&outside).unwrap();
+    std::fs::copy(daemon.state.join("current.toml"), outside.join("evil.toml")).unwrap();
+    let relative = format!(
+        "{}/outside/evil",
+        std::iter::repeat_n("..", daemon.state.components().count())
+            .collect::<Vec<_>>()
+            .join("/")
+    );
+    let absolute = outside.join("evil").display().to_string();
+    for id in [
+        relative.as_str(),
+        "../../outside/evil",
+        absolute.as_str(),
+        "../current",
+    ] {
+        let body = serde_json::json!({ "to": id }).to_string();
+        let reply = post(&api, "/rollback", &body).await;
+        assert_eq!(reply.status, 400, "{id}: {}", reply.text());
+        assert!(reply.error_message().contains("not a profile id"), "{id}");
+        let current = Profile::read(&daemon.state.join("current.toml")).unwrap();
+        assert_eq!(current.id, ids[1], "after {id}");
+    }
+    assert_eq!(get(&api, "/status").await.status, 200);
+    assert!(outside.join("evil.toml").exists());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

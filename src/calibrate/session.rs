@@ -282,8 +282,9 @@ pub async fn finish_run(
         .and_then(|h| h.current)
         .is_some_and(|id| id == run.run_id);
     let published = (already_current && config.target.is_some())
-        .then(|| Profile::read(&store.profile_path(&run.run_id)).ok())
-        .flatten();
+        .then(|| store.profile_path(&run.run_id).ok())
+        .flatten()
+        .and_then(|path| Profile::read(&path).ok());
     // Calibration curves, measured into place on the devices still held. A failure
     // here costs the curves, not the profile: it is published without them.
     let (calibration, calibration_error) = match (&config.target, published) {
@@ -337,7 +338,9 @@ pub async fn finish_run(
         source,
     };
     let profile_path = if already_current {
-        store.profile_path(&run.run_id)
+        store
+            .profile_path(&run.run_id)
+            .map_err(|e| store_error(std::io::Error::other(e.to_string())))?
     } else if rejection.is_none() {
         store
             .publish(

@@ -534,6 +534,9 @@ async fn rollback(State(state): State<Shared>, body: axum::body::Bytes) -> Respo
         Err(e @ crate::profile::store::StoreError::NoRollback(_)) => {
             refusal(StatusCode::CONFLICT, e.to_string())
         }
+        Err(e @ crate::profile::store::StoreError::InvalidId(_)) => {
+            refusal(StatusCode::BAD_REQUEST, e.to_string())
+        }
         Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
 }

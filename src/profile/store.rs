@@ -34,6 +34,34 @@ pub enum StoreError {
     Corrupt { path: PathBuf, message: String },
     #[error("no profile to roll back to: {0}")]
     NoRollback(String),
+    #[error(
+        "'{0}' is not a profile id of this store (ids are letters, digits, '-', '_' and '.', at most {MAX_ID_LEN} characters, not starting with '.')"
+    )]
+    InvalidId(String),
+}
+
+/// Longest profile id the store accepts.
+pub const MAX_ID_LEN: usize = 128;
+
+/// Is `id` of the form the store gives its profiles (a run id, with its job kind or
+/// `-uniformity`)? Only such ids are ever joined into a path, so an id can never name
+/// a file outside `profiles/` (no separator, no `..`, not absolute, not hidden).
+pub fn is_valid_id(id: &str) -> bool {
+    !id.is_empty()
+        && id.len() <= MAX_ID_LEN
+        && !id.starts_with('.')
+        && !id.contains("..")
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.'))
+}
+
+fn checked_id(id: &str) -> Result<&str, StoreError> {
+    if is_valid_id(id) {
+        Ok(id)
+    } else {
+        Err(StoreError::InvalidId(id.to_string()))
+    }
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
@@ -118,8 +146,12 @@ impl ProfileStore {
         self.root.join("current.toml")
     }
 
-    pub fn profile_path(&self, id: &str) -> PathBuf {
-        self.root.join("profiles").join(format!("{id}.toml"))
+    /// The file of profile `id`; an id not of the store's form has none.
+    pub fn profile_path(&self, id: &str) -> Result<PathBuf, StoreError> {
+        Ok(self
+            .root
+            .join("profiles")
+            .join(format!("{}.toml", checked_id(id)?)))
     }
 
     pub fn runs_dir(&self) -> PathBuf {
@@ -128,7 +160,9 @@ impl ProfileStore {
 
     /// Keep a profile in the store without making it current.
     pub fn keep(&self, id: &str, toml: &str) -> std::io::Result<PathBuf> {
-        let path = self.profile_path(id);
+        let path = self
+            .profile_path(id)
+            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
         write_atomic(&path, toml.as_bytes())?;
         Ok(path)
     }
@@ -197,20 +231,34 @@ impl ProfileStore {
         })?;
         write_atomic(&path, text.as_bytes()).map_err(io_error(&path))?;
         for old in dropped {
-            if !history.entries.iter().any(|e| e.id == old.id) {
-                let _ = fs::remove_file(self.profile_path(&old.id));
+            // An id not of the store's form (a hand-edited history) names no file.
+            if let (false, Ok(file)) = (
+                history.entries.iter().any(|e| e.id == old.id),
+                self.profile_path(&old.id),
+            ) {
+                let _ = fs::remove_file(file);
             }
         }
         Ok(())
     }
 
     /// Make an earlier profile current again: `to`, or else the one current before
-    /// the current one. Returns the new history entry.
+    /// the current one. `to` must be an id of the store's form that the history holds,
+    /// and its file must read as a profile, before anything is replaced. Returns the
+    /// new history entry.
     pub fn rollback(&self, to: Option<&str>) -> Result<HistoryEntry, StoreError> {
         let history = self.history()?;
         let current = history.current.clone();
         let target = match to {
-            Some(id) => id.to_string(),
+            Some(id) => {
+                checked_id(id)?;
+                if !history.entries.iter().any(|e| e.id == id) {
+                    return Err(StoreError::NoRollback(format!(
+                        "profile '{id}' is not in the history (chromacal history lists it)"
+                    )));
+                }
+                id.to_string()
+            }
             None => history
                 .entries
                 .iter()
@@ -222,9 +270,14 @@ impl ProfileStore {
                     StoreError::NoRollback("the history has no earlier profile".into())
                 })?,
         };
-        let path = self.profile_path(&target);
+        let path = self.profile_path(&target)?;
         let text = fs::read_to_string(&path).map_err(|e| {
             StoreError::NoRollback(format!("profile '{target}' is not in the store ({e})"))
+        })?;
+        super::Profile::from_toml(&text, &path.display().to_string()).map_err(|e| {
+            StoreError::NoRollback(format!(
+                "profile '{target}' does not read as a profile: {e}"
+            ))
         })?;
         write_atomic(&self.current_path(), text.as_bytes())
             .map_err(io_error(&self.current_path()))?;
@@ -302,11 +355,11 @@ mod tests {
         store.keep("c", "rejected").unwrap();
         assert_eq!(fs::read_to_string(store.current_path()).unwrap(), "second");
         assert_eq!(
-            fs::read_to_string(store.profile_path("a")).unwrap(),
+            fs::read_to_string(store.profile_path("a").unwrap()).unwrap(),
             "first"
         );
         assert_eq!(
-            fs::read_to_string(store.profile_path("c")).unwrap(),
+            fs::read_to_string(store.profile_path("c").unwrap()).unwrap(),
             "rejected"
         );
         let leftovers: Vec<_> = fs::read_dir(dir.path())
@@ -320,6 +373,51 @@ mod tests {
         assert_eq!(history.entries.len(), 2);
     }
 
+    /// A real profile's TOML with id `id` (rollback reads what it restores), fitted
+    /// once to a simulated run.
+    fn profile_text(id: &str) -> String {
+        static FITTED: std::sync::OnceLock<crate::fit::FittedModel> = std::sync::OnceLock::new();
+        let fitted = FITTED.get_or_init(|| {
+            let config = crate::config::parse_config("", "test").unwrap();
+            let dir = tempfile::tempdir().unwrap();
+            let journal =
+                crate::calibrate::session::block_on(crate::calibrate::session::measure_simulated(
+                    &config,
+                    "",
+                    Path::new("."),
+                    &dir.path().join("journal.jsonl"),
+                ))
+                .unwrap()
+                .unwrap();
+            crate::fit::fit_monitor(&journal.measurement_set(), &Default::default()).unwrap()
+        });
+        super::super::Profile {
+            schema_version: super::super::SCHEMA_VERSION,
+            id: id.to_string(),
+            created: "2026-12-01T00:00:00Z".into(),
+            units: crate::measurement::Units::Absolute,
+            model: fitted.model.clone(),
+            provenance: super::super::Provenance {
+                source: "test".into(),
+                display: None,
+                instrument: None,
+                config_digest: None,
+                program: "test".into(),
+            },
+            report: fitted.report.clone(),
+            calibration: None,
+        }
+        .to_toml()
+        .unwrap()
+    }
+
+    fn current_id(store: &ProfileStore) -> String {
+        let text = fs::read_to_string(store.current_path()).unwrap();
+        super::super::Profile::from_toml(&text, "current")
+            .unwrap()
+            .id
+    }
+
     #[test]
     fn rollback_restores_the_previous_profile_and_history_is_bounded() {
         let dir = tempfile::tempdir().unwrap();
@@ -330,33 +428,114 @@ mod tests {
         ));
         for id in ["a", "b", "c", "d"] {
             store
-                .publish(id, &format!("profile {id}"), None, "calibration")
+                .publish(id, &profile_text(id), None, "calibration")
                 .unwrap();
         }
         // Only the last three are kept, with their files.
         let history = store.history().unwrap();
         let ids: Vec<&str> = history.entries.iter().map(|e| e.id.as_str()).collect();
         assert_eq!(ids, ["b", "c", "d"]);
-        assert!(!store.profile_path("a").exists());
+        assert!(!store.profile_path("a").unwrap().exists());
         let entry = store.rollback(None).unwrap();
         assert_eq!((entry.id.as_str(), entry.how.as_str()), ("c", "rollback"));
-        assert_eq!(
-            fs::read_to_string(store.current_path()).unwrap(),
-            "profile c"
-        );
+        assert_eq!(current_id(&store), "c");
         store.rollback(Some("d")).unwrap();
-        assert_eq!(
-            fs::read_to_string(store.current_path()).unwrap(),
-            "profile d"
-        );
+        assert_eq!(current_id(&store), "d");
         assert!(matches!(
             store.rollback(Some("a")),
             Err(StoreError::NoRollback(_))
         ));
-        assert_eq!(
-            fs::read_to_string(store.current_path()).unwrap(),
-            "profile d"
+        assert_eq!(current_id(&store), "d");
+    }
+
+    #[test]
+    fn ids_that_would_leave_the_store_are_refused_and_nothing_outside_is_touched() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = dir.path().join("state");
+        let store = ProfileStore::new(&state).keeping(2);
+        for id in ["a", "b"] {
+            store
+                .publish(id, &profile_text(id), None, "calibration")
+                .unwrap();
+        }
+        // A readable profile outside the store, as an attacker would plant it.
+        let outside = dir.path().join("outside");
+        fs::create_dir_all(&outside).unwrap();
+        fs::write(outside.join("evil.toml"), profile_text("evil")).unwrap();
+        let absolute = outside.join("evil").display().to_string();
+        for id in [
+            "../../outside/evil",
+            absolute.as_str(),
+            "../current",
+            ".hidden",
+            "",
+        ] {
+            assert!(
+                matches!(store.rollback(Some(id)), Err(StoreError::InvalidId(_))),
+                "{id:?} was not refused as an id"
+            );
+            assert_eq!(current_id(&store), "b", "after {id:?}");
+            assert!(store.current_path().exists(), "after {id:?}");
+        }
+        // A history edited by hand to hold an outside id: pruning it deletes nothing
+        // outside `profiles/`, and rolling back to it is still refused.
+        let mut history = store.history().unwrap();
+        history.entries.insert(
+            0,
+            HistoryEntry {
+                id: "../../outside/evil".into(),
+                at: "2026-12-01T00:00:00Z".into(),
+                how: "calibration".into(),
+                held_out: None,
+            },
         );
+        fs::write(
+            store.history_path(),
+            serde_json::to_string(&history).unwrap(),
+        )
+        .unwrap();
+        assert!(matches!(
+            store.rollback(Some("../../outside/evil")),
+            Err(StoreError::InvalidId(_))
+        ));
+        store
+            .publish("c", &profile_text("c"), None, "calibration")
+            .unwrap();
+        let ids: Vec<String> = store
+            .history()
+            .unwrap()
+            .entries
+            .into_iter()
+            .map(|e| e.id)
+            .collect();
+        assert_eq!(ids, ["b", "c"]);
+        assert!(outside.join("evil.toml").exists());
+        // A profile of the store's form whose file is not a profile is not made current.
+        fs::write(store.profile_path("b").unwrap(), "not a profile").unwrap();
+        assert!(matches!(
+            store.rollback(Some("b")),
+            Err(StoreError::NoRollback(why)) if why.contains("does not read as a profile")
+        ));
+        assert_eq!(current_id(&store), "c");
+        // Keeping a profile under a bad id is refused too.
+        assert!(store.keep("../x", "anything").is_err());
+        assert!(!state.join("x.toml").exists());
+    }
+
+    #[test]
+    fn the_store_accepts_its_own_ids() {
+        for id in [
+            "20261201T223403-ab12",
+            "calibrate-20261201T223403-ab12",
+            "20261201T223403-ab12-uniformity",
+            "dell_u2713hm.v2",
+        ] {
+            assert!(is_valid_id(id), "{id}");
+        }
+        for id in ["a/b", "a\\b", "..", "a..b", ".x", "/abs", "a b", "é"] {
+            assert!(!is_valid_id(id), "{id}");
+        }
+        assert!(!is_valid_id(&"x".repeat(MAX_ID_LEN + 1)));
     }
 
     #[test]
