@@ -135,18 +135,7 @@ pub fn unfinished_run(store: &ProfileStore) -> Option<PathBuf> {
 
 /// Does the fitted profile meet the publishing limits? `None` if it does.
 pub fn publish_rejection(fitted: &FittedModel, limits: &PublishConfig) -> Option<String> {
-    match &fitted.report.held_out {
-        None => Some("no held-out patches, so the profile's error is unknown".into()),
-        Some(s) if s.mean > limits.max_mean_de00 => Some(format!(
-            "held-out mean ΔE00 {:.3} is above the limit {}",
-            s.mean, limits.max_mean_de00
-        )),
-        Some(s) if s.p95 > limits.max_p95_de00 => Some(format!(
-            "held-out 95th-percentile ΔE00 {:.3} is above the limit {}",
-            s.p95, limits.max_p95_de00
-        )),
-        Some(_) => None,
-    }
+    limits.rejection(fitted.report.held_out.as_ref(), "held-out")
 }
 
 /// Measure every patch of the journal's plan that is missing, on any display and

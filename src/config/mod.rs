@@ -17,6 +17,7 @@ pub use daemon::{DaemonConfig, OnStart, ScheduleConfig};
 use crate::display::resolve::ResolveConfig;
 use crate::display::web::WebConfig;
 use crate::fit::FitOptions;
+use crate::fit::stats::ErrorStats;
 use crate::instrument::devices::DeviceKind;
 use crate::instrument::driver::DriverOptions;
 use crate::instrument::simulated::SimulatedInstrumentSpec;
@@ -171,6 +172,52 @@ pub struct PublishConfig {
     pub max_p95_de00: f64,
 }
 
+impl PublishConfig {
+    /// Both limits finite and positive: `nan` would let every profile through (or none).
+    pub fn check(&self) -> Result<(), String> {
+        for (key, value) in [
+            ("publish.max_mean_de00", self.max_mean_de00),
+            ("publish.max_p95_de00", self.max_p95_de00),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(format!("{key} must be a positive number, not {value}"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The one gate every publishing path goes through: why a profile whose error (on
+    /// held-out patches, or the spatial map's cross-validation) is `stats` may not
+    /// replace the current one, or `None` when it may. A figure that is not a finite
+    /// number is refused: an error that cannot be told is not within any limit.
+    pub fn rejection(&self, stats: Option<&ErrorStats>, what: &str) -> Option<String> {
+        let Some(s) = stats else {
+            return Some(format!(
+                "no {what} ΔE00 (no patches to score), so the profile's error is unknown"
+            ));
+        };
+        if !(s.mean.is_finite() && s.p95.is_finite()) {
+            return Some(format!(
+                "{what} mean ΔE00 {} / 95th percentile {} is not a number",
+                s.mean, s.p95
+            ));
+        }
+        if !(s.mean <= self.max_mean_de00) {
+            return Some(format!(
+                "{what} mean ΔE00 {:.3} is above the limit {}",
+                s.mean, self.max_mean_de00
+            ));
+        }
+        if !(s.p95 <= self.max_p95_de00) {
+            return Some(format!(
+                "{what} 95th-percentile ΔE00 {:.3} is above the limit {}",
+                s.p95, self.max_p95_de00
+            ));
+        }
+        None
+    }
+}
+
 impl Default for PublishConfig {
     fn default() -> Self {
         PublishConfig {
@@ -256,6 +303,7 @@ pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
 /// together. Run again after command-line overrides.
 pub fn check_config(config: &Config) -> Result<(), String> {
     config.daemon.check()?;
+    config.publish.check()?;
     config.schedule.check()?;
     config.warmup.check()?;
     if let Some(target) = &config.target {
@@ -352,6 +400,47 @@ pub fn load_config(path: Option<&Path>) -> Result<LoadedConfig, ConfigError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn publishing_limits_must_be_numbers_and_the_gate_refuses_figures_that_are_not() {
+        for text in [
+            "[publish]\nmax_mean_de00 = nan\n",
+            "[publish]\nmax_p95_de00 = inf\n",
+            "[publish]\nmax_mean_de00 = -1.0\n",
+        ] {
+            let error = parse_config(text, "c.toml").unwrap_err().to_string();
+            assert!(
+                error.contains("must be a positive number"),
+                "{text}: {error}"
+            );
+        }
+        let limits = PublishConfig::default();
+        let stats = |mean: f64, p95: f64| ErrorStats {
+            n: 10,
+            mean,
+            p95,
+            max: p95,
+        };
+        assert_eq!(limits.rejection(Some(&stats(0.5, 1.0)), "held-out"), None);
+        for (mean, p95) in [(f64::NAN, 1.0), (0.5, f64::NAN), (f64::INFINITY, 1.0)] {
+            let why = limits
+                .rejection(Some(&stats(mean, p95)), "held-out")
+                .unwrap();
+            assert!(why.contains("is not a number"), "{why}");
+        }
+        assert!(
+            limits
+                .rejection(Some(&stats(1.5, 1.0)), "held-out")
+                .unwrap()
+                .contains("above the limit")
+        );
+        assert!(
+            limits
+                .rejection(None, "held-out")
+                .unwrap()
+                .contains("unknown")
+        );
+    }
 
     #[test]
     fn the_default_config_parses_and_builds_a_monitor() {

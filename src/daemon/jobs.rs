@@ -588,8 +588,9 @@ async fn uniformity(
     updated.schema_version = SCHEMA_VERSION;
     let text = updated.to_toml().map_err(|e| e.to_string())?;
     let limits = &config.publish;
-    let passes =
-        chosen.is_some_and(|s| s.mean <= limits.max_mean_de00 && s.p95 <= limits.max_p95_de00);
+    let passes = limits
+        .rejection(chosen.as_ref(), "the spatial map's cross-validated")
+        .is_none();
     let store_error = |e: std::io::Error| format!("profile store: {e}");
     if passes {
         daemon
