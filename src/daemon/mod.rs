@@ -290,12 +290,30 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
         path: path.to_path_buf(),
         source,
     };
+    // A token others could read is no secret: an existing file is made 0600 before
+    // its token is used or a new one is written into it.
+    let private = |file_path: &Path| -> Result<(), DaemonError> {
+        let mode = std::fs::metadata(file_path)
+            .map_err(io)?
+            .permissions()
+            .mode();
+        if mode & 0o077 != 0 {
+            std::fs::set_permissions(file_path, std::fs::Permissions::from_mode(0o600)).map_err(
+                |e| {
+                    DaemonError::Config(format!(
+                        "the API token file {} can be read by others (mode {:o}) and could not be made 0600: {e}",
+                        file_path.display(),
+                        mode & 0o777
+                    ))
+                },
+            )?;
+            tracing::warn!(path = %file_path.display(), "the API token file could be read by others; made it 0600");
+        }
+        Ok(())
+    };
     match std::fs::read_to_string(path) {
         Ok(text) if !text.trim().is_empty() => {
-            let mode = std::fs::metadata(path).map_err(io)?.permissions().mode();
-            if mode & 0o077 != 0 {
-                tracing::warn!(path = %path.display(), "the API token file can be read by others; chmod 600 it");
-            }
+            private(path)?;
             return Ok(text.trim().to_string());
         }
         Ok(_) => {}
@@ -315,6 +333,9 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
         .mode(0o600)
         .open(path)
         .map_err(io)?;
+    // `mode` applies only when the file is created; an empty one already there keeps
+    // its mode unless changed here, before the secret is written.
+    private(path)?;
     use std::io::Write;
     file.write_all(format!("{token}\n").as_bytes())
         .and_then(|()| file.sync_all())
@@ -457,5 +478,38 @@ async fn wait_for_stop_signal() {
         _ => {
             let _ = tokio::signal::ctrl_c().await;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt;
+
+    fn mode(path: &Path) -> u32 {
+        std::fs::metadata(path).unwrap().permissions().mode() & 0o777
+    }
+
+    #[test]
+    fn the_token_file_is_always_0600() {
+        let dir = tempfile::tempdir().unwrap();
+        // Made fresh.
+        let fresh = dir.path().join("fresh.token");
+        let token = load_or_create_token(&fresh).unwrap();
+        assert_eq!(token.len(), 64);
+        assert_eq!(mode(&fresh), 0o600);
+        // An empty file others can read gets the secret only once it is private.
+        let empty = dir.path().join("empty.token");
+        std::fs::write(&empty, "").unwrap();
+        std::fs::set_permissions(&empty, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let token = load_or_create_token(&empty).unwrap();
+        assert_eq!(mode(&empty), 0o600);
+        assert_eq!(std::fs::read_to_string(&empty).unwrap().trim(), token);
+        // A token already there, readable by others, is kept and made private.
+        let open = dir.path().join("open.token");
+        std::fs::write(&open, "abc123\n").unwrap();
+        std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o644)).unwrap();
+        assert_eq!(load_or_create_token(&open).unwrap(), "abc123");
+        assert_eq!(mode(&open), 0o600);
     }
 }
