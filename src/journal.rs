@@ -33,6 +33,8 @@ pub enum JournalError {
     },
     #[error("{path} already exists; resume it or choose another run")]
     Exists { path: PathBuf },
+    #[error("{path} is being written by another process; one writer per journal")]
+    Busy { path: PathBuf },
     #[error("{path}, line 1: not a chromacal journal header: {message}")]
     Header { path: PathBuf, message: String },
     #[error("{path}, line {line}: {message}")]
@@ -101,6 +103,19 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> JournalError + '_ {
     }
 }
 
+/// Take the journal's own lock (`flock`, held while the file is open), so a second
+/// writer is refused instead of interleaving its lines. Lines are appended with
+/// `O_APPEND` as well, so even a writer that ignores the lock cannot overwrite them.
+fn lock_journal(file: &File, path: &Path) -> Result<(), JournalError> {
+    match file.try_lock() {
+        Ok(()) => Ok(()),
+        Err(std::fs::TryLockError::WouldBlock) => Err(JournalError::Busy {
+            path: path.to_path_buf(),
+        }),
+        Err(std::fs::TryLockError::Error(e)) => Err(io_error(path)(e)),
+    }
+}
+
 impl Journal {
     /// Start a new journal at `path` (which must not exist) with `header`.
     pub fn create(path: &Path, header: JournalHeader) -> Result<Self, JournalError> {
@@ -108,7 +123,7 @@ impl Journal {
             std::fs::create_dir_all(dir).map_err(io_error(dir))?;
         }
         let mut file = OpenOptions::new()
-            .write(true)
+            .append(true)
             .create_new(true)
             .open(path)
             .map_err(|e| {
@@ -120,6 +135,7 @@ impl Journal {
                     io_error(path)(e)
                 }
             })?;
+        lock_journal(&file, path)?;
         let line = serde_json::to_string(&header).map_err(|e| JournalError::Header {
             path: path.to_path_buf(),
             message: e.to_string(),
@@ -141,9 +157,10 @@ impl Journal {
     pub fn open(path: &Path) -> Result<(Self, Recovery), JournalError> {
         let mut file = OpenOptions::new()
             .read(true)
-            .write(true)
+            .append(true)
             .open(path)
             .map_err(io_error(path))?;
+        lock_journal(&file, path)?;
         let mut text = String::new();
         file.read_to_string(&mut text).map_err(io_error(path))?;
         let (header, entries, recovery, good_len) = parse(&text, path)?;

@@ -50,6 +50,8 @@ pub enum CalibrateError {
     #[error("no unfinished run to resume in {0}")]
     NothingToResume(PathBuf),
     #[error(transparent)]
+    StoreLocked(#[from] crate::profile::store::StoreError),
+    #[error(transparent)]
     Devices(#[from] DevicesError),
     #[error("cannot write the config: {0}")]
     Serialize(String),
@@ -377,6 +379,8 @@ pub async fn calibrate<'a>(
     prompt: Option<PositionPrompt<'a>>,
 ) -> Result<CalibrationOutcome, CalibrateError> {
     let store = ProfileStore::new(&options.state_dir);
+    // Held for the whole run: one writer per state directory.
+    let _store_lock = store.lock("chromacal calibrate")?;
     // A resumed run goes on with the config it started with (and the overrides).
     let (run, mut devices) = if options.resume {
         let dir = unfinished_run(&store)

@@ -44,6 +44,8 @@ pub enum DaemonError {
     Config(String),
     #[error("another daemon already answers on {0}")]
     AlreadyRunning(PathBuf),
+    #[error(transparent)]
+    Store(#[from] crate::profile::store::StoreError),
 }
 
 /// Where the API socket is by default.
@@ -358,6 +360,9 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
         source,
     })?;
     let store = ProfileStore::new(&options.state_dir).keeping(config.keep_profiles);
+    // Held until the daemon returns: no `calibrate` or second daemon writes this store
+    // meanwhile.
+    let _store_lock = store.lock("chromacal daemon")?;
     let daemon = Daemon::new(loaded, store);
 
     let socket_path = config

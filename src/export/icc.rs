@@ -276,7 +276,7 @@ fn assemble(tags: &[([u8; 4], Vec<u8>)], text: &IccText, version: IccVersion) ->
         let (offset, size) = shared.unwrap_or_else(|| {
             let offset = (table_end + data.len()) as u32;
             data.extend_from_slice(bytes);
-            while data.len() % 4 != 0 {
+            while !data.len().is_multiple_of(4) {
                 data.push(0);
             }
             (offset, bytes.len() as u32)

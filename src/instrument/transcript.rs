@@ -45,7 +45,7 @@ pub struct TranscriptEvent {
 
 impl TranscriptEvent {
     pub fn bytes(&self) -> Result<Vec<u8>, String> {
-        if self.hex.len() % 2 != 0 {
+        if !self.hex.len().is_multiple_of(2) {
             return Err(format!("odd number of hex digits in '{}'", self.hex));
         }
         (0..self.hex.len())

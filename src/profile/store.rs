@@ -35,7 +35,11 @@ pub enum StoreError {
     #[error("no profile to roll back to: {0}")]
     NoRollback(String),
     #[error(
-        "'{0}' is not a profile id of this store (ids are letters, digits, '-', '_' and '.', at most {MAX_ID_LEN} characters, not starting with '.')"
+        "{path} is in use by {holder}: one process at a time may write a state directory (stop it, or give this one another --state)"
+    )]
+    Locked { path: PathBuf, holder: String },
+    #[error(
+        "'{0}' is not a profile id of this store (ids are letters, digits, '-', '_' and '.', at most {MAX_ID_LEN} characters, without '..')"
     )]
     InvalidId(String),
 }
@@ -44,12 +48,12 @@ pub enum StoreError {
 pub const MAX_ID_LEN: usize = 128;
 
 /// Is `id` of the form the store gives its profiles (a run id, with its job kind or
-/// `-uniformity`)? Only such ids are ever joined into a path, so an id can never name
-/// a file outside `profiles/` (no separator, no `..`, not absolute, not hidden).
+/// `-uniformity`, or a run directory's name)? Only such ids are ever joined into a
+/// path, so an id can never name a file outside `profiles/` (no separator, no `..`,
+/// not absolute).
 pub fn is_valid_id(id: &str) -> bool {
     !id.is_empty()
         && id.len() <= MAX_ID_LEN
-        && !id.starts_with('.')
         && !id.contains("..")
         && id
             .bytes()
@@ -122,6 +126,17 @@ pub struct ProfileStore {
     root: PathBuf,
     /// Profiles kept in the history; older ones (and their files) are removed.
     keep: usize,
+    /// Serialises this process's read-modify-writes of `history.json` (a daemon's
+    /// rollback and a job's publish may run at once); other processes are kept out by
+    /// [`ProfileStore::lock`].
+    history_guard: std::sync::Arc<std::sync::Mutex<()>>,
+}
+
+/// The advisory lock on a state directory (`<state>/lock`, `flock`), held while the
+/// value lives: one writer per store, whether a daemon or a `calibrate`.
+#[derive(Debug)]
+pub struct StoreLock {
+    _file: fs::File,
 }
 
 impl ProfileStore {
@@ -129,7 +144,46 @@ impl ProfileStore {
         ProfileStore {
             root: root.to_path_buf(),
             keep: DEFAULT_KEEP,
+            history_guard: Default::default(),
         }
+    }
+
+    pub fn lock_path(&self) -> PathBuf {
+        self.root.join("lock")
+    }
+
+    /// Take the store's lock for `what` (e.g. "chromacal daemon"), or say who holds it.
+    /// The holder's pid and `what` are written into the lock file for the next comer;
+    /// the lock goes with the process (a kill -9 releases it).
+    pub fn lock(&self, what: &str) -> Result<StoreLock, StoreError> {
+        fs::create_dir_all(&self.root).map_err(io_error(&self.root))?;
+        let path = self.lock_path();
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io_error(&path))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(fs::TryLockError::WouldBlock) => {
+                let holder = fs::read_to_string(&path)
+                    .ok()
+                    .map(|t| t.trim().to_string())
+                    .filter(|t| !t.is_empty())
+                    .unwrap_or_else(|| "another process".into());
+                return Err(StoreError::Locked { path, holder });
+            }
+            Err(fs::TryLockError::Error(e)) => return Err(io_error(&path)(e)),
+        }
+        file.set_len(0)
+            .and_then(|()| {
+                writeln!(file, "{what} (pid {})", std::process::id())?;
+                file.sync_all()
+            })
+            .map_err(io_error(&path))?;
+        Ok(StoreLock { _file: file })
     }
 
     /// Keep the last `n` current profiles (at least 2, so there is one to roll back to).
@@ -212,6 +266,12 @@ impl ProfileStore {
         how: &str,
         held_out: Option<ErrorStats>,
     ) -> Result<(), StoreError> {
+        // A poisoned guard only means another thread panicked mid-update; the file on
+        // disk is whole (written atomically), so go on.
+        let _guard = self
+            .history_guard
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
         let mut history = self.history()?;
         history.entries.push(HistoryEntry {
             id: id.to_string(),
@@ -467,7 +527,7 @@ mod tests {
             "../../outside/evil",
             absolute.as_str(),
             "../current",
-            ".hidden",
+            "a/b",
             "",
         ] {
             assert!(
@@ -529,10 +589,11 @@ mod tests {
             "calibrate-20261201T223403-ab12",
             "20261201T223403-ab12-uniformity",
             "dell_u2713hm.v2",
+            ".tmpGVcBoq",
         ] {
             assert!(is_valid_id(id), "{id}");
         }
-        for id in ["a/b", "a\\b", "..", "a..b", ".x", "/abs", "a b", "é"] {
+        for id in ["a/b", "a\\b", "..", "a..b", "/abs", "a b", "é"] {
             assert!(!is_valid_id(id), "{id}");
         }
         assert!(!is_valid_id(&"x".repeat(MAX_ID_LEN + 1)));

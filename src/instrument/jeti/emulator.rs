@@ -43,7 +43,7 @@ impl SpecbosEmulator {
         self.replies += 1;
         let mut bytes = Vec::with_capacity(text.len() + 1);
         // Every seventh reply carries a stray ENQ, as the real instrument's do.
-        if self.replies % 7 == 0 {
+        if self.replies.is_multiple_of(7) {
             bytes.push(ENQ);
         }
         bytes.extend_from_slice(text.as_bytes());
