@@ -316,6 +316,16 @@ pub fn check_config(config: &Config) -> Result<(), String> {
         return Err("fit.laws must name at least one law".into());
     }
     let serial = config.instrument.serial()?;
+    // A light meter's readings make no model without the primaries' chromaticities:
+    // say so now, not after every patch has been measured.
+    if let Some((kind, _)) = &serial
+        && kind.capability() == crate::instrument::Capability::Luminance
+        && config.fit.primaries_xy.is_none()
+    {
+        return Err(format!(
+            "the {kind} measures luminance only: give the primaries' chromaticities in [fit] primaries_xy = [[xr, yr], [xg, yg], [xb, yb]] (the manufacturer's figures) before measuring"
+        ));
+    }
     let sink = config.display.sink();
     match (sink, serial.is_some()) {
         (Sink::Simulated, true) => {
@@ -400,6 +410,16 @@ pub fn load_config(path: Option<&Path>) -> Result<LoadedConfig, ConfigError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_light_meter_without_chromaticities_is_refused_before_measuring() {
+        let text = "[instrument]\ndriver = \"ls100\"\nport = \"/dev/ttyUSB0\"\n[display]\nsink = \"web\"\n";
+        let error = parse_config(text, "c.toml").unwrap_err().to_string();
+        assert!(error.contains("primaries_xy"), "{error}");
+        let fixed =
+            format!("{text}[fit]\nprimaries_xy = [[0.64, 0.33], [0.30, 0.60], [0.15, 0.06]]\n");
+        parse_config(&fixed, "c.toml").unwrap();
+    }
 
     #[test]
     fn publishing_limits_must_be_numbers_and_the_gate_refuses_figures_that_are_not() {
