@@ -27,7 +27,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "file".into());
-    let temporary = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    // Unique per call, so two threads replacing one file never share a temporary.
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let temporary = dir.join(format!(".{name}.tmp-{}-{n}", std::process::id()));
     {
         let mut f = File::create(&temporary)?;
         f.write_all(bytes)?;

@@ -392,6 +392,29 @@ mod tests {
     }
 
     #[test]
+    fn lines_are_appended_at_the_end_even_past_a_writer_that_ignores_the_lock() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("journal.jsonl");
+        let mut j = Journal::create(&path, header()).unwrap();
+        j.append(measurement(0, 1.0)).unwrap();
+        // The lock is advisory: a careless writer can still append a line. With
+        // O_APPEND the journal's next line goes after it instead of over it.
+        let mut other = OpenOptions::new().append(true).open(&path).unwrap();
+        other
+            .write_all(
+                format!("{}\n", serde_json::to_string(&measurement(1, 2.0)).unwrap()).as_bytes(),
+            )
+            .unwrap();
+        drop(other);
+        j.append(measurement(2, 3.0)).unwrap();
+        drop(j);
+        let (_, entries, recovery) = Journal::read(&path).unwrap();
+        assert!(recovery.dropped_tail.is_none());
+        let indices: Vec<usize> = entries.iter().map(|m| m.index).collect();
+        assert_eq!(indices, [0, 1, 2]);
+    }
+
+    #[test]
     fn entries_survive_reopening_and_a_torn_tail_is_dropped() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("journal.jsonl");

@@ -258,25 +258,46 @@ async fn a_correction_matrix_applies_to_colorimeters_only() {
 fn a_light_meter_run_needs_the_primaries_chromaticities() {
     let dir = tempfile::tempdir().unwrap();
     let ls = emulate(&["--instrument", "ls100", "--time-scale", "0.002"]);
-    let out = chromacal()
-        .args([
-            "calibrate",
-            "--instrument",
-            &format!("ls100:{}", ls.device),
-            "--screen",
-            &ls.screen,
-        ])
-        .args([
-            "--timing-scale",
-            "0.002",
-            "--state-dir",
-            dir.path().to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(1));
+    let run = |config: Option<&std::path::Path>| {
+        let mut command = chromacal();
+        command.arg("calibrate");
+        if let Some(config) = config {
+            command.arg("--config").arg(config);
+        }
+        command
+            .args([
+                "--instrument",
+                &format!("ls100:{}", ls.device),
+                "--screen",
+                &ls.screen,
+            ])
+            .args([
+                "--timing-scale",
+                "0.002",
+                "--state-dir",
+                dir.path().to_str().unwrap(),
+            ])
+            .output()
+            .unwrap()
+    };
+    // Refused before the first patch: nothing measured to lose, no run started.
+    let out = run(None);
+    assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("primaries_xy"));
-    // The journal is there, so the readings can be fitted once the figures are known.
+    assert!(!dir.path().join("runs").exists());
+    // With the manufacturer's chromaticities the run measures and fits luminance only.
+    let config = dir.path().join("ls100.toml");
+    std::fs::write(
+        &config,
+        "[fit]\nprimaries_xy = [[0.619, 0.344], [0.2765, 0.605], [0.1513, 0.0611]]\n",
+    )
+    .unwrap();
+    let out = run(Some(&config));
+    assert!(
+        matches!(out.status.code(), Some(0) | Some(3)),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let journal = std::fs::read_dir(dir.path().join("runs"))
         .unwrap()
         .next()

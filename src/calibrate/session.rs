@@ -50,7 +50,7 @@ pub enum CalibrateError {
     #[error("no unfinished run to resume in {0}")]
     NothingToResume(PathBuf),
     #[error(transparent)]
-    StoreLocked(#[from] crate::profile::store::StoreError),
+    StoreState(#[from] crate::profile::store::StoreError),
     #[error(transparent)]
     Devices(#[from] DevicesError),
     #[error("cannot write the config: {0}")]

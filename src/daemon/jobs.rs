@@ -588,9 +588,8 @@ async fn uniformity(
     updated.schema_version = SCHEMA_VERSION;
     let text = updated.to_toml().map_err(|e| e.to_string())?;
     let limits = &config.publish;
-    let passes = limits
-        .rejection(chosen.as_ref(), "the spatial map's cross-validated")
-        .is_none();
+    let rejection = limits.rejection(chosen.as_ref(), "the spatial map's cross-validated");
+    let passes = rejection.is_none();
     let store_error = |e: std::io::Error| format!("profile store: {e}");
     if passes {
         daemon
@@ -614,12 +613,11 @@ async fn uniformity(
         format!("leave-one-position-out mean ΔE00 {:.3}", s.mean)
     });
     Ok(JobSuccess {
-        message: if passes {
-            format!("published {new_id}: a new spatial map ({cv})")
-        } else {
-            format!(
-                "kept {new_id} but not published: the new map's {cv} misses the [publish] limits"
-            )
+        message: match &rejection {
+            None => format!("published {new_id}: a new spatial map ({cv})"),
+            Some(why) => format!(
+                "kept {new_id} but not published: the new map misses the [publish] limits ({why})"
+            ),
         },
         profile_id: Some(new_id),
         published: passes,

@@ -82,6 +82,9 @@ pub struct Daemon {
     /// When the last job ended (or the daemon started).
     pub(crate) idle_since: Mutex<Instant>,
     next_verification: Mutex<Option<std::time::SystemTime>>,
+    /// The state directory's lock: it lives as long as the daemon does, including any
+    /// job task still holding it after `run` returns.
+    store_lock: Mutex<Option<crate::profile::store::StoreLock>>,
 }
 
 /// Why a job was not started.
@@ -108,7 +111,15 @@ impl Daemon {
             started: Instant::now(),
             idle_since: Mutex::new(Instant::now()),
             next_verification: Mutex::new(None),
+            store_lock: Mutex::new(None),
         })
+    }
+
+    /// Keep the state directory's lock for as long as this daemon lives.
+    pub fn hold_store_lock(&self, lock: crate::profile::store::StoreLock) {
+        if let Ok(mut held) = self.store_lock.lock() {
+            *held = Some(lock);
+        }
     }
 
     pub fn store(&self) -> &ProfileStore {
@@ -313,10 +324,21 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
         }
         Ok(())
     };
+    if std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) {
+        return Err(DaemonError::Config(format!(
+            "the API token file {} is a symbolic link; give a regular file",
+            path.display()
+        )));
+    }
     match std::fs::read_to_string(path) {
         Ok(text) if !text.trim().is_empty() => {
+            let mode = std::fs::metadata(path).map_err(io)?.permissions().mode();
             private(path)?;
-            return Ok(text.trim().to_string());
+            if mode & 0o077 == 0 {
+                return Ok(text.trim().to_string());
+            }
+            // Others could read it, so it may be known: a new one replaces it below.
+            tracing::warn!(path = %path.display(), "the API token could be read by others; a new one replaces it (clients need the new token)");
         }
         Ok(_) => {}
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
@@ -360,10 +382,11 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
         source,
     })?;
     let store = ProfileStore::new(&options.state_dir).keeping(config.keep_profiles);
-    // Held until the daemon returns: no `calibrate` or second daemon writes this store
-    // meanwhile.
-    let _store_lock = store.lock("chromacal daemon")?;
+    // Held while the daemon (and any job task) lives: no `calibrate` or second daemon
+    // writes this store meanwhile.
+    let store_lock = store.lock("chromacal daemon")?;
     let daemon = Daemon::new(loaded, store);
+    daemon.hold_store_lock(store_lock);
 
     let socket_path = config
         .socket
@@ -510,11 +533,21 @@ mod tests {
         let token = load_or_create_token(&empty).unwrap();
         assert_eq!(mode(&empty), 0o600);
         assert_eq!(std::fs::read_to_string(&empty).unwrap().trim(), token);
-        // A token already there, readable by others, is kept and made private.
+        // A private token already there is used as it is.
+        assert_eq!(load_or_create_token(&fresh).unwrap().len(), 64);
+        std::fs::write(&fresh, "abc123\n").unwrap();
+        assert_eq!(load_or_create_token(&fresh).unwrap(), "abc123");
+        // One others could read may be known: it is replaced, and the file made private.
         let open = dir.path().join("open.token");
         std::fs::write(&open, "abc123\n").unwrap();
         std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o644)).unwrap();
-        assert_eq!(load_or_create_token(&open).unwrap(), "abc123");
+        let token = load_or_create_token(&open).unwrap();
+        assert_ne!(token, "abc123");
+        assert_eq!(std::fs::read_to_string(&open).unwrap().trim(), token);
         assert_eq!(mode(&open), 0o600);
+        // A symbolic link is not followed to wherever it points.
+        let link = dir.path().join("link.token");
+        std::os::unix::fs::symlink(&open, &link).unwrap();
+        assert!(load_or_create_token(&link).is_err());
     }
 }

@@ -35,7 +35,7 @@ pub enum StoreError {
     #[error("no profile to roll back to: {0}")]
     NoRollback(String),
     #[error(
-        "{path} is in use by {holder}: one process at a time may write a state directory (stop it, or give this one another --state)"
+        "{path} is in use by {holder}: one process at a time may write a state directory (stop it, or give this one another --state-dir)"
     )]
     Locked { path: PathBuf, holder: String },
     #[error(
@@ -136,7 +136,15 @@ pub struct ProfileStore {
 /// value lives: one writer per store, whether a daemon or a `calibrate`.
 #[derive(Debug)]
 pub struct StoreLock {
-    _file: fs::File,
+    file: fs::File,
+}
+
+impl Drop for StoreLock {
+    /// Leave no stale holder behind (best effort: a kill -9 leaves the text, but not
+    /// the lock, and the next holder writes its own).
+    fn drop(&mut self) {
+        let _ = self.file.set_len(0);
+    }
 }
 
 impl ProfileStore {
@@ -183,7 +191,7 @@ impl ProfileStore {
                 file.sync_all()
             })
             .map_err(io_error(&path))?;
-        Ok(StoreLock { _file: file })
+        Ok(StoreLock { file })
     }
 
     /// Keep the last `n` current profiles (at least 2, so there is one to roll back to).
@@ -230,6 +238,7 @@ impl ProfileStore {
         held_out: Option<&ErrorStats>,
         how: &str,
     ) -> std::io::Result<PathBuf> {
+        let _guard = self.guard();
         let path = self.keep(id, toml)?;
         write_atomic(&self.current_path(), toml.as_bytes())?;
         self.record_current(id, how, held_out.cloned())
@@ -258,20 +267,24 @@ impl ProfileStore {
         }
     }
 
+    /// This process's turn at `current.toml` and `history.json`: held across a whole
+    /// publish or rollback, so the two always name the same profile. A poisoned guard
+    /// only means another thread panicked mid-update; the files are whole (written
+    /// atomically), so go on.
+    fn guard(&self) -> std::sync::MutexGuard<'_, ()> {
+        self.history_guard
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
     /// Add `id` as current to the history, and drop the oldest entries (and their
-    /// profile files) past the number kept.
+    /// profile files) past the number kept. The caller holds [`Self::guard`].
     fn record_current(
         &self,
         id: &str,
         how: &str,
         held_out: Option<ErrorStats>,
     ) -> Result<(), StoreError> {
-        // A poisoned guard only means another thread panicked mid-update; the file on
-        // disk is whole (written atomically), so go on.
-        let _guard = self
-            .history_guard
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
         let mut history = self.history()?;
         history.entries.push(HistoryEntry {
             id: id.to_string(),
@@ -307,6 +320,7 @@ impl ProfileStore {
     /// and its file must read as a profile, before anything is replaced. Returns the
     /// new history entry.
     pub fn rollback(&self, to: Option<&str>) -> Result<HistoryEntry, StoreError> {
+        let _guard = self.guard();
         let history = self.history()?;
         let current = history.current.clone();
         let target = match to {
@@ -334,11 +348,18 @@ impl ProfileStore {
         let text = fs::read_to_string(&path).map_err(|e| {
             StoreError::NoRollback(format!("profile '{target}' is not in the store ({e})"))
         })?;
-        super::Profile::from_toml(&text, &path.display().to_string()).map_err(|e| {
-            StoreError::NoRollback(format!(
-                "profile '{target}' does not read as a profile: {e}"
-            ))
-        })?;
+        let profile =
+            super::Profile::from_toml(&text, &path.display().to_string()).map_err(|e| {
+                StoreError::NoRollback(format!(
+                    "profile '{target}' does not read as a profile: {e}"
+                ))
+            })?;
+        if profile.id != target {
+            return Err(StoreError::NoRollback(format!(
+                "the file of profile '{target}' holds profile '{}'",
+                profile.id
+            )));
+        }
         write_atomic(&self.current_path(), text.as_bytes())
             .map_err(io_error(&self.current_path()))?;
         let held_out = history
@@ -580,6 +601,48 @@ mod tests {
         // Keeping a profile under a bad id is refused too.
         assert!(store.keep("../x", "anything").is_err());
         assert!(!state.join("x.toml").exists());
+    }
+
+    #[test]
+    fn publishing_and_rolling_back_at_once_leave_current_and_history_agreeing() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = ProfileStore::new(dir.path()).keeping(50);
+        for id in ["a", "b"] {
+            store
+                .publish(id, &profile_text(id), None, "calibration")
+                .unwrap();
+        }
+        let texts: Vec<(String, String)> = (0..20)
+            .map(|k| (format!("p{k}"), profile_text(&format!("p{k}"))))
+            .collect();
+        std::thread::scope(|scope| {
+            let publisher = store.clone();
+            scope.spawn(move || {
+                for (id, text) in &texts {
+                    publisher.publish(id, text, None, "calibration").unwrap();
+                }
+            });
+            let roller = store.clone();
+            scope.spawn(move || {
+                for _ in 0..20 {
+                    roller.rollback(None).unwrap();
+                }
+            });
+        });
+        let history = store.history().unwrap();
+        // No update lost: two to start, twenty published, twenty rollbacks.
+        assert_eq!(history.entries.len(), 42, "history entries were lost");
+        assert_eq!(
+            Some(current_id(&store)),
+            history.current,
+            "current.toml and history.json name different profiles"
+        );
+        let leftovers = fs::read_dir(dir.path())
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+            .count();
+        assert_eq!(leftovers, 0);
     }
 
     #[test]
