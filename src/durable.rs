@@ -31,12 +31,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let temporary = dir.join(format!(".{name}.tmp-{}-{n}", std::process::id()));
-    {
-        let mut f = File::create(&temporary)?;
+    // Whatever fails (a full disk while writing, the rename), no temporary is left.
+    let written = File::create(&temporary).and_then(|mut f| {
         f.write_all(bytes)?;
-        f.sync_all()?;
-    }
-    if let Err(e) = fs::rename(&temporary, path) {
+        f.sync_all()
+    });
+    if let Err(e) = written.and_then(|()| fs::rename(&temporary, path)) {
         let _ = fs::remove_file(&temporary);
         return Err(e);
     }

@@ -244,6 +244,18 @@ async fn refusals_are_clear_and_name_what_was_wrong() {
     assert_eq!(post(&api, "/jobs/cancel", "").await.status, 404);
     let reply = get(&api, "/profile?format=xml").await;
     assert_eq!(reply.status, 404, "no profile yet comes first");
+    // A query string that does not parse is refused in JSON too.
+    let reply = get(&api, "/profile?colour=red").await;
+    assert_eq!(reply.status, 400);
+    let error = reply
+        .json()
+        .ok()
+        .and_then(|v| v["error"].as_str().map(String::from));
+    assert!(
+        error.is_some_and(|e| e.contains("query string")),
+        "{}",
+        reply.text()
+    );
 
     // One event stream at most, as configured; the second is refused, not queued.
     let _first = subscribe(&api);
@@ -331,12 +343,39 @@ async fn tcp_needs_the_token_and_requests_past_the_rate_are_refused() {
     }
     assert_eq!(statuses[0], 200);
     assert!(statuses.contains(&429), "{statuses:?}");
+    // A token holder who used up the TCP bucket does not starve the owner's socket.
+    assert_eq!(
+        get(&daemon.endpoint(), "/status").await.status,
+        200,
+        "the unix socket has its own bucket"
+    );
     tokio::time::sleep(Duration::from_millis(1200)).await;
     assert_eq!(
         get(&right, "/status").await.status,
         200,
         "the bucket refills"
     );
+    // The scheme's name is case-insensitive: `bearer` as well as `Bearer`.
+    tokio::time::sleep(Duration::from_millis(600)).await;
+    let chromacal::daemon::client::Endpoint::Tcp { address, token } = &right else {
+        unreachable!()
+    };
+    for scheme in ["bearer", "BEARER"] {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let mut stream = tokio::net::TcpStream::connect(address).await.unwrap();
+        stream
+            .write_all(
+                format!(
+                    "GET /status HTTP/1.1\r\nHost: {address}\r\nAuthorization: {scheme} {token}\r\nConnection: close\r\n\r\n"
+                )
+                .as_bytes(),
+            )
+            .await
+            .unwrap();
+        let mut reply = String::new();
+        stream.read_to_string(&mut reply).await.unwrap();
+        assert!(reply.starts_with("HTTP/1.1 200"), "{scheme}: {reply}");
+    }
 
     // An address other machines can reach is refused unless allowed.
     let other = tempfile::tempdir().unwrap();

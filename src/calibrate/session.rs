@@ -42,7 +42,9 @@ pub enum CalibrateError {
     Fit(#[from] FitError),
     #[error("profile: {0}")]
     Profile(#[from] ProfileError),
-    #[error("profile store {path}: {source}")]
+    #[error(
+        "profile store {path}: {source}\nThe run's journal is kept; once the cause is fixed, `chromacal calibrate --resume` fits and publishes it without measuring again."
+    )]
     Store {
         path: PathBuf,
         source: std::io::Error,

@@ -71,7 +71,8 @@ impl Connected<IncomingStream<'_, tokio::net::TcpListener>> for Peer {
     }
 }
 
-/// A token bucket shared by every client: a local API has one user, so one bucket.
+/// A token bucket. There is one per listener: a token holder on TCP can use up its
+/// own, never the owner's on the unix socket.
 struct RateLimit {
     state: Mutex<(f64, Instant)>,
     per_s: f64,
@@ -99,8 +100,34 @@ impl RateLimit {
 struct ApiState {
     daemon: Arc<Daemon>,
     access: Access,
-    limit: RateLimit,
+    /// The unix socket's bucket and the TCP listener's.
+    limit_local: RateLimit,
+    limit_tcp: RateLimit,
     streams: AtomicUsize,
+    /// When a refused TCP client was last logged, and how many were refused since:
+    /// one line per `REFUSAL_LOG_EVERY`, so a flood of bad requests cannot flood the log.
+    refusals: Mutex<(Option<Instant>, u64)>,
+}
+
+/// Least time between two log lines about refused TCP clients.
+const REFUSAL_LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
+
+impl ApiState {
+    /// Log a refused TCP client, at most once per `REFUSAL_LOG_EVERY`.
+    fn log_refusal(&self, addr: &SocketAddr) {
+        let Ok(mut refusals) = self.refusals.lock() else {
+            return;
+        };
+        refusals.1 += 1;
+        let now = Instant::now();
+        if refusals
+            .0
+            .is_none_or(|last| now.duration_since(last) >= REFUSAL_LOG_EVERY)
+        {
+            tracing::warn!(%addr, refused = refusals.1, "refused TCP clients without the right token (this one and those since the last such line)");
+            *refusals = (Some(now), 0);
+        }
+    }
 }
 
 type Shared = Arc<ApiState>;
@@ -112,14 +139,17 @@ fn refusal(status: StatusCode, message: impl Into<String>) -> Response {
 /// The router, for both listeners.
 pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
     let config = &daemon.loaded.config.daemon;
+    let bucket = || RateLimit {
+        state: Mutex::new((config.burst as f64, Instant::now())),
+        per_s: config.requests_per_s,
+        burst: config.burst as f64,
+    };
     let state = Arc::new(ApiState {
-        limit: RateLimit {
-            state: Mutex::new((config.burst as f64, Instant::now())),
-            per_s: config.requests_per_s,
-            burst: config.burst as f64,
-        },
+        limit_local: bucket(),
+        limit_tcp: bucket(),
         access,
         streams: AtomicUsize::new(0),
+        refusals: Mutex::new((None, 0)),
         daemon: daemon.clone(),
     });
     let max_body = config.max_body_bytes;
@@ -152,6 +182,16 @@ pub async fn serve_tcp(listener: tokio::net::TcpListener, app: Router) {
     if let Err(e) = axum::serve(listener, service).await {
         tracing::error!(error = %e, "the API's TCP listener stopped");
     }
+}
+
+/// The credentials of an `Authorization` value in the Bearer scheme: the scheme's
+/// name is case-insensitive (RFC 9110 §11.1, RFC 6750 §2.1), so `bearer` and `BEARER`
+/// are accepted as `Bearer` is; `None` for any other scheme.
+fn bearer_credentials(value: &str) -> Option<&str> {
+    let (scheme, credentials) = value.trim_start().split_once(' ')?;
+    scheme
+        .eq_ignore_ascii_case("bearer")
+        .then(|| credentials.trim())
 }
 
 /// Compare without an early exit, so that timing tells nothing of the token.
@@ -190,13 +230,13 @@ async fn guard(
                 .headers()
                 .get(header::AUTHORIZATION)
                 .and_then(|v| v.to_str().ok())
-                .and_then(|v| v.strip_prefix("Bearer "));
+                .and_then(bearer_credentials);
             let ok = match (&state.access.token, sent) {
                 (Some(token), Some(sent)) => same_secret(token, sent.trim()),
                 _ => false,
             };
             if !ok {
-                tracing::warn!(%addr, "refused a TCP client without the right token");
+                state.log_refusal(&addr);
                 return refusal(
                     StatusCode::UNAUTHORIZED,
                     "send the API token as 'Authorization: Bearer <token>' (daemon.token_file)",
@@ -204,13 +244,17 @@ async fn guard(
             }
         }
     }
-    if !state.limit.allow() {
+    let limit = match peer {
+        Peer::Local { .. } => &state.limit_local,
+        Peer::Tcp(_) => &state.limit_tcp,
+    };
+    if !limit.allow() {
         return (
             StatusCode::TOO_MANY_REQUESTS,
             [(header::RETRY_AFTER, "1")],
             axum::Json(json!({"error": format!(
                 "more than {} requests a second; slow down",
-                state.limit.per_s
+                limit.per_s
             )})),
         )
             .into_response();
@@ -424,8 +468,21 @@ struct ProfileQuery {
 
 /// `GET /profile[?format=…&white=…&tone=…&luminance=…]`: the current profile in any
 /// export format. What the format cannot carry is listed in `x-chromacal-not-carried`.
-async fn profile(State(state): State<Shared>, Query(query): Query<ProfileQuery>) -> Response {
+async fn profile(
+    State(state): State<Shared>,
+    query: Result<Query<ProfileQuery>, axum::extract::rejection::QueryRejection>,
+) -> Response {
     use crate::export::{ExportOptions, Format, export, parse_target};
+    // Refused in JSON like every other refusal (axum's own answer is plain text).
+    let Query(query) = match query {
+        Ok(q) => q,
+        Err(e) => {
+            return refusal(
+                StatusCode::BAD_REQUEST,
+                format!("the query string: {}", e.body_text()),
+            );
+        }
+    };
     let (profile, text) = match read_current(&state.daemon) {
         Ok(Some(c)) => c,
         Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),

@@ -48,6 +48,11 @@ impl Default for FaultSpec {
     }
 }
 
+/// Longest extra delay of a late reply: an hour is far past any driver's timeout.
+const MAX_LATE_S: f64 = 3600.0;
+/// Largest count (`start_after`, `seed`): 2^53, beyond which an f64 skips integers.
+const MAX_COUNT: f64 = 9_007_199_254_740_992.0;
+
 impl FaultSpec {
     /// From `name=value,…`, e.g. `no_reply=0.05,garbage=0.02,seed=7`.
     pub fn parse(text: &str) -> Result<Self, String> {
@@ -70,12 +75,18 @@ impl FaultSpec {
                 "overload" => &mut spec.overload,
                 "sync_failure" => &mut spec.sync_failure,
                 "late_s" => &mut spec.late_s,
-                "start_after" => {
-                    spec.start_after = number as u64;
-                    continue;
-                }
-                "seed" => {
-                    spec.seed = number as u64;
+                "start_after" | "seed" => {
+                    // Counts: whole, not negative, and small enough to be exact.
+                    if !(number >= 0.0 && number.fract() == 0.0 && number <= MAX_COUNT) {
+                        return Err(format!(
+                            "{name} must be a whole number from 0 to {MAX_COUNT}, not {value}"
+                        ));
+                    }
+                    if name.trim() == "seed" {
+                        spec.seed = number as u64;
+                    } else {
+                        spec.start_after = number as u64;
+                    }
                     continue;
                 }
                 other => {
@@ -84,7 +95,13 @@ impl FaultSpec {
                     ));
                 }
             };
-            if !(0.0..=1.0).contains(&number) && name.trim() != "late_s" {
+            if name.trim() == "late_s" {
+                if !(0.0..=MAX_LATE_S).contains(&number) {
+                    return Err(format!(
+                        "late_s must be from 0 to {MAX_LATE_S} s, not {value}"
+                    ));
+                }
+            } else if !(0.0..=1.0).contains(&number) {
                 return Err(format!(
                     "the rate of {name} must be in [0, 1], not {number}"
                 ));
@@ -196,6 +213,19 @@ mod tests {
         );
         assert!(FaultSpec::parse("late=2").unwrap_err().contains("[0, 1]"));
         assert!(FaultSpec::parse("late").unwrap_err().contains("name=value"));
+        // Times and counts out of range are refused, not handed to a thread to panic on.
+        for bad in [
+            "late_s=1e308",
+            "late_s=-1",
+            "late_s=nan",
+            "start_after=-3",
+            "seed=1.5",
+            "seed=1e300",
+        ] {
+            let why = FaultSpec::parse(bad).unwrap_err();
+            assert!(why.contains("must be"), "{bad}: {why}");
+        }
+        assert_eq!(FaultSpec::parse("late_s=2.5").unwrap().late_s, 2.5);
     }
 
     #[test]
