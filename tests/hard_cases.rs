@@ -410,3 +410,36 @@ fn infinite_and_missing_values_in_imported_files_are_errors() {
         assert!(err.contains("XYZ_Y") && err.contains(bad), "{bad}: {err}");
     }
 }
+
+/// A fit of `set` on its own thread: its result, or `None` if it has not ended after a
+/// minute (a hang; a real fit of these few readings takes milliseconds).
+fn fit_that_ends(
+    set: chromacal::measurement::MeasurementSet,
+) -> Option<Result<chromacal::fit::FittedModel, FitError>> {
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = send.send(fit_monitor(&set, &FitOptions::default()));
+    });
+    receive
+        .recv_timeout(std::time::Duration::from_secs(60))
+        .ok()
+}
+
+#[test]
+fn a_reading_out_of_all_proportion_ends_the_fit_with_a_result() {
+    // One ramp reading a million times too bright (a unit slip in a journal): the log
+    // laws' misfit overflows, and the line search once compared infinities for ever.
+    let (mut set, _) = simulate("", Path::new("."));
+    let ramp = set
+        .measurements
+        .iter_mut()
+        .find(|m| m.role == Role::Ramp)
+        .unwrap();
+    let xyz = ramp.reading.xyz.unwrap();
+    ramp.reading.xyz = Some(chromacal::color::Xyz::new(xyz.x * 1e6, 2e6, xyz.z * 1e6));
+    let result = fit_that_ends(set).expect("the fit did not end");
+    // Whatever it concludes, it says it in numbers or in words, never NaN.
+    if let Ok(fit) = result {
+        assert_finite_profile(&fit);
+    }
+}

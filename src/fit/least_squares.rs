@@ -59,7 +59,20 @@ struct Problem<'a> {
     x: &'a [f64],
     y: &'a [f64],
     sigma: &'a [f64],
+    /// Evaluations of the residuals so far: argmin's backtracking line search has no
+    /// bound of its own, so the fit ends itself after `MAX_EVALUATIONS`.
+    evaluations: std::sync::atomic::AtomicUsize,
 }
+
+/// Most evaluations of the residuals one fit may make (100 Gauss–Newton steps of a
+/// line search each take a few dozen at most); past it the fit fails with a reason
+/// instead of running for ever on data that make no sense.
+const MAX_EVALUATIONS: usize = 20_000;
+
+/// What a residual that is not finite (or absurdly large) counts as: large enough to
+/// reject any step, small enough that a sum of squares of thousands of them stays
+/// finite, so the line search always compares numbers.
+const RESIDUAL_CAP: f64 = 1e100;
 
 impl Problem<'_> {
     /// The weighted residuals alone: what the line search asks for most often, without
@@ -96,9 +109,22 @@ impl Operator for Problem<'_> {
     type Output = DVector<f64>;
 
     fn apply(&self, theta: &Self::Param) -> Result<Self::Output, ArgminError> {
+        let n = self
+            .evaluations
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if n >= MAX_EVALUATIONS {
+            return Err(ArgminError::msg(format!(
+                "no step lowered the misfit in {MAX_EVALUATIONS} evaluations (readings out of all proportion?)"
+            )));
+        }
         let r = self.residuals(theta.as_slice());
-        // A non-finite residual would stall the line search; a huge one rejects the step.
-        Ok(r.map(|v| if v.is_finite() { v } else { 1e150 }))
+        Ok(r.map(|v| {
+            if v.is_finite() {
+                v.clamp(-RESIDUAL_CAP, RESIDUAL_CAP)
+            } else {
+                RESIDUAL_CAP
+            }
+        }))
     }
 }
 
@@ -127,7 +153,13 @@ pub fn fit_curve(
             params: p,
         });
     }
-    let problem = Problem { curve, x, y, sigma };
+    let problem = Problem {
+        curve,
+        x,
+        y,
+        sigma,
+        evaluations: Default::default(),
+    };
     let condition =
         ArmijoCondition::new(1e-4).map_err(|e| LeastSquaresError::NoConvergence(e.to_string()))?;
     let solver = GaussNewtonLS::new(BacktrackingLineSearch::new(condition))
@@ -150,7 +182,13 @@ pub fn fit_curve(
     if theta.iter().any(|v| !v.is_finite()) {
         return Err(LeastSquaresError::NotFinite);
     }
-    let problem = Problem { curve, x, y, sigma };
+    let problem = Problem {
+        curve,
+        x,
+        y,
+        sigma,
+        evaluations: Default::default(),
+    };
     Ok(summarise(&problem, theta.as_slice()))
 }
 
