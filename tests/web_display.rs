@@ -161,6 +161,8 @@ async fn post(url: String) -> u16 {
 }
 
 /// Open the event stream by hand and return the first `data:` line.
+/// The first event that carries a shown patch (id 1 on): a client that connects
+/// before the patch is published first gets the page's state before it (id 0).
 fn first_event(address: std::net::SocketAddr) -> (std::net::TcpStream, String) {
     use std::io::{BufRead, BufReader, Write};
     let mut stream = std::net::TcpStream::connect(address).unwrap();
@@ -176,7 +178,13 @@ fn first_event(address: std::net::SocketAddr) -> (std::net::TcpStream, String) {
         line.clear();
         assert!(reader.read_line(&mut line).unwrap() > 0, "the stream ended");
         if let Some(data) = line.trim().strip_prefix("data:") {
-            return (stream, data.trim().to_string());
+            let shown = serde_json::from_str::<serde_json::Value>(data.trim())
+                .ok()
+                .and_then(|state| state["id"].as_u64())
+                .is_some_and(|id| id >= 1);
+            if shown {
+                return (stream, data.trim().to_string());
+            }
         }
     }
 }
