@@ -331,9 +331,7 @@ pub async fn finish_run(
         source,
     };
     let profile_path = if already_current {
-        store
-            .profile_path(&run.run_id)
-            .map_err(|e| store_error(std::io::Error::other(e.to_string())))?
+        store.profile_path(&run.run_id)?
     } else if rejection.is_none() {
         store
             .publish(

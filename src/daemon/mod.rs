@@ -84,7 +84,7 @@ pub struct Daemon {
     next_verification: Mutex<Option<std::time::SystemTime>>,
     /// The state directory's lock: it lives as long as the daemon does, including any
     /// job task still holding it after `run` returns.
-    store_lock: Mutex<Option<crate::profile::store::StoreLock>>,
+    _store_lock: crate::profile::store::StoreLock,
 }
 
 /// Why a job was not started.
@@ -97,7 +97,12 @@ pub enum JobRefused {
 }
 
 impl Daemon {
-    pub fn new(loaded: LoadedConfig, store: ProfileStore) -> Arc<Self> {
+    /// A daemon on `store`, holding its lock (`ProfileStore::lock`) while it lives.
+    pub fn new(
+        loaded: LoadedConfig,
+        store: ProfileStore,
+        store_lock: crate::profile::store::StoreLock,
+    ) -> Arc<Self> {
         let (events, _) = broadcast::channel(256);
         Arc::new(Daemon {
             loaded,
@@ -111,15 +116,8 @@ impl Daemon {
             started: Instant::now(),
             idle_since: Mutex::new(Instant::now()),
             next_verification: Mutex::new(None),
-            store_lock: Mutex::new(None),
+            _store_lock: store_lock,
         })
-    }
-
-    /// Keep the state directory's lock for as long as this daemon lives.
-    pub fn hold_store_lock(&self, lock: crate::profile::store::StoreLock) {
-        if let Ok(mut held) = self.store_lock.lock() {
-            *held = Some(lock);
-        }
     }
 
     pub fn store(&self) -> &ProfileStore {
@@ -304,25 +302,21 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
         source,
     };
     // A token others could read is no secret: an existing file is made 0600 before
-    // its token is used or a new one is written into it.
-    let private = |file_path: &Path| -> Result<(), DaemonError> {
-        let mode = std::fs::metadata(file_path)
-            .map_err(io)?
-            .permissions()
-            .mode();
-        if mode & 0o077 != 0 {
-            std::fs::set_permissions(file_path, std::fs::Permissions::from_mode(0o600)).map_err(
-                |e| {
-                    DaemonError::Config(format!(
-                        "the API token file {} can be read by others (mode {:o}) and could not be made 0600: {e}",
-                        file_path.display(),
-                        mode & 0o777
-                    ))
-                },
-            )?;
-            tracing::warn!(path = %file_path.display(), "the API token file could be read by others; made it 0600");
+    // its token is used or a new one is written into it. Says whether others could.
+    let private = || -> Result<bool, DaemonError> {
+        let mode = std::fs::metadata(path).map_err(io)?.permissions().mode();
+        if mode & 0o077 == 0 {
+            return Ok(false);
         }
-        Ok(())
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).map_err(|e| {
+            DaemonError::Config(format!(
+                "the API token file {} can be read by others (mode {:o}) and could not be made 0600: {e}",
+                path.display(),
+                mode & 0o777
+            ))
+        })?;
+        tracing::warn!(path = %path.display(), "the API token file could be read by others; made it 0600");
+        Ok(true)
     };
     if std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) {
         return Err(DaemonError::Config(format!(
@@ -332,9 +326,7 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
     }
     match std::fs::read_to_string(path) {
         Ok(text) if !text.trim().is_empty() => {
-            let mode = std::fs::metadata(path).map_err(io)?.permissions().mode();
-            private(path)?;
-            if mode & 0o077 == 0 {
+            if !private()? {
                 return Ok(text.trim().to_string());
             }
             // Others could read it, so it may be known: a new one replaces it below.
@@ -359,7 +351,7 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
         .map_err(io)?;
     // `mode` applies only when the file is created; an empty one already there keeps
     // its mode unless changed here, before the secret is written.
-    private(path)?;
+    private()?;
     use std::io::Write;
     file.write_all(format!("{token}\n").as_bytes())
         .and_then(|()| file.sync_all())
@@ -385,8 +377,7 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     // Held while the daemon (and any job task) lives: no `calibrate` or second daemon
     // writes this store meanwhile.
     let store_lock = store.lock("chromacal daemon")?;
-    let daemon = Daemon::new(loaded, store);
-    daemon.hold_store_lock(store_lock);
+    let daemon = Daemon::new(loaded, store, store_lock);
 
     let socket_path = config
         .socket
