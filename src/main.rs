@@ -26,6 +26,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     Calibrate(calibrate::CalibrateArgs),
+    Runs(calibrate::RunsArgs),
     Fit(fit::FitArgs),
     Check(check::CheckArgs),
     Spectrum(spectrum::SpectrumArgs),
@@ -47,6 +48,7 @@ fn main() -> ExitCode {
     cli::shared::init_logging(matches!(cli.command, Command::Daemon(_)));
     let result = match cli.command {
         Command::Calibrate(args) => calibrate::run(args),
+        Command::Runs(args) => calibrate::run_runs(args),
         Command::Fit(args) => fit::run(args),
         Command::Check(args) => check::run(args),
         Command::Spectrum(args) => spectrum::run(args),

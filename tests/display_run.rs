@@ -26,7 +26,8 @@ async fn run(text: &str) -> chromacal::calibrate::session::CalibrationOutcome {
     };
     let options = CalibrateOptions {
         state_dir: state.path().to_path_buf(),
-        resume: false,
+        resume: None,
+        resume_settings: false,
         realtime_scale: None,
         overrides: Default::default(),
     };

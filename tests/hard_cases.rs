@@ -35,6 +35,7 @@ fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
             instrument: None,
             config_digest: None,
             program: "test".into(),
+            settings_at_resume: None,
         },
         report: fit.report.clone(),
         calibration: None,
@@ -442,4 +443,87 @@ fn a_reading_out_of_all_proportion_ends_the_fit_with_a_result() {
     if let Ok(fit) = result {
         assert_finite_profile(&fit);
     }
+}
+
+#[test]
+fn a_black_patch_relabelled_as_a_red_level_ends_the_fit() {
+    // A real MacBook Pro set with its first black patch relabelled as red at 33.33 %
+    // (an edit slip): the red ramp then turns back at its foot, and the fit once
+    // searched for ever.
+    let source = common::shared_text("measurements/macbookpro15_2014_colormunki_spectral_57.ti3");
+    let black = "0.000000000 0.000000000 0.000000000";
+    let at = source.find(black).expect("the set has a black patch");
+    let edited = format!(
+        "{}33.33000000 0.000000000 0.000000000{}",
+        &source[..at],
+        &source[at + black.len()..]
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("edited.ti3");
+    std::fs::write(&path, edited).unwrap();
+    let set = read_measurements(&path).unwrap();
+    let result = fit_that_ends(set).expect("the fit did not end");
+    if let Ok(fit) = result {
+        assert_finite_profile(&fit);
+    }
+}
+
+#[test]
+fn a_uniformity_reading_of_minus_1e308_ends_the_fit() {
+    // One grid position read as −1e308: its gain is −∞, and the SVD of the surface
+    // fit iterated for ever on it.
+    let (mut set, _) = simulate("", Path::new("."));
+    let position = set
+        .measurements
+        .iter_mut()
+        .find(|m| m.role == Role::Uniformity)
+        .expect("the default plan measures a uniformity grid");
+    let xyz = position.reading.xyz.unwrap();
+    position.reading.xyz = Some(chromacal::color::Xyz::new(xyz.x, -1e308, xyz.z));
+    let fit = fit_that_ends(set)
+        .expect("the fit did not end")
+        .expect("one absurd grid reading is left out, not fatal");
+    assert_finite_profile(&fit);
+}
+
+#[test]
+fn a_stop_check_ends_a_long_fit_early() {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    // A 36-position uniformity grid makes the fit take seconds; a stop asked for
+    // during it ends it within a fraction of that.
+    let dir = tempfile::tempdir().unwrap();
+    let (set, _) = simulate("[plan]\nuniformity_grid = 36\n", dir.path());
+    let started = std::time::Instant::now();
+    fit_monitor(&set, &FitOptions::default()).unwrap();
+    let whole = started.elapsed();
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let check: chromacal::fit::cancel::StopCheck = {
+        let stop = stop.clone();
+        Arc::new(move || stop.load(Ordering::SeqCst))
+    };
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let result = chromacal::fit::cancel::with_stop(Some(check), || {
+            fit_monitor(&set, &FitOptions::default())
+        });
+        let _ = send.send((result, std::time::Instant::now()));
+    });
+    std::thread::sleep(whole / 10);
+    stop.store(true, Ordering::SeqCst);
+    let asked = std::time::Instant::now();
+    let (result, ended) = receive
+        .recv_timeout(std::time::Duration::from_secs(60))
+        .expect("the stopped fit did not end");
+    assert!(
+        matches!(result, Err(FitError::Stopped)),
+        "{:?}",
+        result.map(|_| "a whole fit")
+    );
+    let after = ended.saturating_duration_since(asked);
+    assert!(
+        after < whole / 4,
+        "the fit ended {after:?} after the stop; a whole fit takes {whole:?}"
+    );
 }

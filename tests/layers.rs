@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 /// from none at or above it. A new top-level module must be placed here.
 const LAYERS: &[&[&str]] = &[
     // Foundations: colorimetry, numeric CSV tables, clocks, crash-safe files.
-    &["color", "numeric_csv", "time", "durable"],
+    &["color", "numeric_csv", "time", "durable", "linalg"],
     // The monitor model: transfer laws, spatial map, targets.
     &["model"],
     // What a screen shows: codes, patch windows, content.

@@ -43,7 +43,8 @@ async fn an_interrupted_journal_resumes_to_the_uninterrupted_readings() {
     let loaded = load_config(None).unwrap(); // ignored on resume: the journal's config wins
     let options = CalibrateOptions {
         state_dir: state.path().to_path_buf(),
-        resume: true,
+        resume: Some(chromacal::calibrate::session::Resume::Newest),
+        resume_settings: false,
         realtime_scale: None,
         overrides: Default::default(),
     };

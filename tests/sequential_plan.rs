@@ -64,7 +64,8 @@ async fn a_resumed_sequential_run_continues_the_same_sequence() {
     std::fs::write(run_dir.join("journal.jsonl"), kept.join("\n") + "\n").unwrap();
     let options = CalibrateOptions {
         state_dir: state.path().to_path_buf(),
-        resume: true,
+        resume: Some(chromacal::calibrate::session::Resume::Newest),
+        resume_settings: false,
         realtime_scale: None,
         overrides: Default::default(),
     };

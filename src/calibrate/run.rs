@@ -42,8 +42,9 @@ pub struct RunHooks<'a> {
     /// Asked to aim the instrument when the patch moves (see [`PositionPrompt`]).
     pub prompt: Option<PositionPrompt<'a>>,
     /// Asked before each patch whether to stop (a cancelled job, SIGTERM): the
-    /// reading under way is finished and journaled first.
-    pub stop: Option<&'a (dyn Fn() -> bool + Send + Sync)>,
+    /// reading under way is finished and journaled first. The fit after the readings
+    /// asks it between its steps.
+    pub stop: Option<crate::fit::cancel::StopCheck>,
 }
 
 impl<'a> RunHooks<'a> {
@@ -244,7 +245,7 @@ pub async fn measure_patch<D: PatchDisplay, I: Instrument>(
         instrument,
         clock,
     } = devices;
-    if hooks.stop.is_some_and(|stop| stop()) {
+    if hooks.stop.as_ref().is_some_and(|stop| stop()) {
         let _ = display.blank().await;
         return Err(RunError::Stopped {
             done: journal.entries().len(),

@@ -11,10 +11,10 @@ use crate::calibrate::rig::SimulatedRig;
 use crate::config::digest;
 use crate::config::{Config, ConfigError, LoadedConfig, PublishConfig, check_config, parse_config};
 use crate::display::PatchDisplay;
-use crate::fit::{FitError, FittedModel, fit_monitor};
+use crate::fit::{FitError, FitOptions, FittedModel, fit_monitor};
 use crate::instrument::Instrument;
 use crate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, JournalHeader};
-use crate::measurement::Units;
+use crate::measurement::{MeasurementSet, Units};
 use crate::plan::{Plan, PlanError, make_plan};
 use crate::profile::store::ProfileStore;
 use crate::profile::{Profile, ProfileError, Provenance, SCHEMA_VERSION};
@@ -49,8 +49,16 @@ pub enum CalibrateError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("no unfinished run to resume in {0}")]
+    #[error(
+        "no unfinished run to resume in {0} (`chromacal runs` lists them, with any whose fit failed twice and is resumed only by name)"
+    )]
     NothingToResume(PathBuf),
+    #[error(
+        "{origin} differs from the run's own config in {sections}, which decide what is measured: a resumed run keeps its own; only [fit], [publish], [target], [daemon] and [schedule] may change at --resume"
+    )]
+    ResumeConfig { origin: String, sections: String },
+    #[error("no unfinished run is named {id}; unfinished runs: {}", if unfinished.is_empty() { "none".to_string() } else { unfinished.join(", ") })]
+    NoSuchRun { id: String, unfinished: Vec<String> },
     #[error(transparent)]
     StoreState(#[from] crate::profile::store::StoreError),
     #[error(transparent)]
@@ -67,12 +75,25 @@ pub enum CalibrateError {
 #[derive(Debug, Clone)]
 pub struct CalibrateOptions {
     pub state_dir: PathBuf,
-    /// Resume the newest unfinished run instead of starting one.
-    pub resume: bool,
+    /// Resume an unfinished run instead of starting one.
+    pub resume: Option<Resume>,
+    /// On resume, take the settings that do not change what is measured (`[fit]`,
+    /// `[publish]`, …) from the config given, not the journal's (see
+    /// `adopt_settings_at_resume`).
+    pub resume_settings: bool,
     /// Real seconds per simulated second (`None`: as fast as possible).
     pub realtime_scale: Option<f64>,
     /// Command-line settings that win over the config's.
     pub overrides: Overrides,
+}
+
+/// Which unfinished run to resume.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Resume {
+    /// The newest that is resumable (`UnfinishedRun::resumable`).
+    Newest,
+    /// The one with this id, whatever its state.
+    Named(String),
 }
 
 /// Check a config again once the command line changed it.
@@ -126,15 +147,114 @@ pub fn new_run_id() -> String {
     )
 }
 
-/// The newest run directory whose journal has not ended in a profile.
-pub fn unfinished_run(store: &ProfileStore) -> Option<PathBuf> {
-    let mut runs: Vec<PathBuf> = std::fs::read_dir(store.runs_dir())
-        .ok()?
+/// A run whose journal has not ended in a profile.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct UnfinishedRun {
+    /// Its id: the name of its directory under `runs/`.
+    pub id: String,
+    pub dir: PathBuf,
+    /// Readings in its journal.
+    pub readings: usize,
+    /// Fits of its readings that failed (not counting fits that were stopped).
+    pub fit_failures: u32,
+}
+
+impl UnfinishedRun {
+    /// Is it resumed without being named? Not once its fit has failed
+    /// `MAX_FIT_FAILURES` times: resuming it again would fail again.
+    pub fn resumable(&self) -> bool {
+        self.fit_failures < MAX_FIT_FAILURES
+    }
+}
+
+/// Failed fits after which a run is no longer resumed unless named.
+pub const MAX_FIT_FAILURES: u32 = 2;
+
+/// The file in a run's directory that counts its failed fits.
+const FIT_FAILURES_FILE: &str = "fit_failures";
+
+/// Every unfinished run of the store, oldest first.
+pub fn unfinished_runs(store: &ProfileStore) -> Vec<UnfinishedRun> {
+    let Ok(entries) = std::fs::read_dir(store.runs_dir()) else {
+        return Vec::new();
+    };
+    let mut runs: Vec<UnfinishedRun> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.join("journal.jsonl").is_file() && !p.join(DONE_MARKER).exists())
+        .map(|dir| UnfinishedRun {
+            id: dir
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            readings: count_journal_readings(&dir.join("journal.jsonl")),
+            fit_failures: fit_failures(&dir),
+            dir,
+        })
         .collect();
-    runs.sort();
-    runs.pop()
+    runs.sort_by(|a, b| a.id.cmp(&b.id));
+    runs
+}
+
+/// The newest unfinished run that is resumed without being named.
+pub fn unfinished_run(store: &ProfileStore) -> Option<PathBuf> {
+    unfinished_runs(store)
+        .into_iter()
+        .rev()
+        .find(UnfinishedRun::resumable)
+        .map(|run| run.dir)
+}
+
+/// The unfinished run named `id` (its directory name under `runs/`).
+pub fn named_run(store: &ProfileStore, id: &str) -> Result<PathBuf, CalibrateError> {
+    let runs = unfinished_runs(store);
+    runs.iter()
+        .find(|run| run.id == id)
+        .map(|run| run.dir.clone())
+        .ok_or_else(|| CalibrateError::NoSuchRun {
+            id: id.to_string(),
+            unfinished: runs.iter().map(|r| r.id.clone()).collect(),
+        })
+}
+
+/// Lines in a journal after its header: the readings (a line cut short by a crash
+/// included, which is close enough for a listing).
+fn count_journal_readings(path: &Path) -> usize {
+    use std::io::BufRead;
+    std::fs::File::open(path)
+        .map(|f| {
+            std::io::BufReader::new(f)
+                .lines()
+                .map_while(Result::ok)
+                .filter(|l| !l.trim().is_empty())
+                .count()
+                .saturating_sub(1)
+        })
+        .unwrap_or(0)
+}
+
+fn fit_failures(run_dir: &Path) -> u32 {
+    std::fs::read_to_string(run_dir.join(FIT_FAILURES_FILE))
+        .ok()
+        .and_then(|t| t.trim().parse().ok())
+        .unwrap_or(0)
+}
+
+/// Count one more failed fit of the run whose journal is at `journal`.
+fn count_fit_failure(journal: &Path) {
+    let Some(dir) = journal.parent() else {
+        return;
+    };
+    let failures = fit_failures(dir) + 1;
+    if let Err(e) = std::fs::write(dir.join(FIT_FAILURES_FILE), format!("{failures}\n")) {
+        tracing::warn!(error = %e, "cannot count the failed fit");
+    }
+    if failures >= MAX_FIT_FAILURES {
+        tracing::warn!(
+            run = %dir.display(),
+            failures,
+            "this run's fit has failed {failures} times: it is kept, and no longer resumed unless named (`chromacal calibrate --resume RUN`)"
+        );
+    }
 }
 
 /// Does the fitted profile meet the publishing limits? `None` if it does.
@@ -168,8 +288,32 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
             journal: journal.path().to_path_buf(),
         })?;
     let started = Instant::now();
-    let fitted = fit_monitor(&journal.measurement_set(), &config.fit)?;
+    let fitted = fit_off_the_workers(
+        journal.measurement_set(),
+        config.fit.clone(),
+        hooks.stop.clone(),
+    )
+    .await;
+    if matches!(&fitted, Err(e) if !matches!(e, FitError::Stopped)) {
+        count_fit_failure(journal.path());
+    }
+    let fitted = fitted?;
     Ok((run, fitted, started.elapsed().as_secs_f64()))
+}
+
+/// Fit on tokio's blocking pool, so that a fit of seconds never holds an async worker
+/// (in the daemon, every API request would wait for it), with `stop` asked between its
+/// steps.
+pub async fn fit_off_the_workers(
+    set: MeasurementSet,
+    options: FitOptions,
+    stop: Option<crate::fit::cancel::StopCheck>,
+) -> Result<FittedModel, FitError> {
+    tokio::task::spawn_blocking(move || {
+        crate::fit::cancel::with_stop(stop, || fit_monitor(&set, &options))
+    })
+    .await
+    .unwrap_or_else(|e| std::panic::resume_unwind(e.into_panic()))
 }
 
 /// A calibration run with its journal open, ready to measure what it lacks.
@@ -178,6 +322,50 @@ pub struct PreparedRun {
     /// The config the run goes on with (a resumed run's own, from its journal).
     pub config: Config,
     pub run_id: String,
+    /// Set when `--resume` was given a config whose fit settings replaced the
+    /// journal's: where they came from (recorded in the profile's provenance).
+    pub settings_at_resume: Option<String>,
+}
+
+/// Give a resumed run the settings of `given` that do not change what is measured:
+/// `[fit]`, `[publish]`, `[target]`, `[daemon]` and `[schedule]`. A config that differs
+/// from the run's in what it measures (`[monitor]`, `[instrument]`, `[display]`,
+/// `[plan]`, `[warmup]`) is refused, naming the sections: its readings would not be
+/// the run's.
+pub fn adopt_settings_at_resume(
+    run: &mut PreparedRun,
+    given: &LoadedConfig,
+) -> Result<(), CalibrateError> {
+    let (was, now) = (&run.config, &given.config);
+    let differ: Vec<&str> = [
+        ("monitor", was.monitor == now.monitor),
+        ("instrument", was.instrument == now.instrument),
+        ("display", was.display == now.display),
+        ("plan", was.plan == now.plan),
+        ("warmup", was.warmup == now.warmup),
+    ]
+    .into_iter()
+    .filter(|(_, same)| !same)
+    .map(|(name, _)| name)
+    .collect();
+    if !differ.is_empty() {
+        return Err(CalibrateError::ResumeConfig {
+            origin: given.origin.clone(),
+            sections: differ
+                .iter()
+                .map(|s| format!("[{s}]"))
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    let config = &mut run.config;
+    config.fit = now.fit.clone();
+    config.publish = now.publish.clone();
+    config.target = now.target.clone();
+    config.daemon = now.daemon.clone();
+    config.schedule = now.schedule.clone();
+    run.settings_at_resume = Some(format!("{} (sha256 {})", given.origin, given.digest()));
+    Ok(())
 }
 
 /// Start a new run of `config` in `store`, on devices named `display` and `instrument`.
@@ -208,6 +396,7 @@ pub fn start_run(
         journal: Journal::create(&path, header)?,
         config: config.clone(),
         run_id,
+        settings_at_resume: None,
     })
 }
 
@@ -227,6 +416,7 @@ pub fn reopen_run(dir: &Path) -> Result<PreparedRun, CalibrateError> {
         journal,
         config,
         run_id,
+        settings_at_resume: None,
     })
 }
 
@@ -320,6 +510,7 @@ pub async fn finish_run(
             instrument: Some(header.instrument.clone()),
             config_digest: Some(header.config_digest.clone()),
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
+            settings_at_resume: run.settings_at_resume.clone(),
         },
         report: fitted.report.clone(),
         calibration,
@@ -382,10 +573,16 @@ pub async fn calibrate<'a>(
     // Held for the whole run: one writer per state directory.
     let _store_lock = store.lock("chromacal calibrate")?;
     // A resumed run goes on with the config it started with (and the overrides).
-    let (run, mut devices) = if options.resume {
-        let dir = unfinished_run(&store)
-            .ok_or_else(|| CalibrateError::NothingToResume(store.runs_dir()))?;
+    let (run, mut devices) = if let Some(resume) = &options.resume {
+        let dir = match resume {
+            Resume::Newest => unfinished_run(&store)
+                .ok_or_else(|| CalibrateError::NothingToResume(store.runs_dir()))?,
+            Resume::Named(id) => named_run(&store, id)?,
+        };
         let mut run = reopen_run(&dir)?;
+        if options.resume_settings {
+            adopt_settings_at_resume(&mut run, loaded)?;
+        }
         options.overrides.apply(&mut run.config);
         check_overridden(&run.config)?;
         let base_dir = run.journal.header().config_dir.clone();

@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use chromacal::calibrate::devices::Overrides;
 use chromacal::calibrate::run::Progress;
-use chromacal::calibrate::session::{CalibrateOptions, calibrate as calibrate_session};
+use chromacal::calibrate::session::{
+    CalibrateOptions, Resume, calibrate as calibrate_session, unfinished_runs,
+};
 use chromacal::config::{LoadedConfig, Sink, check_config, load_config};
 use chromacal::model::ScreenPosition;
 use chromacal::profile::store::default_state_dir;
@@ -24,9 +26,12 @@ pub struct CalibrateArgs {
     /// $XDG_STATE_HOME/chromacal, else ~/.local/state/chromacal].
     #[arg(long)]
     state_dir: Option<PathBuf>,
-    /// Resume the newest unfinished run, measuring only what it lacks.
-    #[arg(long)]
-    resume: bool,
+    /// Resume an unfinished run, measuring only what it lacks: the newest one, or
+    /// the run named (`chromacal runs` lists them). With --config, that config's
+    /// [fit], [publish], [target], [daemon] and [schedule] replace the run's (what it
+    /// measures must be unchanged).
+    #[arg(long, value_name = "RUN", num_args = 0..=1, default_missing_value = "")]
+    resume: Option<String>,
     /// Take the simulated instrument's time for real (scaled by --time-scale).
     #[arg(long)]
     realtime: bool,
@@ -45,7 +50,10 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
     calibrate(
         args.config.as_deref(),
         args.state_dir,
-        args.resume,
+        args.resume.map(|run| match run.as_str() {
+            "" => Resume::Newest,
+            _ => Resume::Named(run),
+        }),
         args.realtime.then_some(args.time_scale),
         args.json,
         overrides,
@@ -55,7 +63,7 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
 fn calibrate(
     config: Option<&Path>,
     state_dir: Option<PathBuf>,
-    resume: bool,
+    resume: Option<Resume>,
     realtime_scale: Option<f64>,
     json: bool,
     overrides: Overrides,
@@ -63,6 +71,7 @@ fn calibrate(
     let loaded = load_config(config)?;
     let options = CalibrateOptions {
         state_dir: state_dir.unwrap_or_else(default_state_dir),
+        resume_settings: resume.is_some() && config.is_some(),
         resume,
         realtime_scale,
         overrides,
@@ -173,7 +182,7 @@ fn calibrate(
 fn announce_display(loaded: &LoadedConfig, options: &CalibrateOptions) {
     let mut config = loaded.config.clone();
     options.overrides.apply(&mut config);
-    if options.resume || check_config(&config).is_err() {
+    if options.resume.is_some() || check_config(&config).is_err() {
         return; // the session reports the error, or resumes with the journal's config
     }
     match config.display.sink() {
@@ -203,4 +212,47 @@ fn aim_prompt(bar: &indicatif::ProgressBar, position: ScreenPosition) -> Result<
             Err(e) => Err(format!("cannot read the terminal: {e}")),
         }
     })
+}
+
+/// List the unfinished calibration runs of a state directory: the ones
+/// `calibrate --resume [RUN]` can go on with.
+#[derive(clap::Args)]
+pub struct RunsArgs {
+    /// Profile store and run journals (as for `calibrate`).
+    #[arg(long)]
+    state_dir: Option<PathBuf>,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run_runs(args: RunsArgs) -> Result<(), Failure> {
+    let store = chromacal::profile::store::ProfileStore::new(
+        &args.state_dir.unwrap_or_else(default_state_dir),
+    );
+    let runs = unfinished_runs(&store);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&runs)?);
+        return Ok(());
+    }
+    if runs.is_empty() {
+        println!("no unfinished runs in {}", store.runs_dir().display());
+        return Ok(());
+    }
+    let newest = runs.iter().rev().find(|r| r.resumable()).map(|r| &r.id);
+    println!("{:<30} {:>9}  state", "run", "readings");
+    for run in &runs {
+        let state = if !run.resumable() {
+            format!(
+                "its fit failed {} times: resumed only by name",
+                run.fit_failures
+            )
+        } else if Some(&run.id) == newest {
+            "resumed by `calibrate --resume`".to_string()
+        } else {
+            "resume with `calibrate --resume <run>`".to_string()
+        };
+        println!("{:<30} {:>9}  {state}", run.id, run.readings);
+    }
+    Ok(())
 }

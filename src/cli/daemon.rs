@@ -310,6 +310,21 @@ pub fn status(api: &ApiArgs, json: bool) -> Result<(), String> {
         if let Some(next) = &status.next_verification {
             println!("  next verification: {next}");
         }
+        for run in &status.unfinished_runs {
+            println!(
+                "  unfinished run: {} ({} readings{})",
+                run.id,
+                run.readings,
+                if run.resumable() {
+                    String::new()
+                } else {
+                    format!(
+                        "; its fit failed {} times, so it is not resumed",
+                        run.fit_failures
+                    )
+                }
+            );
+        }
         Ok(())
     })
 }

@@ -95,6 +95,7 @@ fn fit(
             instrument: set.instrument.clone(),
             config_digest: None,
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
+            settings_at_resume: None,
         },
         report: fitted.report.clone(),
         calibration: None,

@@ -48,6 +48,18 @@ pub struct DaemonConfig {
     pub burst: usize,
     /// Event streams open at once.
     pub max_event_streams: usize,
+    /// Connections open at once on the TCP listener; more are closed at once.
+    pub max_connections: usize,
+    /// Connections open at once on the unix socket (its own cap, so TCP clients
+    /// cannot use it up).
+    pub max_local_connections: usize,
+    /// Seconds a client has to send a request's headers (and an idle keep-alive
+    /// connection waits for its next request).
+    pub header_timeout_s: f64,
+    /// Seconds with nothing read or written after which a connection is closed.
+    pub idle_timeout_s: f64,
+    /// Seconds a request (with its body) may take to be answered.
+    pub request_timeout_s: f64,
 }
 
 impl Default for DaemonConfig {
@@ -66,6 +78,11 @@ impl Default for DaemonConfig {
             requests_per_s: 50.0,
             burst: 200,
             max_event_streams: 32,
+            max_connections: 64,
+            max_local_connections: 64,
+            header_timeout_s: 10.0,
+            idle_timeout_s: 60.0,
+            request_timeout_s: 30.0,
         }
     }
 }
@@ -82,6 +99,22 @@ impl DaemonConfig {
             return Err(
                 "daemon: requests_per_s, burst and max_event_streams must be positive".into(),
             );
+        }
+        if self.max_connections == 0 || self.max_local_connections == 0 {
+            return Err(
+                "daemon: max_connections and max_local_connections must be positive".into(),
+            );
+        }
+        for (key, value) in [
+            ("header_timeout_s", self.header_timeout_s),
+            ("idle_timeout_s", self.idle_timeout_s),
+            ("request_timeout_s", self.request_timeout_s),
+        ] {
+            if !(0.1..=86_400.0).contains(&value) {
+                return Err(format!(
+                    "daemon.{key} = {value} is out of range: from 0.1 to 86400 seconds"
+                ));
+            }
         }
         if let Some(address) = &self.tcp {
             let addr: SocketAddr = address

@@ -24,14 +24,12 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use axum::Router;
-use axum::extract::connect_info::Connected;
 use axum::extract::{ConnectInfo, DefaultBodyLimit, Query, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
-use axum::serve::IncomingStream;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 use tokio_stream::StreamExt;
@@ -55,20 +53,6 @@ pub struct Access {
 pub enum Peer {
     Local { uid: Option<u32> },
     Tcp(SocketAddr),
-}
-
-impl Connected<IncomingStream<'_, tokio::net::UnixListener>> for Peer {
-    fn connect_info(stream: IncomingStream<'_, tokio::net::UnixListener>) -> Self {
-        Peer::Local {
-            uid: stream.io().peer_cred().ok().map(|c| c.uid()),
-        }
-    }
-}
-
-impl Connected<IncomingStream<'_, tokio::net::TcpListener>> for Peer {
-    fn connect_info(stream: IncomingStream<'_, tokio::net::TcpListener>) -> Self {
-        Peer::Tcp(*stream.remote_addr())
-    }
 }
 
 /// A token bucket. There is one per listener: a token holder on TCP can use up its
@@ -168,22 +152,6 @@ pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
         .with_state(state)
 }
 
-/// Serve on the unix socket, with each peer's credentials.
-pub async fn serve_unix(listener: tokio::net::UnixListener, app: Router) {
-    let service = app.into_make_service_with_connect_info::<Peer>();
-    if let Err(e) = axum::serve(listener, service).await {
-        tracing::error!(error = %e, "the API's unix socket stopped");
-    }
-}
-
-/// Serve on TCP.
-pub async fn serve_tcp(listener: tokio::net::TcpListener, app: Router) {
-    let service = app.into_make_service_with_connect_info::<Peer>();
-    if let Err(e) = axum::serve(listener, service).await {
-        tracing::error!(error = %e, "the API's TCP listener stopped");
-    }
-}
-
 /// The credentials of an `Authorization` value in the Bearer scheme: the scheme's
 /// name is case-insensitive (RFC 9110 §11.1, RFC 6750 §2.1), so `bearer` and `BEARER`
 /// are accepted as `Bearer` is; `None` for any other scheme.
@@ -268,7 +236,17 @@ async fn guard(
             format!("the body has {length} bytes; the limit is {max} (daemon.max_body_bytes)"),
         );
     }
-    let mut response = next.run(request).await;
+    let timeout =
+        std::time::Duration::from_secs_f64(state.daemon.loaded.config.daemon.request_timeout_s);
+    let Ok(mut response) = tokio::time::timeout(timeout, next.run(request)).await else {
+        return refusal(
+            StatusCode::REQUEST_TIMEOUT,
+            format!(
+                "the request took over {} s (daemon.request_timeout_s)",
+                timeout.as_secs_f64()
+            ),
+        );
+    };
     // The body limit of the extractors answers in plain text; say it in JSON too.
     if response.status() == StatusCode::PAYLOAD_TOO_LARGE && !is_json(response.headers()) {
         response = refusal(
@@ -331,6 +309,10 @@ pub struct StatusReply {
     pub current_profile: Option<CurrentProfile>,
     /// RFC 3339.
     pub next_verification: Option<String>,
+    /// Calibration runs not ended in a profile (the one a running calibration
+    /// measures included), oldest first; those whose fit failed twice are not resumed.
+    #[serde(default)]
+    pub unfinished_runs: Vec<crate::calibrate::session::UnfinishedRun>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -377,6 +359,7 @@ async fn status(State(state): State<Shared>) -> Response {
         next_verification: daemon
             .next_verification()
             .map(|t| humantime::format_rfc3339_seconds(t).to_string()),
+        unfinished_runs: crate::calibrate::session::unfinished_runs(daemon.store()),
     })
     .into_response()
 }
@@ -428,6 +411,12 @@ impl Drop for StreamSlot {
     }
 }
 
+/// The event stream's keep-alive interval: 15 s, or a third of the idle timeout if
+/// that is shorter.
+fn keep_alive_interval(idle_timeout_s: f64) -> std::time::Duration {
+    std::time::Duration::from_secs_f64((idle_timeout_s / 3.0).min(15.0))
+}
+
 async fn events(State(state): State<Shared>) -> Response {
     let max = state.daemon.loaded.config.daemon.max_event_streams;
     if state.streams.fetch_add(1, Ordering::SeqCst) >= max {
@@ -452,7 +441,10 @@ async fn events(State(state): State<Shared>) -> Response {
         })
     });
     Sse::new(stream)
-        .keep_alive(KeepAlive::default())
+        // Often enough that a quiet stream is never taken for an idle connection.
+        .keep_alive(KeepAlive::new().interval(keep_alive_interval(
+            state.daemon.loaded.config.daemon.idle_timeout_s,
+        )))
         .into_response()
 }
 

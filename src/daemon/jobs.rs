@@ -17,6 +17,8 @@ use crate::calibrate::session::{
 use crate::calibrate::warmup::wait_for_warmup;
 use crate::color::spaces::xyz_to_xyy;
 use crate::display::PatchDisplay;
+use crate::fit::FitError;
+use crate::fit::cancel::StopCheck;
 use crate::fit::primaries::Corrected;
 use crate::fit::spatial::choose_spatial_map;
 use crate::fit::stats::ErrorStats;
@@ -50,7 +52,7 @@ impl From<CalibrateError> for JobFailure {
             CalibrateError::Run {
                 source: RunError::Stopped { .. },
                 ..
-            }
+            } | CalibrateError::Fit(FitError::Stopped)
         );
         let devices_suspect = matches!(
             &e,
@@ -109,10 +111,10 @@ pub(crate) async fn run_job(
         }),
         Ok(devices) => {
             age_while_idle(daemon, devices);
-            let stop = {
+            let stop: StopCheck = {
                 let daemon = daemon.clone();
                 let cancel = cancel.clone();
-                move || cancel.load(Ordering::SeqCst) || daemon.is_shutting_down()
+                Arc::new(move || cancel.load(Ordering::SeqCst) || daemon.is_shutting_down())
             };
             match warm_up(daemon, id, devices, &stop).await {
                 Err(message) => Err(JobFailure {
@@ -203,7 +205,7 @@ async fn warm_up(
     daemon: &Arc<Daemon>,
     id: &str,
     devices: &mut Devices,
-    stop: &(dyn Fn() -> bool + Send + Sync),
+    stop: &StopCheck,
 ) -> Result<(), String> {
     let config = &daemon.loaded.config;
     if !config.warmup.enabled {
@@ -237,7 +239,7 @@ async fn warm_up(
         &now,
         wait,
         &mut on_step,
-        stop,
+        stop.as_ref(),
     )
     .await?;
     tracing::info!(
@@ -308,7 +310,7 @@ async fn calibrate(
     _id: &str,
     devices: &mut Devices,
     resume: Option<PathBuf>,
-    stop: &(dyn Fn() -> bool + Send + Sync),
+    stop: &StopCheck,
 ) -> Result<JobSuccess, JobFailure> {
     let store = &daemon.store;
     let run = match &resume {
@@ -328,7 +330,7 @@ async fn calibrate(
     let mut hooks = RunHooks {
         progress: &mut progress,
         prompt: None,
-        stop: Some(stop),
+        stop: Some(stop.clone()),
     };
     daemon.update_job(|j| {
         j.phase = "measuring".into();
@@ -381,7 +383,7 @@ async fn measure_plan(
     plan: Plan,
     devices: &mut Devices,
     current: &MonitorModel,
-    stop: &(dyn Fn() -> bool + Send + Sync),
+    stop: &StopCheck,
 ) -> Result<Journal, JobFailure> {
     let config = &daemon.loaded.config;
     let header = JournalHeader {
@@ -408,7 +410,7 @@ async fn measure_plan(
     let mut hooks = RunHooks {
         progress: &mut progress,
         prompt: None,
-        stop: Some(stop),
+        stop: Some(stop.clone()),
     };
     let options = RunOptions {
         stability: config.display.stability,
@@ -436,7 +438,7 @@ async fn verify(
     daemon: &Arc<Daemon>,
     id: &str,
     devices: &mut Devices,
-    stop: &(dyn Fn() -> bool + Send + Sync),
+    stop: &StopCheck,
 ) -> Result<JobSuccess, JobFailure> {
     let config = &daemon.loaded.config;
     let profile = current_profile(daemon)
@@ -505,7 +507,7 @@ async fn uniformity(
     daemon: &Arc<Daemon>,
     id: &str,
     devices: &mut Devices,
-    stop: &(dyn Fn() -> bool + Send + Sync),
+    stop: &StopCheck,
 ) -> Result<JobSuccess, JobFailure> {
     let config = &daemon.loaded.config;
     let profile = current_profile(daemon).ok_or_else(|| {
@@ -556,19 +558,39 @@ async fn uniformity(
             }
         }
     };
-    let grid: Vec<Corrected<'_>> = journal
+    // The grid readings, scaled to the centre white of their time.
+    let grid: Vec<(crate::measurement::Measurement, crate::color::Xyz)> = journal
         .entries()
         .iter()
         .filter(|m| m.role == Role::Uniformity && m.reading.status == ReadingStatus::Ok)
-        .filter_map(|m| {
-            let xyz = m.reading.xyz?;
-            Some(Corrected {
-                measurement: m,
-                xyz: xyz / ratio_at(m.time_s),
+        .filter_map(|m| Some((m.clone(), m.reading.xyz? / ratio_at(m.time_s))))
+        .collect();
+    // A large grid takes seconds to fit: off the async workers, and stoppable.
+    let (map, report) = {
+        let model = model.clone();
+        let noise = profile.report.noise.clone();
+        let stop = stop.clone();
+        tokio::task::spawn_blocking(move || {
+            crate::fit::cancel::with_stop(Some(stop), || {
+                let grid: Vec<Corrected<'_>> = grid
+                    .iter()
+                    .map(|(measurement, xyz)| Corrected {
+                        measurement,
+                        xyz: *xyz,
+                    })
+                    .collect();
+                let chosen = choose_spatial_map(&model, &grid, &noise);
+                (!crate::fit::cancel::requested()).then_some(chosen)
             })
         })
-        .collect();
-    let (map, report) = choose_spatial_map(model, &grid, &profile.report.noise);
+        .await
+        .map_err(|e| format!("the spatial fit failed: {e}"))?
+        .ok_or(JobFailure {
+            message: "stopped while fitting the spatial map".into(),
+            devices_suspect: false,
+            stopped: true,
+        })?
+    };
     let chosen: Option<ErrorStats> = report
         .candidates
         .iter()

@@ -17,6 +17,7 @@ pub mod client;
 pub mod events;
 pub mod jobs;
 pub mod notify;
+pub mod serve;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -26,7 +27,7 @@ use std::time::{Duration, Instant};
 use tokio::sync::broadcast;
 
 use crate::calibrate::devices::Devices;
-use crate::calibrate::session::{discard_run, unfinished_run};
+use crate::calibrate::session::{discard_run, unfinished_run, unfinished_runs};
 use crate::config::LoadedConfig;
 use crate::config::OnStart;
 use crate::profile::store::ProfileStore;
@@ -415,7 +416,12 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
             )?),
             None => None,
         };
-    tokio::spawn(api::serve_unix(unix, app.clone()));
+    serve::raise_descriptor_limit();
+    tokio::spawn(serve::serve(
+        serve::Listener::Unix(unix),
+        app.clone(),
+        serve::ConnectionLimits::local(&config),
+    ));
     if let Some(listener) = tcp {
         if let Ok(addr) = listener.local_addr() {
             if !addr.ip().is_loopback() {
@@ -423,12 +429,25 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
             }
             tracing::info!(%addr, "control API on TCP (bearer token required)");
         }
-        tokio::spawn(api::serve_tcp(listener, app));
+        tokio::spawn(serve::serve(
+            serve::Listener::Tcp(listener),
+            app,
+            serve::ConnectionLimits::tcp(&config),
+        ));
     }
     tracing::info!(socket = %socket_path.display(), state = %options.state_dir.display(), "chromacal daemon ready");
 
-    // A calibration a stop cut short.
-    if let Some(dir) = unfinished_run(&daemon.store) {
+    // A calibration a stop cut short: the newest that can be resumed. The others are
+    // said, and listed in /status.
+    let resumed = unfinished_run(&daemon.store);
+    for run in unfinished_runs(&daemon.store) {
+        if !run.resumable() {
+            tracing::warn!(run = %run.id, failures = run.fit_failures, "not resuming a run whose fit failed twice (it is kept; `chromacal calibrate --resume RUN` names it)");
+        } else if Some(&run.dir) != resumed.as_ref() {
+            tracing::warn!(run = %run.id, readings = run.readings, "an older unfinished run is not resumed (`chromacal calibrate --resume RUN` names it)");
+        }
+    }
+    if let Some(dir) = resumed {
         match config.on_start {
             OnStart::Resume => {
                 tracing::info!(run = %dir.display(), "resuming the calibration a stop cut short");

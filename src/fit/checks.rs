@@ -206,7 +206,7 @@ fn primary_constancy(
                 }
                 let rows = spectra[0].len();
                 let m = DMatrix::from_fn(rows, spectra.len(), |i, j| spectra[j][i]);
-                let sv = m.singular_values();
+                let sv = crate::linalg::bounded_svd(m)?.singular_values;
                 let total: f64 = sv.iter().map(|s| s * s).sum();
                 (total > 0.0).then(|| sv.max().powi(2) / total)
             });

@@ -112,6 +112,9 @@ impl Operator for Problem<'_> {
         let n = self
             .evaluations
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if super::cancel::requested() {
+            return Err(ArgminError::msg("stopped"));
+        }
         if n >= MAX_EVALUATIONS {
             return Err(ArgminError::msg(format!(
                 "no step lowered the misfit in {MAX_EVALUATIONS} evaluations (readings out of all proportion?)"
@@ -233,7 +236,7 @@ pub fn fit_linear(
         a.row_mut(i).scale_mut(w);
         b[i] *= w;
     }
-    let svd = a.clone().svd(true, true);
+    let svd = crate::linalg::bounded_svd(a.clone()).ok_or(LeastSquaresError::NotFinite)?;
     let theta = svd
         .solve(&b, 1e-12)
         .map_err(|e| LeastSquaresError::NoConvergence(e.to_string()))?;

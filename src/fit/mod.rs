@@ -23,6 +23,7 @@
 //! Readings of luminance alone (a light meter) go through `light_meter`, which gives
 //! them chromaticities and runs the same chain twice.
 
+pub mod cancel;
 pub mod checks;
 pub mod law_selection;
 pub mod laws;
@@ -114,6 +115,8 @@ pub enum FitError {
         "the primaries are nearly collinear (condition number {condition:.3e}, limit {limit:.0e}): an inverse model would amplify measurement noise that much, so no profile is made; check that each channel was measured, or raise fit.max_condition_number knowingly"
     )]
     IllConditioned { condition: f64, limit: f64 },
+    #[error("the fit was stopped before its end (a cancelled job, or the daemon stopping)")]
+    Stopped,
 }
 
 /// A primary as fitted.
@@ -195,12 +198,19 @@ fn code_step(set: &MeasurementSet) -> f64 {
 
 /// Fit the monitor model to `set`. Readings of luminance alone (a light meter) take
 /// their own path, which gives them chromaticities first (`light_meter`).
+///
+/// A stop check set with `cancel::with_stop` ends the fit early with
+/// `FitError::Stopped`: its iterative parts look at it between steps.
 pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedModel, FitError> {
-    if light_meter::is_luminance_only(set) {
+    let fitted = if light_meter::is_luminance_only(set) {
         light_meter::fit_luminance_only(set, options, fit_measurements)
     } else {
         fit_measurements(set, options)
+    };
+    if cancel::requested() {
+        return Err(FitError::Stopped);
     }
+    fitted
 }
 
 /// The chain of the module documentation, one step a call, on readings with XYZ.

@@ -13,7 +13,7 @@
 //! taken relative to the brightest level measured and the transfer law, fitted with a
 //! free amplitude, extrapolates to full drive ("unpinned").
 
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::noise::NoiseModel;
@@ -207,7 +207,7 @@ fn reduce_ramp(
         let w = 1.0 / sigma_of(xyz).powi(2);
         scatter += r * r.transpose() * w;
     }
-    let eigen = SymmetricEigen::new(scatter);
+    let eigen = crate::linalg::bounded_symmetric_eigen(scatter)?;
     let (k, _) = eigen
         .eigenvalues
         .iter()

@@ -57,6 +57,9 @@ impl Shape {
     }
 }
 
+/// Largest gain (grid reading over the centre's prediction) taken as a reading.
+const MAX_PLAUSIBLE_GAIN: f64 = 10.0;
+
 /// One grid reading as an observed gain.
 struct GainPoint<'a> {
     reading: &'a Corrected<'a>,
@@ -77,7 +80,11 @@ fn gain_points<'a>(
             let m = r.measurement;
             let centre = base.forward_centre(m.drive);
             let above = centre.y - base.black.y;
-            if !(above > 0.0) {
+            let gain = (r.xyz.y - base.black.y) / above;
+            // A grid patch is bright, and no screen's corner is ten times its centre:
+            // a gain outside (0, 10) is a reading out of all range (−1e308, a unit
+            // slip), which says nothing about the falloff. It is left out, not fitted.
+            if !(above > 0.0 && gain > 0.0 && gain < MAX_PLAUSIBLE_GAIN) {
                 return None;
             }
             let on: Vec<usize> = (0..3).filter(|c| m.drive[*c] > 0.0).collect();
@@ -85,7 +92,7 @@ fn gain_points<'a>(
                 reading: r,
                 position: m.position,
                 channel: (on.len() == 1).then(|| on[0]),
-                gain: (r.xyz.y - base.black.y) / above,
+                gain,
                 sigma: noise.sigma(r.xyz.y) / above,
             })
         })
@@ -166,6 +173,10 @@ pub fn choose_spatial_map(
         let mut errors = Vec::new();
         let mut note = None;
         for held in &positions {
+            if crate::fit::cancel::requested() {
+                note = Some("stopped".to_string());
+                break;
+            }
             let at = |p: &&GainPoint<'_>| {
                 (p.position.x - held.x).abs() < 1e-9 && (p.position.y - held.y).abs() < 1e-9
             };

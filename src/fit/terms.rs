@@ -200,7 +200,7 @@ fn fit_interaction(
             b[3 * i + j] = residual[j] * weight;
         }
     }
-    let svd = a.svd(true, true);
+    let svd = crate::linalg::bounded_svd(a)?;
     let x = svd.solve(&b, svd.singular_values.max() * 1e-6).ok()?;
     let gamma = [x[0], x[1], x[2]];
     gamma.iter().all(|v| v.is_finite()).then_some(gamma)

@@ -282,7 +282,10 @@ impl MonitorModel {
 
 /// σ_max / σ_min of a 3×3 matrix (∞ when it is singular).
 pub fn matrix_condition_number(m: &Matrix3<f64>) -> f64 {
-    let s = m.singular_values();
+    let Some(svd) = crate::linalg::bounded_svd(*m) else {
+        return f64::INFINITY;
+    };
+    let s = svd.singular_values;
     let max = s.max();
     let min = s.min();
     if min <= 0.0 { f64::INFINITY } else { max / min }

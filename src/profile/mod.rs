@@ -52,6 +52,10 @@ pub struct Provenance {
     /// SHA-256 of the config of the run, when it came from a run.
     pub config_digest: Option<String>,
     pub program: String,
+    /// Fit and publishing settings given at `--resume` in place of the journal's
+    /// (where from, and its digest): the readings were taken with the journal's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings_at_resume: Option<String>,
 }
 
 /// A monitor profile.

@@ -484,6 +484,7 @@ mod tests {
                 instrument: None,
                 config_digest: None,
                 program: "test".into(),
+                settings_at_resume: None,
             },
             report: fitted.report.clone(),
             calibration: None,
