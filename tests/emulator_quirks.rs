@@ -185,6 +185,62 @@ fn the_klein_streams_until_n5_and_frames_every_reply() {
     assert_eq!(exchange(&mut t, b"", 1.0), b"", "and the stream is over");
 }
 
+/// ArgyllCMS's generic serial scan (PROTOCOLS.md §7, step 0), byte for byte over a
+/// real pseudo-terminal: `;` alone must get no reply (an echo would pass for a
+/// Lumagen), `D024` CR LF a reply beginning `D4` (the calibration list, then `<0>`),
+/// and only then `P0` names the model.
+#[test]
+fn the_klein_answers_argylls_identification_probe_over_a_pty() {
+    use std::io::{Read, Write};
+    use std::time::{Duration, Instant};
+    let emulator = common::emulate(&["--instrument", "k10a"]);
+    let mut port = serialport::new(&emulator.device, 9600)
+        .timeout(Duration::from_millis(100))
+        .open()
+        .unwrap();
+    // Everything the port says within `seconds` (as the probe reads: until silence).
+    let mut listen = |port: &mut Box<dyn serialport::SerialPort>, seconds: f64| {
+        let mut out = Vec::new();
+        let end = Instant::now() + Duration::from_secs_f64(seconds);
+        let mut buffer = [0u8; 4096];
+        while Instant::now() < end {
+            match port.read(&mut buffer) {
+                Ok(n) => out.extend_from_slice(&buffer[..n]),
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) => panic!("{e}"),
+            }
+        }
+        out
+    };
+    port.write_all(b";").unwrap();
+    assert_eq!(listen(&mut port, 0.2), b"", "';' alone gets no reply");
+    port.write_all(b"D024\r\n").unwrap();
+    let reply = listen(&mut port, 0.5);
+    assert!(reply.len() >= 3 && reply.starts_with(b"D4"), "{reply:?}");
+    assert!(
+        reply.ends_with(b"<0>"),
+        "{:?}",
+        &reply[reply.len().saturating_sub(8)..]
+    );
+    assert_eq!(
+        reply.len(),
+        2 + 96 * 20 + 3,
+        "D4, the calibration list, <0>"
+    );
+    assert_eq!(&reply[2..13], b"Factory LCD");
+    port.write_all(b"P0\r").unwrap();
+    let p0 = listen(&mut port, 0.5);
+    assert!(
+        p0.starts_with(b"P0K-10"),
+        "{:?}",
+        String::from_utf8_lossy(&p0)
+    );
+    // The probe left the emulator in its usual state: the driver's session works.
+    port.write_all(b"N5\r").unwrap();
+    let n5 = listen(&mut port, 0.5);
+    assert!(n5.starts_with(b"N5") && n5.ends_with(b"<0>"), "{n5:?}");
+}
+
 #[test]
 fn the_specbos_talks_only_at_its_baud_and_the_driver_finds_it() {
     let mut t = MemoryTransport::new(

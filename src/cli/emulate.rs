@@ -88,7 +88,7 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
         .clone()
         .unwrap_or_default();
     let meter = Meter::new(monitor.clone(), simulated, faults.device(), faults.seed);
-    let device = match kind {
+    let device: Box<dyn chromacal::instrument::emulator::DeviceModel> = match kind {
         DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a if args.not_remote => {
             let model = match kind {
                 DeviceKind::Ls110 => minolta::protocol::Model::Ls110,
@@ -97,6 +97,19 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
             };
             Box::new(minolta::emulator::MinoltaEmulator::new(model, meter, false))
         }
+        // The PR-650's arming window is a human's time (switch on, connect at once),
+        // so it lasts 5 real seconds however fast the device's time runs: scaled, it
+        // would be 10 ms at --time-scale 0.002, less than a loaded machine takes to
+        // start the host program.
+        DeviceKind::Pr650 => Box::new(chromacal::instrument::pr650::emulator::Pr650Emulator::new(
+            meter,
+            chromacal::instrument::pr650::protocol::ARMING_WINDOW_S
+                / if args.time_scale > 0.0 {
+                    args.time_scale
+                } else {
+                    1.0
+                },
+        )),
         _ => kind.emulator(meter),
     };
     let screen = args.screen.unwrap_or_else(|| {

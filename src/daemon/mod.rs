@@ -380,6 +380,27 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     let store_lock = store.lock("chromacal daemon")?;
     let daemon = Daemon::new(loaded, store, store_lock);
 
+    // The TCP listener is bound and its token written before the unix socket exists:
+    // a client that finds the socket may go straight to TCP.
+    let tcp =
+        match &config.tcp {
+            Some(address) => Some(tokio::net::TcpListener::bind(address).await.map_err(
+                |source| DaemonError::Io {
+                    path: PathBuf::from(address),
+                    source,
+                },
+            )?),
+            None => None,
+        };
+    let token = match &config.tcp {
+        Some(_) => Some(load_or_create_token(
+            &config
+                .token_file
+                .clone()
+                .unwrap_or_else(|| options.state_dir.join("api.token")),
+        )?),
+        None => None,
+    };
     let socket_path = config
         .socket
         .clone()
@@ -394,28 +415,7 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
             })?
             .uid()
     };
-    let token = match &config.tcp {
-        Some(_) => Some(load_or_create_token(
-            &config
-                .token_file
-                .clone()
-                .unwrap_or_else(|| options.state_dir.join("api.token")),
-        )?),
-        None => None,
-    };
     let app = api::router(daemon.clone(), api::Access { owner, token });
-    // Both listeners are bound before either serves: a client that finds the unix
-    // socket answering may go straight to TCP.
-    let tcp =
-        match &config.tcp {
-            Some(address) => Some(tokio::net::TcpListener::bind(address).await.map_err(
-                |source| DaemonError::Io {
-                    path: PathBuf::from(address),
-                    source,
-                },
-            )?),
-            None => None,
-        };
     serve::raise_descriptor_limit();
     tokio::spawn(serve::serve(
         serve::Listener::Unix(unix),

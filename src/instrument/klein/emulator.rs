@@ -2,6 +2,11 @@
 //! matrix of a slot), `N5`, `J1`–`J8`, `L0`/`L1`, `M6`, `B9`, and the `T2` flicker
 //! stream (96-byte packets every 125 ms) that `N5` stops. Each reply is the echoed
 //! command, the payload and `<status>`.
+//!
+//! It also answers the identification probe of ArgyllCMS's generic serial scan
+//! (`ser_inst_type` in `spectro/inst.c`; PROTOCOLS.md §7): `;` alone, which a K-10
+//! ignores, then `D024` + CR LF, which it answers with `D4`, its calibration list and
+//! `<0>`. Only after that reply does the host send `P0`.
 
 use super::protocol::{encode_ranges, encode_value};
 use crate::color::Xyz;
@@ -69,14 +74,19 @@ impl K10Emulator {
         frame(b"N5", &payload, status)
     }
 
-    fn d7(&self) -> Vec<u8> {
+    /// The calibration list: 96 slots of 20 bytes, unused ones 0xFF.
+    fn calibration_list() -> Vec<u8> {
         let mut payload = vec![0xFFu8; 96 * 20];
         for (slot, name) in ["Factory LCD", "Factory CRT"].iter().enumerate() {
             let mut field = format!("{name:<20}").into_bytes();
             field.truncate(20);
             payload[slot * 20..slot * 20 + 20].copy_from_slice(&field);
         }
-        frame(b"D7", &payload, b'0')
+        payload
+    }
+
+    fn d7(&self) -> Vec<u8> {
+        frame(b"D7", &Self::calibration_list(), b'0')
     }
 
     /// A slot's 128 bytes: the name, then the identity matrix in Klein format at
@@ -167,8 +177,14 @@ impl DeviceModel for K10Emulator {
                 continue;
             }
             if b == b'\r' || b == b'\n' {
-                let line = std::mem::take(&mut self.input);
-                if line.len() >= 2 {
+                let mut line = std::mem::take(&mut self.input);
+                // A `;` sent alone (the probe's first step) is not answered, and is
+                // no part of the command after it.
+                line.retain(|c| *c != b';');
+                if line == b"D024" {
+                    let reply = frame(b"D4", &Self::calibration_list(), b'0');
+                    out.push(Scheduled::after(0.05, reply));
+                } else if line.len() >= 2 {
                     out.extend(self.command(&line[line.len() - 2..], now));
                 }
             } else if self.input.len() < 64 {
