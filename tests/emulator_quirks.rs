@@ -199,7 +199,7 @@ fn the_klein_answers_argylls_identification_probe_over_a_pty() {
         .open()
         .unwrap();
     // Everything the port says within `seconds` (as the probe reads: until silence).
-    let mut listen = |port: &mut Box<dyn serialport::SerialPort>, seconds: f64| {
+    let listen = |port: &mut Box<dyn serialport::SerialPort>, seconds: f64| {
         let mut out = Vec::new();
         let end = Instant::now() + Duration::from_secs_f64(seconds);
         let mut buffer = [0u8; 4096];
