@@ -69,7 +69,8 @@ impl CgatsTable {
 }
 
 /// Split a line into tokens; double-quoted strings are one token without the quotes.
-fn tokens(line: &str) -> Vec<String> {
+/// A quote left open at the end of the line is an error.
+fn tokens(line: &str) -> Result<Vec<String>, String> {
     let mut out = Vec::new();
     let mut current = String::new();
     let mut quoted = false;
@@ -92,10 +93,13 @@ fn tokens(line: &str) -> Vec<String> {
             }
         }
     }
+    if quoted {
+        return Err("a quoted string is not closed on its line".into());
+    }
     if in_token {
         out.push(current);
     }
-    out
+    Ok(out)
 }
 
 /// Parse every table of a CGATS text; `path` names it in errors.
@@ -119,7 +123,10 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
     let mut expected_sets: Option<(usize, usize)> = None;
     for (i, raw) in text.lines().enumerate() {
         let number = i + 1;
-        let line = raw.trim_matches(|c: char| c.is_whitespace() || c == '\0');
+        if raw.contains('\0') {
+            return Err(syntax(number, "a NUL byte: not a text file".into()));
+        }
+        let line = raw.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
@@ -139,7 +146,7 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
                 }
             }
             State::Header => {
-                let t = tokens(line);
+                let t = tokens(line).map_err(|m| syntax(number, m))?;
                 let Some(table) = table.as_mut() else {
                     continue;
                 };
@@ -171,7 +178,15 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
                 if line.starts_with("END_DATA_FORMAT") {
                     state = State::Header;
                 } else if let Some(table) = table.as_mut() {
-                    table.fields.extend(tokens(line));
+                    for field in tokens(line).map_err(|m| syntax(number, m))? {
+                        if table.fields.contains(&field) {
+                            return Err(syntax(
+                                number,
+                                format!("the data format names {field} twice"),
+                            ));
+                        }
+                        table.fields.push(field);
+                    }
                 }
             }
             State::Data => {
@@ -197,7 +212,7 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
                     state = State::Identifier;
                     continue;
                 }
-                let t = tokens(line);
+                let t = tokens(line).map_err(|m| syntax(number, m))?;
                 if t.len() != current.fields.len() {
                     return Err(syntax(
                         number,
@@ -230,10 +245,13 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
 /// Read an ArgyllCMS `.ti3` display measurement file.
 pub fn read_ti3(path: &Path) -> Result<MeasurementSet, CgatsError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| CgatsError::Io {
-        path: name.clone(),
-        source,
-    })?;
+    let bytes =
+        crate::durable::read_limited(path, crate::durable::limits::TABLE).map_err(|source| {
+            CgatsError::Io {
+                path: name.clone(),
+                source,
+            }
+        })?;
     // Argyll writes Latin-1 in places (° and ² in names); read leniently.
     let text = String::from_utf8_lossy(&bytes);
     ti3_from_text(&text, &name)
@@ -330,7 +348,18 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
         }
         let mut value = Xyz::zeros();
         for c in 0..3 {
-            value[c] = number(*line, xyz[c], &row[xyz[c]])? * scale;
+            let read = number(*line, xyz[c], &row[xyz[c]])?;
+            value[c] = read * scale;
+            // A value that overflows once scaled to cd/m² is named, not dropped.
+            if !value[c].is_finite() {
+                return Err(CgatsError::Content {
+                    path: name.into(),
+                    message: format!(
+                        "line {line}: {} = {read:e} overflows when scaled to cd/m² (× {scale} from LUMINANCE_XYZ_CDM2)",
+                        table.fields[xyz[c]]
+                    ),
+                });
+            }
         }
         let spectrum = if spectral.len() >= 2 {
             let values = spectral
@@ -441,6 +470,22 @@ mod tests {
             assert_eq!(a.drive, b.drive);
             assert!((a.reading.xyz.unwrap() - b.reading.xyz.unwrap()).norm() < 1e-4);
         }
+    }
+
+    #[test]
+    fn nul_bytes_open_quotes_duplicate_fields_and_overflow_are_refused() {
+        let err = |text: &str| ti3_from_text(text, "x").unwrap_err().to_string();
+        let e = err(&SMALL.replace("2 0 0 0 0.1", "2 0 0 0\x000.1"));
+        assert!(e.contains("line 16") && e.contains("NUL"), "{e}");
+        let e = err(&SMALL.replace("\"3\" 50", "\"3 50"));
+        assert!(e.contains("line 17") && e.contains("not closed"), "{e}");
+        let e = err(&SMALL.replace("RGB_R RGB_G RGB_B XYZ_X", "RGB_R RGB_G RGB_R XYZ_X"));
+        assert!(e.contains("names RGB_R twice"), "{e}");
+        let e = err(&SMALL.replace("8.9 4.6 0.4", "8.9 1.5e308 0.4"));
+        assert!(
+            e.contains("line 17") && e.contains("XYZ_Y") && e.contains("overflows"),
+            "{e}"
+        );
     }
 
     #[test]

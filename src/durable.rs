@@ -1,10 +1,51 @@
 //! Files that survive a crash or a power cut: a directory entry made durable, and a
 //! file replaced whole or not at all. The journal, the profile store and the daemon's
-//! history are written through these.
+//! history are written through these. And reads with a size limit, so that a path
+//! to `/dev/zero` or a runaway file is refused instead of filling the memory.
 
 use std::fs::{self, File};
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::Path;
+
+/// Largest file of each kind chromacal reads, bytes.
+pub mod limits {
+    /// A config file.
+    pub const CONFIG: u64 = 1 << 20;
+    /// A profile, `history.json`, a token file.
+    pub const PROFILE: u64 = 16 << 20;
+    /// A run's journal (a 1,400-patch run with spectra is about 15 MB).
+    pub const JOURNAL: u64 = 1 << 30;
+    /// A measurement file (CGATS, `.ti3`, CSV) or a numeric table.
+    pub const TABLE: u64 = 256 << 20;
+}
+
+/// Read at most `limit` bytes from `reader`; more is an error that names the limit.
+pub fn read_limited_from(reader: impl Read, limit: u64) -> std::io::Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    reader.take(limit + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > limit {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("larger than {limit} bytes: not a file of this kind"),
+        ));
+    }
+    Ok(bytes)
+}
+
+/// The whole of `path`, if it is at most `limit` bytes.
+pub fn read_limited(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
+    read_limited_from(File::open(path)?, limit)
+}
+
+/// The whole of `path` as UTF-8 text, if it is at most `limit` bytes.
+pub fn read_text_limited(path: &Path, limit: u64) -> std::io::Result<String> {
+    String::from_utf8(read_limited(path, limit)?).map_err(|_| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            "stream did not contain valid UTF-8",
+        )
+    })
+}
 
 /// fsync a directory so a new or renamed entry in it survives a power cut. Best
 /// effort: not every file system lets a directory be opened for this.

@@ -9,7 +9,7 @@
 
 use std::collections::BTreeSet;
 use std::fs::{File, OpenOptions};
-use std::io::{Read, Seek, SeekFrom, Write};
+use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -56,7 +56,9 @@ pub enum JournalError {
         line: usize,
         index: usize,
     },
-    #[error("cannot record a reading with a value that is not finite (patch {index})")]
+    #[error(
+        "cannot record a reading with a value that is not finite, or that would not read back as written (patch {index})"
+    )]
     NotFinite { index: usize },
 }
 
@@ -161,8 +163,14 @@ impl Journal {
             .open(path)
             .map_err(io_error(path))?;
         lock_journal(&file, path)?;
-        let mut text = String::new();
-        file.read_to_string(&mut text).map_err(io_error(path))?;
+        let bytes = crate::durable::read_limited_from(&mut file, crate::durable::limits::JOURNAL)
+            .map_err(io_error(path))?;
+        let text = String::from_utf8(bytes).map_err(|_| {
+            io_error(path)(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                "stream did not contain valid UTF-8",
+            ))
+        })?;
         let (header, entries, recovery, good_len) = parse(&text, path)?;
         if recovery.dropped_tail.is_some() {
             file.set_len(good_len as u64).map_err(io_error(path))?;
@@ -182,7 +190,8 @@ impl Journal {
 
     /// Read a journal without changing it.
     pub fn read(path: &Path) -> Result<(JournalHeader, Vec<Measurement>, Recovery), JournalError> {
-        let text = std::fs::read_to_string(path).map_err(io_error(path))?;
+        let text = crate::durable::read_text_limited(path, crate::durable::limits::JOURNAL)
+            .map_err(io_error(path))?;
         let (header, entries, recovery, _) = parse(&text, path)?;
         Ok((header, entries, recovery))
     }
@@ -201,6 +210,14 @@ impl Journal {
             line: self.entries.len() + 2,
             message: e.to_string(),
         })?;
+        // Any other number that is not finite (a time, an integration, a spectrum
+        // value) is written by serde_json as null, and would read back as something
+        // else or not at all: the line must read back as what it records.
+        if serde_json::from_str::<Measurement>(&line).ok().as_ref() != Some(&measurement) {
+            return Err(JournalError::NotFinite {
+                index: measurement.index,
+            });
+        }
         self.file
             .write_all(format!("{line}\n").as_bytes())
             .map_err(io_error(&self.path))?;
@@ -481,6 +498,19 @@ mod tests {
         let mut j = Journal::create(&path, header()).unwrap();
         assert!(matches!(
             j.append(measurement(0, f64::NAN)),
+            Err(JournalError::NotFinite { index: 0 })
+        ));
+        // A time that is not a number would be written as null and read back as none.
+        let mut timed = measurement(0, 1.0);
+        timed.time_s = Some(f64::NAN);
+        assert!(matches!(
+            j.append(timed),
+            Err(JournalError::NotFinite { index: 0 })
+        ));
+        let mut integrated = measurement(0, 1.0);
+        integrated.reading.integration_s = f64::INFINITY;
+        assert!(matches!(
+            j.append(integrated),
             Err(JournalError::NotFinite { index: 0 })
         ));
         assert!(j.entries().is_empty());

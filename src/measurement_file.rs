@@ -25,10 +25,13 @@ pub enum ReadMeasurementsError {
 /// Read measurements from a run journal (JSON Lines) or an ArgyllCMS `.ti3` file,
 /// told apart by their first line.
 pub fn read_measurements(path: &Path) -> Result<MeasurementSet, ReadMeasurementsError> {
-    let bytes = std::fs::read(path).map_err(|source| ReadMeasurementsError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
+    let bytes =
+        crate::durable::read_limited(path, crate::durable::limits::TABLE).map_err(|source| {
+            ReadMeasurementsError::Io {
+                path: path.display().to_string(),
+                source,
+            }
+        })?;
     let text = String::from_utf8_lossy(&bytes);
     if text.trim_start().starts_with('{') {
         let (header, entries, recovery) = Journal::read(path)?;

@@ -50,10 +50,12 @@ pub struct NumericTable {
 
 impl NumericTable {
     pub fn read(path: &Path) -> Result<Self, CsvError> {
-        let text = std::fs::read_to_string(path).map_err(|source| CsvError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::durable::read_text_limited(path, crate::durable::limits::TABLE).map_err(
+            |source| CsvError::Io {
+                path: path.to_path_buf(),
+                source,
+            },
+        )?;
         Self::parse(&text, path)
     }
 

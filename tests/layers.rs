@@ -11,8 +11,10 @@ use std::path::{Path, PathBuf};
 /// The layers, lowest first. A module may import from any layer below its own and
 /// from none at or above it. A new top-level module must be placed here.
 const LAYERS: &[&[&str]] = &[
-    // Foundations: colorimetry, numeric CSV tables, clocks, crash-safe files.
-    &["color", "numeric_csv", "time", "durable", "linalg"],
+    // Foundations: crash-safe and size-limited files, decompositions that end.
+    &["durable", "linalg"],
+    // Colorimetry, numeric CSV tables, clocks.
+    &["color", "numeric_csv", "time"],
     // The monitor model: transfer laws, spatial map, targets.
     &["model"],
     // What a screen shows: codes, patch windows, content.

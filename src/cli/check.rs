@@ -61,6 +61,31 @@ fn check(
             .iter()
             .filter_map(|m| Some((m, m.usable_xyz()?))),
     );
+    // A reading out of all range gives a ΔE00 that is not a number: name it rather
+    // than print NaN as a result.
+    let unscorable: Vec<String> = evaluation
+        .patches
+        .iter()
+        .filter(|p| !p.delta_e00.is_finite())
+        .map(|p| {
+            format!(
+                "patch {} (measured X Y Z {:e} {:e} {:e})",
+                p.index, p.measured.x, p.measured.y, p.measured.z
+            )
+        })
+        .collect();
+    if !unscorable.is_empty() {
+        return Err(Failure::from(format!(
+            "{}: the ΔE00 of {} cannot be computed (a value out of all range): {}",
+            measurements.display(),
+            if unscorable.len() == 1 {
+                "one reading".to_string()
+            } else {
+                format!("{} readings", unscorable.len())
+            },
+            unscorable.join(", ")
+        )));
+    }
     if json {
         #[derive(serde::Serialize)]
         struct Output<'a> {

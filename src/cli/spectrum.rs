@@ -92,10 +92,11 @@ impl From<IlluminantArg> for Illuminant {
 struct SpectrumResult {
     sample: String,
     xyz: [f64; 3],
-    x: f64,
-    y: f64,
-    u_prime: f64,
-    v_prime: f64,
+    /// Chromaticity: none (null) for a sample with no light, where it is undefined.
+    x: Option<f64>,
+    y: Option<f64>,
+    u_prime: Option<f64>,
+    v_prime: Option<f64>,
     lab: [f64; 3],
     luv: [f64; 3],
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -113,6 +114,13 @@ fn spectrum(
     observer: &str,
     json: bool,
 ) -> Result<(), Failure> {
+    if let Some(w) = white_y
+        && !(w > 0.0 && w.is_finite())
+    {
+        return Err(Failure::from(format!(
+            "--white-y must be a positive luminance, not {w}: L*a*b* and L*u*v* are relative to it"
+        )));
+    }
     let observer = if observer == "10" {
         Observer::Cie1964TenDegree
     } else {
@@ -165,6 +173,12 @@ fn spectrum(
     } else {
         white_y.unwrap_or_else(|| results.iter().map(|r| r.1.y).fold(0.0, f64::max))
     };
+    if !(white_luminance > 0.0 && white_luminance.is_finite()) {
+        return Err(Failure::from(format!(
+            "{}: no sample has any light, so L*a*b* and L*u*v* have no reference white: give --white-y",
+            file.display()
+        )));
+    }
     let white: Xyz = white_xyz * (white_luminance / 100.0);
     let out: Vec<SpectrumResult> = results
         .iter()
@@ -174,13 +188,14 @@ fn spectrum(
             let uv = xyz_to_uv_prime(xyz, UvPrime { u: 0.0, v: 0.0 });
             let lab = xyz_to_lab(xyz, &white);
             let luv = xyz_to_luv(xyz, &white);
+            let has_light = xyz.x + xyz.y + xyz.z > 0.0;
             SpectrumResult {
                 sample: name.clone(),
                 xyz: [xyz.x, xyz.y, xyz.z],
-                x: xyy.x,
-                y: xyy.y,
-                u_prime: uv.u,
-                v_prime: uv.v,
+                x: has_light.then_some(xyy.x),
+                y: has_light.then_some(xyy.y),
+                u_prime: has_light.then_some(uv.u),
+                v_prime: has_light.then_some(uv.v),
                 lab: [lab.l, lab.a, lab.b],
                 luv: [luv.l, luv.u, luv.v],
                 photopic_cd_m2: lum.map(|l| l.0),
@@ -188,6 +203,21 @@ fn spectrum(
             }
         })
         .collect();
+    // Never a NaN or ∞ printed with success: say which sample and stop.
+    if let Some(r) = out.iter().find(|r| {
+        r.xyz
+            .iter()
+            .chain(&r.lab)
+            .chain(&r.luv)
+            .chain([r.x, r.y, r.u_prime, r.v_prime].iter().flatten())
+            .any(|v| !v.is_finite())
+    }) {
+        return Err(Failure::from(format!(
+            "{}, column '{}': the result is not a finite number (values out of all range?)",
+            file.display(),
+            r.sample
+        )));
+    }
     if json {
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
@@ -212,10 +242,10 @@ fn spectrum(
                 format!("{:.4}", r.xyz[0]),
                 format!("{:.4}", r.xyz[1]),
                 format!("{:.4}", r.xyz[2]),
-                format!("{:.4}", r.x),
-                format!("{:.4}", r.y),
-                format!("{:.4}", r.u_prime),
-                format!("{:.4}", r.v_prime),
+                chromaticity(r.x),
+                chromaticity(r.y),
+                chromaticity(r.u_prime),
+                chromaticity(r.v_prime),
                 format!("{:.2}", r.lab[0]),
                 format!("{:.2}", r.lab[1]),
                 format!("{:.2}", r.lab[2]),
@@ -241,4 +271,9 @@ fn spectrum(
         }
     }
     Ok(())
+}
+
+/// A chromaticity coordinate, or "undefined" for a sample with no light.
+fn chromaticity(value: Option<f64>) -> String {
+    value.map_or_else(|| "undefined".to_string(), |v| format!("{v:.4}"))
 }

@@ -6,6 +6,7 @@
 
 pub mod calibration;
 pub mod daemon;
+pub mod ranges;
 
 use std::path::{Path, PathBuf};
 
@@ -301,7 +302,36 @@ pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
 
 /// Check what the types cannot: ranges, and that the instrument, display and plan go
 /// together. Run again after command-line overrides.
+/// The rules that tie one key to another (the ranges of single keys are in `ranges`).
+fn check_between_keys(config: &Config) -> Result<(), String> {
+    let monitor = &config.monitor;
+    if let (Some(black), Some(white)) = (monitor.black_luminance, monitor.white_luminance)
+        && !(black < white)
+    {
+        return Err(format!(
+            "monitor.black_luminance = {black} is not below monitor.white_luminance = {white}"
+        ));
+    }
+    if let Some(sim) = &config.instrument.simulated {
+        if !(sim.max_integration_s >= sim.integration_s) {
+            return Err(format!(
+                "instrument.simulated.max_integration_s = {} is below integration_s = {}",
+                sim.max_integration_s, sim.integration_s
+            ));
+        }
+        if !(sim.low_light_limit < sim.overload_limit) {
+            return Err(format!(
+                "instrument.simulated.low_light_limit = {} is not below overload_limit = {}",
+                sim.low_light_limit, sim.overload_limit
+            ));
+        }
+    }
+    Ok(())
+}
+
 pub fn check_config(config: &Config) -> Result<(), String> {
+    ranges::check_ranges(config)?;
+    check_between_keys(config)?;
     config.daemon.check()?;
     config.publish.check()?;
     config.schedule.check()?;
@@ -389,10 +419,11 @@ pub fn load_config(path: Option<&Path>) -> Result<LoadedConfig, ConfigError> {
             base_dir: std::env::current_dir().unwrap_or_else(|_| PathBuf::from(".")),
         }),
         Some(path) => {
-            let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-                path: path.to_path_buf(),
-                source,
-            })?;
+            let text = crate::durable::read_text_limited(path, crate::durable::limits::CONFIG)
+                .map_err(|source| ConfigError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
             let origin = path.display().to_string();
             Ok(LoadedConfig {
                 config: parse_config(&text, &origin)?,
@@ -430,7 +461,7 @@ mod tests {
         ] {
             let error = parse_config(text, "c.toml").unwrap_err().to_string();
             assert!(
-                error.contains("must be a positive number"),
+                error.contains("is out of range: it must be from 0.000001 to 1000"),
                 "{text}: {error}"
             );
         }

@@ -326,7 +326,7 @@ pub struct CurrentProfile {
 /// The current profile and its text; an error says why it does not read.
 fn read_current(daemon: &Daemon) -> Result<Option<(Profile, String)>, String> {
     let path = daemon.store().current_path();
-    let text = match std::fs::read_to_string(&path) {
+    let text = match crate::durable::read_text_limited(&path, crate::durable::limits::PROFILE) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(format!("{}: {e}", path.display())),

@@ -325,7 +325,7 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
             path.display()
         )));
     }
-    match std::fs::read_to_string(path) {
+    match crate::durable::read_text_limited(path, crate::durable::limits::PROFILE) {
         Ok(text) if !text.trim().is_empty() => {
             if !private()? {
                 return Ok(text.trim().to_string());

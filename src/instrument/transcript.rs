@@ -122,10 +122,12 @@ pub fn read_transcript(
     path: &Path,
 ) -> Result<(TranscriptHeader, Vec<TranscriptEvent>), TranscriptError> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| TranscriptError::Io {
-        path: name.clone(),
-        source,
-    })?;
+    let text = crate::durable::read_text_limited(path, crate::durable::limits::TABLE).map_err(
+        |source| TranscriptError::Io {
+            path: name.clone(),
+            source,
+        },
+    )?;
     let bad = |line: usize, message: String| TranscriptError::Bad {
         path: name.clone(),
         line,

@@ -319,6 +319,8 @@ struct PerChannel<T> {
 pub enum ModelFileError {
     #[error("model: {0} is not a finite number")]
     NotFinite(&'static str),
+    #[error("model: the spatial map has {0}")]
+    Spatial(String),
     #[error("model: the {channel} law: {source}")]
     Law {
         channel: &'static str,
@@ -361,6 +363,9 @@ impl TryFrom<ModelFile> for MonitorModel {
         finite(&f.primaries.blue, "primaries.blue")?;
         if !f.terms.is_finite() {
             return Err(ModelFileError::NotFinite("terms"));
+        }
+        if let Some(problem) = f.spatial.problem() {
+            return Err(ModelFileError::Spatial(problem));
         }
         let laws = [f.laws.red, f.laws.green, f.laws.blue];
         for (law, channel) in laws.iter().zip(CHANNELS) {

@@ -87,7 +87,40 @@ pub enum SpatialMap {
     PerChannel { surfaces: [Surface; 3] },
 }
 
+/// Highest degree of a surface a profile may hold: the fit tries 2 and 4; a degree
+/// of 4294967295 in a hand-edited file once made every use of the profile hang.
+pub const MAX_SURFACE_DEGREE: u32 = 8;
+
 impl SpatialMap {
+    /// Why the map is not usable, if it is not: a degree above `MAX_SURFACE_DEGREE`,
+    /// a number of coefficients that is not the degree's, or one not finite.
+    pub fn problem(&self) -> Option<String> {
+        let surfaces: &[Surface] = match self {
+            SpatialMap::Uniform => &[],
+            SpatialMap::Scalar { surface } => std::slice::from_ref(surface),
+            SpatialMap::PerChannel { surfaces } => surfaces,
+        };
+        surfaces.iter().find_map(|s| {
+            if s.degree > MAX_SURFACE_DEGREE {
+                Some(format!(
+                    "a surface of degree {} (at most {MAX_SURFACE_DEGREE})",
+                    s.degree
+                ))
+            } else if s.coefficients.len() != surface_term_count(s.degree) {
+                Some(format!(
+                    "a surface of degree {} with {} coefficients (it has {})",
+                    s.degree,
+                    s.coefficients.len(),
+                    surface_term_count(s.degree)
+                ))
+            } else if s.coefficients.iter().any(|c| !c.is_finite()) {
+                Some("a surface coefficient that is not a finite number".to_string())
+            } else {
+                None
+            }
+        })
+    }
+
     /// Gains of the R, G and B channels at `position`.
     pub fn gains(&self, position: ScreenPosition) -> [f64; 3] {
         match self {

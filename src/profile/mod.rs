@@ -37,6 +37,10 @@ pub enum ProfileError {
     },
     #[error("{path}: schema version {found}, this program reads version {SCHEMA_VERSION}")]
     Version { path: String, found: u32 },
+    #[error(
+        "{path}: {key} is not a finite number (chromacal never writes one: the file was edited or damaged)"
+    )]
+    NotFinite { path: String, key: String },
     #[error("cannot write the profile as TOML: {0}")]
     Serialize(String),
 }
@@ -112,6 +116,23 @@ impl Profile {
                 found,
             });
         }
+        let value: toml::Value = toml::from_str(text).map_err(|e| {
+            let (line, column, message) = toml_error_position(text, &e);
+            ProfileError::Parse {
+                path: path.into(),
+                line,
+                column,
+                message,
+            }
+        })?;
+        // chromacal never writes a number that is not finite; one in a file (TOML
+        // allows `nan` and `inf`) is an edit or damage, and would print as NaN.
+        if let Some(key) = non_finite_key(&value, "") {
+            return Err(ProfileError::NotFinite {
+                path: path.into(),
+                key,
+            });
+        }
         toml::from_str(text).map_err(|e| {
             let (line, column, message) = toml_error_position(text, &e);
             ProfileError::Parse {
@@ -124,10 +145,11 @@ impl Profile {
     }
 
     pub fn read(path: &Path) -> Result<Self, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        let text = crate::durable::read_text_limited(path, crate::durable::limits::PROFILE)
+            .map_err(|source| ProfileError::Io {
+                path: path.display().to_string(),
+                source,
+            })?;
         Self::from_toml(&text, &path.display().to_string())
     }
 
@@ -142,6 +164,26 @@ impl Profile {
             path: path.display().to_string(),
             source,
         })
+    }
+}
+
+/// The first key under `value` holding a float that is not finite.
+fn non_finite_key(value: &toml::Value, key: &str) -> Option<String> {
+    match value {
+        toml::Value::Float(f) if !f.is_finite() => Some(key.to_string()),
+        toml::Value::Array(items) => items
+            .iter()
+            .enumerate()
+            .find_map(|(i, item)| non_finite_key(item, &format!("{key}[{i}]"))),
+        toml::Value::Table(table) => table.iter().find_map(|(name, item)| {
+            let key = if key.is_empty() {
+                name.clone()
+            } else {
+                format!("{key}.{name}")
+            };
+            non_finite_key(item, &key)
+        }),
+        _ => None,
     }
 }
 

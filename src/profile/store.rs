@@ -257,7 +257,7 @@ impl ProfileStore {
     /// The history (empty when nothing was published yet).
     pub fn history(&self) -> Result<History, StoreError> {
         let path = self.history_path();
-        match fs::read_to_string(&path) {
+        match crate::durable::read_text_limited(&path, crate::durable::limits::PROFILE) {
             Ok(text) => serde_json::from_str(&text).map_err(|e| StoreError::Corrupt {
                 path: path.clone(),
                 message: e.to_string(),
@@ -345,9 +345,10 @@ impl ProfileStore {
                 })?,
         };
         let path = self.profile_path(&target)?;
-        let text = fs::read_to_string(&path).map_err(|e| {
-            StoreError::NoRollback(format!("profile '{target}' is not in the store ({e})"))
-        })?;
+        let text = crate::durable::read_text_limited(&path, crate::durable::limits::PROFILE)
+            .map_err(|e| {
+                StoreError::NoRollback(format!("profile '{target}' is not in the store ({e})"))
+            })?;
         let profile =
             super::Profile::from_toml(&text, &path.display().to_string()).map_err(|e| {
                 StoreError::NoRollback(format!(
@@ -396,7 +397,7 @@ impl ProfileStore {
     /// Every verification, oldest first (a line torn by a crash is skipped).
     pub fn verifications(&self) -> Result<Vec<VerificationRecord>, StoreError> {
         let path = self.verifications_path();
-        let text = match fs::read_to_string(&path) {
+        let text = match crate::durable::read_text_limited(&path, crate::durable::limits::JOURNAL) {
             Ok(t) => t,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
             Err(e) => return Err(io_error(&path)(e)),

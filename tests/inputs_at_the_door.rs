@@ -1,0 +1,269 @@
+//! Issue 12, item 6: every input is checked where it comes in, with a message that
+//! names it, an exit code that says failure, and no panic, hang or runaway read.
+//! Each case is one of the issue's reproductions, run through the real command.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+mod common;
+use common::chromacal;
+
+/// Run `chromacal args…` with a time limit; (exit code, stdout, stderr).
+fn run(args: &[&str], limit: Duration) -> (Option<i32>, String, String) {
+    let mut child = chromacal()
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        if started.elapsed() > limit {
+            let _ = child.kill();
+            panic!("chromacal {args:?} ran past {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let out = child.wait_with_output().unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path.display().to_string()
+}
+
+#[test]
+fn config_values_out_of_range_are_refused_before_anything_is_measured() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let cases = [
+        ("[plan]\nbudget = 9223372036854775807\n", "plan.budget"),
+        (
+            "[plan]\nverification = 9223372036854775807\n",
+            "plan.verification",
+        ),
+        ("[plan]\nuniformity_grid = 1000\n", "plan.uniformity_grid"),
+        (
+            "[instrument.simulated]\nintegration_s = nan\n",
+            "integration_s = NaN",
+        ),
+        (
+            "[instrument.simulated]\nmax_integration_s = nan\n",
+            "max_integration_s = NaN",
+        ),
+        (
+            "[instrument.simulated]\nrelative_noise = -0.1\n",
+            "relative_noise",
+        ),
+        (
+            "[instrument.simulated]\noverload_limit = -5.0\n",
+            "overload_limit",
+        ),
+        (
+            "[display.stability]\ntolerance = 0.0\nmax_reads = 1000000000\n",
+            "max_reads",
+        ),
+        (
+            "[fit]\nmax_condition_number = 0.0\n",
+            "max_condition_number",
+        ),
+        (
+            "[monitor]\nwhite_luminance = 10.0\nblack_luminance = 20.0\n",
+            "black_luminance = 20 is not below",
+        ),
+        (
+            "[monitor]\npreset = \"crt\"\nprimaries_csv = \"/dev/zero\"\n",
+            "/dev/zero",
+        ),
+    ];
+    for (text, named) in cases {
+        let config = write(dir.path(), "c.toml", text);
+        let (code, stdout, stderr) = run(
+            &[
+                "calibrate",
+                "--config",
+                &config,
+                "--state-dir",
+                state.to_str().unwrap(),
+            ],
+            Duration::from_secs(30),
+        );
+        assert!(
+            code.is_some_and(|c| c != 0 && c != 101),
+            "{text}: exit {code:?}\n{stderr}"
+        );
+        assert!(stderr.contains(named), "{text}: {stderr}");
+        assert!(!stdout.contains("published"), "{text}: {stdout}");
+    }
+    // Nothing was measured: no run was started.
+    let runs = state.join("runs");
+    assert!(
+        !runs.exists() || std::fs::read_dir(&runs).unwrap().next().is_none(),
+        "a refused config left a run behind"
+    );
+}
+
+#[test]
+fn a_profile_with_a_runaway_degree_or_a_nan_is_refused_when_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let (code, _, stderr) = run(
+        &["calibrate", "--state-dir", state.to_str().unwrap()],
+        Duration::from_secs(120),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    let good = std::fs::read_to_string(state.join("current.toml")).unwrap();
+    assert!(
+        good.contains("degree = "),
+        "the default run fits a spatial map"
+    );
+
+    // A degree of 2^32 − 1 once hung `profile show`, `check` and the exports.
+    let mut degree = String::new();
+    for line in good.lines() {
+        if line.trim_start().starts_with("degree = ") {
+            degree.push_str("degree = 4294967295\n");
+        } else {
+            degree.push_str(line);
+            degree.push('\n');
+        }
+    }
+    let degree = write(dir.path(), "degree.toml", &degree);
+    // A coefficient that is not a number.
+    let nan = good.replacen("coefficients = [", "coefficients = [nan, ", 1);
+    let nan = write(dir.path(), "nan.toml", &nan);
+    // A figure of the report that is not a number.
+    let report_nan = good.replacen("mean = ", "mean = nan # was ", 1);
+    let report_nan = write(dir.path(), "report-nan.toml", &report_nan);
+    for (file, named) in [
+        (&degree, "degree 4294967295"),
+        (&nan, "not a finite number"),
+        (&report_nan, "not a finite number"),
+    ] {
+        for args in [
+            vec!["profile", "show", file.as_str()],
+            vec![
+                "export",
+                file.as_str(),
+                "--format",
+                "cal",
+                "-o",
+                "/dev/null",
+            ],
+        ] {
+            let (code, stdout, stderr) = run(&args, Duration::from_secs(10));
+            assert!(
+                code.is_some_and(|c| c != 0 && c != 101),
+                "{args:?}: exit {code:?}: {stderr}"
+            );
+            assert!(stderr.contains(named), "{args:?}: {stderr}");
+            assert!(!stdout.contains("NaN"), "{args:?}: {stdout}");
+        }
+    }
+}
+
+#[test]
+fn outputs_are_never_nan_with_success() {
+    let dir = tempfile::tempdir().unwrap();
+    let spectra = write(
+        dir.path(),
+        "s.csv",
+        "wavelength_nm,lamp,dark\n500,1,0\n550,2,0\n600,1,0\n",
+    );
+    // A reference white of Y = 0 makes L*a*b* infinite: refused.
+    let (code, stdout, stderr) = run(
+        &["spectrum", &spectra, "--white-y", "0"],
+        Duration::from_secs(10),
+    );
+    assert_eq!(code, Some(1), "{stdout}{stderr}");
+    assert!(stderr.contains("--white-y"), "{stderr}");
+    // A sample with no light has no chromaticity: it says so.
+    let (code, stdout, stderr) = run(&["spectrum", &spectra], Duration::from_secs(10));
+    assert_eq!(code, Some(0), "{stderr}");
+    let dark = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with("dark"))
+        .unwrap();
+    assert!(dark.contains("undefined"), "{dark}");
+    assert!(
+        !stdout.contains("NaN") && !stdout.contains("inf"),
+        "{stdout}"
+    );
+    let (_, json, _) = run(&["spectrum", &spectra, "--json"], Duration::from_secs(10));
+    let json: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert!(json[1]["x"].is_null(), "{json}");
+    // Nothing but darkness: L*a*b* has no white.
+    let dark_only = write(dir.path(), "d.csv", "wavelength_nm,dark\n500,0\n550,0\n");
+    let (code, _, stderr) = run(&["spectrum", &dark_only], Duration::from_secs(10));
+    assert_eq!(code, Some(1));
+    assert!(stderr.contains("no sample has any light"), "{stderr}");
+
+    // `check` against a file with a reading out of all range names it.
+    let ti3 = common::shared_text("measurements/macbookpro15_2014_colormunki_spectral_57.ti3");
+    let (_, _, stderr) = run(
+        &[
+            "fit",
+            common::shared_path("measurements/macbookpro15_2014_colormunki_spectral_57.ti3")
+                .to_str()
+                .unwrap(),
+            "-o",
+            dir.path().join("mac.toml").to_str().unwrap(),
+        ],
+        Duration::from_secs(60),
+    );
+    assert!(dir.path().join("mac.toml").exists(), "{stderr}");
+    let white = "1 100.0000000 100.0000000 100.0000000 95.07730000 100.0000000 109.9800000";
+    assert!(ti3.contains(white));
+    let huge = write(
+        dir.path(),
+        "huge.ti3",
+        &ti3.replacen(
+            white,
+            "1 100.0000000 100.0000000 100.0000000 1e300 1e300 1e300",
+            1,
+        ),
+    );
+    let (code, stdout, stderr) = run(
+        &[
+            "check",
+            dir.path().join("mac.toml").to_str().unwrap(),
+            &huge,
+        ],
+        Duration::from_secs(30),
+    );
+    assert_eq!(code, Some(1), "{stdout}");
+    assert!(stderr.contains("patch 0"), "{stderr}");
+    assert!(!stdout.contains("NaN"), "{stdout}");
+    // One that overflows when scaled to cd/m² is named at the line it is on.
+    let overflow = write(
+        dir.path(),
+        "overflow.ti3",
+        &ti3.replacen(
+            white,
+            "1 100.0000000 100.0000000 100.0000000 1e308 1e308 1e308",
+            1,
+        ),
+    );
+    let (code, _, stderr) = run(
+        &[
+            "check",
+            dir.path().join("mac.toml").to_str().unwrap(),
+            &overflow,
+        ],
+        Duration::from_secs(30),
+    );
+    assert_eq!(code, Some(1));
+    assert!(
+        stderr.contains("overflows when scaled to cd/m²"),
+        "{stderr}"
+    );
+}
