@@ -4,15 +4,18 @@
 # then runs the suite. .ci/run calls this; the README's test command is this.
 #
 #   scripts/test.sh                 the whole suite
-#   scripts/test.sh --soak N        only the daemon kill test, with N SIGKILLs
-#                                   (CHROMACAL_SOAK_SEED=S picks the kill times)
+#   scripts/test.sh --soak N        only the soaks: the daemon kill test with N
+#                                   SIGKILLs (CHROMACAL_SOAK_SEED=S picks the kill
+#                                   times), and the parser fuzz with 20 × N cases
+#                                   per parser
 #   scripts/test.sh ARGS...         passed to `cargo test --locked`
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 if [ "${1:-}" = "--soak" ]; then
     kills="${2:?--soak needs a number of kills}"
-    CHROMACAL_SOAK_KILLS="$kills" exec cargo test --locked --test daemon_kill -- --nocapture
+    CHROMACAL_SOAK_KILLS="$kills" cargo test --locked --test daemon_kill -- --nocapture
+    CHROMACAL_FUZZ_CASES="$((kills * 20))" exec cargo test --locked --test parser_fuzz -- --nocapture
 fi
 
 updated=""

@@ -98,9 +98,15 @@ async fn a_thousand_idle_connections_neither_starve_the_owner_nor_fail_a_job() {
         assert_eq!(reply.status, 200, "{}", reply.text());
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
-    let slowest = latencies.iter().max().unwrap();
+    latencies.sort();
+    let slowest = *latencies.last().unwrap();
+    eprintln!(
+        "/status over the socket with 1,020 TCP clients connected and a calibration running: {} requests, p95 {:?}, max {slowest:?}",
+        latencies.len(),
+        latencies[latencies.len() * 95 / 100]
+    );
     assert!(
-        *slowest < Duration::from_secs(1),
+        slowest < Duration::from_secs(1),
         "the owner's /status took {slowest:?} under the flood"
     );
     let (_, outcome) = events_of_job(&mut events, &id, Duration::from_secs(120)).await;
@@ -169,6 +175,23 @@ async fn an_idle_keep_alive_connection_is_closed_and_a_live_one_is_not() {
     assert!(
         closed.is_some(),
         "an idle keep-alive connection stayed open"
+    );
+
+    // A client without the token is answered 401 and its connection closed: it holds
+    // no slot of the listener by asking again and again.
+    let mut stranger = tokio::net::TcpStream::connect(&address).await.unwrap();
+    stranger
+        .write_all(b"GET /status HTTP/1.1\r\nHost: x\r\n\r\n")
+        .await
+        .unwrap();
+    let mut head = [0u8; 12];
+    stranger.read_exact(&mut head).await.unwrap();
+    assert_eq!(&head, b"HTTP/1.1 401");
+    assert!(
+        closed_within(&mut stranger, Duration::from_millis(500))
+            .await
+            .is_some(),
+        "a refused client's connection stayed open"
     );
 
     // A body trickled in one byte at a time is cut off at the request timeout, in JSON.
@@ -268,6 +291,11 @@ async fn a_long_fit_neither_stalls_the_api_nor_outlives_sigterm() {
     }
     latencies.sort();
     let slowest = *latencies.last().unwrap();
+    eprintln!(
+        "/status during a 36 × 36 uniformity fit: {} requests, p95 {:?}, max {slowest:?}",
+        latencies.len(),
+        latencies[latencies.len() * 95 / 100]
+    );
     assert!(
         slowest < Duration::from_millis(500),
         "/status took up to {slowest:?} during the fit"
@@ -280,12 +308,14 @@ async fn a_long_fit_neither_stalls_the_api_nor_outlives_sigterm() {
     );
     let runs = common::daemon_runs(&daemon.state);
     assert_eq!(runs.len(), 1);
+    let run = runs[0].parent().unwrap();
+    assert!(run.exists());
     assert!(
-        !runs[0].join("profile").exists(),
+        !run.join("profile").exists(),
         "the stopped run is still unfinished"
     );
     assert!(
-        !runs[0].join("fit_failures").exists(),
+        !run.join("fit_failures").exists(),
         "a stopped fit is not a failed one"
     );
     drop(daemon);

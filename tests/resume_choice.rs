@@ -208,3 +208,79 @@ fn resume_takes_new_fit_settings_but_refuses_a_changed_plan() {
         profile.report.terms_rule
     );
 }
+
+/// On a serial rig the run's config holds the command line's instrument and screen:
+/// `--resume --config F` with the same command line compares like with like, and the
+/// settings it gives outlive a second interruption.
+#[test]
+fn resume_with_new_fit_settings_on_a_serial_rig_survives_a_second_interruption() {
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let emulator = common::emulate(&["--instrument", "k10a", "--time-scale", "0.002"]);
+    let base = "[fit]\nprimaries_xy = [[0.6190, 0.3440], [0.2765, 0.6050], [0.1513, 0.0611]]\n";
+    let config = dir.path().join("c.toml");
+    std::fs::write(&config, base).unwrap();
+    let fit_only = dir.path().join("fit-only.toml");
+    std::fs::write(&fit_only, format!("{base}additivity_terms = false\n")).unwrap();
+    let rig = [
+        "--instrument".to_string(),
+        format!("k10a:{}", emulator.device),
+        "--screen".into(),
+        emulator.screen.clone(),
+        "--timing-scale".into(),
+        "0.002".into(),
+        "--state-dir".into(),
+        state.display().to_string(),
+    ];
+    // Start (or resume) a calibration and kill it once its journal has `readings`.
+    let run_until_killed = |extra: &[&str], readings: usize| {
+        let mut child = chromacal()
+            .arg("calibrate")
+            .args(extra)
+            .args(&rig)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            let now = common::daemon_runs(&state)
+                .first()
+                .and_then(|journal| std::fs::read_to_string(journal).ok())
+                .map_or(0, |t| t.lines().count().saturating_sub(1));
+            if now >= readings {
+                break;
+            }
+            assert!(Instant::now() < deadline, "the run measured {now} readings");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+    };
+    run_until_killed(&["--config", config.to_str().unwrap()], 10);
+    // Resumed with new fit settings, and interrupted again.
+    run_until_killed(&["--resume", "--config", fit_only.to_str().unwrap()], 30);
+    // A plain resume keeps the settings given before.
+    let out = chromacal()
+        .args(["calibrate", "--resume"])
+        .args(&rig)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let profile = Profile::read(&state.join("current.toml")).unwrap();
+    let note = profile.provenance.settings_at_resume.unwrap_or_default();
+    assert!(note.contains("fit-only.toml"), "{note:?}");
+    assert!(
+        profile
+            .report
+            .terms_rule
+            .contains("fit.additivity_terms = false"),
+        "{}",
+        profile.report.terms_rule
+    );
+}

@@ -247,13 +247,16 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
         // A step is half a dozen fits: off the async task, so that a daemon's other
         // work (its API, its schedule) goes on meanwhile.
         let (header, owned) = (journal.header().clone(), config.clone());
-        let step = tokio::task::spawn_blocking(move || next_step_for(&header, &set, &owned))
-            .await
-            .unwrap_or_else(|e| {
-                Step::Stop(Stop::Unfitted(FitError::NoLaw(format!(
-                    "choosing the next patch failed: {e}"
-                ))))
-            });
+        let stop = hooks.stop.clone();
+        let step = tokio::task::spawn_blocking(move || {
+            crate::fit::cancel::with_stop(stop, || next_step_for(&header, &set, &owned))
+        })
+        .await
+        .unwrap_or_else(|e| {
+            Step::Stop(Stop::Unfitted(FitError::NoLaw(format!(
+                "choosing the next patch failed: {e}"
+            ))))
+        });
         let patch = match step {
             Step::Stop(stop) => {
                 devices.display.blank().await?;

@@ -9,7 +9,9 @@ use super::run::{PositionPrompt, Progress, RunError, RunHooks, RunOptions, RunSu
 use super::sequential::measure_run;
 use crate::calibrate::rig::SimulatedRig;
 use crate::config::digest;
-use crate::config::{Config, ConfigError, LoadedConfig, PublishConfig, check_config, parse_config};
+use crate::config::{
+    Config, ConfigError, LoadedConfig, PublishConfig, check_config, parse_config_unchecked,
+};
 use crate::display::PatchDisplay;
 use crate::fit::{FitError, FitOptions, FittedModel, fit_monitor};
 use crate::instrument::Instrument;
@@ -217,19 +219,23 @@ pub fn named_run(store: &ProfileStore, id: &str) -> Result<PathBuf, CalibrateErr
 }
 
 /// Lines in a journal after its header: the readings (a line cut short by a crash
-/// included, which is close enough for a listing).
+/// included, which is close enough for a listing). Counted in chunks, never more than
+/// a journal's size limit, so a damaged file costs no more than a whole one.
 fn count_journal_readings(path: &Path) -> usize {
-    use std::io::BufRead;
-    std::fs::File::open(path)
-        .map(|f| {
-            std::io::BufReader::new(f)
-                .lines()
-                .map_while(Result::ok)
-                .filter(|l| !l.trim().is_empty())
-                .count()
-                .saturating_sub(1)
-        })
-        .unwrap_or(0)
+    use std::io::Read;
+    let Ok(file) = std::fs::File::open(path) else {
+        return 0;
+    };
+    let mut reader = file.take(crate::durable::limits::JOURNAL);
+    let mut buffer = vec![0u8; 1 << 16];
+    let mut lines = 0;
+    while let Ok(n) = reader.read(&mut buffer) {
+        if n == 0 {
+            break;
+        }
+        lines += buffer[..n].iter().filter(|b| **b == b'\n').count();
+    }
+    lines.saturating_sub(1)
 }
 
 fn fit_failures(run_dir: &Path) -> u32 {
@@ -332,11 +338,17 @@ pub struct PreparedRun {
 /// from the run's in what it measures (`[monitor]`, `[instrument]`, `[display]`,
 /// `[plan]`, `[warmup]`) is refused, naming the sections: its readings would not be
 /// the run's.
+///
+/// `overrides` are the command line's, applied to `given` before the comparison as
+/// they were to the run's config when it began.
 pub fn adopt_settings_at_resume(
     run: &mut PreparedRun,
     given: &LoadedConfig,
+    overrides: &Overrides,
 ) -> Result<(), CalibrateError> {
-    let (was, now) = (&run.config, &given.config);
+    let mut now = given.config.clone();
+    overrides.apply(&mut now);
+    let (was, now) = (&run.config, &now);
     let differ: Vec<&str> = [
         ("monitor", was.monitor == now.monitor),
         ("instrument", was.instrument == now.instrument),
@@ -358,13 +370,17 @@ pub fn adopt_settings_at_resume(
                 .join(", "),
         });
     }
-    let config = &mut run.config;
-    config.fit = now.fit.clone();
-    config.publish = now.publish.clone();
-    config.target = now.target.clone();
-    config.daemon = now.daemon.clone();
-    config.schedule = now.schedule.clone();
-    run.settings_at_resume = Some(format!("{} (sha256 {})", given.origin, given.digest()));
+    take_settings(&mut run.config, now);
+    let note = format!("{} (sha256 {})", given.origin, given.digest());
+    if let Some(dir) = run.journal.path().parent() {
+        let path = dir.join(SETTINGS_AT_RESUME_FILE);
+        crate::durable::write_atomic(
+            &path,
+            format!("# given at --resume: {note}\n{}", given.text).as_bytes(),
+        )
+        .map_err(|source| CalibrateError::Store { path, source })?;
+    }
+    run.settings_at_resume = Some(note);
     Ok(())
 }
 
@@ -410,14 +426,46 @@ pub fn reopen_run(dir: &Path) -> Result<PreparedRun, CalibrateError> {
             "dropped a reading cut short by the interruption"
         );
     }
-    let config = parse_config(&journal.header().config, "the run's journal header")?;
+    // Checked when the run began; checked again by the caller once `--resume` has
+    // put its settings in, so a run begun under other ranges can still be resumed.
+    let mut config = parse_config_unchecked(&journal.header().config, "the run's journal header")?;
     let run_id = journal.header().run_id.clone();
+    // Settings given at an earlier `--resume` go on applying.
+    let mut settings_at_resume = None;
+    let saved = dir.join(SETTINGS_AT_RESUME_FILE);
+    if saved.exists() {
+        let text = crate::durable::read_text_limited(&saved, crate::durable::limits::CONFIG)
+            .map_err(|source| CalibrateError::Store {
+                path: saved.clone(),
+                source,
+            })?;
+        let given = parse_config_unchecked(&text, &saved.display().to_string())?;
+        take_settings(&mut config, &given);
+        settings_at_resume = text
+            .lines()
+            .next()
+            .and_then(|l| l.strip_prefix("# given at --resume: "))
+            .map(str::to_string);
+    }
     Ok(PreparedRun {
         journal,
         config,
         run_id,
-        settings_at_resume: None,
+        settings_at_resume,
     })
+}
+
+/// Where a run keeps the config given at `--resume`, so that its settings outlive a
+/// second interruption.
+const SETTINGS_AT_RESUME_FILE: &str = "settings_at_resume.toml";
+
+/// The sections that do not change what is measured, from `given` into `config`.
+fn take_settings(config: &mut Config, given: &Config) {
+    config.fit = given.fit.clone();
+    config.publish = given.publish.clone();
+    config.target = given.target.clone();
+    config.daemon = given.daemon.clone();
+    config.schedule = given.schedule.clone();
 }
 
 /// Mark an unfinished run as given up, so that it is not resumed.
@@ -581,7 +629,7 @@ pub async fn calibrate<'a>(
         };
         let mut run = reopen_run(&dir)?;
         if options.resume_settings {
-            adopt_settings_at_resume(&mut run, loaded)?;
+            adopt_settings_at_resume(&mut run, loaded, &options.overrides)?;
         }
         options.overrides.apply(&mut run.config);
         check_overridden(&run.config)?;

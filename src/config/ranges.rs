@@ -75,7 +75,7 @@ pub const RANGES: &[Range] = &[
     r("plan.patch_size", 0.001, 1.0),
     r("plan.seed", 0.0, SEED_MAX),
     r("plan.seed_budget", 0.0, 20_000.0),
-    r("plan.target_de00", 0.001, 100.0),
+    r("plan.target_de00", 0.0, 100.0),
     // [fit]
     r("fit.max_condition_number", 1.0, 1e12),
     r("fit.primaries_xy[][]", 0.0, 1.0),
@@ -86,7 +86,7 @@ pub const RANGES: &[Range] = &[
     // [daemon]
     r("daemon.stop_timeout_s", 0.0, 3600.0),
     r("daemon.simulated_time_scale", 1e-6, 1000.0),
-    r("daemon.keep_profiles", 2.0, 100_000.0),
+    r("daemon.keep_profiles", 2.0, 10_000.0),
     r("daemon.max_body_bytes", 64.0, 16_777_216.0),
     r("daemon.requests_per_s", 0.01, 1e6),
     r("daemon.burst", 1.0, 1e6),
@@ -97,7 +97,7 @@ pub const RANGES: &[Range] = &[
     r("daemon.idle_timeout_s", 0.1, 86_400.0),
     r("daemon.request_timeout_s", 0.1, 86_400.0),
     // [schedule]
-    r("schedule.verify_every_s", 1.0, 1e8),
+    r("schedule.verify_every_s", 0.01, 1e8),
     r("schedule.verify_patches", 5.0, 1000.0),
     r("schedule.threshold_de00", 1e-6, 1000.0),
     // [warmup]

@@ -120,6 +120,17 @@ fn refusal(status: StatusCode, message: impl Into<String>) -> Response {
     (status, axum::Json(json!({ "error": message.into() }))).into_response()
 }
 
+/// A refusal of a client that may not use the API at all: the connection is closed
+/// after it, so that no slot of the listener is held by a client without the token.
+fn refusal_and_close(status: StatusCode, message: impl Into<String>) -> Response {
+    let mut response = refusal(status, message);
+    response.headers_mut().insert(
+        header::CONNECTION,
+        axum::http::HeaderValue::from_static("close"),
+    );
+    response
+}
+
 /// The router, for both listeners.
 pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
     let config = &daemon.loaded.config.daemon;
@@ -184,7 +195,7 @@ async fn guard(
             if !allowed {
                 let who = uid.map_or("an unknown user".to_string(), |u| format!("uid {u}"));
                 tracing::warn!(who, "refused a local client that does not own the socket");
-                return refusal(
+                return refusal_and_close(
                     StatusCode::FORBIDDEN,
                     format!(
                         "{who} may not use this daemon: only its owner (uid {}) and root may",
@@ -205,7 +216,7 @@ async fn guard(
             };
             if !ok {
                 state.log_refusal(&addr);
-                return refusal(
+                return refusal_and_close(
                     StatusCode::UNAUTHORIZED,
                     "send the API token as 'Authorization: Bearer <token>' (daemon.token_file)",
                 );
@@ -338,6 +349,15 @@ fn read_current(daemon: &Daemon) -> Result<Option<(Profile, String)>, String> {
 
 async fn status(State(state): State<Shared>) -> Response {
     let daemon = &state.daemon;
+    // Listing the runs reads their journals: off the async workers.
+    let unfinished_runs = {
+        let daemon = daemon.clone();
+        tokio::task::spawn_blocking(move || {
+            crate::calibrate::session::unfinished_runs(daemon.store())
+        })
+        .await
+        .unwrap_or_default()
+    };
     let current = match read_current(daemon) {
         Ok(c) => c.map(|(p, _)| CurrentProfile {
             id: p.id,
@@ -359,7 +379,7 @@ async fn status(State(state): State<Shared>) -> Response {
         next_verification: daemon
             .next_verification()
             .map(|t| humantime::format_rfc3339_seconds(t).to_string()),
-        unfinished_runs: crate::calibrate::session::unfinished_runs(daemon.store()),
+        unfinished_runs,
     })
     .into_response()
 }

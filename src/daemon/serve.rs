@@ -173,10 +173,20 @@ where
         inner: io,
         activity: activity.clone(),
     });
-    let service = hyper::service::service_fn(move |mut request: hyper::Request<Incoming>| {
-        request.extensions_mut().insert(ConnectInfo(peer));
-        app.clone().oneshot(request)
-    });
+    let service = {
+        let activity = activity.clone();
+        hyper::service::service_fn(move |mut request: hyper::Request<Incoming>| {
+            request.extensions_mut().insert(ConnectInfo(peer));
+            // A request being answered is not idleness (the request timeout bounds it).
+            let busy = Busy::start(activity.clone());
+            let answer = app.clone().oneshot(request);
+            async move {
+                let response = answer.await;
+                drop(busy);
+                response
+            }
+        })
+    };
     let connection = hyper::server::conn::http1::Builder::new()
         .timer(TokioTimer::new())
         .header_read_timeout(limits.header_timeout)
@@ -201,10 +211,29 @@ where
     }
 }
 
-/// When a connection last read or wrote a byte.
+/// When a connection last read or wrote a byte, and how many of its requests are
+/// being answered.
 struct Activity {
     start: Instant,
     last_ms: AtomicU64,
+    in_flight: AtomicU64,
+}
+
+/// A request in flight on a connection, for as long as it lives.
+struct Busy(Arc<Activity>);
+
+impl Busy {
+    fn start(activity: Arc<Activity>) -> Self {
+        activity.in_flight.fetch_add(1, Ordering::SeqCst);
+        Busy(activity)
+    }
+}
+
+impl Drop for Busy {
+    fn drop(&mut self) {
+        self.0.touch();
+        self.0.in_flight.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 impl Activity {
@@ -212,6 +241,7 @@ impl Activity {
         Activity {
             start: Instant::now(),
             last_ms: AtomicU64::new(0),
+            in_flight: AtomicU64::new(0),
         }
     }
 
@@ -220,7 +250,11 @@ impl Activity {
         self.last_ms.store(ms, Ordering::Relaxed);
     }
 
+    /// Time since the last byte, or zero while a request is being answered.
     fn idle_for(&self) -> Duration {
+        if self.in_flight.load(Ordering::SeqCst) > 0 {
+            return Duration::ZERO;
+        }
         let last = Duration::from_millis(self.last_ms.load(Ordering::Relaxed));
         self.start.elapsed().saturating_sub(last)
     }

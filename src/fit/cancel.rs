@@ -19,10 +19,17 @@ thread_local! {
 
 /// Run `work` on this thread with `stop` as its stop check (none: it runs to its end).
 pub fn with_stop<T>(stop: Option<StopCheck>, work: impl FnOnce() -> T) -> T {
-    let previous = STOP.with(|s| s.replace(stop));
-    let result = work();
-    STOP.with(|s| *s.borrow_mut() = previous);
-    result
+    /// Puts the previous check back, also when the work panics: the blocking pool
+    /// reuses its threads, and a stale check would stop another fit.
+    struct Restore(Option<StopCheck>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let previous = self.0.take();
+            STOP.with(|s| *s.borrow_mut() = previous);
+        }
+    }
+    let _restore = Restore(STOP.with(|s| s.replace(stop)));
+    work()
 }
 
 /// Has the work running on this thread been asked to stop?

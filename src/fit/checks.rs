@@ -324,6 +324,10 @@ fn spatial_independence(
             .copied()
             .filter(|r| r.measurement.background.iter().all(|b| *b > 0.5)),
     )?;
+    // A surround reading with no light has no relative change to give.
+    if !(on_black.y > 0.0) {
+        return None;
+    }
     let change = on_white.y / on_black.y - 1.0;
     let noise_percent = 3.0 * 2f64.sqrt() * noise.sigma(on_black.y) / on_black.y * 100.0;
     let de = delta_e00_xyz(&on_white, &on_black, white);

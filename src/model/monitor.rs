@@ -291,6 +291,9 @@ pub fn matrix_condition_number(m: &Matrix3<f64>) -> f64 {
     if min <= 0.0 { f64::INFINITY } else { max / min }
 }
 
+/// Largest |X|, |Y| or |Z| of a black or a primary a model file may hold.
+pub const MAX_TRISTIMULUS: f64 = 1e7;
+
 /// The model as written in a file: named primaries and laws, so a person can read
 /// it; checked when read (finite numbers, monotone laws).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -317,7 +320,7 @@ struct PerChannel<T> {
 /// Why a model in a file is not usable.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ModelFileError {
-    #[error("model: {0} is not a finite number")]
+    #[error("model: {0} is not a finite number within ±1e7")]
     NotFinite(&'static str),
     #[error("model: the spatial map has {0}")]
     Spatial(String),
@@ -350,8 +353,12 @@ impl TryFrom<ModelFile> for MonitorModel {
     type Error = ModelFileError;
 
     fn try_from(f: ModelFile) -> Result<Self, Self::Error> {
+        // Finite, and within what any display gives: 10⁷ cd/m² is a thousand times the
+        // brightest HDR screen, and keeps every sum of the model finite.
         let finite = |v: &[f64; 3], what| {
-            if v.iter().all(|x| x.is_finite()) {
+            if v.iter()
+                .all(|x| x.is_finite() && x.abs() <= MAX_TRISTIMULUS)
+            {
                 Ok(())
             } else {
                 Err(ModelFileError::NotFinite(what))

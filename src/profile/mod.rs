@@ -153,7 +153,17 @@ impl Profile {
         Self::from_toml(&text, &path.display().to_string())
     }
 
+    /// The profile as TOML; refused if it holds a number that is not finite, which
+    /// `from_toml` would refuse to read back.
     pub fn to_toml(&self) -> Result<String, ProfileError> {
+        let value =
+            toml::Value::try_from(self).map_err(|e| ProfileError::Serialize(e.to_string()))?;
+        if let Some(key) = non_finite_key(&value, "") {
+            return Err(ProfileError::NotFinite {
+                path: format!("profile {}", self.id),
+                key,
+            });
+        }
         toml::to_string(self).map_err(|e| ProfileError::Serialize(e.to_string()))
     }
 
