@@ -39,7 +39,12 @@ pub fn read_limited(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
 
 /// The whole of `path` as UTF-8 text, if it is at most `limit` bytes.
 pub fn read_text_limited(path: &Path, limit: u64) -> std::io::Result<String> {
-    String::from_utf8(read_limited(path, limit)?).map_err(|_| {
+    read_text_limited_from(File::open(path)?, limit)
+}
+
+/// All of `reader` as UTF-8 text, if it is at most `limit` bytes.
+pub fn read_text_limited_from(reader: impl Read, limit: u64) -> std::io::Result<String> {
+    String::from_utf8(read_limited_from(reader, limit)?).map_err(|_| {
         std::io::Error::new(
             std::io::ErrorKind::InvalidData,
             "stream did not contain valid UTF-8",

@@ -163,14 +163,9 @@ impl Journal {
             .open(path)
             .map_err(io_error(path))?;
         lock_journal(&file, path)?;
-        let bytes = crate::durable::read_limited_from(&mut file, crate::durable::limits::JOURNAL)
-            .map_err(io_error(path))?;
-        let text = String::from_utf8(bytes).map_err(|_| {
-            io_error(path)(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                "stream did not contain valid UTF-8",
-            ))
-        })?;
+        let text =
+            crate::durable::read_text_limited_from(&mut file, crate::durable::limits::JOURNAL)
+                .map_err(io_error(path))?;
         let (header, entries, recovery, good_len) = parse(&text, path)?;
         if recovery.dropped_tail.is_some() {
             file.set_len(good_len as u64).map_err(io_error(path))?;

@@ -197,13 +197,15 @@ pub fn unfinished_runs(store: &ProfileStore) -> Vec<UnfinishedRun> {
     runs
 }
 
+/// The newest of `runs` (oldest first, as `unfinished_runs` gives them) that is
+/// resumed without being named.
+pub fn newest_resumable(runs: &[UnfinishedRun]) -> Option<&UnfinishedRun> {
+    runs.iter().rev().find(|run| run.resumable())
+}
+
 /// The newest unfinished run that is resumed without being named.
 pub fn unfinished_run(store: &ProfileStore) -> Option<PathBuf> {
-    unfinished_runs(store)
-        .into_iter()
-        .rev()
-        .find(UnfinishedRun::resumable)
-        .map(|run| run.dir)
+    newest_resumable(&unfinished_runs(store)).map(|run| run.dir.clone())
 }
 
 /// The unfinished run named `id` (its directory name under `runs/`).

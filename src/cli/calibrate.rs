@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use chromacal::calibrate::devices::Overrides;
 use chromacal::calibrate::run::Progress;
 use chromacal::calibrate::session::{
-    CalibrateOptions, Resume, calibrate as calibrate_session, unfinished_runs,
+    CalibrateOptions, Resume, calibrate as calibrate_session, newest_resumable, unfinished_runs,
 };
 use chromacal::config::{LoadedConfig, Sink, check_config, load_config};
 use chromacal::model::ScreenPosition;
@@ -239,7 +239,7 @@ pub fn run_runs(args: RunsArgs) -> Result<(), Failure> {
         println!("no unfinished runs in {}", store.runs_dir().display());
         return Ok(());
     }
-    let newest = runs.iter().rev().find(|r| r.resumable()).map(|r| &r.id);
+    let newest = newest_resumable(&runs).map(|r| &r.id);
     println!("{:<30} {:>9}  state", "run", "readings");
     for run in &runs {
         let state = if !run.resumable() {

@@ -88,28 +88,18 @@ struct ApiState {
     limit_local: RateLimit,
     limit_tcp: RateLimit,
     streams: AtomicUsize,
-    /// When a refused TCP client was last logged, and how many were refused since:
-    /// one line per `REFUSAL_LOG_EVERY`, so a flood of bad requests cannot flood the log.
-    refusals: Mutex<(Option<Instant>, u64)>,
+    /// Refused TCP clients, logged at most once per 10 s.
+    refusals: Mutex<super::serve::LogThrottle>,
 }
 
-/// Least time between two log lines about refused TCP clients.
-const REFUSAL_LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
-
 impl ApiState {
-    /// Log a refused TCP client, at most once per `REFUSAL_LOG_EVERY`.
+    /// Log a refused TCP client, at most once per 10 s with the count since.
     fn log_refusal(&self, addr: &SocketAddr) {
         let Ok(mut refusals) = self.refusals.lock() else {
             return;
         };
-        refusals.1 += 1;
-        let now = Instant::now();
-        if refusals
-            .0
-            .is_none_or(|last| now.duration_since(last) >= REFUSAL_LOG_EVERY)
-        {
-            tracing::warn!(%addr, refused = refusals.1, "refused TCP clients without the right token (this one and those since the last such line)");
-            *refusals = (Some(now), 0);
+        if let Some(count) = refusals.note() {
+            tracing::warn!(%addr, refused = count, "refused TCP clients without the right token (this one and those since the last such line)");
         }
     }
 }
@@ -144,7 +134,7 @@ pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
         limit_tcp: bucket(),
         access,
         streams: AtomicUsize::new(0),
-        refusals: Mutex::new((None, 0)),
+        refusals: Mutex::default(),
         daemon: daemon.clone(),
     });
     let max_body = config.max_body_bytes;

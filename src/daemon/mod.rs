@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use tokio::sync::broadcast;
 
 use crate::calibrate::devices::Devices;
-use crate::calibrate::session::{discard_run, unfinished_run, unfinished_runs};
+use crate::calibrate::session::{discard_run, newest_resumable, unfinished_runs};
 use crate::config::LoadedConfig;
 use crate::config::OnStart;
 use crate::profile::store::ProfileStore;
@@ -439,8 +439,9 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
 
     // A calibration a stop cut short: the newest that can be resumed. The others are
     // said, and listed in /status.
-    let resumed = unfinished_run(&daemon.store);
-    for run in unfinished_runs(&daemon.store) {
+    let unfinished = unfinished_runs(&daemon.store);
+    let resumed = newest_resumable(&unfinished).map(|run| run.dir.clone());
+    for run in &unfinished {
         if !run.resumable() {
             tracing::warn!(run = %run.id, failures = run.fit_failures, "not resuming a run whose fit failed twice (it is kept; `chromacal calibrate --resume RUN` names it)");
         } else if Some(&run.dir) != resumed.as_ref() {

@@ -85,7 +85,7 @@ pub fn raise_descriptor_limit() {
 /// Accept and serve connections until the process ends.
 pub async fn serve(listener: Listener, app: Router, limits: ConnectionLimits) {
     let slots = Arc::new(Semaphore::new(limits.max_connections));
-    let mut refused = RefusalLog::default();
+    let mut refused = LogThrottle::default();
     loop {
         let admitted = match &listener {
             Listener::Unix(l) => l.accept().await.map(|(stream, _)| {
@@ -101,7 +101,16 @@ pub async fn serve(listener: Listener, app: Router, limits: ConnectionLimits) {
         };
         match admitted {
             Ok(true) => {}
-            Ok(false) => refused.note(listener.name(), limits.max_connections),
+            Ok(false) => {
+                if let Some(count) = refused.note() {
+                    tracing::warn!(
+                        listener = listener.name(),
+                        cap = limits.max_connections,
+                        refused = count,
+                        "connections over the cap were closed (this one and those since the last such line)"
+                    );
+                }
+            }
             Err(e) => {
                 // Out of descriptors, or the peer gone before accept: wait a little
                 // rather than spin.
@@ -135,30 +144,29 @@ where
     true
 }
 
-/// Logs connections refused over the cap, at most once per 10 s.
+/// Counts events that are logged at most once per `LogThrottle::EVERY`, so that a
+/// flood of bad clients cannot flood the log: each line says how many there were.
 #[derive(Default)]
-struct RefusalLog {
+pub(super) struct LogThrottle {
     last: Option<Instant>,
     count: u64,
 }
 
-impl RefusalLog {
-    fn note(&mut self, listener: &str, cap: usize) {
+impl LogThrottle {
+    const EVERY: Duration = Duration::from_secs(10);
+
+    /// Count one event; the count since the last line when one is due now.
+    pub(super) fn note(&mut self) -> Option<u64> {
         self.count += 1;
         let now = Instant::now();
         if self
             .last
-            .is_none_or(|last| now.duration_since(last) >= Duration::from_secs(10))
+            .is_some_and(|last| now.duration_since(last) < Self::EVERY)
         {
-            tracing::warn!(
-                listener,
-                cap,
-                refused = self.count,
-                "connections over the cap were closed (this one and those since the last such line)"
-            );
-            self.last = Some(now);
-            self.count = 0;
+            return None;
         }
+        self.last = Some(now);
+        Some(std::mem::take(&mut self.count))
     }
 }
 
