@@ -230,6 +230,34 @@ async fn an_idle_keep_alive_connection_is_closed_and_a_live_one_is_not() {
         started.elapsed()
     );
 
+    // Requests hyper itself refuses, before any handler, are answered in JSON too.
+    for (bytes, status) in [
+        (b"NOT HTTP AT ALL\r\n\r\n".to_vec(), "400"),
+        (
+            format!(
+                "GET /status HTTP/1.1\r\nHost: x\r\nX-Big: {}\r\n\r\n",
+                "a".repeat(500_000)
+            )
+            .into_bytes(),
+            "431",
+        ),
+    ] {
+        let mut client = tokio::net::TcpStream::connect(&address).await.unwrap();
+        // The daemon may answer and close before it has read the whole of a huge head.
+        let _ = client.write_all(&bytes).await;
+        let mut reply = Vec::new();
+        let _ = tokio::time::timeout(Duration::from_secs(3), client.read_to_end(&mut reply)).await;
+        let reply = String::from_utf8_lossy(&reply);
+        assert!(reply.starts_with(&format!("HTTP/1.1 {status}")), "{reply}");
+        assert!(reply.contains("application/json"), "{reply}");
+        let body = reply.split("\r\n\r\n").nth(1).unwrap_or_default();
+        let json: serde_json::Value = serde_json::from_str(body).expect(&reply);
+        assert!(
+            json["error"].as_str().is_some_and(|e| !e.is_empty()),
+            "{reply}"
+        );
+    }
+
     // An event stream stays open past the idle timeout: its keep-alives are traffic.
     let events = chromacal::daemon::client::Endpoint::Tcp {
         address: address.clone(),

@@ -180,6 +180,7 @@ where
     let io = TokioIo::new(Watched {
         inner: io,
         activity: activity.clone(),
+        pending: Vec::new(),
     });
     let service = {
         let activity = activity.clone();
@@ -268,10 +269,70 @@ impl Activity {
     }
 }
 
-/// A stream that records its activity.
+/// A stream that records its activity, and gives hyper's own refusals a JSON body.
+///
+/// hyper answers a request it cannot parse (a malformed request line or header: 400;
+/// headers over its limit: 431; a URI too long: 414) itself, before any handler sees
+/// it, with an empty body and no hook to change that. Every other refusal of the API
+/// is JSON `{"error": …}`, so such a head is replaced, as it is written, by the same
+/// status with a body that says what was wrong.
 struct Watched<I> {
     inner: I,
     activity: Arc<Activity>,
+    /// Bytes of a replacement answer not yet written.
+    pending: Vec<u8>,
+}
+
+/// The JSON answer for one of hyper's own bodiless refusals, or `None` when `head`
+/// is anything else (every answer of the API's handlers has a body).
+fn refusal_with_a_body(head: &[u8]) -> Option<Vec<u8>> {
+    let text = std::str::from_utf8(head).ok()?;
+    let status_line = text.strip_prefix("HTTP/1.1 ")?;
+    let (status, _) = status_line.split_once("\r\n")?;
+    let why = match status.get(..3)? {
+        "400" => "the request could not be read as HTTP/1.1 (a malformed request line or header)",
+        "431" => "the request's headers are larger than the daemon reads",
+        "414" => "the request's URI is longer than the daemon reads",
+        _ => return None,
+    };
+    let only_a_head = text.ends_with("\r\n\r\n") && text.matches("\r\n\r\n").count() == 1;
+    let empty = text
+        .to_ascii_lowercase()
+        .contains("\r\ncontent-length: 0\r\n");
+    if !(only_a_head && empty) {
+        return None;
+    }
+    let body = serde_json::json!({ "error": why }).to_string();
+    Some(
+        format!(
+            "HTTP/1.1 {status}\r\ncontent-type: application/json\r\ncontent-length: {}\r\nconnection: close\r\n\r\n{body}",
+            body.len()
+        )
+        .into_bytes(),
+    )
+}
+
+impl<I: AsyncWrite + Unpin> Watched<I> {
+    /// Write what is left of a replacement answer; ready when none is left.
+    fn drain_pending(
+        &mut self,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        while !self.pending.is_empty() {
+            match std::pin::Pin::new(&mut self.inner).poll_write(cx, &self.pending) {
+                std::task::Poll::Ready(Ok(0)) => {
+                    return std::task::Poll::Ready(Err(std::io::ErrorKind::WriteZero.into()));
+                }
+                std::task::Poll::Ready(Ok(n)) => {
+                    self.pending.drain(..n);
+                    self.activity.touch();
+                }
+                std::task::Poll::Ready(Err(e)) => return std::task::Poll::Ready(Err(e)),
+                std::task::Poll::Pending => return std::task::Poll::Pending,
+            }
+        }
+        std::task::Poll::Ready(Ok(()))
+    }
 }
 
 impl<I: AsyncRead + Unpin> AsyncRead for Watched<I> {
@@ -295,6 +356,15 @@ impl<I: AsyncWrite + Unpin> AsyncWrite for Watched<I> {
         cx: &mut std::task::Context<'_>,
         buf: &[u8],
     ) -> std::task::Poll<std::io::Result<usize>> {
+        std::task::ready!(self.drain_pending(cx))?;
+        if let Some(answer) = refusal_with_a_body(buf) {
+            self.pending = answer;
+            // The replacement is written now or by the flush hyper does next.
+            if let std::task::Poll::Ready(Err(e)) = self.drain_pending(cx) {
+                return std::task::Poll::Ready(Err(e));
+            }
+            return std::task::Poll::Ready(Ok(buf.len()));
+        }
         let poll = std::pin::Pin::new(&mut self.inner).poll_write(cx, buf);
         if matches!(poll, std::task::Poll::Ready(Ok(n)) if n > 0) {
             self.activity.touch();
@@ -306,6 +376,7 @@ impl<I: AsyncWrite + Unpin> AsyncWrite for Watched<I> {
         mut self: std::pin::Pin<&mut Self>,
         cx: &mut std::task::Context<'_>,
     ) -> std::task::Poll<std::io::Result<()>> {
+        std::task::ready!(self.drain_pending(cx))?;
         std::pin::Pin::new(&mut self.inner).poll_flush(cx)
     }
 
@@ -313,6 +384,38 @@ impl<I: AsyncWrite + Unpin> AsyncWrite for Watched<I> {
         mut self: std::pin::Pin<&mut Self>,
         cx: &mut std::task::Context<'_>,
     ) -> std::task::Poll<std::io::Result<()>> {
+        std::task::ready!(self.drain_pending(cx))?;
         std::pin::Pin::new(&mut self.inner).poll_shutdown(cx)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::refusal_with_a_body;
+
+    #[test]
+    fn only_hyper_s_bodiless_refusals_are_given_a_body() {
+        let hyper_400 = b"HTTP/1.1 400 Bad Request\r\ncontent-length: 0\r\ndate: Wed, 02 Dec 2026 05:00:00 GMT\r\n\r\n";
+        let answer = refusal_with_a_body(hyper_400).expect("a refusal");
+        let text = String::from_utf8(answer).expect("text");
+        assert!(text.starts_with("HTTP/1.1 400 Bad Request\r\n"), "{text}");
+        assert!(text.contains("content-type: application/json"), "{text}");
+        let body = text.split("\r\n\r\n").nth(1).expect("a body");
+        let json: serde_json::Value = serde_json::from_str(body).expect("JSON");
+        assert!(
+            json["error"]
+                .as_str()
+                .is_some_and(|e| e.contains("HTTP/1.1")),
+            "{json}"
+        );
+        let hyper_431 =
+            b"HTTP/1.1 431 Request Header Fields Too Large\r\ncontent-length: 0\r\n\r\n";
+        assert!(refusal_with_a_body(hyper_431).is_some());
+        // The API's own answers, with bodies or of other statuses, pass untouched.
+        let own = b"HTTP/1.1 400 Bad Request\r\ncontent-type: application/json\r\ncontent-length: 12\r\n\r\n{\"error\":1}";
+        assert!(refusal_with_a_body(own).is_none());
+        let ok = b"HTTP/1.1 200 OK\r\ncontent-length: 0\r\n\r\n";
+        assert!(refusal_with_a_body(ok).is_none());
+        assert!(refusal_with_a_body(b"{\"error\":\"HTTP/1.1 400\"}").is_none());
     }
 }
