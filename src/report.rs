@@ -122,6 +122,17 @@ pub fn fit_summary(report: &FitReport) -> String {
         &rows,
     ));
     let _ = writeln!(out, "  rule: {}", report.law_rule);
+    if let Some(c) = &report.law_correction {
+        let mean =
+            |s: Option<ErrorStats>| s.map_or("—".to_string(), |s| format!("{:.3}", s.mean));
+        let _ = writeln!(
+            out,
+            "  correction at the measured levels: {} (CV mean {} alone, {} corrected; kept only if lower by more than two standard errors and than noise)",
+            if c.kept { "kept" } else { "not kept" },
+            mean(c.law_cv),
+            mean(c.corrected_cv),
+        );
+    }
     for l in &report.laws {
         for n in &l.notes {
             let _ = writeln!(out, "  note ({}): {n}", l.law);

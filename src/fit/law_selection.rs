@@ -13,14 +13,15 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::law_correction::correct_law;
 use super::laws::{FittedParameter, LawFit, LawFitError, fit_law};
 use super::noise::NoiseModel;
 use super::primaries::ChannelRamp;
-use super::select::simplest_within_noise;
+use super::select::{simplest_within, simplest_within_noise};
 use super::stats::ErrorStats;
 use super::validate::{delta_e00_xyz, noise_delta_e00};
 use crate::color::Xyz;
-use crate::model::transfer::LawKind;
+use crate::model::transfer::{LawKind, TransferLaw};
 
 /// A law tried, fitted on all the data, with its cross-validated error.
 #[derive(Debug, Clone)]
@@ -31,6 +32,8 @@ pub struct LawCandidate {
     /// Each fold's errors, `None` where the law could not be fitted without it (empty
     /// when it was not cross-validated at all).
     pub folds: Vec<Option<FoldErrors>>,
+    /// Each fold's fits, where it could be fitted (what `folds` were scored with).
+    pub fold_fits: Vec<Option<FoldFit>>,
     /// Cross-validated ΔE00 of each left-out ramp reading and grey, all channels, when
     /// every fold could be fitted.
     pub cv_errors: Option<Vec<f64>>,
@@ -54,9 +57,40 @@ pub struct LawSelection {
     pub candidates: Vec<LawCandidate>,
     pub chosen: LawKind,
     pub rule: String,
+    /// Whether the chosen law was corrected at the measured levels
+    /// (`law_correction`), and why; `None` where it was not tried.
+    pub correction: Option<CorrectionReport>,
+    /// The corrected laws of the three channels, when the correction was kept.
+    pub corrected: Option<Vec<LawFit>>,
+}
+
+/// The chosen law against the same law corrected at the measured levels, on the same
+/// folds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CorrectionReport {
+    pub law: LawKind,
+    pub kept: bool,
+    /// Cross-validated ΔE00 of the law alone and corrected, on the folds both could be
+    /// fitted on.
+    pub law_cv: Option<ErrorStats>,
+    pub corrected_cv: Option<ErrorStats>,
+    pub rule: String,
 }
 
 impl LawSelection {
+    /// The laws a profile is made of: the corrected ones when the correction was kept,
+    /// else the chosen law's fits.
+    pub fn fits_to_publish(&self) -> Option<Vec<&LawFit>> {
+        if let Some(corrected) = &self.corrected {
+            return Some(corrected.iter().collect());
+        }
+        self.chosen_candidate()?
+            .fits
+            .iter()
+            .map(|f| f.as_ref().ok())
+            .collect()
+    }
+
     pub fn chosen_candidate(&self) -> Option<&LawCandidate> {
         self.candidates.iter().find(|c| c.kind == self.chosen)
     }
@@ -140,13 +174,24 @@ pub fn level_folds(mut levels: Vec<f64>, max_folds: usize) -> Vec<Vec<f64>> {
 /// The ΔE00 of one fold's left-out ramp readings and of its left-out greys.
 pub type FoldErrors = (Vec<f64>, Vec<f64>);
 
+/// One fold's fit: the levels it left out, and each channel's training ramp with the
+/// law fitted to it (kept so that the correction is cross-validated on the same fits).
+#[derive(Debug, Clone)]
+pub struct FoldFit {
+    pub held: Vec<f64>,
+    pub channels: Vec<(ChannelRamp, LawFit)>,
+}
+
+/// One fold's fit and errors, or why the law could not be fitted without it.
+type FoldOutcome = Result<(FoldFit, FoldErrors), String>;
+
 /// Cross-validated errors of one law (see the module documentation), fold by fold: a
-/// fold's errors, or why the law could not be fitted without it; `Err` when there is no
-/// level to leave out at all.
+/// fold's fit and errors, or why the law could not be fitted without it; `Err` when
+/// there is no level to leave out at all.
 fn cross_validate(
     kind: LawKind,
     evidence: &Evidence<'_>,
-) -> Result<Vec<Result<FoldErrors, String>>, String> {
+) -> Result<Vec<FoldOutcome>, String> {
     let Evidence { ramps, greys, .. } = *evidence;
     if ramps.iter().any(|r| r.law_points().all(|p| p.drive >= 1.0)) {
         return Err("no level below full drive to hold out".into());
@@ -158,30 +203,51 @@ fn cross_validate(
         .filter(|l| *l < 1.0)
         .collect();
     Ok(level_folds(levels, MAX_FOLDS)
-        .iter()
-        .map(|held| fold_errors(kind, evidence, held))
+        .into_iter()
+        .map(|held| {
+            let fit = fold_fit(kind, evidence, held)?;
+            let errors = fold_errors(&fit, evidence, false);
+            Ok((fit, errors))
+        })
         .collect())
 }
 
-/// One fold: every channel fitted without the levels `held`, its readings there
-/// predicted.
-fn fold_errors(kind: LawKind, evidence: &Evidence<'_>, held: &[f64]) -> Result<FoldErrors, String> {
+/// One fold: every channel fitted without the levels `held`.
+fn fold_fit(kind: LawKind, evidence: &Evidence<'_>, held: Vec<f64>) -> Result<FoldFit, String> {
+    let mut channels = Vec::with_capacity(3);
+    for ramp in evidence.ramps {
+        let training = ramp
+            .without_levels(&held, evidence.black, evidence.noise)
+            .ok_or("a training fold had no light")?;
+        let fit = fit_law(kind, &training, evidence.toe)
+            .map_err(|e| format!("a training fold: {e}"))?;
+        channels.push((training, fit));
+    }
+    Ok(FoldFit { held, channels })
+}
+
+/// A fold's left-out ramp readings and greys, predicted by its laws (corrected at the
+/// levels the fold kept, when `corrected`).
+fn fold_errors(fold: &FoldFit, evidence: &Evidence<'_>, corrected: bool) -> FoldErrors {
     let Evidence {
         ramps,
         greys,
         black,
         white,
-        noise,
-        toe,
+        ..
     } = *evidence;
-    let mut curves = Vec::with_capacity(3);
-    for ramp in ramps {
-        let training = ramp
-            .without_levels(held, black, noise)
-            .ok_or("a training fold had no light")?;
-        let fit = fit_law(kind, &training, toe).map_err(|e| format!("a training fold: {e}"))?;
-        curves.push((training.column(fit.amplitude), fit.law));
-    }
+    let held = &fold.held;
+    let curves: Vec<(Xyz, TransferLaw)> = fold
+        .channels
+        .iter()
+        .map(|(training, fit)| {
+            let fit = match corrected.then(|| correct_law(fit, training)).flatten() {
+                Some(c) => c,
+                None => fit.clone(),
+            };
+            (training.column(fit.amplitude), fit.law)
+        })
+        .collect();
     let light = |c: usize, level: f64| curves[c].0 * curves[c].1.excitation(level);
     let mut ramp_errors = Vec::new();
     for (c, ramp) in ramps.iter().enumerate() {
@@ -197,7 +263,7 @@ fn fold_errors(kind: LawKind, evidence: &Evidence<'_>, held: &[f64]) -> Result<F
             delta_e00_xyz(measured, &predicted, white)
         })
         .collect();
-    Ok((ramp_errors, grey_errors))
+    (ramp_errors, grey_errors)
 }
 
 /// Fit every law in `kinds` to every channel, score each on held-out readings (see the
@@ -244,11 +310,62 @@ pub fn choose_law(
                 .to_string(),
         ),
     };
+    let (correction, corrected) = try_correction(&candidates, chosen, &evidence, tolerance);
     Some(LawSelection {
         candidates,
         chosen,
         rule,
+        correction,
+        corrected,
     })
+}
+
+/// The chosen law corrected at the measured levels (`law_correction`), cross-validated
+/// on the folds of the law alone and kept only if it lowers their error by more than
+/// two paired standard errors and more than `tolerance` (noise alone). Not tried for
+/// the table, exact at every level already, nor for a law that was not
+/// cross-validated.
+fn try_correction(
+    candidates: &[LawCandidate],
+    chosen: LawKind,
+    evidence: &Evidence<'_>,
+    tolerance: f64,
+) -> (Option<CorrectionReport>, Option<Vec<LawFit>>) {
+    let Some(law) = candidates.iter().find(|c| c.kind == chosen) else {
+        return (None, None);
+    };
+    if chosen == LawKind::Table || law.folds.is_empty() {
+        return (None, None);
+    }
+    let (mut alone, mut with) = (Vec::new(), Vec::new());
+    for (a, fit) in law.folds.iter().zip(&law.fold_fits) {
+        if let (Some(a), Some(fit)) = (a, fit) {
+            let c = fold_errors(fit, evidence, true);
+            alone.extend(a.0.iter().chain(&a.1));
+            with.extend(c.0.iter().chain(&c.1));
+        }
+    }
+    if alone.is_empty() || alone.len() != with.len() {
+        return (None, None);
+    }
+    let fits: Option<Vec<LawFit>> = law
+        .fits
+        .iter()
+        .zip(evidence.ramps)
+        .map(|(fit, ramp)| correct_law(fit.as_ref().ok()?, ramp))
+        .collect();
+    let better = simplest_within(&[Some(alone.clone()), Some(with.clone())], tolerance, 2.0);
+    let kept = better == Some(1) && fits.is_some();
+    let report = CorrectionReport {
+        law: chosen,
+        kept,
+        law_cv: ErrorStats::of(&alone),
+        corrected_cv: ErrorStats::of(&with),
+        rule: format!(
+            "{chosen} corrected at the measured levels, kept only if it lowers the ΔE00 of the same left-out levels by more than two standard errors (paired) and than noise alone ({tolerance:.3})"
+        ),
+    };
+    (Some(report), if kept { fits } else { None })
 }
 
 /// One law fitted to all three channels, and cross-validated where every channel fits.
@@ -273,6 +390,13 @@ fn fit_candidate(kind: LawKind, evidence: &Evidence<'_>) -> LawCandidate {
     } else {
         (Vec::new(), None)
     };
+    let (fold_fits, folds): (Vec<Option<FoldFit>>, Vec<Option<FoldErrors>>) = folds
+        .into_iter()
+        .map(|f: Option<(FoldFit, FoldErrors)>| match f {
+            Some((fit, errors)) => (Some(fit), Some(errors)),
+            None => (None, None),
+        })
+        .unzip();
     let complete = !folds.is_empty() && folds.iter().all(Option::is_some);
     let (cv_errors, grey_errors) = if complete {
         let all: Vec<&FoldErrors> = folds.iter().flatten().collect();
@@ -292,6 +416,7 @@ fn fit_candidate(kind: LawKind, evidence: &Evidence<'_>) -> LawCandidate {
         kind,
         fits,
         folds,
+        fold_fits,
         cv_errors,
         grey_errors,
         cv_note,

@@ -558,15 +558,18 @@ pub fn isotonic_regression(values: &[f64], weights: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// The table law: one knot per level of the ramp and of the greys' channel shares, the
-/// weighted mean of its points, pooled to be monotone and joined by the monotone cubic
-/// of `Table`.
-fn fit_table(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
-    let kind = LawKind::Table;
-    if !ramp.pinned {
-        return Err(LawFitError::NeedsFullDrive { law: kind });
-    }
-    // One knot per level: the weighted mean of its readings.
+/// One drive level of a ramp: the weighted mean of its points (the ramp's readings
+/// and the greys' channel shares there) and that mean's standard error.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LevelMean {
+    pub drive: f64,
+    pub excitation: f64,
+    pub sigma: f64,
+}
+
+/// The levels of `ramp`'s law points, ascending, each the mean of its points weighted
+/// by 1/σ².
+pub fn level_means(ramp: &ChannelRamp) -> Vec<LevelMean> {
     let mut levels: Vec<(f64, f64, f64)> = Vec::new(); // drive, Σ w e, Σ w
     for p in ramp.law_points() {
         let w = 1.0 / (p.sigma * p.sigma);
@@ -579,9 +582,28 @@ fn fit_table(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         }
     }
     levels.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let drive: Vec<f64> = levels.iter().map(|l| l.0).collect();
-    let means: Vec<f64> = levels.iter().map(|l| l.1 / l.2).collect();
-    let weights: Vec<f64> = levels.iter().map(|l| l.2).collect();
+    levels
+        .into_iter()
+        .map(|(drive, sum, weight)| LevelMean {
+            drive,
+            excitation: sum / weight,
+            sigma: weight.sqrt().recip(),
+        })
+        .collect()
+}
+
+/// The table law: one knot per level of the ramp and of the greys' channel shares, the
+/// weighted mean of its points, pooled to be monotone and joined by the monotone cubic
+/// of `Table`.
+fn fit_table(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
+    let kind = LawKind::Table;
+    if !ramp.pinned {
+        return Err(LawFitError::NeedsFullDrive { law: kind });
+    }
+    let levels = level_means(ramp);
+    let drive: Vec<f64> = levels.iter().map(|l| l.drive).collect();
+    let means: Vec<f64> = levels.iter().map(|l| l.excitation).collect();
+    let weights: Vec<f64> = levels.iter().map(|l| l.sigma.powi(-2)).collect();
     let monotone = isotonic_regression(&means, &weights);
     let pooled = means
         .iter()

@@ -25,6 +25,7 @@
 
 pub mod cancel;
 pub mod checks;
+pub mod law_correction;
 pub mod law_selection;
 pub mod laws;
 pub mod least_squares;
@@ -49,7 +50,7 @@ use crate::model::monitor::matrix_condition_number;
 use crate::model::transfer::LawKind;
 use crate::model::{CHANNELS, MonitorModel, SpatialMap};
 use checks::{AssumptionChecks, check_assumptions};
-use law_selection::{LawReport, LawSelection, choose_law};
+use law_selection::{CorrectionReport, LawReport, LawSelection, choose_law};
 use noise::{DriftModel, DriftReport, NoiseModel, estimate_drift, estimate_noise};
 use primaries::{
     BlackEstimate, ChannelRamp, Corrected, RampError, add_grey_excitations, channel_ramp,
@@ -162,6 +163,10 @@ pub struct FitReport {
     pub terms_rule: String,
     #[serde(default)]
     pub terms: Vec<TermReport>,
+    /// The chosen law against itself corrected at the measured levels (absent in
+    /// profiles made before there was a correction, and where it was not tried).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub law_correction: Option<CorrectionReport>,
     pub spatial: SpatialReport,
     pub checks: AssumptionChecks,
     /// ΔE00 on patches held out of every fit.
@@ -253,7 +258,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
         &greys,
         &readings,
         &noise,
-        (options.max_condition_number, code_step(set)),
+        CurveRefit::as_chosen(&selection, options, code_step(set)),
     );
     let grid = readings_of_role(&corrected, Role::Uniformity);
     let (spatial_map, spatial) = choose_spatial_map(&base, &grid, &noise);
@@ -281,6 +286,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
             laws: selection.reports(),
             terms_rule: choice.rule,
             terms: choice.reports,
+            law_correction: selection.correction.clone(),
             spatial,
             checks,
             held_out: evaluation.stats,
@@ -468,16 +474,13 @@ fn primary_matrix(
     black: &BlackEstimate,
     options: &FitOptions,
 ) -> Result<(MonitorModel, f64), FitError> {
-    let chosen = selection
-        .chosen_candidate()
+    let fits = selection
+        .fits_to_publish()
         .ok_or_else(|| FitError::NoLaw("the chosen law has no fit".into()))?;
     let mut matrix = Matrix3::zeros();
     let mut laws = Vec::with_capacity(3);
-    for (c, ramp) in ramps.iter().enumerate() {
-        let fit = chosen.fits[c]
-            .as_ref()
-            .map_err(|e| FitError::NoLaw(e.to_string()))?;
-        matrix.set_column(c, &ramp.column(fit.amplitude));
+    for (ramp, fit) in ramps.iter().zip(fits) {
+        matrix.set_column(ramp.channel, &ramp.column(fit.amplitude));
         laws.push(fit.law.clone());
     }
     let laws: [_; 3] = laws
@@ -534,8 +537,14 @@ fn refit_curves_for_terms(
     greys: &[(usize, f64, Xyz)],
     readings: &[TermReading],
     noise: &NoiseModel,
-    (max_condition, toe): (f64, f64),
+    refit: CurveRefit,
 ) -> MonitorModel {
+    let CurveRefit {
+        max_condition,
+        toe,
+        law,
+        corrected,
+    } = refit;
     let Some(kept) = choice.model.clone() else {
         return additive.clone();
     };
@@ -557,17 +566,40 @@ fn refit_curves_for_terms(
         noise,
         max_condition,
     );
-    let kind = additive.laws[0].kind();
     let mut refitted = additive.clone();
     for (c, ramp) in ramps.iter().enumerate() {
-        let Ok(fit) = laws::fit_law(kind, ramp, toe) else {
+        let Ok(mut fit) = laws::fit_law(law, ramp, toe) else {
             return kept;
         };
+        if corrected && let Some(c) = law_correction::correct_law(&fit, ramp) {
+            fit = c;
+        }
         refitted.matrix.set_column(c, &ramp.column(fit.amplitude));
         refitted.laws[c] = fit.law;
     }
     let all: Vec<&TermReading> = readings.iter().collect();
     fit_terms(&refitted, choice.chosen, &all, noise).unwrap_or(kept)
+}
+
+/// How the curves are fitted again once a term is kept: as the law was chosen.
+#[derive(Debug, Clone, Copy)]
+struct CurveRefit {
+    max_condition: f64,
+    toe: f64,
+    law: LawKind,
+    /// The law was corrected at the measured levels.
+    corrected: bool,
+}
+
+impl CurveRefit {
+    fn as_chosen(selection: &LawSelection, options: &FitOptions, toe: f64) -> Self {
+        CurveRefit {
+            max_condition: options.max_condition_number,
+            toe,
+            law: selection.chosen,
+            corrected: selection.corrected.is_some(),
+        }
+    }
 }
 
 /// The corrected readings of one role.
