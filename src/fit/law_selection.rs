@@ -13,12 +13,12 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::law_correction::correct_law;
+use super::law_correction::{BANDWIDTHS, correct_law};
 use super::laws::{FittedParameter, LawFit, LawFitError, fit_law};
 use super::noise::NoiseModel;
 use super::primaries::ChannelRamp;
 use super::select::{simplest_within, simplest_within_noise};
-use super::stats::ErrorStats;
+use super::stats::{ErrorStats, mean};
 use super::validate::{delta_e00_xyz, noise_delta_e00};
 use crate::color::Xyz;
 use crate::model::transfer::{LawKind, TransferLaw};
@@ -74,6 +74,9 @@ pub struct CorrectionReport {
     /// fitted on.
     pub law_cv: Option<ErrorStats>,
     pub corrected_cv: Option<ErrorStats>,
+    /// The kernel width the correction was cross-validated best with.
+    #[serde(default)]
+    pub bandwidth: f64,
     pub rule: String,
 }
 
@@ -188,10 +191,7 @@ type FoldOutcome = Result<(FoldFit, FoldErrors), String>;
 /// Cross-validated errors of one law (see the module documentation), fold by fold: a
 /// fold's fit and errors, or why the law could not be fitted without it; `Err` when
 /// there is no level to leave out at all.
-fn cross_validate(
-    kind: LawKind,
-    evidence: &Evidence<'_>,
-) -> Result<Vec<FoldOutcome>, String> {
+fn cross_validate(kind: LawKind, evidence: &Evidence<'_>) -> Result<Vec<FoldOutcome>, String> {
     let Evidence { ramps, greys, .. } = *evidence;
     if ramps.iter().any(|r| r.law_points().all(|p| p.drive >= 1.0)) {
         return Err("no level below full drive to hold out".into());
@@ -206,7 +206,7 @@ fn cross_validate(
         .into_iter()
         .map(|held| {
             let fit = fold_fit(kind, evidence, held)?;
-            let errors = fold_errors(&fit, evidence, false);
+            let errors = fold_errors(&fit, evidence, None);
             Ok((fit, errors))
         })
         .collect())
@@ -219,16 +219,16 @@ fn fold_fit(kind: LawKind, evidence: &Evidence<'_>, held: Vec<f64>) -> Result<Fo
         let training = ramp
             .without_levels(&held, evidence.black, evidence.noise)
             .ok_or("a training fold had no light")?;
-        let fit = fit_law(kind, &training, evidence.toe)
-            .map_err(|e| format!("a training fold: {e}"))?;
+        let fit =
+            fit_law(kind, &training, evidence.toe).map_err(|e| format!("a training fold: {e}"))?;
         channels.push((training, fit));
     }
     Ok(FoldFit { held, channels })
 }
 
 /// A fold's left-out ramp readings and greys, predicted by its laws (corrected at the
-/// levels the fold kept, when `corrected`).
-fn fold_errors(fold: &FoldFit, evidence: &Evidence<'_>, corrected: bool) -> FoldErrors {
+/// levels the fold kept with kernel width `corrected`, when it is given).
+fn fold_errors(fold: &FoldFit, evidence: &Evidence<'_>, corrected: Option<f64>) -> FoldErrors {
     let Evidence {
         ramps,
         greys,
@@ -241,7 +241,7 @@ fn fold_errors(fold: &FoldFit, evidence: &Evidence<'_>, corrected: bool) -> Fold
         .channels
         .iter()
         .map(|(training, fit)| {
-            let fit = match corrected.then(|| correct_law(fit, training)).flatten() {
+            let fit = match corrected.and_then(|h| correct_law(fit, training, h)) {
                 Some(c) => c,
                 None => fit.clone(),
             };
@@ -337,14 +337,25 @@ fn try_correction(
     if chosen == LawKind::Table || law.folds.is_empty() {
         return (None, None);
     }
-    let (mut alone, mut with) = (Vec::new(), Vec::new());
-    for (a, fit) in law.folds.iter().zip(&law.fold_fits) {
-        if let (Some(a), Some(fit)) = (a, fit) {
-            let c = fold_errors(fit, evidence, true);
-            alone.extend(a.0.iter().chain(&a.1));
-            with.extend(c.0.iter().chain(&c.1));
-        }
-    }
+    let paired = |h: Option<f64>| -> Vec<f64> {
+        law.folds
+            .iter()
+            .zip(&law.fold_fits)
+            .filter_map(|(a, fit)| Some((a.as_ref()?, fit.as_ref()?)))
+            .flat_map(|(_, fit)| {
+                let (ramp, grey) = fold_errors(fit, evidence, h);
+                ramp.into_iter().chain(grey)
+            })
+            .collect()
+    };
+    let alone = paired(None);
+    let Some((bandwidth, with)) = BANDWIDTHS
+        .iter()
+        .map(|h| (*h, paired(Some(*h))))
+        .min_by(|a, b| mean(&a.1).total_cmp(&mean(&b.1)))
+    else {
+        return (None, None);
+    };
     if alone.is_empty() || alone.len() != with.len() {
         return (None, None);
     }
@@ -352,7 +363,7 @@ fn try_correction(
         .fits
         .iter()
         .zip(evidence.ramps)
-        .map(|(fit, ramp)| correct_law(fit.as_ref().ok()?, ramp))
+        .map(|(fit, ramp)| correct_law(fit.as_ref().ok()?, ramp, bandwidth))
         .collect();
     let better = simplest_within(&[Some(alone.clone()), Some(with.clone())], tolerance, 2.0);
     let kept = better == Some(1) && fits.is_some();
@@ -361,8 +372,9 @@ fn try_correction(
         kept,
         law_cv: ErrorStats::of(&alone),
         corrected_cv: ErrorStats::of(&with),
+        bandwidth,
         rule: format!(
-            "{chosen} corrected at the measured levels, kept only if it lowers the ΔE00 of the same left-out levels by more than two standard errors (paired) and than noise alone ({tolerance:.3})"
+            "{chosen} corrected at the measured levels (kernel width {bandwidth}, the best of {BANDWIDTHS:?}), kept only if it lowers the ΔE00 of the same left-out levels by more than two standard errors (paired) and than noise alone ({tolerance:.3})"
         ),
     };
     (Some(report), if kept { fits } else { None })

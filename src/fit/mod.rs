@@ -571,7 +571,7 @@ fn refit_curves_for_terms(
         let Ok(mut fit) = laws::fit_law(law, ramp, toe) else {
             return kept;
         };
-        if corrected && let Some(c) = law_correction::correct_law(&fit, ramp) {
+        if let Some(c) = corrected.and_then(|h| law_correction::correct_law(&fit, ramp, h)) {
             fit = c;
         }
         refitted.matrix.set_column(c, &ramp.column(fit.amplitude));
@@ -587,8 +587,8 @@ struct CurveRefit {
     max_condition: f64,
     toe: f64,
     law: LawKind,
-    /// The law was corrected at the measured levels.
-    corrected: bool,
+    /// The law was corrected at the measured levels, with this kernel width.
+    corrected: Option<f64>,
 }
 
 impl CurveRefit {
@@ -597,7 +597,11 @@ impl CurveRefit {
             max_condition: options.max_condition_number,
             toe,
             law: selection.chosen,
-            corrected: selection.corrected.is_some(),
+            corrected: selection
+                .correction
+                .as_ref()
+                .filter(|c| c.kept)
+                .map(|c| c.bandwidth),
         }
     }
 }
