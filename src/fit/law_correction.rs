@@ -44,8 +44,19 @@ pub const BANDWIDTHS: [f64; 3] = [0.02, 0.05, 0.1];
 /// `None` when the ramp is not pinned at full drive, no level is bright enough to take
 /// a ratio at, or the corrected curve would not be monotone.
 pub fn correct_law(fit: &LawFit, ramp: &ChannelRamp, bandwidth: f64) -> Option<LawFit> {
+    correct_law_widths(fit, ramp, &[bandwidth]).pop().flatten()
+}
+
+/// [`correct_law`] for each of `bandwidths`, sharing the residuals and the law's
+/// samples between them (what cross-validation over the widths needs).
+pub fn correct_law_widths(
+    fit: &LawFit,
+    ramp: &ChannelRamp,
+    bandwidths: &[f64],
+) -> Vec<Option<LawFit>> {
+    let none = || bandwidths.iter().map(|_| None).collect();
     if !ramp.pinned {
-        return None;
+        return none();
     }
     let law = |v: f64| fit.amplitude * fit.law.excitation(v);
     // (level, residual, its noise), where the law and the data are clear of black.
@@ -58,13 +69,12 @@ pub fn correct_law(fit: &LawFit, ramp: &ChannelRamp, bandwidth: f64) -> Option<L
         })
         .collect();
     if residuals.is_empty() {
-        return None;
+        return none();
     }
     let n = residuals.len() as f64;
     let spread = residuals.iter().map(|r| r.1 * r.1).sum::<f64>() / n;
     let noise = residuals.iter().map(|r| r.2 * r.2).sum::<f64>() / n;
     let tau2 = (spread - noise).max(0.0);
-    let factor = |v: f64| 1.0 + pooled_residual(&residuals, tau2, bandwidth, v);
     let mut drives: Vec<f64> = (1..=GRID)
         .map(|k| k as f64 / GRID as f64)
         .chain((1..=GRID / 2).map(|k| (k as f64 / (GRID / 2) as f64).powi(2)))
@@ -73,14 +83,29 @@ pub fn correct_law(fit: &LawFit, ramp: &ChannelRamp, bandwidth: f64) -> Option<L
         .collect();
     drives.sort_by(|a, b| a.total_cmp(b));
     drives.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-    let excitation: Vec<f64> = drives
+    let uncorrected: Vec<f64> = drives.iter().map(|v| law(*v)).collect();
+    bandwidths
         .iter()
-        .map(|v| (law(*v) * factor(*v)).max(0.0))
-        .collect();
-    // Where shrunk residuals of neighbouring levels fall faster than the law rises (only
-    // near black), the samples are pooled to stay monotone, as the table law's are.
-    let excitation = isotonic_regression(&excitation, &vec![1.0; excitation.len()]);
-    let table = Table::new(drives.clone(), excitation).ok()?;
+        .map(|bandwidth| {
+            let excitation: Vec<f64> = drives
+                .iter()
+                .zip(&uncorrected)
+                .map(|(v, e)| {
+                    (e * (1.0 + pooled_residual(&residuals, tau2, *bandwidth, *v))).max(0.0)
+                })
+                .collect();
+            // Where shrunk residuals of neighbouring levels fall faster than the law
+            // rises (only near black), the samples are pooled to stay monotone, as the
+            // table law's are.
+            let excitation = isotonic_regression(&excitation, &vec![1.0; excitation.len()]);
+            let table = Table::new(drives.clone(), excitation).ok()?;
+            Some(corrected_fit(fit, table, residuals.len(), tau2, *bandwidth))
+        })
+        .collect()
+}
+
+/// The law fit that a corrected table stands for.
+fn corrected_fit(fit: &LawFit, table: Table, levels: usize, tau2: f64, bandwidth: f64) -> LawFit {
     let mut parameters = fit.parameters.clone();
     parameters.push(FittedParameter {
         name: "correction spread τ".into(),
@@ -89,20 +114,19 @@ pub fn correct_law(fit: &LawFit, ramp: &ChannelRamp, bandwidth: f64) -> Option<L
     });
     let mut notes = fit.notes.clone();
     notes.push(format!(
-        "{} corrected at {} measured levels (spread τ = {:.4}, kernel width {bandwidth})",
+        "{} corrected at {levels} measured levels (spread τ = {:.4}, kernel width {bandwidth})",
         fit.law.kind(),
-        residuals.len(),
         tau2.sqrt()
     ));
-    Some(LawFit {
+    LawFit {
         law: TransferLaw::Table(table),
         amplitude: 1.0,
         parameters,
         chi2: 0.0,
         dof: 0,
-        free_parameters: fit.free_parameters + residuals.len(),
+        free_parameters: fit.free_parameters + levels,
         notes,
-    })
+    }
 }
 
 /// The residual at drive `v`: the measured residuals (level, r, noise s; ascending in

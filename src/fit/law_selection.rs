@@ -13,7 +13,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::law_correction::{BANDWIDTHS, correct_law};
+use super::law_correction::{BANDWIDTHS, correct_law, correct_law_widths};
 use super::laws::{FittedParameter, LawFit, LawFitError, fit_law};
 use super::noise::NoiseModel;
 use super::primaries::ChannelRamp;
@@ -206,7 +206,7 @@ fn cross_validate(kind: LawKind, evidence: &Evidence<'_>) -> Result<Vec<FoldOutc
         .into_iter()
         .map(|held| {
             let fit = fold_fit(kind, evidence, held)?;
-            let errors = fold_errors(&fit, evidence, None);
+            let errors = fold_errors(&fit, evidence);
             Ok((fit, errors))
         })
         .collect())
@@ -226,9 +226,23 @@ fn fold_fit(kind: LawKind, evidence: &Evidence<'_>, held: Vec<f64>) -> Result<Fo
     Ok(FoldFit { held, channels })
 }
 
-/// A fold's left-out ramp readings and greys, predicted by its laws (corrected at the
-/// levels the fold kept with kernel width `corrected`, when it is given).
-fn fold_errors(fold: &FoldFit, evidence: &Evidence<'_>, corrected: Option<f64>) -> FoldErrors {
+/// A fold's left-out ramp readings and greys, predicted by its laws.
+fn fold_errors(fold: &FoldFit, evidence: &Evidence<'_>) -> FoldErrors {
+    let curves: Vec<(Xyz, TransferLaw)> = fold
+        .channels
+        .iter()
+        .map(|(training, fit)| (training.column(fit.amplitude), fit.law.clone()))
+        .collect();
+    fold_errors_with(fold, evidence, &curves)
+}
+
+/// A fold's left-out ramp readings and greys, predicted by `curves` (each channel's
+/// column and law).
+fn fold_errors_with(
+    fold: &FoldFit,
+    evidence: &Evidence<'_>,
+    curves: &[(Xyz, TransferLaw)],
+) -> FoldErrors {
     let Evidence {
         ramps,
         greys,
@@ -237,17 +251,6 @@ fn fold_errors(fold: &FoldFit, evidence: &Evidence<'_>, corrected: Option<f64>) 
         ..
     } = *evidence;
     let held = &fold.held;
-    let curves: Vec<(Xyz, TransferLaw)> = fold
-        .channels
-        .iter()
-        .map(|(training, fit)| {
-            let fit = match corrected.and_then(|h| correct_law(fit, training, h)) {
-                Some(c) => c,
-                None => fit.clone(),
-            };
-            (training.column(fit.amplitude), fit.law)
-        })
-        .collect();
     let light = |c: usize, level: f64| curves[c].0 * curves[c].1.excitation(level);
     let mut ramp_errors = Vec::new();
     for (c, ramp) in ramps.iter().enumerate() {
@@ -337,21 +340,38 @@ fn try_correction(
     if chosen == LawKind::Table || law.folds.is_empty() {
         return (None, None);
     }
-    let paired = |h: Option<f64>| -> Vec<f64> {
-        law.folds
+    // Each fold's errors alone, and corrected with each width (the widths share one
+    // correction of each channel's fold fit).
+    let mut alone = Vec::new();
+    let mut with: Vec<Vec<f64>> = vec![Vec::new(); BANDWIDTHS.len()];
+    for (errors, fold) in law.folds.iter().zip(&law.fold_fits) {
+        let (Some(errors), Some(fold)) = (errors, fold) else {
+            continue;
+        };
+        alone.extend(errors.0.iter().chain(&errors.1));
+        let corrected: Vec<Vec<Option<LawFit>>> = fold
+            .channels
             .iter()
-            .zip(&law.fold_fits)
-            .filter_map(|(a, fit)| Some((a.as_ref()?, fit.as_ref()?)))
-            .flat_map(|(_, fit)| {
-                let (ramp, grey) = fold_errors(fit, evidence, h);
-                ramp.into_iter().chain(grey)
-            })
-            .collect()
-    };
-    let alone = paired(None);
+            .map(|(training, fit)| correct_law_widths(fit, training, &BANDWIDTHS))
+            .collect();
+        for (w, errors) in with.iter_mut().enumerate() {
+            let curves: Vec<(Xyz, TransferLaw)> = fold
+                .channels
+                .iter()
+                .zip(&corrected)
+                .map(|((training, fit), c)| {
+                    let fit = c[w].as_ref().unwrap_or(fit);
+                    (training.column(fit.amplitude), fit.law.clone())
+                })
+                .collect();
+            let (ramp, grey) = fold_errors_with(fold, evidence, &curves);
+            errors.extend(ramp.into_iter().chain(grey));
+        }
+    }
     let Some((bandwidth, with)) = BANDWIDTHS
         .iter()
-        .map(|h| (*h, paired(Some(*h))))
+        .copied()
+        .zip(with)
         .min_by(|a, b| mean(&a.1).total_cmp(&mean(&b.1)))
     else {
         return (None, None);
