@@ -3,9 +3,9 @@
 //! A law of two or three parameters follows a channel's curve in the large but not the
 //! wiggles a real panel's look-up tables leave in it (the Dell U2713HM's grey shares
 //! wander by several per cent from one level to the next), while the table law, exact
-//! at every level, chases the noise of the dark ones too. The correction
-//! keeps the law's shape and multiplies it by a factor that is exact where the data
-//! are sure and shrinks to 1 where they are not:
+//! at every level, chases the noise of the dark ones too. The correction keeps the
+//! law's shape and multiplies it by a factor that follows the residuals where the data
+//! are sure of them and shrinks to 1 where they are not:
 //!
 //! - at each measured level v (the ramp's readings and the greys' channel shares,
 //!   `laws::level_means`) the relative residual is rᵢ = ēᵢ / L(vᵢ) − 1, with noise
@@ -15,8 +15,9 @@
 //! - each residual is shrunk to r̂ᵢ = rᵢ·τ² / (τ² + sᵢ²) (the empirical Bayes estimate
 //!   of a mean under normal noise, ibid. eq. 1.6), and the residual at any drive v is
 //!   the mean of the r̂ᵢ weighted by a kernel of width h in drive (Nadaraya 1964,
-//!   Watson 1964; the tricube weight of Cleveland 1979). Residuals within the noise (τ² = 0) give no correction; a
-//!   wiggle narrower than h is smoothed rather than chased;
+//!   Watson 1964; the tricube weight of Cleveland 1979). Residuals within the noise
+//!   (τ² = 0) give no correction; a wiggle narrower than h is smoothed rather than
+//!   chased;
 //! - the corrected curve L(v)·(1 + r̂(v)) is written as a [`Table`] through dense
 //!   samples, so every export and inverse handles it as it does any table.
 //!
@@ -132,8 +133,8 @@ fn corrected_fit(fit: &LawFit, table: Table, levels: usize, tau2: f64, bandwidth
 /// The residual at drive `v`: the measured residuals (level, r, noise s; ascending in
 /// level), each first shrunk to r·τ²/(τ² + s²), averaged with the weights of a
 /// tricube kernel (1 − |z/3|³)³ of z = (v − level)/`bandwidth`, zero beyond three
-/// widths (Cleveland 1979's weight, as wide as a Gaussian of that width to within a
-/// few per cent, and cheap: no exponential). With τ² = 0 (residuals within the noise)
+/// widths (Cleveland 1979's weight; its standard deviation is 1.14 widths, near a
+/// Gaussian of that width, and it needs no exponential). With τ² = 0 (residuals within the noise)
 /// it is zero everywhere.
 fn pooled_residual(residuals: &[(f64, f64, f64)], tau2: f64, bandwidth: f64, v: f64) -> f64 {
     if !(tau2 > 0.0) {
