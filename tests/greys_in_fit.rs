@@ -27,9 +27,6 @@ fn primaries() -> Matrix3<f64> {
 
 /// Black, each channel at 0.5 and 1, and greys at eighths, with 0.2 % noise.
 fn two_level_set(with_greys: bool, seed: u64) -> MeasurementSet {
-    let black = Xyz::new(0.2, 0.2, 0.3);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let noise = Normal::new(0.0, 0.002).unwrap();
     let mut drives: Vec<[f64; 3]> = vec![[0.0; 3], [0.0; 3], [1.0; 3], [1.0; 3]];
     for c in 0..3 {
         for level in [0.5, 1.0] {
@@ -41,6 +38,20 @@ fn two_level_set(with_greys: bool, seed: u64) -> MeasurementSet {
     if with_greys {
         drives.extend((1..8).map(|k| [k as f64 / 8.0; 3]));
     }
+    readings_of("two levels per channel", &drives, truth, seed)
+}
+
+/// A reading at each of `drives` of a display whose channels all follow `truth`
+/// (black (0.2, 0.2, 0.3), `primaries()`), with 0.2 % noise.
+fn readings_of(
+    source: &str,
+    drives: &[[f64; 3]],
+    truth: impl Fn(f64) -> f64,
+    seed: u64,
+) -> MeasurementSet {
+    let black = Xyz::new(0.2, 0.2, 0.3);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, 0.002).unwrap();
     let measurements = drives
         .iter()
         .enumerate()
@@ -50,7 +61,7 @@ fn two_level_set(with_greys: bool, seed: u64) -> MeasurementSet {
             measurement(index, *drive, xyz)
         })
         .collect();
-    measurement_set("two levels per channel", measurements)
+    measurement_set(source, measurements)
 }
 
 /// One reading of XYZ at `drive`, at the centre on black, its role read from the drive.
@@ -180,9 +191,6 @@ fn grey_shares_keep_their_scale_when_a_fold_takes_an_unpinned_ramps_top_level() 
 /// Black, white, each channel and the grey at sixteenths, 0.2 % noise, every channel
 /// following `truth`.
 fn sixteenths_set(truth: impl Fn(f64) -> f64, seed: u64) -> MeasurementSet {
-    let black = Xyz::new(0.2, 0.2, 0.3);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let noise = Normal::new(0.0, 0.002).unwrap();
     let mut drives: Vec<[f64; 3]> = vec![[0.0; 3], [0.0; 3], [1.0; 3], [1.0; 3]];
     for k in 1..=16 {
         let level = k as f64 / 16.0;
@@ -195,16 +203,7 @@ fn sixteenths_set(truth: impl Fn(f64) -> f64, seed: u64) -> MeasurementSet {
             drives.push([level; 3]);
         }
     }
-    let measurements = drives
-        .iter()
-        .enumerate()
-        .map(|(index, drive)| {
-            let light = primaries() * Vector3::from_fn(|c, _| truth(drive[c]));
-            let xyz = (black + light).map(|v| v * (1.0 + noise.sample(&mut rng)));
-            measurement(index, *drive, xyz)
-        })
-        .collect();
-    measurement_set("sixteenths", measurements)
+    readings_of("sixteenths", &drives, truth, seed)
 }
 
 fn cowan_only() -> FitOptions {

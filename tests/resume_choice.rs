@@ -193,20 +193,7 @@ fn resume_takes_new_fit_settings_but_refuses_a_changed_plan() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let profile = Profile::read(&state.join("current.toml")).unwrap();
-    let note = profile
-        .provenance
-        .settings_at_resume
-        .expect("the provenance names the settings given at resume");
-    assert!(note.contains("fit-only.toml"), "{note}");
-    assert!(
-        profile
-            .report
-            .terms_rule
-            .contains("fit.additivity_terms = false"),
-        "{}",
-        profile.report.terms_rule
-    );
+    assert_published_with_fit_only_settings(&state);
 }
 
 /// On a serial rig the run's config holds the command line's instrument and screen:
@@ -272,9 +259,18 @@ fn resume_with_new_fit_settings_on_a_serial_rig_survives_a_second_interruption()
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    assert_published_with_fit_only_settings(&state);
+}
+
+/// The current profile in `state` names `fit-only.toml` as the settings given at
+/// resume, and was fitted with them (the additivity terms switched off).
+fn assert_published_with_fit_only_settings(state: &std::path::Path) {
     let profile = Profile::read(&state.join("current.toml")).unwrap();
-    let note = profile.provenance.settings_at_resume.unwrap_or_default();
-    assert!(note.contains("fit-only.toml"), "{note:?}");
+    let note = profile
+        .provenance
+        .settings_at_resume
+        .expect("the provenance names the settings given at resume");
+    assert!(note.contains("fit-only.toml"), "{note}");
     assert!(
         profile
             .report

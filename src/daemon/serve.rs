@@ -283,9 +283,18 @@ struct Watched<I> {
     pending: Vec<u8>,
 }
 
+/// Longest head of hyper's own refusals looked at: status line, `content-length`,
+/// `date`, with room to spare.
+const MAX_REFUSAL_HEAD: usize = 512;
+
 /// The JSON answer for one of hyper's own bodiless refusals, or `None` when `head`
 /// is anything else (every answer of the API's handlers has a body).
 fn refusal_with_a_body(head: &[u8]) -> Option<Vec<u8>> {
+    // Every write of every answer passes here: bodies and long heads are let through
+    // before any text is looked at (hyper's own heads are under 200 bytes).
+    if head.len() > MAX_REFUSAL_HEAD || !head.starts_with(b"HTTP/1.1 4") {
+        return None;
+    }
     let text = std::str::from_utf8(head).ok()?;
     let status_line = text.strip_prefix("HTTP/1.1 ")?;
     let (status, _) = status_line.split_once("\r\n")?;

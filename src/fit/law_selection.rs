@@ -379,14 +379,18 @@ fn try_correction(
     if alone.is_empty() || alone.len() != with.len() {
         return (None, None);
     }
-    let fits: Option<Vec<LawFit>> = law
-        .fits
-        .iter()
-        .zip(evidence.ramps)
-        .map(|(fit, ramp)| correct_law(fit.as_ref().ok()?, ramp, bandwidth))
-        .collect();
     let better = simplest_within(&[Some(alone.clone()), Some(with.clone())], tolerance, 2.0);
-    let kept = better == Some(1) && fits.is_some();
+    // The correction of the fits on all the data, made only when it is to be kept.
+    let fits: Option<Vec<LawFit>> = (better == Some(1))
+        .then(|| {
+            law.fits
+                .iter()
+                .zip(evidence.ramps)
+                .map(|(fit, ramp)| correct_law(fit.as_ref().ok()?, ramp, bandwidth))
+                .collect()
+        })
+        .flatten();
+    let kept = fits.is_some();
     let report = CorrectionReport {
         law: chosen,
         kept,
@@ -397,7 +401,7 @@ fn try_correction(
             "{chosen} corrected at the measured levels (kernel width {bandwidth}, the best of {BANDWIDTHS:?}), kept only if it lowers the ΔE00 of the same left-out levels by more than two standard errors (paired) and than noise alone ({tolerance:.3})"
         ),
     };
-    (Some(report), if kept { fits } else { None })
+    (Some(report), fits)
 }
 
 /// One law fitted to all three channels, and cross-validated where every channel fits.

@@ -258,13 +258,21 @@ fn fit_gog(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     need_levels(kind, &points, if pinned { 2 } else { 3 })?;
     let curve = move |t: &[f64], v: f64, g: &mut [f64]| gog_curve(pinned, t, v, g);
     let start = gog_start(&points, pinned, &curve);
-    if start[1] == 0.0 && pinned && cutoff_wants_below_zero(&points, ramp, &curve)? {
-        // The optimum under the constraint is on its boundary: no search needed.
-        return gog_with_cutoff_at_zero(ramp, None);
+    if start[1] == 0.0 && pinned {
+        // The optimum under the constraint may be on its boundary: then no search.
+        if let Ok(power) = fit_power(ramp)
+            && cutoff_wants_below_zero(&points, &power, &curve)
+        {
+            return Ok(gog_with_cutoff_at_zero(ramp, power, None));
+        }
     }
     let fit = points.fit(kind, &curve, &start)?;
     if fit.params[1] < 0.0 {
-        return gog_with_cutoff_at_zero(ramp, Some(fit.params[1]));
+        return Ok(gog_with_cutoff_at_zero(
+            ramp,
+            fit_power(ramp)?,
+            Some(fit.params[1]),
+        ));
     }
     let ses = standard_errors_with_pin(&fit, &points, ramp);
     let (gamma, cutoff) = (fit.params[0], fit.params[1]);
@@ -346,13 +354,8 @@ fn gog_start(points: &Points, pinned: bool, curve: Curve<'_>) -> Vec<f64> {
 /// χ² fall as the cut-off goes below zero (∂χ²/∂v₀ ≥ 0)? Then, the best start being
 /// at 0 as well, the constrained fit is the power law and the search is skipped; on a
 /// dense ramp this halves the cost of the gain-offset-gamma candidate.
-fn cutoff_wants_below_zero(
-    points: &Points,
-    ramp: &ChannelRamp,
-    curve: Curve<'_>,
-) -> Result<bool, LawFitError> {
-    let gamma = fit_power(ramp)?.parameters[0].value;
-    let at = [gamma, 0.0];
+fn cutoff_wants_below_zero(points: &Points, power: &LawFit, curve: Curve<'_>) -> bool {
+    let at = [power.parameters[0].value, 0.0];
     let mut g = [0.0; 2];
     let slope: f64 = (0..points.drive.len())
         .map(|i| {
@@ -360,23 +363,24 @@ fn cutoff_wants_below_zero(
             2.0 * (f - points.excitation[i]) * g[1] / points.sigma[i].powi(2)
         })
         .sum();
-    Ok(slope >= 0.0)
+    slope >= 0.0
 }
 
 /// A negative cut-off means light at zero drive above the measured black: not a law of
-/// light above black. The cut-off is held at zero, which is the power law.
+/// light above black. The cut-off is held at zero, which is the power law (`power`,
+/// fitted to the same ramp).
 fn gog_with_cutoff_at_zero(
     ramp: &ChannelRamp,
+    power: LawFit,
     unconstrained: Option<f64>,
-) -> Result<LawFit, LawFitError> {
-    let power = fit_power(ramp)?;
+) -> LawFit {
     let gamma = power.parameters[0].value;
     let ses: Vec<Option<f64>> = vec![
         power.parameters[0].standard_error,
         None,
         power.parameters.get(1).and_then(|p| p.standard_error),
     ];
-    Ok(LawFit {
+    LawFit {
         law: TransferLaw::GainOffsetGamma(GainOffsetGamma::from_cutoff(0.0, gamma)),
         amplitude: power.amplitude,
         parameters: gog_parameters(gamma, 0.0, power.amplitude, &ses, ramp.pinned),
@@ -387,7 +391,7 @@ fn gog_with_cutoff_at_zero(
             Some(c) => format!("the unconstrained cut-off was negative ({c:.4}); held at 0"),
             None => "the cut-off would go below 0 (χ² falls that way from 0); held at 0".into(),
         }],
-    })
+    }
 }
 
 fn gog_parameters(
