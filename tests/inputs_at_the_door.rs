@@ -141,12 +141,22 @@ fn a_profile_with_a_runaway_degree_or_a_nan_is_refused_when_read() {
     // A coefficient that is not a number.
     let nan = good.replacen("coefficients = [", "coefficients = [nan, ", 1);
     let nan = write(dir.path(), "nan.toml", &nan);
+    // A surface coefficient that is finite but makes every prediction infinite.
+    let huge = good.replacen("coefficients = [", "coefficients = [1e308, ", 1);
+    let huge = {
+        // Keep the count: the coefficient put first replaces the one that was.
+        let at = huge.find("coefficients = [1e308, ").unwrap() + "coefficients = [1e308, ".len();
+        let next = huge[at..].find(", ").map(|i| at + i + 2).unwrap();
+        format!("{}{}", &huge[..at], &huge[next..])
+    };
+    let huge = write(dir.path(), "huge.toml", &huge);
     // A figure of the report that is not a number.
     let report_nan = good.replacen("mean = ", "mean = nan # was ", 1);
     let report_nan = write(dir.path(), "report-nan.toml", &report_nan);
     for (file, named) in [
         (&degree, "degree 4294967295"),
         (&nan, "not a finite number"),
+        (&huge, "a surface coefficient of 1e308"),
         (&report_nan, "not a finite number"),
     ] {
         for args in [

@@ -91,6 +91,11 @@ pub enum SpatialMap {
 /// of 4294967295 in a hand-edited file once made every use of the profile hang.
 pub const MAX_SURFACE_DEGREE: u32 = 8;
 
+/// Largest size of a surface coefficient a profile may hold. Fitted surfaces move the
+/// light by fractions (coefficients of 0.1 or so for a 15 % falloff); a coefficient of
+/// 1e308, finite as it is, made every forward prediction infinite.
+pub const MAX_SURFACE_COEFFICIENT: f64 = 100.0;
+
 impl SpatialMap {
     /// Why the map is not usable, if it is not: a degree above `MAX_SURFACE_DEGREE`,
     /// a number of coefficients that is not the degree's, or one not finite.
@@ -115,6 +120,14 @@ impl SpatialMap {
                 ))
             } else if s.coefficients.iter().any(|c| !c.is_finite()) {
                 Some("a surface coefficient that is not a finite number".to_string())
+            } else if let Some(c) = s
+                .coefficients
+                .iter()
+                .find(|c| c.abs() > MAX_SURFACE_COEFFICIENT)
+            {
+                Some(format!(
+                    "a surface coefficient of {c:e} (at most {MAX_SURFACE_COEFFICIENT:e} in size)"
+                ))
             } else {
                 None
             }
