@@ -120,16 +120,15 @@ impl SpatialMap {
                 ))
             } else if s.coefficients.iter().any(|c| !c.is_finite()) {
                 Some("a surface coefficient that is not a finite number".to_string())
-            } else if let Some(c) = s
-                .coefficients
-                .iter()
-                .find(|c| c.abs() > MAX_SURFACE_COEFFICIENT)
-            {
-                Some(format!(
-                    "a surface coefficient of {c:e} (at most {MAX_SURFACE_COEFFICIENT:e} in size)"
-                ))
             } else {
-                None
+                s.coefficients
+                    .iter()
+                    .find(|c| c.abs() > MAX_SURFACE_COEFFICIENT)
+                    .map(|c| {
+                        format!(
+                            "a surface coefficient of {c:e} (at most {MAX_SURFACE_COEFFICIENT:e} in size)"
+                        )
+                    })
             }
         })
     }
