@@ -22,6 +22,7 @@ pub mod cgats;
 pub mod color;
 pub mod comparison;
 pub mod config;
+pub mod crf;
 pub mod daemon;
 pub mod display;
 pub mod durable;

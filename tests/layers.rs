@@ -35,6 +35,8 @@ const LAYERS: &[&[&str]] = &[
     &["measurement_file", "argyll"],
     &["fit"],
     &["profile"],
+    // The colour reproduction function: scenes through a profile's model.
+    &["crf"],
     &["export"],
     &["config"],
     &["calibrate"],

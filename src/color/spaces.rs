@@ -168,6 +168,27 @@ pub fn xyz_to_luv(xyz: &Xyz, white: &Xyz) -> Luv {
     }
 }
 
+/// XYZ from CIE 1976 L*u*v* (inverse of CIE 15:2004 eq. 8.3 and 8.9–8.12): Y from L*,
+/// then u′ = u*/(13 L*) + u′ₙ and v′ likewise, and X, Z from Y, u′, v′. L* ≤ 0 is
+/// black.
+pub fn luv_to_xyz(luv: &Luv, white: &Xyz) -> Xyz {
+    if luv.l <= 0.0 {
+        return Xyz::zeros();
+    }
+    let y = white.y * lightness_to_luminance(luv.l);
+    let n = xyz_to_uv_prime(white, UvPrime { u: 0.0, v: 0.0 });
+    let u = luv.u / (13.0 * luv.l) + n.u;
+    let v = luv.v / (13.0 * luv.l) + n.v;
+    if v <= 0.0 {
+        return Xyz::new(0.0, y, 0.0);
+    }
+    Xyz::new(
+        y * 9.0 * u / (4.0 * v),
+        y,
+        y * (12.0 - 3.0 * u - 20.0 * v) / (4.0 * v),
+    )
+}
+
 /// Chroma and hue angle (degrees in [0, 360)) of a L*a*b* colour (CIE 15:2004 eq. 8.13–8.14).
 pub fn lab_to_lch(lab: &Lab) -> (f64, f64, f64) {
     let c = lab.a.hypot(lab.b);
@@ -184,6 +205,22 @@ mod tests {
 
     fn d65() -> Xyz {
         Xyz::new(95.047, 100.0, 108.883)
+    }
+
+    #[test]
+    fn luv_round_trips_through_xyz() {
+        for xyz in [
+            Xyz::new(41.24, 21.26, 1.93),
+            Xyz::new(18.05, 7.22, 95.05),
+            Xyz::new(0.5, 0.4, 0.3),
+            d65(),
+        ] {
+            let back = luv_to_xyz(&xyz_to_luv(&xyz, &d65()), &d65());
+            assert!(
+                (back - xyz).norm() < 1e-9 * xyz.norm(),
+                "{xyz:?} -> {back:?}"
+            );
+        }
     }
 
     #[test]

@@ -1,0 +1,303 @@
+//! The colour reproduction function (seed §4): the XYZ a scene asks for, turned into
+//! the codes a calibrated display must be sent to show it.
+//!
+//! The path of one pixel, in order:
+//!
+//! 1. **tone** (`tone`): the scene's luminance mapped to what the display can give,
+//!    chromaticity kept;
+//! 2. **gamut** (`gamut`): a colour the display cannot show at that pixel's position
+//!    (the spatial map makes a corner's gamut smaller than the centre's) brought in
+//!    by the chosen mapping;
+//! 3. **inverse model**: linear light per channel (the primary matrix inverted, the
+//!    spatial gain of the position divided out, the additivity terms' fixed point
+//!    when the profile has them), then each channel's transfer law inverted, exactly
+//!    where the law has an inverse and by monotone search for tables;
+//! 4. **codes** at the display's bit depth, and what the model says they show, so
+//!    every pixel's remaining error (quantisation, mapping) is known.
+//!
+//! Spectra become XYZ before this (`spectral`), by one of the survey's methods.
+
+pub mod gamut;
+pub mod scene;
+pub mod spectral;
+pub mod tone;
+
+use nalgebra::Matrix3;
+use serde::Serialize;
+
+use crate::color::Xyz;
+use crate::fit::stats::ErrorStats;
+use crate::fit::validate::delta_e00_xyz;
+use crate::model::{Drive, MonitorModel, ScreenPosition};
+use gamut::{GamutAt, GamutMapping, StoneCowanBeatty};
+use tone::{SceneLuminance, ToneCurve, ToneOperator};
+
+/// Why a scene could not be rendered.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CrfError {
+    #[error("the profile's primary matrix is singular: no drive reproduces a given XYZ")]
+    SingularMatrix,
+    #[error("a bit depth of {0} (1 to 16)")]
+    BitDepth(u32),
+    #[error("the scene has no lit pixel, so the {0} tone operator has nothing to adapt to")]
+    NothingLit(String),
+    #[error("pixel {index}: {what}")]
+    BadPixel { index: usize, what: String },
+}
+
+/// How a scene is rendered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    pub tone: ToneOperator,
+    pub gamut: GamutMapping,
+    /// Bits per channel of the codes sent to the display.
+    pub bits: u32,
+}
+
+/// One pixel of a scene: its XYZ (in the profile's units, cd/m² for an absolute
+/// profile) and where on the screen it is shown.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScenePixel {
+    pub xyz: Xyz,
+    pub position: ScreenPosition,
+}
+
+/// A scene: its pixels and, when known, the luminance of its white.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    pub pixels: Vec<ScenePixel>,
+    pub white_luminance: Option<f64>,
+}
+
+/// What one pixel became.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RenderedPixel {
+    /// Codes per channel, 0 … 2^bits − 1.
+    pub codes: [u32; 3],
+    /// The colour asked for after tone reproduction.
+    pub target: [f64; 3],
+    /// What the gamut mapping made of it.
+    pub mapped: [f64; 3],
+    /// What the display shows for `codes` there, by the profile's forward model.
+    pub shown: [f64; 3],
+    /// The target lay outside the gamut at this position.
+    pub outside: bool,
+    /// ΔE00 between target and mapped colour (what the mapping changed).
+    pub mapping_delta_e00: f64,
+    /// ΔE00 between mapped and shown colour (the codes' quantisation and the
+    /// inversion).
+    pub inversion_delta_e00: f64,
+}
+
+/// What a rendering did, for the user.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RenderSummary {
+    pub pixels: usize,
+    pub outside: usize,
+    pub tone: String,
+    pub gamut: String,
+    /// ΔE00 the mapping introduced, over every pixel.
+    pub mapping_all: Option<ErrorStats>,
+    /// The same over the pixels that were outside.
+    pub mapping_outside: Option<ErrorStats>,
+    /// ΔE00 between mapped colour and what the codes show.
+    pub inversion: Option<ErrorStats>,
+    /// Stone–Cowan–Beatty's chosen transform, when that mapping was used.
+    pub stone_cowan_beatty: Option<StoneCowanBeatty>,
+}
+
+/// A scene rendered for one display.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rendering {
+    pub pixels: Vec<RenderedPixel>,
+    pub summary: RenderSummary,
+}
+
+/// The colour reproduction function of one display: its model, prepared once.
+#[derive(Debug, Clone)]
+pub struct ColourReproduction<'a> {
+    model: &'a MonitorModel,
+    /// M⁻¹, computed once.
+    matrix_inverse: Matrix3<f64>,
+    /// E_c(1) of each channel.
+    full: [f64; 3],
+    /// The display's centre white: the reference white of every ΔE00 here.
+    white: Xyz,
+}
+
+impl<'a> ColourReproduction<'a> {
+    pub fn new(model: &'a MonitorModel) -> Result<Self, CrfError> {
+        let matrix_inverse = model.matrix.try_inverse().ok_or(CrfError::SingularMatrix)?;
+        Ok(ColourReproduction {
+            model,
+            matrix_inverse,
+            full: [0, 1, 2].map(|c| model.laws[c].full_drive_excitation()),
+            white: model.white(),
+        })
+    }
+
+    pub fn white(&self) -> Xyz {
+        self.white
+    }
+
+    /// The gamut at `position`: P_c = K_c(p) E_c(1) m_c; `None` where a channel's
+    /// spatial gain gives no light (a hand-made map), which no colour can be shown at.
+    pub fn gamut_at(&self, position: ScreenPosition) -> Option<GamutAt> {
+        let k = self.model.spatial.gains(position);
+        let mut primaries = self.model.matrix;
+        for (c, (gain, full)) in k.iter().zip(self.full).enumerate() {
+            let scale = gain * full;
+            if !(scale > 0.0 && scale.is_finite()) {
+                return None;
+            }
+            primaries.column_mut(c).scale_mut(scale);
+        }
+        GamutAt::new(self.model.black, primaries)
+    }
+
+    /// The drive that shows `xyz` (inside the gamut) at `position`: cube coordinates
+    /// to excitations, each law inverted; through the whole model's fixed point when
+    /// the profile has additivity terms.
+    pub fn drive_for(&self, xyz: &Xyz, position: ScreenPosition) -> Drive {
+        if !self.model.terms.is_empty() {
+            return match self.model.inverse(xyz, position) {
+                Ok(r) => r.drive,
+                Err(_) => [0.0; 3],
+            };
+        }
+        let k = self.model.spatial.gains(position);
+        let light = self.matrix_inverse * (xyz - self.model.black);
+        [0, 1, 2].map(|c| {
+            let e = if k[c] > 0.0 { light[c] / k[c] } else { 0.0 };
+            self.model.laws[c].drive(e.clamp(0.0, self.full[c]))
+        })
+    }
+
+    /// Render `scene` with `settings`.
+    pub fn render(&self, scene: &Scene, settings: &RenderSettings) -> Result<Rendering, CrfError> {
+        if !(1..=16).contains(&settings.bits) {
+            return Err(CrfError::BitDepth(settings.bits));
+        }
+        if let Some((index, p)) = scene
+            .pixels
+            .iter()
+            .enumerate()
+            .find(|(_, p)| !p.xyz.iter().all(|v| v.is_finite()))
+        {
+            return Err(CrfError::BadPixel {
+                index,
+                what: format!("XYZ {:?} is not finite", p.xyz.as_slice()),
+            });
+        }
+        let curve = self.tone_curve(scene, settings.tone)?;
+        let targets: Vec<Xyz> = scene
+            .pixels
+            .iter()
+            .map(|p| p.xyz * curve.factor(p.xyz.y))
+            .collect();
+        let gamuts: Vec<GamutAt> = scene
+            .pixels
+            .iter()
+            .enumerate()
+            .map(|(index, p)| {
+                self.gamut_at(p.position).ok_or_else(|| CrfError::BadPixel {
+                    index,
+                    what: format!(
+                        "the profile's spatial map gives a channel no light at ({}, {})",
+                        p.position.x, p.position.y
+                    ),
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        let centre = self
+            .gamut_at(ScreenPosition::CENTRE)
+            .ok_or(CrfError::SingularMatrix)?;
+        let scb = match settings.gamut {
+            GamutMapping::StoneCowanBeatty { outside } => {
+                let with: Vec<(Xyz, &GamutAt)> =
+                    targets.iter().copied().zip(gamuts.iter()).collect();
+                StoneCowanBeatty::fit(&with, &centre, outside)
+            }
+            _ => None,
+        };
+        let top = ((1u64 << settings.bits) - 1) as f64;
+        let pixels: Vec<RenderedPixel> = scene
+            .pixels
+            .iter()
+            .zip(targets.iter().zip(&gamuts))
+            .map(|(pixel, (target, gamut))| {
+                let outside = !gamut.contains(target);
+                let mapped = self.map(settings.gamut, scb.as_ref(), gamut, target);
+                let drive = self.drive_for(&mapped, pixel.position);
+                let codes = drive.map(|d| (d.clamp(0.0, 1.0) * top).round() as u32);
+                let shown = self
+                    .model
+                    .forward(codes.map(|c| c as f64 / top), pixel.position);
+                RenderedPixel {
+                    codes,
+                    target: (*target).into(),
+                    mapped: mapped.into(),
+                    shown: shown.into(),
+                    outside,
+                    mapping_delta_e00: delta_e00_xyz(target, &mapped, &self.white),
+                    inversion_delta_e00: delta_e00_xyz(&mapped, &shown, &self.white),
+                }
+            })
+            .collect();
+        let summary = summarise(&pixels, settings, scb);
+        Ok(Rendering { pixels, summary })
+    }
+
+    fn tone_curve(&self, scene: &Scene, tone: ToneOperator) -> Result<ToneCurve, CrfError> {
+        if tone == ToneOperator::Colorimetric {
+            return Ok(ToneCurve::Scale(1.0));
+        }
+        let stats = SceneLuminance::of(scene.pixels.iter().map(|p| p.xyz.y), scene.white_luminance)
+            .ok_or_else(|| CrfError::NothingLit(tone.name()))?;
+        Ok(tone.curve(&stats, self.white.y))
+    }
+
+    fn map(
+        &self,
+        mapping: GamutMapping,
+        scb: Option<&StoneCowanBeatty>,
+        gamut: &GamutAt,
+        target: &Xyz,
+    ) -> Xyz {
+        match mapping {
+            GamutMapping::Clip => gamut::clip(gamut, target),
+            GamutMapping::GreyAxis(space) => {
+                gamut::grey_axis_clip(gamut, target, space, &self.white)
+            }
+            GamutMapping::Perpendicular => gamut::perpendicular(gamut, target),
+            GamutMapping::StoneCowanBeatty { .. } => {
+                let moved = scb.map_or(*target, |t| t.apply(target));
+                gamut::perpendicular(gamut, &moved)
+            }
+        }
+    }
+}
+
+fn summarise(
+    pixels: &[RenderedPixel],
+    settings: &RenderSettings,
+    scb: Option<StoneCowanBeatty>,
+) -> RenderSummary {
+    let all: Vec<f64> = pixels.iter().map(|p| p.mapping_delta_e00).collect();
+    let outside: Vec<f64> = pixels
+        .iter()
+        .filter(|p| p.outside)
+        .map(|p| p.mapping_delta_e00)
+        .collect();
+    let inversion: Vec<f64> = pixels.iter().map(|p| p.inversion_delta_e00).collect();
+    RenderSummary {
+        pixels: pixels.len(),
+        outside: outside.len(),
+        tone: settings.tone.name(),
+        gamut: settings.gamut.name(),
+        mapping_all: ErrorStats::of(&all),
+        mapping_outside: ErrorStats::of(&outside),
+        inversion: ErrorStats::of(&inversion),
+        stone_cowan_beatty: scb,
+    }
+}
