@@ -50,6 +50,11 @@ const TABLES: &[(&str, &str, usize)] = &[
         "displays/colour_apple_studio_display_lcd_5nm.csv",
         3,
     ),
+    (
+        "COLORCHECKER_OHTA_5NM",
+        "colorchecker/colorchecker_n_ohta_5nm.csv",
+        24,
+    ),
 ];
 
 fn main() {

@@ -245,14 +245,22 @@ pub struct BenchArgs {
     /// Candidate laws for the ArgyllCMS comparison (comma-separated) [default: all].
     #[arg(long, value_delimiter = ',')]
     laws: Option<Vec<LawArg>>,
-    /// Only these tables (comma-separated): fit-time, budget, sequential, argyll.
-    #[arg(long, value_delimiter = ',', value_parser = ["fit-time", "budget", "sequential", "argyll"])]
+    /// Only these tables (comma-separated): fit-time, budget, sequential, argyll,
+    /// spectral.
+    #[arg(long, value_delimiter = ',', value_parser = TABLES)]
     only: Vec<String>,
+    /// The same as --only, as words: `chromacal bench spectral`.
+    #[arg(value_parser = TABLES)]
+    tables: Vec<String>,
 }
+
+/// The tables `bench` prints.
+const TABLES: [&str; 5] = ["fit-time", "budget", "sequential", "argyll", "spectral"];
 
 pub fn run(args: BenchArgs) -> Result<(), Failure> {
     let data = args.data.unwrap_or_else(|| PathBuf::from("../shared/data"));
-    let wanted = |table: &str| args.only.is_empty() || args.only.iter().any(|o| o == table);
+    let only: Vec<&String> = args.only.iter().chain(&args.tables).collect();
+    let wanted = |table: &str| only.is_empty() || only.iter().any(|o| *o == table);
     if wanted("fit-time") || wanted("budget") {
         bench(args.quick, &data, wanted("fit-time"), wanted("budget"))?;
     }
@@ -270,6 +278,9 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
             options.laws = laws.into_iter().map(LawKind::from).collect();
         }
         against_argyll(&data, &options)?;
+    }
+    if wanted("spectral") {
+        super::bench_spectral::spectral_tables(&data, args.quick)?;
     }
     Ok(())
 }

@@ -20,6 +20,7 @@
 pub mod gamut;
 pub mod scene;
 pub mod spectral;
+pub mod spectral_table;
 pub mod tone;
 
 use nalgebra::Matrix3;

@@ -1,0 +1,131 @@
+//! `chromacal bench spectral`: the survey's spectral methods (seed §3.4) measured,
+//! family by family: counted operations, time per conversion, and ΔE*uv and ΔE00
+//! against the direct weighted-ordinate reference, with the survey's own figures
+//! beside; then, per family, the cheapest method under a mean ΔE00 of 0.5 and of 0.1.
+
+use std::path::Path;
+
+use chromacal::color::spectrum::{Illuminant, Observer};
+use chromacal::crf::spectral::MethodKind;
+use chromacal::crf::spectral_table::{
+    Family, Row, cheapest_below, colorchecker_family, display_family, family_table,
+    grid_description, illuminant_family, standard_methods, survey_figure,
+};
+use chromacal::report::table;
+
+/// Print the tables; the display primaries come from `data/displays/spd` when there.
+pub fn spectral_tables(data: &Path, quick: bool) -> Result<(), String> {
+    let repeats = if quick { 200 } else { 2000 };
+    let mut families = vec![
+        (colorchecker_family(Illuminant::A, "A"), true),
+        (colorchecker_family(Illuminant::D65, "D65"), true),
+        (colorchecker_family(Illuminant::F11, "F11"), true),
+        (illuminant_family(), false),
+    ];
+    let displays = data.join("displays/spd");
+    if displays.is_dir() {
+        families.push((display_family(&displays).map_err(|e| e.to_string())?, false));
+    } else {
+        eprintln!(
+            "note: {} is not there: the display primaries are left out",
+            displays.display()
+        );
+    }
+    println!(
+        "Spectral methods (seed §3): spectra on {}, CIE 1931 2°; error against the direct sum on that grid; time per conversion on one core\n",
+        grid_description()
+    );
+    let methods = standard_methods();
+    let mut summary = Vec::new();
+    for (family, reflective) in &families {
+        let rows = family_table(family, &methods, Observer::default(), repeats)
+            .map_err(|e| e.to_string())?;
+        print_family(family, *reflective, &rows);
+        let pick = |limit: f64| {
+            cheapest_below(&rows, *reflective, limit).map_or("none".to_string(), |r| {
+                format!(
+                    "{} ({}), {} ops",
+                    r.method.name(),
+                    r.method.parameter(),
+                    r.operations(*reflective)
+                )
+            })
+        };
+        summary.push(vec![family.name.clone(), pick(0.5), pick(0.1)]);
+    }
+    println!(
+        "Cheapest method per conversion (operations: product and integration for reflected light)"
+    );
+    println!(
+        "{}",
+        table(&["family", "mean ΔE00 < 0.5", "mean ΔE00 < 0.1"], &summary)
+    );
+    Ok(())
+}
+
+fn print_family(family: &Family, reflective: bool, rows: &[Row]) {
+    println!(
+        "{} ({} spectra{})",
+        family.name,
+        family.cases.len(),
+        if reflective {
+            ", reflected once: product then integration"
+        } else {
+            ", integration alone"
+        }
+    );
+    let cells: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            vec![
+                r.method.name().to_string(),
+                if r.spans_the_family {
+                    format!("{} (spans the family)", r.method.parameter())
+                } else {
+                    r.method.parameter()
+                },
+                format!("{} × {} +", r.product.multiplications, r.product.additions),
+                format!(
+                    "{} × {} +",
+                    r.integration.multiplications, r.integration.additions
+                ),
+                r.nanoseconds.map_or("-".into(), |n| format!("{n:.0}")),
+                format!("{:.3} / {:.3}", r.delta_e_uv.mean, r.delta_e_uv.max),
+                format!("{:.3} / {:.3}", r.delta_e00.mean, r.delta_e00.max),
+                survey_column(&r.method),
+            ]
+        })
+        .collect();
+    println!(
+        "{}",
+        table(
+            &[
+                "method",
+                "parameters",
+                "product",
+                "integration",
+                "ns/conv",
+                "ΔE*uv mean / max",
+                "ΔE00 mean / max",
+                "the survey says",
+            ],
+            &cells
+        )
+    );
+}
+
+/// The survey's figure, shown once per method (on its first parameter).
+fn survey_column(kind: &MethodKind) -> String {
+    let first = match kind {
+        MethodKind::Direct => true,
+        MethodKind::Sampling { step_nm } => *step_nm == 10,
+        MethodKind::Gauss { points } => *points == 2,
+        MethodKind::RasoFournier { degree } => *degree == 3,
+        MethodKind::CharacteristicVectors { m } => *m == 3,
+    };
+    if first {
+        survey_figure(kind).to_string()
+    } else {
+        String::new()
+    }
+}
