@@ -8,7 +8,8 @@ use clap::{Parser, Subcommand};
 mod cli;
 
 use cli::{
-    bench, calibrate, check, daemon, emulate, export, fit, instruments, measure, profile, spectrum,
+    bench, calibrate, check, daemon, emulate, export, fit, instruments, measure, profile, render,
+    spectrum,
 };
 
 #[derive(Parser)]
@@ -30,6 +31,7 @@ enum Command {
     Fit(fit::FitArgs),
     Check(check::CheckArgs),
     Spectrum(spectrum::SpectrumArgs),
+    Render(render::RenderArgs),
     Emulate(emulate::EmulateArgs),
     Measure(measure::MeasureArgs),
     Instruments(instruments::InstrumentsArgs),
@@ -52,6 +54,7 @@ fn main() -> ExitCode {
         Command::Fit(args) => fit::run(args),
         Command::Check(args) => check::run(args),
         Command::Spectrum(args) => spectrum::run(args),
+        Command::Render(args) => render::run(args),
         Command::Emulate(args) => emulate::run(args),
         Command::Measure(args) => measure::run(args),
         Command::Instruments(args) => instruments::run(args),

@@ -13,5 +13,6 @@ pub mod fit;
 pub mod instruments;
 pub mod measure;
 pub mod profile;
+pub mod render;
 pub mod shared;
 pub mod spectrum;

@@ -99,3 +99,29 @@ pub fn parse_instrument(spec: &str) -> Result<(DeviceKind, String), Failure> {
         port.to_string(),
     ))
 }
+
+/// A CIE illuminant on the command line (either case: D65 or d65).
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum IlluminantArg {
+    A,
+    C,
+    D50,
+    D65,
+    F2,
+    F7,
+    F11,
+}
+
+impl From<IlluminantArg> for chromacal::color::spectrum::Illuminant {
+    fn from(i: IlluminantArg) -> Self {
+        match i {
+            IlluminantArg::A => chromacal::color::spectrum::Illuminant::A,
+            IlluminantArg::C => chromacal::color::spectrum::Illuminant::C,
+            IlluminantArg::D50 => chromacal::color::spectrum::Illuminant::D50,
+            IlluminantArg::D65 => chromacal::color::spectrum::Illuminant::D65,
+            IlluminantArg::F2 => chromacal::color::spectrum::Illuminant::F2,
+            IlluminantArg::F7 => chromacal::color::spectrum::Illuminant::F7,
+            IlluminantArg::F11 => chromacal::color::spectrum::Illuminant::F11,
+        }
+    }
+}

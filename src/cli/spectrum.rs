@@ -2,8 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use clap::ValueEnum;
-
 use chromacal::color::spaces::{Xyz, xyz_to_luv, xyz_to_uv_prime, xyz_to_xyy};
 use chromacal::color::spectrum::{
     Illuminant, Observer, Spectrum, SpectrumError, emission_to_relative_xyz, emission_to_xyz,
@@ -13,7 +11,7 @@ use chromacal::color::{UvPrime, xyz_to_lab};
 use chromacal::numeric_csv::NumericTable;
 use chromacal::report;
 
-use super::shared::Failure;
+use super::shared::{Failure, IlluminantArg};
 
 /// Integrate spectra to XYZ, xyY, u′v′, L*a*b* and L*u*v*.
 ///
@@ -61,31 +59,6 @@ pub fn run(args: SpectrumArgs) -> Result<(), Failure> {
         &args.observer,
         args.json,
     )
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum IlluminantArg {
-    A,
-    C,
-    D50,
-    D65,
-    F2,
-    F7,
-    F11,
-}
-
-impl From<IlluminantArg> for Illuminant {
-    fn from(i: IlluminantArg) -> Self {
-        match i {
-            IlluminantArg::A => Illuminant::A,
-            IlluminantArg::C => Illuminant::C,
-            IlluminantArg::D50 => Illuminant::D50,
-            IlluminantArg::D65 => Illuminant::D65,
-            IlluminantArg::F2 => Illuminant::F2,
-            IlluminantArg::F7 => Illuminant::F7,
-            IlluminantArg::F11 => Illuminant::F11,
-        }
-    }
 }
 
 #[derive(serde::Serialize)]

@@ -124,7 +124,11 @@ impl GamutMapping {
 
 /// Per-channel clipping in cube coordinates.
 pub fn clip(gamut: &GamutAt, xyz: &Xyz) -> Xyz {
-    let a = gamut.to_cube(xyz).map(|v| v.clamp(0.0, 1.0));
+    let a = gamut.to_cube(xyz);
+    if cube_contains(&a) {
+        return *xyz;
+    }
+    let a = a.map(|v| v.clamp(0.0, 1.0));
     gamut.from_cube(&a)
 }
 

@@ -27,6 +27,7 @@ use nalgebra::Matrix3;
 use serde::Serialize;
 
 use crate::color::Xyz;
+use crate::color::adaptation::{AdaptationTransform, adaptation_matrix};
 use crate::fit::stats::ErrorStats;
 use crate::fit::validate::delta_e00_xyz;
 use crate::model::{Drive, MonitorModel, ScreenPosition};
@@ -44,11 +45,17 @@ pub enum CrfError {
     NothingLit(String),
     #[error("pixel {index}: {what}")]
     BadPixel { index: usize, what: String },
+    #[error("chromatic adaptation needs the scene's white, and none was given")]
+    NoSceneWhite,
 }
 
 /// How a scene is rendered.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderSettings {
+    /// Carry the scene's white to the display's (von Kries in the cone space of the
+    /// transform), for an observer adapted to the screen as in a dark room (seed
+    /// §4.2.3, §4.2.5); needs the scene's white. `None`: the XYZ as asked.
+    pub adaptation: Option<AdaptationTransform>,
     pub tone: ToneOperator,
     pub gamut: GamutMapping,
     /// Bits per channel of the codes sent to the display.
@@ -63,11 +70,12 @@ pub struct ScenePixel {
     pub position: ScreenPosition,
 }
 
-/// A scene: its pixels and, when known, the luminance of its white.
+/// A scene: its pixels and, when known, its white (the XYZ of a perfect white in
+/// it, in the pixels' units).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scene {
     pub pixels: Vec<ScenePixel>,
-    pub white_luminance: Option<f64>,
+    pub white: Option<Xyz>,
 }
 
 /// What one pixel became.
@@ -190,8 +198,9 @@ impl<'a> ColourReproduction<'a> {
                 what: format!("XYZ {:?} is not finite", p.xyz.as_slice()),
             });
         }
-        let curve = self.tone_curve(scene, settings.tone)?;
-        let targets: Vec<Xyz> = scene
+        let adapted = self.adapt(scene, settings.adaptation)?;
+        let curve = self.tone_curve(&adapted, settings.tone)?;
+        let targets: Vec<Xyz> = adapted
             .pixels
             .iter()
             .map(|p| p.xyz * curve.factor(p.xyz.y))
@@ -249,12 +258,41 @@ impl<'a> ColourReproduction<'a> {
         Ok(Rendering { pixels, summary })
     }
 
+    /// The scene with its white carried to the display's chromaticity (luminance
+    /// kept), or as it is.
+    fn adapt(
+        &self,
+        scene: &Scene,
+        transform: Option<AdaptationTransform>,
+    ) -> Result<Scene, CrfError> {
+        let Some(transform) = transform else {
+            return Ok(scene.clone());
+        };
+        let source = scene.white.ok_or(CrfError::NoSceneWhite)?;
+        let destination = self.white * (source.y / self.white.y);
+        let m = adaptation_matrix(transform, &source, &destination);
+        Ok(Scene {
+            pixels: scene
+                .pixels
+                .iter()
+                .map(|p| ScenePixel {
+                    xyz: m * p.xyz,
+                    position: p.position,
+                })
+                .collect(),
+            white: Some(destination),
+        })
+    }
+
     fn tone_curve(&self, scene: &Scene, tone: ToneOperator) -> Result<ToneCurve, CrfError> {
         if tone == ToneOperator::Colorimetric {
             return Ok(ToneCurve::Scale(1.0));
         }
-        let stats = SceneLuminance::of(scene.pixels.iter().map(|p| p.xyz.y), scene.white_luminance)
-            .ok_or_else(|| CrfError::NothingLit(tone.name()))?;
+        let stats = SceneLuminance::of(
+            scene.pixels.iter().map(|p| p.xyz.y),
+            scene.white.map(|w| w.y),
+        )
+        .ok_or_else(|| CrfError::NothingLit(tone.name()))?;
         Ok(tone.curve(&stats, self.white.y))
     }
 

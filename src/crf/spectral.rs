@@ -42,6 +42,25 @@ fn interpolate(spectrum: &[f64], nm: f64) -> f64 {
     spectrum[i] * (1.0 - f) + spectrum[i + 1] * f
 }
 
+/// A table on another grid, read onto the grid by linear interpolation (0 outside
+/// its range, as the CMFs' sums stop there).
+pub fn onto_grid(wavelengths: &[f64], values: &[f64]) -> Vec<f64> {
+    (0..GRID_LEN)
+        .map(|i| {
+            let nm = grid_nm(i);
+            let Some(k) = wavelengths
+                .windows(2)
+                .position(|w| w[0] <= nm && nm <= w[1])
+            else {
+                return 0.0;
+            };
+            let (a, b) = (wavelengths[k], wavelengths[k + 1]);
+            let f = if b > a { (nm - a) / (b - a) } else { 0.0 };
+            values[k] * (1.0 - f) + values[k + 1] * f
+        })
+        .collect()
+}
+
 /// Multiplications and additions of one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct Operations {
@@ -106,6 +125,47 @@ impl MethodKind {
             MethodKind::Gauss { points } => format!("{points} per function"),
             MethodKind::RasoFournier { degree } => format!("2 spans, degree {degree}"),
             MethodKind::CharacteristicVectors { m } => format!("m = {m}"),
+        }
+    }
+}
+
+impl std::str::FromStr for MethodKind {
+    type Err = String;
+
+    /// `direct`, `sampling:STEP_NM`, `gauss:POINTS`, `raso-fournier:DEGREE` or
+    /// `cva:M`.
+    fn from_str(text: &str) -> Result<Self, String> {
+        let (name, parameter) = text.split_once(':').unwrap_or((text, ""));
+        let number = |what: &str| -> Result<usize, String> {
+            parameter.parse::<usize>().map_err(|_| {
+                format!(
+                    "'{text}': {name} needs {what} after a colon, e.g. {name}:{}",
+                    match name {
+                        "sampling" => "10",
+                        "gauss" => "8",
+                        "raso-fournier" => "3",
+                        _ => "8",
+                    }
+                )
+            })
+        };
+        match name.to_ascii_lowercase().as_str() {
+            "direct" if parameter.is_empty() => Ok(MethodKind::Direct),
+            "sampling" => Ok(MethodKind::Sampling {
+                step_nm: number("a step in nm")?,
+            }),
+            "gauss" => Ok(MethodKind::Gauss {
+                points: number("the points per function")?,
+            }),
+            "raso-fournier" => Ok(MethodKind::RasoFournier {
+                degree: number("a degree")?,
+            }),
+            "cva" => Ok(MethodKind::CharacteristicVectors {
+                m: number("the number of vectors")?,
+            }),
+            _ => Err(format!(
+                "'{text}': the methods are direct, sampling:STEP_NM, gauss:POINTS, raso-fournier:DEGREE and cva:M"
+            )),
         }
     }
 }

@@ -29,7 +29,7 @@ use crate::numeric_csv::{CsvError, NumericTable};
 
 use super::spectral::{
     GRID_LEN, GRID_START_NM, GRID_STEP_NM, MethodKind, Operations, SpectralError, SpectralMethod,
-    grid_nm,
+    grid_nm, onto_grid,
 };
 
 /// One spectrum to convert.
@@ -66,25 +66,6 @@ impl Family {
         }
         out
     }
-}
-
-/// A table on another grid, read onto the grid by linear interpolation (0 outside
-/// its range, as the CMFs' sums stop there).
-fn onto_grid(wavelengths: &[f64], values: &[f64]) -> Vec<f64> {
-    (0..GRID_LEN)
-        .map(|i| {
-            let nm = grid_nm(i);
-            let Some(k) = wavelengths
-                .windows(2)
-                .position(|w| w[0] <= nm && nm <= w[1])
-            else {
-                return 0.0;
-            };
-            let (a, b) = (wavelengths[k], wavelengths[k + 1]);
-            let f = if b > a { (nm - a) / (b - a) } else { 0.0 };
-            values[k] * (1.0 - f) + values[k + 1] * f
-        })
-        .collect()
 }
 
 fn illuminant_on_grid(illuminant: Illuminant) -> Vec<f64> {

@@ -1,0 +1,513 @@
+//! `chromacal render`: a scene through a profile, the colour reproduction function
+//! (seed §4). XYZ or spectra in, the codes a calibrated display must be sent out.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use clap::ValueEnum;
+
+use chromacal::color::Xyz;
+use chromacal::color::adaptation::AdaptationTransform;
+use chromacal::color::spaces::{Xyy, xyy_to_xyz};
+use chromacal::color::spectrum::{KM_PHOTOPIC, Observer};
+use chromacal::crf::gamut::{GamutMapping, UniformSpace};
+use chromacal::crf::scene::{
+    Placement, XyzImage, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
+};
+use chromacal::crf::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
+use chromacal::crf::tone::{TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
+use chromacal::crf::{ColourReproduction, RenderSettings, RenderSummary, Scene, ScenePixel};
+use chromacal::measurement::Units;
+use chromacal::model::ScreenPosition;
+use chromacal::model::target::{WhiteTarget, daylight_xy, parse_white};
+use chromacal::numeric_csv::NumericTable;
+use chromacal::profile::Profile;
+
+use super::shared::{Failure, IlluminantArg};
+
+/// Render a scene for a calibrated display: XYZ (a CSV list or a PFM image) or
+/// spectra (emission, reflectance under an illuminant, or a stack of per-wavelength
+/// images) through tone reproduction, gamut mapping and the profile's inverse model
+/// (matrix, laws, black, and the spatial map at each pixel's place on the screen).
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// The profile (a chromacal .toml).
+    profile: PathBuf,
+    /// XYZ list: columns X, Y, Z, optionally screen_x, screen_y (0–1 from the top left).
+    #[arg(long, group = "scene")]
+    xyz: Option<PathBuf>,
+    /// XYZ image: a PFM (PF: X, Y, Z per pixel; Pf: Y alone, at the display white's
+    /// chromaticity).
+    #[arg(long, group = "scene")]
+    image: Option<PathBuf>,
+    /// Emission spectra: wavelength_nm, then one column of radiance
+    /// (W·sr⁻¹·m⁻²·nm⁻¹) per colour.
+    #[arg(long, group = "scene")]
+    spectra: Option<PathBuf>,
+    /// Reflectance factors (0–1): wavelength_nm, then one column per colour, seen
+    /// under --illuminant with its white at --white-luminance.
+    #[arg(long, group = "scene")]
+    reflectance: Option<PathBuf>,
+    /// A spectral image: a directory of single-channel PFMs (Pf) named by wavelength
+    /// (380.pfm, 390.pfm, …), radiance in W·sr⁻¹·m⁻²·nm⁻¹.
+    #[arg(long, group = "scene")]
+    spectral_image: Option<PathBuf>,
+    /// Where the codes go: .csv, .png (16-bit, images only), or - for CSV on standard
+    /// output.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Units of --xyz and --image values.
+    #[arg(long, value_enum, default_value = "absolute")]
+    units: UnitsArg,
+    /// Luminance (cd/m²) of Y = 100 in a relative scene and of the white of a
+    /// reflectance scene [default: the display's white].
+    #[arg(long)]
+    white_luminance: Option<f64>,
+    /// Illuminant of --reflectance.
+    #[arg(long, value_enum, ignore_case = true, default_value = "d65")]
+    illuminant: IlluminantArg,
+    /// Spectral method: direct, sampling:STEP_NM, gauss:POINTS, raso-fournier:DEGREE
+    /// or cva:M (characteristic vectors of the scene's own spectra).
+    #[arg(long, default_value = "direct")]
+    method: MethodKind,
+    /// Where an image sits on the screen: LEFT,TOP,WIDTH,HEIGHT in fractions.
+    #[arg(long, default_value = "0,0,1,1")]
+    at: String,
+    /// Tone reproduction.
+    #[arg(long, value_enum, default_value = "colorimetric")]
+    tone: ToneArg,
+    /// Usable contrast of the display for Tumblin–Rushmeier (the survey's 35).
+    #[arg(long, default_value_t = TUMBLIN_RUSHMEIER_CONTRAST)]
+    display_contrast: f64,
+    /// Gamut mapping of colours the display cannot show where they are.
+    #[arg(long, value_enum, default_value = "clip")]
+    gamut: GamutArg,
+    /// Stone–Cowan–Beatty: the share of colours its transform may leave outside
+    /// (then projected).
+    #[arg(long, default_value_t = 0.01)]
+    scb_outside: f64,
+    /// Bits per channel of the codes.
+    #[arg(long, default_value_t = 8)]
+    bits: u32,
+    /// The scene's white, for --tone linear and --adapt: D50, D65, 6500K or x,y, at
+    /// --white-luminance [default: a reflectance scene's illuminant].
+    #[arg(long)]
+    scene_white: Option<String>,
+    /// Carry the scene's white to the display's (Bradford), for a viewer adapted to
+    /// the screen, as in a dark room.
+    #[arg(long)]
+    adapt: bool,
+    /// The summary as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum UnitsArg {
+    Absolute,
+    Relative,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum ToneArg {
+    Colorimetric,
+    Linear,
+    Ward,
+    TumblinRushmeier,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum GamutArg {
+    Clip,
+    GreyLab,
+    GreyLuv,
+    Perpendicular,
+    Scb,
+}
+
+/// A scene as read: its pixels, and its image size when it is an image.
+struct ReadScene {
+    scene: Scene,
+    size: Option<(usize, usize)>,
+    spectral: Option<String>,
+}
+
+pub fn run(args: RenderArgs) -> Result<(), Failure> {
+    let profile = Profile::read(&args.profile)?;
+    let model = &profile.model;
+    let crf = ColourReproduction::new(model).map_err(|e| e.to_string())?;
+    let display_white = crf.white();
+    let white_luminance = match args.white_luminance {
+        Some(w) if !(w > 0.0 && w.is_finite()) => {
+            return Err(Failure::from(format!(
+                "--white-luminance must be a positive luminance, not {w}"
+            )));
+        }
+        Some(w) => w,
+        None => display_white.y,
+    };
+    let placement = Placement::parse(&args.at).map_err(|e| e.to_string())?;
+    let read = read_scene(&args, &profile, white_luminance, &display_white, &placement)?;
+    let tone = match args.tone {
+        ToneArg::Colorimetric => ToneOperator::Colorimetric,
+        ToneArg::Linear => ToneOperator::Linear,
+        ToneArg::Ward => ToneOperator::Ward,
+        ToneArg::TumblinRushmeier => ToneOperator::TumblinRushmeier {
+            display_contrast: args.display_contrast,
+        },
+    };
+    if !(0.0..1.0).contains(&args.scb_outside) {
+        return Err(Failure::from(format!(
+            "--scb-outside is a share from 0 to below 1, not {}",
+            args.scb_outside
+        )));
+    }
+    let gamut = match args.gamut {
+        GamutArg::Clip => GamutMapping::Clip,
+        GamutArg::GreyLab => GamutMapping::GreyAxis(UniformSpace::Lab),
+        GamutArg::GreyLuv => GamutMapping::GreyAxis(UniformSpace::Luv),
+        GamutArg::Perpendicular => GamutMapping::Perpendicular,
+        GamutArg::Scb => GamutMapping::StoneCowanBeatty {
+            outside: args.scb_outside,
+        },
+    };
+    let settings = RenderSettings {
+        adaptation: args.adapt.then_some(AdaptationTransform::Bradford),
+        tone,
+        gamut,
+        bits: args.bits,
+    };
+    let rendering = crf
+        .render(&read.scene, &settings)
+        .map_err(|e| e.to_string())?;
+    let to_stdout = args.output.as_os_str() == "-";
+    if args
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        let Some((width, height)) = read.size else {
+            return Err(Failure::from(
+                "a PNG needs an image scene (--image or --spectral-image); write a .csv for a list",
+            ));
+        };
+        write_png16(&args.output, width, height, &rendering.pixels, args.bits)
+            .map_err(|e| e.to_string())?;
+    } else if to_stdout {
+        let mut out = std::io::stdout().lock();
+        write_codes_csv(&mut out, &read.scene.pixels, &rendering.pixels)
+            .map_err(|e| format!("standard output: {e}"))?;
+    } else {
+        let mut text = Vec::new();
+        write_codes_csv(&mut text, &read.scene.pixels, &rendering.pixels)
+            .map_err(|e| e.to_string())?;
+        std::fs::write(&args.output, text)
+            .map_err(|e| format!("{}: {e}", args.output.display()))?;
+    }
+    let summary = describe(&rendering.summary, read.spectral.as_deref(), &args.output);
+    let json = serde_json::to_string_pretty(&rendering.summary).map_err(|e| e.to_string())?;
+    let text = if args.json { json } else { summary };
+    // The codes may be on standard output: the summary then goes to standard error.
+    if to_stdout {
+        eprintln!("{text}");
+    } else {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{text}").map_err(|e| format!("standard output: {e}"))?;
+    }
+    Ok(())
+}
+
+fn read_scene(
+    args: &RenderArgs,
+    profile: &Profile,
+    white_luminance: f64,
+    display_white: &Xyz,
+    placement: &Placement,
+) -> Result<ReadScene, Failure> {
+    // Relative values (white Y = 100) scaled to the profile's units.
+    let relative_scale = match profile.units {
+        Units::Absolute => white_luminance / 100.0,
+        Units::Relative => 1.0,
+    };
+    let xyz_scale = match (args.units, profile.units) {
+        (UnitsArg::Absolute, Units::Absolute) => 1.0,
+        (UnitsArg::Relative, _) => relative_scale,
+        (UnitsArg::Absolute, Units::Relative) => {
+            return Err(Failure::from(
+                "the profile is relative (white Y = 100) and the scene in cd/m²: give --units relative, or a profile in cd/m²",
+            ));
+        }
+    };
+    let absolute_spectra = |what: &str| -> Result<f64, Failure> {
+        match profile.units {
+            Units::Absolute => Ok(KM_PHOTOPIC),
+            Units::Relative => Err(Failure::from(format!(
+                "{what} are radiances (cd/m² once integrated), and the profile is relative: use a profile in cd/m²"
+            ))),
+        }
+    };
+    // The scene's white at the luminance of its Y = 100, in the profile's units.
+    let white = match &args.scene_white {
+        Some(text) => {
+            let xy = match parse_white(text).map_err(|e| e.to_string())? {
+                WhiteTarget::Chromaticity(xy) => xy,
+                WhiteTarget::Daylight(k) => daylight_xy(k).map_err(|e| e.to_string())?,
+                WhiteTarget::Native => {
+                    let w = display_white;
+                    let sum = w.x + w.y + w.z;
+                    [w.x / sum, w.y / sum]
+                }
+            };
+            Some(xyy_to_xyz(&Xyy {
+                x: xy[0],
+                y: xy[1],
+                big_y: 100.0 * relative_scale,
+            }))
+        }
+        None if args.reflectance.is_some() => Some(
+            chromacal::color::spectrum::white_point(args.illuminant.into(), Observer::default())
+                .map_err(|e| e.to_string())?
+                * relative_scale,
+        ),
+        None => None,
+    };
+    if let Some(path) = &args.xyz {
+        let pixels = read_xyz_csv(path, xyz_scale).map_err(|e| e.to_string())?;
+        return Ok(ReadScene {
+            scene: Scene { pixels, white },
+            size: None,
+            spectral: None,
+        });
+    }
+    if let Some(path) = &args.image {
+        let image = read_pfm(path, display_white).map_err(|e| e.to_string())?;
+        return Ok(image_scene(&image, placement, xyz_scale, white, None));
+    }
+    let method_name = format!("{} ({})", args.method.name(), args.method.parameter());
+    if let Some(path) = &args.spectra {
+        let spectra = read_spectra(path)?;
+        let xyz = integrate_all(&args.method, &spectra, None)?;
+        let scale = absolute_spectra("--spectra")?;
+        return Ok(ReadScene {
+            scene: Scene {
+                pixels: at_centre(xyz, scale),
+                white,
+            },
+            size: None,
+            spectral: Some(method_name),
+        });
+    }
+    if let Some(path) = &args.reflectance {
+        let reflectances = read_spectra(path)?;
+        let illuminant = chromacal::color::spectrum::Illuminant::from(args.illuminant).spectrum();
+        let light = onto_grid(illuminant.wavelengths_nm(), illuminant.values());
+        let xyz = integrate_all(&args.method, &reflectances, Some(&light))?;
+        return Ok(ReadScene {
+            scene: Scene {
+                pixels: at_centre(xyz, relative_scale),
+                white,
+            },
+            size: None,
+            spectral: Some(method_name),
+        });
+    }
+    if let Some(dir) = &args.spectral_image {
+        let (width, height, spectra) = read_spectral_stack(dir)?;
+        let xyz = integrate_all(&args.method, &spectra, None)?;
+        let scale = absolute_spectra("--spectral-image")?;
+        let image = XyzImage { width, height, xyz };
+        return Ok(image_scene(
+            &image,
+            placement,
+            scale,
+            white,
+            Some(method_name),
+        ));
+    }
+    Err(Failure::from(
+        "no scene: give --xyz, --image, --spectra, --reflectance or --spectral-image",
+    ))
+}
+
+fn image_scene(
+    image: &XyzImage,
+    placement: &Placement,
+    scale: f64,
+    white: Option<Xyz>,
+    spectral: Option<String>,
+) -> ReadScene {
+    ReadScene {
+        scene: Scene {
+            pixels: image.pixels(placement, scale),
+            white,
+        },
+        size: Some((image.width, image.height)),
+        spectral,
+    }
+}
+
+fn at_centre(xyz: Vec<Xyz>, scale: f64) -> Vec<ScenePixel> {
+    xyz.into_iter()
+        .map(|xyz| ScenePixel {
+            xyz: xyz * scale,
+            position: ScreenPosition::CENTRE,
+        })
+        .collect()
+}
+
+/// The columns of a `wavelength_nm` CSV, each on the 5 nm grid.
+fn read_spectra(path: &Path) -> Result<Vec<Vec<f64>>, Failure> {
+    let table = NumericTable::read(path)?;
+    if !table.header[0].eq_ignore_ascii_case("wavelength_nm") || table.header.len() < 2 {
+        return Err(Failure::from(format!(
+            "{}: the first column must be wavelength_nm and one column per colour follow",
+            path.display()
+        )));
+    }
+    let wavelengths = table.column(0);
+    if wavelengths.windows(2).any(|w| w[1] <= w[0]) {
+        return Err(Failure::from(format!(
+            "{}: wavelengths must rise from row to row",
+            path.display()
+        )));
+    }
+    Ok((1..table.header.len())
+        .map(|k| onto_grid(&wavelengths, &table.column(k)))
+        .collect())
+}
+
+/// A directory of `<nm>.pfm` single-channel images: each pixel's spectrum on the grid.
+fn read_spectral_stack(dir: &Path) -> Result<(usize, usize, Vec<Vec<f64>>), Failure> {
+    let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut planes: Vec<(f64, PathBuf)> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("pfm")))
+        .filter_map(|p| {
+            let nm = p.file_stem()?.to_str()?.parse::<f64>().ok()?;
+            Some((nm, p))
+        })
+        .collect();
+    planes.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if planes.len() < 2 {
+        return Err(Failure::from(format!(
+            "{}: a spectral image needs at least two planes named by wavelength (e.g. 450.pfm, 550.pfm)",
+            dir.display()
+        )));
+    }
+    let grey = Xyz::new(1.0, 1.0, 1.0);
+    let mut images = Vec::new();
+    for (nm, path) in &planes {
+        let image = read_pfm(path, &grey).map_err(|e| e.to_string())?;
+        if let Some((_, first)) = images.first().map(|(n, i): &(f64, XyzImage)| (*n, i))
+            && (first.width, first.height) != (image.width, image.height)
+        {
+            return Err(Failure::from(format!(
+                "{}: {} × {} where the first plane is {} × {}",
+                path.display(),
+                image.width,
+                image.height,
+                first.width,
+                first.height
+            )));
+        }
+        images.push((*nm, image));
+    }
+    let (width, height) = (images[0].1.width, images[0].1.height);
+    let wavelengths: Vec<f64> = images.iter().map(|(nm, _)| *nm).collect();
+    let spectra = (0..width * height)
+        .map(|k| {
+            let values: Vec<f64> = images.iter().map(|(_, i)| i.xyz[k].y).collect();
+            onto_grid(&wavelengths, &values)
+        })
+        .collect();
+    Ok((width, height, spectra))
+}
+
+/// XYZ (in units of ∫ S f dλ) of each spectrum, or of each reflectance under `light`
+/// with the light's Y = 100, by `kind`. Characteristic vectors are computed from
+/// these spectra themselves (and the light).
+fn integrate_all(
+    kind: &MethodKind,
+    spectra: &[Vec<f64>],
+    light: Option<&Vec<f64>>,
+) -> Result<Vec<Xyz>, Failure> {
+    debug_assert!(spectra.iter().all(|s| s.len() == GRID_LEN));
+    let family: Vec<Vec<f64>> = match light {
+        Some(l) => std::iter::once(l.clone())
+            .chain(
+                spectra
+                    .iter()
+                    .map(|r| r.iter().zip(l).map(|(r, s)| r * s).collect()),
+            )
+            .collect(),
+        None => spectra.to_vec(),
+    };
+    let method = SpectralMethod::new(kind.clone(), Observer::default(), &family)
+        .map_err(|e| e.to_string())?;
+    Ok(match light {
+        None => spectra
+            .iter()
+            .map(|s| method.integrate(&method.represent(s)))
+            .collect(),
+        Some(l) => {
+            let light = method.represent(l);
+            let y = method.integrate(&light).y;
+            if y.is_nan() || y <= 0.0 {
+                return Err(Failure::from("the illuminant has no luminance"));
+            }
+            spectra
+                .iter()
+                .map(|r| {
+                    method.integrate(&method.product(&method.reflectance(r), &light)) * (100.0 / y)
+                })
+                .collect()
+        }
+    })
+}
+
+/// The summary a person reads.
+fn describe(summary: &RenderSummary, spectral: Option<&str>, output: &Path) -> String {
+    let mut lines = vec![format!(
+        "rendered {} pixels to {}",
+        summary.pixels,
+        if output.as_os_str() == "-" {
+            "standard output".to_string()
+        } else {
+            output.display().to_string()
+        }
+    )];
+    if let Some(method) = spectral {
+        lines.push(format!("spectra to XYZ: {method}"));
+    }
+    lines.push(format!("tone: {}", summary.tone));
+    lines.push(format!("gamut mapping: {}", summary.gamut));
+    lines.push(format!(
+        "outside the gamut where shown: {} of {}",
+        summary.outside, summary.pixels
+    ));
+    if let Some(scb) = &summary.stone_cowan_beatty {
+        lines.push(format!(
+            "Stone–Cowan–Beatty: black shift {:.3}, contrast scale {:.4}",
+            scb.black_shift, scb.contrast_scale
+        ));
+    }
+    if let Some(s) = &summary.mapping_all {
+        lines.push(format!(
+            "ΔE00 the mapping introduced: mean {:.3}, max {:.3} over all pixels",
+            s.mean, s.max
+        ));
+    }
+    if let Some(s) = &summary.mapping_outside {
+        lines.push(format!(
+            "  over the {} outside: mean {:.3}, p95 {:.3}, max {:.3}",
+            s.n, s.mean, s.p95, s.max
+        ));
+    }
+    if let Some(s) = &summary.inversion {
+        lines.push(format!(
+            "ΔE00 of the codes against the mapped colour (quantisation, inversion): mean {:.3}, max {:.3}",
+            s.mean, s.max
+        ));
+    }
+    lines.join("\n")
+}

@@ -1,0 +1,479 @@
+//! Issue 13: the colour reproduction function. A default calibration of the simulated
+//! CRT (15 % falloff at the corners, so its profile has a spatial map) renders scenes;
+//! what the codes show, by the profile's forward model, is checked against what was
+//! asked, everywhere on the screen, and each gamut mapping and tone operator is held
+//! to what it promises.
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+use chromacal::color::spectrum::{Illuminant, Observer};
+use chromacal::color::{Xyz, xyz_to_lab};
+use chromacal::crf::gamut::{GamutMapping, UniformSpace};
+use chromacal::crf::spectral::{MethodKind, SpectralMethod};
+use chromacal::crf::spectral_table::{Case, colorchecker_family};
+use chromacal::crf::tone::ToneOperator;
+use chromacal::crf::{ColourReproduction, RenderSettings, Scene, ScenePixel};
+use chromacal::fit::validate::delta_e00_xyz;
+use chromacal::model::spatial::SpatialMap;
+use chromacal::model::{MonitorModel, ScreenPosition};
+use chromacal::profile::Profile;
+
+mod common;
+use common::chromacal;
+
+/// The default calibration's profile, made once for this file's tests.
+fn profile_path() -> &'static PathBuf {
+    static PROFILE: OnceLock<PathBuf> = OnceLock::new();
+    PROFILE.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap().keep();
+        let state = dir.join("state");
+        let out = chromacal()
+            .args(["calibrate", "--state-dir"])
+            .arg(&state)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        state.join("current.toml")
+    })
+}
+
+fn model() -> MonitorModel {
+    Profile::read(profile_path()).unwrap().model
+}
+
+fn settings(gamut: GamutMapping, bits: u32) -> RenderSettings {
+    RenderSettings {
+        adaptation: None,
+        tone: ToneOperator::Colorimetric,
+        gamut,
+        bits,
+    }
+}
+
+/// Positions over the whole screen, corners included.
+fn grid(n: usize) -> Vec<ScreenPosition> {
+    (0..n)
+        .flat_map(|i| (0..n).map(move |j| (i, j)))
+        .map(|(i, j)| {
+            ScreenPosition::new(
+                0.02 + 0.96 * i as f64 / (n - 1) as f64,
+                0.02 + 0.96 * j as f64 / (n - 1) as f64,
+            )
+        })
+        .collect()
+}
+
+/// The ColorChecker under D65 with its white at `white` cd/m², at the centre.
+fn colorchecker(white: f64, illuminant: Illuminant) -> Vec<Xyz> {
+    let family = colorchecker_family(illuminant, "");
+    let direct = SpectralMethod::new(MethodKind::Direct, Observer::default(), &[]).unwrap();
+    let light = direct.represent(family.light.as_ref().unwrap());
+    let y = direct.integrate(&light).y;
+    family
+        .cases
+        .iter()
+        .map(|c| match c {
+            Case::Reflected { reflectance, .. } => {
+                direct.integrate(&direct.product(&direct.reflectance(reflectance), &light))
+                    * (white / y)
+            }
+            Case::Emission { .. } => unreachable!(),
+        })
+        .collect()
+}
+
+fn at_centre(xyz: &[Xyz]) -> Scene {
+    Scene {
+        pixels: xyz
+            .iter()
+            .map(|x| ScenePixel {
+                xyz: *x,
+                position: ScreenPosition::CENTRE,
+            })
+            .collect(),
+        white: None,
+    }
+}
+
+#[test]
+fn in_gamut_colours_round_trip_everywhere_on_the_screen() {
+    let model = model();
+    assert!(
+        !matches!(model.spatial, SpatialMap::Uniform),
+        "the default calibration fits a spatial map"
+    );
+    let crf = ColourReproduction::new(&model).unwrap();
+    // Colours made by the display itself at each position (so inside its gamut
+    // there), from drives well inside the cube.
+    let mut pixels = Vec::new();
+    for (k, position) in grid(9).into_iter().enumerate() {
+        let f = |s: usize| 0.1 + 0.8 * (((k * 7 + s * 3) % 11) as f64 / 10.0);
+        let drive = [f(0), f(1), f(2)];
+        pixels.push(ScenePixel {
+            xyz: model.forward(drive, position),
+            position,
+        });
+    }
+    let scene = Scene {
+        pixels: pixels.clone(),
+        white: None,
+    };
+    let rendering = crf
+        .render(&scene, &settings(GamutMapping::Clip, 16))
+        .unwrap();
+    assert_eq!(rendering.summary.outside, 0);
+    let white = model.white();
+    for (p, r) in pixels.iter().zip(&rendering.pixels) {
+        let shown = model.forward(r.codes.map(|c| c as f64 / 65535.0), p.position);
+        let error = delta_e00_xyz(&p.xyz, &shown, &white);
+        assert!(error < 0.01, "{p:?}: ΔE00 {error}");
+    }
+    // At 8 bits the codes' steps are what remains.
+    let eight = crf
+        .render(&scene, &settings(GamutMapping::Clip, 8))
+        .unwrap();
+    let stats = eight.summary.inversion.unwrap();
+    assert!(stats.mean < 0.3 && stats.max < 1.0, "{stats:?}");
+}
+
+#[test]
+fn a_corner_gets_the_drive_that_gives_the_colour_there() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let colour = model.forward([0.5, 0.4, 0.3], ScreenPosition::CENTRE);
+    let corner = ScreenPosition::new(0.05, 0.05);
+    let scene = Scene {
+        pixels: vec![
+            ScenePixel {
+                xyz: colour,
+                position: ScreenPosition::CENTRE,
+            },
+            ScenePixel {
+                xyz: colour,
+                position: corner,
+            },
+        ],
+        white: None,
+    };
+    let r = crf
+        .render(&scene, &settings(GamutMapping::Clip, 16))
+        .unwrap();
+    // The corner is dimmer, so it is driven harder for the same colour…
+    for c in 0..3 {
+        assert!(
+            r.pixels[1].codes[c] > r.pixels[0].codes[c],
+            "{:?}",
+            r.pixels
+        );
+    }
+    // …and shows it, which the centre's codes would not.
+    let white = model.white();
+    let shown = |codes: [u32; 3]| model.forward(codes.map(|c| c as f64 / 65535.0), corner);
+    assert!(delta_e00_xyz(&colour, &shown(r.pixels[1].codes), &white) < 0.01);
+    assert!(delta_e00_xyz(&colour, &shown(r.pixels[0].codes), &white) > 1.0);
+}
+
+/// The ColorChecker with its white 30 % above the display's: the light patches are
+/// too bright, the saturated ones too saturated.
+fn hard_scene(model: &MonitorModel) -> Vec<Xyz> {
+    colorchecker(1.3 * model.white().y, Illuminant::D65)
+}
+
+#[test]
+fn clipping_leaves_what_is_inside_and_puts_the_rest_on_the_boundary() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let colours = hard_scene(&model);
+    let r = crf
+        .render(&at_centre(&colours), &settings(GamutMapping::Clip, 16))
+        .unwrap();
+    let gamut = crf.gamut_at(ScreenPosition::CENTRE).unwrap();
+    let outside = r.pixels.iter().filter(|p| p.outside).count();
+    assert!((3..24).contains(&outside), "{outside} of 24 outside");
+    for (x, p) in colours.iter().zip(&r.pixels) {
+        let a = gamut.to_cube(&Xyz::from(p.mapped));
+        if p.outside {
+            assert!(
+                a.iter().any(|v| v.abs() < 1e-9 || (v - 1.0).abs() < 1e-9),
+                "{a:?}"
+            );
+            assert!(p.mapping_delta_e00 > 0.0);
+        } else {
+            assert_eq!(Xyz::from(p.mapped), *x);
+            assert_eq!(p.mapping_delta_e00, 0.0);
+        }
+    }
+}
+
+#[test]
+fn the_grey_axis_clip_keeps_hue_and_the_projection_is_nearest() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let colours = hard_scene(&model);
+    let white = crf.white();
+    let gamut = crf.gamut_at(ScreenPosition::CENTRE).unwrap();
+    let clip = crf
+        .render(&at_centre(&colours), &settings(GamutMapping::Clip, 16))
+        .unwrap();
+    let grey = crf
+        .render(
+            &at_centre(&colours),
+            &settings(GamutMapping::GreyAxis(UniformSpace::Lab), 16),
+        )
+        .unwrap();
+    let perpendicular = crf
+        .render(
+            &at_centre(&colours),
+            &settings(GamutMapping::Perpendicular, 16),
+        )
+        .unwrap();
+    let mut hue_kept = 0;
+    for (k, x) in colours.iter().enumerate() {
+        let (c, g, p) = (&clip.pixels[k], &grey.pixels[k], &perpendicular.pixels[k]);
+        if !c.outside {
+            assert_eq!(g.mapped, c.mapped);
+            assert_eq!(p.mapped, c.mapped);
+            continue;
+        }
+        // Grey-axis clip: hue angle and (within the display's range) lightness kept,
+        // chroma lower.
+        let (before, after) = (
+            xyz_to_lab(x, &white),
+            xyz_to_lab(&Xyz::from(g.mapped), &white),
+        );
+        let lightest = xyz_to_lab(&gamut.white(), &white).l;
+        if before.l <= lightest && before.a.hypot(before.b) > 1.0 {
+            let angle = |l: &chromacal::color::Lab| l.b.atan2(l.a);
+            assert!(
+                (angle(&before) - angle(&after)).abs() < 1e-6,
+                "{before:?} {after:?}"
+            );
+            assert!((before.l - after.l).abs() < 1e-6);
+            hue_kept += 1;
+        }
+        // Clipping per channel turns hue; this one does not.
+        let clipped = xyz_to_lab(&Xyz::from(c.mapped), &white);
+        let turn = |l: &chromacal::color::Lab| (l.b.atan2(l.a) - before.b.atan2(before.a)).abs();
+        assert!(turn(&after) <= turn(&clipped) + 1e-9);
+        // Perpendicular projection: on the boundary, and no farther than the clip.
+        let distance = |m: [f64; 3]| (Xyz::from(m) - x).norm();
+        assert!(distance(p.mapped) <= distance(c.mapped) + 1e-9);
+        assert!(!gamut.contains(x) && gamut.contains(&Xyz::from(p.mapped)));
+    }
+    assert!(
+        hue_kept >= 1,
+        "no saturated colour was mapped at constant lightness"
+    );
+}
+
+/// D65's white at luminance `y`.
+fn d65_white(y: f64) -> Xyz {
+    chromacal::color::spectrum::white_point(Illuminant::D65, Observer::default()).unwrap()
+        * (y / 100.0)
+}
+
+#[test]
+fn stone_cowan_beatty_moves_the_whole_set_and_keeps_the_grey_axis() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let colours = hard_scene(&model);
+    // Seen by a viewer adapted to the screen: the scene's D65 white carried to the
+    // display's, so that the scene's greys are the display's greys.
+    let scene = Scene {
+        white: Some(d65_white(1.3 * model.white().y)),
+        ..at_centre(&colours)
+    };
+    let settings = RenderSettings {
+        adaptation: Some(chromacal::color::adaptation::AdaptationTransform::Bradford),
+        ..settings(GamutMapping::StoneCowanBeatty { outside: 0.0 }, 16)
+    };
+    let r = crf.render(&scene, &settings).unwrap();
+    let scb = r.summary.stone_cowan_beatty.unwrap();
+    assert!(
+        scb.contrast_scale > 0.0 && scb.contrast_scale < 1.0,
+        "{scb:?}"
+    );
+    // Every colour moved, not just those outside; with nothing allowed outside,
+    // the transform alone brought them all in.
+    assert!(r.pixels.iter().all(|p| p.mapping_delta_e00 > 0.0));
+    let gamut = crf.gamut_at(ScreenPosition::CENTRE).unwrap();
+    for p in &r.pixels {
+        assert!(gamut.contains(&scb.apply(&Xyz::from(p.target))));
+    }
+    // SCB's first rule: the grey axis is kept. The ColorChecker's neutrals (19–23)
+    // stay neutral on the display (a* and b* of the scene's own greys, about 1).
+    let white = crf.white();
+    let mut lightness = Vec::new();
+    for k in 18..24 {
+        let target = xyz_to_lab(&Xyz::from(r.pixels[k].target), &white);
+        let mapped = xyz_to_lab(&Xyz::from(r.pixels[k].mapped), &white);
+        assert!(
+            target.a.hypot(target.b) < 2.0,
+            "patch {}: {target:?}",
+            k + 1
+        );
+        assert!(
+            mapped.a.hypot(mapped.b) < 2.0,
+            "patch {}: {mapped:?}",
+            k + 1
+        );
+        lightness.push((target.l, mapped.l));
+    }
+    // The too-bright white comes down, the black may go up (the black shift), and
+    // the greys keep their order.
+    assert!(lightness[0].1 < lightness[0].0, "{lightness:?}");
+    assert!(
+        lightness.windows(2).all(|w| w[1].1 < w[0].1),
+        "{lightness:?}"
+    );
+}
+
+#[test]
+fn the_tone_operators_map_a_bright_scene_into_the_display() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    // A sunlit ColorChecker: white at 5000 cd/m², fifty times the display's.
+    let colours = colorchecker(5000.0, Illuminant::D65);
+    let scene = Scene {
+        white: Some(d65_white(5000.0)),
+        ..at_centre(&colours)
+    };
+    let render = |tone| {
+        crf.render(
+            &scene,
+            &RenderSettings {
+                adaptation: None,
+                tone,
+                gamut: GamutMapping::Clip,
+                bits: 16,
+            },
+        )
+        .unwrap()
+    };
+    let colorimetric = render(ToneOperator::Colorimetric);
+    assert_eq!(
+        colorimetric.summary.outside, 24,
+        "all far too bright as they are"
+    );
+    let linear = render(ToneOperator::Linear);
+    // The scene's white on the display's: the white patch (Y 90 %) just below it.
+    let ratio = linear.pixels[18].target[1] / model.white().y;
+    assert!((ratio - colours[18].y / 5000.0).abs() < 1e-9);
+    let ward = render(ToneOperator::Ward);
+    let tr = render(ToneOperator::TumblinRushmeier {
+        display_contrast: 35.0,
+    });
+    for r in [&linear, &ward, &tr] {
+        assert!(r.summary.outside < 24, "{}", r.summary.tone);
+        // Chromaticity kept: each target is the scene colour scaled.
+        for (x, p) in colours.iter().zip(&r.pixels) {
+            let t = Xyz::from(p.target);
+            assert!((t.x / t.y - x.x / x.y).abs() < 1e-9);
+        }
+    }
+    // Ward scales by one factor; Tumblin–Rushmeier by a power (it changes contrast).
+    let factor = |r: &chromacal::crf::Rendering, k: usize| r.pixels[k].target[1] / colours[k].y;
+    assert!((factor(&ward, 0) - factor(&ward, 18)).abs() < 1e-12);
+    assert!((factor(&tr, 0) - factor(&tr, 18)).abs() > 1e-3);
+}
+
+#[test]
+fn render_writes_codes_a_png_reader_gets_back() {
+    let dir = tempfile::tempdir().unwrap();
+    // A 4 × 3 PFM of a mid grey at 20 cd/m² over the whole screen.
+    let model = model();
+    let grey = model.forward([0.5; 3], ScreenPosition::CENTRE);
+    let image = chromacal::crf::scene::XyzImage {
+        width: 4,
+        height: 3,
+        xyz: vec![grey; 12],
+    };
+    let pfm = dir.path().join("grey.pfm");
+    chromacal::crf::scene::write_pfm(&pfm, &image).unwrap();
+    let png = dir.path().join("grey.png");
+    let out = chromacal()
+        .arg("render")
+        .arg(profile_path())
+        .arg("--image")
+        .arg(&pfm)
+        .arg("-o")
+        .arg(&png)
+        .args(["--bits", "10"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("rendered 12 pixels"), "{stdout}");
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buffer).unwrap();
+    assert_eq!((info.width, info.height), (4, 3));
+    assert_eq!(info.bit_depth, png::BitDepth::Sixteen);
+    let value = |pixel: usize, c: usize| {
+        let k = (pixel * 3 + c) * 2;
+        u16::from_be_bytes([buffer[k], buffer[k + 1]]) as f64 / 65535.0
+    };
+    // The centre pixels are driven at about half; the corners, dimmer, harder.
+    let centre = value(5, 1);
+    assert!((centre - 0.5).abs() < 0.02, "{centre}");
+    assert!(value(0, 1) > centre);
+    // What the display shows for the corner pixel's codes is the grey asked for.
+    let position = chromacal::crf::scene::Placement::FULL.position(0, 0, 4, 3);
+    let shown = model.forward([value(0, 0), value(0, 1), value(0, 2)], position);
+    assert!(delta_e00_xyz(&grey, &shown, &model.white()) < 0.3);
+}
+
+#[test]
+fn render_refuses_bad_scenes_naming_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("scene.csv");
+    std::fs::write(&csv, "X,Y,Z,screen_x,screen_y\n10,10,10,1.5,0.5\n").unwrap();
+    let out = chromacal()
+        .arg("render")
+        .arg(profile_path())
+        .arg("--xyz")
+        .arg(&csv)
+        .args(["-o", "-"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("row 1: screen position (1.5, 0.5) is not on the screen"),
+        "{stderr}"
+    );
+    std::fs::write(&csv, "X,Y,Q\n1,2,3\n").unwrap();
+    let out = chromacal()
+        .arg("render")
+        .arg(profile_path())
+        .arg("--xyz")
+        .arg(&csv)
+        .args(["-o", "-"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("no column named 'Z'"), "{stderr}");
+    // A list cannot be a PNG.
+    std::fs::write(&csv, "X,Y,Z\n1,2,3\n").unwrap();
+    let out = chromacal()
+        .arg("render")
+        .arg(profile_path())
+        .arg("--xyz")
+        .arg(&csv)
+        .arg("-o")
+        .arg(dir.path().join("list.png"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("a PNG needs an image scene"), "{stderr}");
+}
