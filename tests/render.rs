@@ -477,3 +477,96 @@ fn render_refuses_bad_scenes_naming_what_is_wrong() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("a PNG needs an image scene"), "{stderr}");
 }
+
+#[test]
+fn explain_drops_the_spatial_map_for_a_centre_scene_and_keeps_it_for_a_full_screen_one() {
+    use chromacal::crf::explain::{Part, explain};
+    let model = model();
+    let colours = colorchecker(0.8 * model.white().y, Illuminant::D65);
+    let cost = |scene: &Scene| {
+        let e = explain(&model, scene, &settings(GamutMapping::Clip, 16), 0.5).unwrap();
+        let spatial = e
+            .parts
+            .iter()
+            .find(|p| p.part == Part::SpatialMap)
+            .unwrap()
+            .clone();
+        (e, spatial)
+    };
+    let (centre, spatial) = cost(&at_centre(&colours));
+    assert!(spatial.present && spatial.dropped, "{spatial:?}");
+    assert!(spatial.cost.unwrap().max < 1e-9);
+    assert_eq!(centre.reduced.spatial, SpatialMap::Uniform);
+    // The same colours over the whole screen, corners included.
+    let positions = grid(5);
+    let full = Scene {
+        pixels: colours
+            .iter()
+            .zip(positions.iter().cycle())
+            .map(|(x, p)| ScenePixel {
+                xyz: *x,
+                position: *p,
+            })
+            .collect(),
+        white: None,
+    };
+    let (everywhere, spatial) = cost(&full);
+    assert!(spatial.present && !spatial.dropped, "{spatial:?}");
+    assert!(spatial.cost.unwrap().max > 0.5);
+    assert_eq!(everywhere.reduced.spatial, model.spatial);
+    // Whatever was dropped costs, together, less than the threshold.
+    for e in [&centre, &everywhere] {
+        assert!(e.combined.as_ref().is_none_or(|c| c.max < 0.5));
+    }
+}
+
+#[test]
+fn render_explain_chooses_a_cheaper_spectral_method_within_the_limit() {
+    let out = chromacal()
+        .arg("render")
+        .arg(profile_path())
+        .arg("--reflectance")
+        .arg(common::shared_path(
+            "colorchecker/colorchecker_n_ohta_5nm.csv",
+        ))
+        .args([
+            "--illuminant",
+            "D65",
+            "--explain",
+            "--max-de00",
+            "0.5",
+            "-o",
+            "-",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        report.contains("spatial map: without it mean 0.000"),
+        "{report}"
+    );
+    assert!(
+        report.contains("spatial map") && report.contains("→ dropped"),
+        "{report}"
+    );
+    let chosen = report
+        .lines()
+        .find(|l| l.contains("chosen:"))
+        .unwrap_or_default();
+    assert!(!chosen.contains("direct"), "{report}");
+    // The chosen method's line says its largest ΔE00 is within the limit.
+    let name = chosen.trim().trim_start_matches("chosen: ");
+    let line = report
+        .lines()
+        .find(|l| l.trim().starts_with(name) && l.contains("largest ΔE00"))
+        .unwrap();
+    let worst: f64 = line.rsplit(' ').next().unwrap().parse().unwrap();
+    assert!(worst < 0.5, "{line}");
+    // The codes went to standard output.
+    assert!(String::from_utf8_lossy(&out.stdout).starts_with("index,screen_x"));
+}

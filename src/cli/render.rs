@@ -10,13 +10,16 @@ use chromacal::color::Xyz;
 use chromacal::color::adaptation::AdaptationTransform;
 use chromacal::color::spaces::{Xyy, xyy_to_xyz};
 use chromacal::color::spectrum::{KM_PHOTOPIC, Observer};
+use chromacal::crf::explain::explain;
 use chromacal::crf::gamut::{GamutMapping, UniformSpace};
 use chromacal::crf::scene::{
     Placement, XyzImage, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
 };
 use chromacal::crf::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
+use chromacal::crf::spectral_table::standard_methods;
 use chromacal::crf::tone::{TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
 use chromacal::crf::{ColourReproduction, RenderSettings, RenderSummary, Scene, ScenePixel};
+use chromacal::fit::validate::delta_e00_xyz;
 use chromacal::measurement::Units;
 use chromacal::model::ScreenPosition;
 use chromacal::model::target::{WhiteTarget, daylight_xy, parse_white};
@@ -100,6 +103,15 @@ pub struct RenderArgs {
     /// The summary as JSON.
     #[arg(long)]
     json: bool,
+    /// Before rendering, measure what each part of the monitor model (spatial map,
+    /// black, additivity terms, the laws beyond a power law) and, for spectra, the
+    /// spectral method is worth to this scene, and drop what costs less than
+    /// --max-de00.
+    #[arg(long)]
+    explain: bool,
+    /// Largest ΔE00 (over the scene's pixels) a part may cost and still be dropped.
+    #[arg(long, default_value_t = 0.5)]
+    max_de00: f64,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -134,9 +146,9 @@ struct ReadScene {
 
 pub fn run(args: RenderArgs) -> Result<(), Failure> {
     let profile = Profile::read(&args.profile)?;
-    let model = &profile.model;
-    let crf = ColourReproduction::new(model).map_err(|e| e.to_string())?;
-    let display_white = crf.white();
+    let display_white = ColourReproduction::new(&profile.model)
+        .map_err(|e| e.to_string())?
+        .white();
     let white_luminance = match args.white_luminance {
         Some(w) if !(w > 0.0 && w.is_finite()) => {
             return Err(Failure::from(format!(
@@ -146,8 +158,71 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
         Some(w) => w,
         None => display_white.y,
     };
+    if !(args.max_de00 > 0.0 && args.max_de00.is_finite()) {
+        return Err(Failure::from(format!(
+            "--max-de00 must be a positive ΔE00, not {}",
+            args.max_de00
+        )));
+    }
     let placement = Placement::parse(&args.at).map_err(|e| e.to_string())?;
-    let read = read_scene(&args, &profile, white_luminance, &display_white, &placement)?;
+    let settings = settings_of(&args)?;
+    let read_with = |method: &MethodKind| {
+        read_scene(
+            &args,
+            method,
+            &profile,
+            white_luminance,
+            &display_white,
+            &placement,
+        )
+    };
+    let mut lines = Vec::new();
+    let method = if args.explain && is_spectral(&args) {
+        let (method, report) = choose_method(
+            &read_with,
+            args.reflectance.is_some(),
+            &display_white,
+            args.max_de00,
+        )?;
+        lines.extend(report);
+        method
+    } else {
+        args.method.clone()
+    };
+    let read = read_with(&method)?;
+    let model = if args.explain {
+        let explanation = explain(&profile.model, &read.scene, &settings, args.max_de00)
+            .map_err(|e| e.to_string())?;
+        lines.extend(describe_explanation(&explanation));
+        explanation.reduced
+    } else {
+        profile.model.clone()
+    };
+    let rendering = ColourReproduction::new(&model)
+        .and_then(|crf| crf.render(&read.scene, &settings))
+        .map_err(|e| e.to_string())?;
+    write_codes(&args, &read, &rendering)?;
+    lines.push(describe(
+        &rendering.summary,
+        read.spectral.as_deref(),
+        &args.output,
+    ));
+    let text = if args.json {
+        serde_json::to_string_pretty(&rendering.summary).map_err(|e| e.to_string())?
+    } else {
+        lines.join("\n")
+    };
+    // The codes may be on standard output: the summary then goes to standard error.
+    if args.output.as_os_str() == "-" {
+        eprintln!("{text}");
+    } else {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{text}").map_err(|e| format!("standard output: {e}"))?;
+    }
+    Ok(())
+}
+
+fn settings_of(args: &RenderArgs) -> Result<RenderSettings, Failure> {
     let tone = match args.tone {
         ToneArg::Colorimetric => ToneOperator::Colorimetric,
         ToneArg::Linear => ToneOperator::Linear,
@@ -171,16 +246,19 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
             outside: args.scb_outside,
         },
     };
-    let settings = RenderSettings {
+    Ok(RenderSettings {
         adaptation: args.adapt.then_some(AdaptationTransform::Bradford),
         tone,
         gamut,
         bits: args.bits,
-    };
-    let rendering = crf
-        .render(&read.scene, &settings)
-        .map_err(|e| e.to_string())?;
-    let to_stdout = args.output.as_os_str() == "-";
+    })
+}
+
+fn write_codes(
+    args: &RenderArgs,
+    read: &ReadScene,
+    rendering: &chromacal::crf::Rendering,
+) -> Result<(), Failure> {
     if args
         .output
         .extension()
@@ -191,34 +269,107 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
                 "a PNG needs an image scene (--image or --spectral-image); write a .csv for a list",
             ));
         };
-        write_png16(&args.output, width, height, &rendering.pixels, args.bits)
-            .map_err(|e| e.to_string())?;
-    } else if to_stdout {
-        let mut out = std::io::stdout().lock();
-        write_codes_csv(&mut out, &read.scene.pixels, &rendering.pixels)
-            .map_err(|e| format!("standard output: {e}"))?;
-    } else {
-        let mut text = Vec::new();
-        write_codes_csv(&mut text, &read.scene.pixels, &rendering.pixels)
-            .map_err(|e| e.to_string())?;
-        std::fs::write(&args.output, text)
-            .map_err(|e| format!("{}: {e}", args.output.display()))?;
+        return write_png16(&args.output, width, height, &rendering.pixels, args.bits)
+            .map_err(|e| Failure::from(e.to_string()));
     }
-    let summary = describe(&rendering.summary, read.spectral.as_deref(), &args.output);
-    let json = serde_json::to_string_pretty(&rendering.summary).map_err(|e| e.to_string())?;
-    let text = if args.json { json } else { summary };
-    // The codes may be on standard output: the summary then goes to standard error.
-    if to_stdout {
-        eprintln!("{text}");
-    } else {
+    if args.output.as_os_str() == "-" {
         let mut out = std::io::stdout().lock();
-        writeln!(out, "{text}").map_err(|e| format!("standard output: {e}"))?;
+        return write_codes_csv(&mut out, &read.scene.pixels, &rendering.pixels)
+            .map_err(|e| Failure::from(format!("standard output: {e}")));
     }
-    Ok(())
+    let mut text = Vec::new();
+    write_codes_csv(&mut text, &read.scene.pixels, &rendering.pixels).map_err(|e| e.to_string())?;
+    std::fs::write(&args.output, text)
+        .map_err(|e| Failure::from(format!("{}: {e}", args.output.display())))
+}
+
+fn is_spectral(args: &RenderArgs) -> bool {
+    args.spectra.is_some() || args.reflectance.is_some() || args.spectral_image.is_some()
+}
+
+/// The cheapest of the survey's methods whose largest ΔE00 on this scene, against
+/// the direct sum, is below `limit`; and the lines that say so.
+fn choose_method(
+    read_with: &dyn Fn(&MethodKind) -> Result<ReadScene, Failure>,
+    reflective: bool,
+    white: &Xyz,
+    limit: f64,
+) -> Result<(MethodKind, Vec<String>), Failure> {
+    let reference = read_with(&MethodKind::Direct)?;
+    let mut best: Option<(usize, MethodKind, f64)> = None;
+    let mut lines = vec![format!(
+        "spectral method: the cheapest whose largest ΔE00 on this scene is below {limit}"
+    )];
+    for kind in standard_methods() {
+        let Ok(read) = read_with(&kind) else { continue };
+        let worst = read
+            .scene
+            .pixels
+            .iter()
+            .zip(&reference.scene.pixels)
+            .map(|(a, b)| delta_e00_xyz(&a.xyz, &b.xyz, white))
+            .fold(0.0, f64::max);
+        // Operations do not depend on the spectra (a flat one stands in for the
+        // family of characteristic vectors).
+        let method = SpectralMethod::new(kind.clone(), Observer::default(), &[vec![1.0; GRID_LEN]])
+            .map_err(|e| e.to_string())?;
+        let (p, i) = (method.product_operations(), method.integration_operations());
+        let operations = i.multiplications
+            + i.additions
+            + if reflective {
+                p.multiplications + p.additions
+            } else {
+                0
+            };
+        lines.push(format!(
+            "  {} ({}): {operations} operations, largest ΔE00 {worst:.3}",
+            kind.name(),
+            kind.parameter()
+        ));
+        if worst < limit && best.as_ref().is_none_or(|b| operations < b.0) {
+            best = Some((operations, kind, worst));
+        }
+    }
+    let (_, kind, _) = best.unwrap_or((0, MethodKind::Direct, 0.0));
+    lines.push(format!("  chosen: {} ({})", kind.name(), kind.parameter()));
+    Ok((kind, lines))
+}
+
+fn describe_explanation(e: &chromacal::crf::explain::Explanation) -> Vec<String> {
+    let mut lines = vec![format!(
+        "model parts this scene needs (a part costing less than ΔE00 {} everywhere is dropped):",
+        e.threshold
+    )];
+    for p in &e.parts {
+        let cost = match (&p.cost, p.present) {
+            (_, false) => "not in the profile".to_string(),
+            (Some(c), true) => format!("without it mean {:.3}, max {:.3}", c.mean, c.max),
+            (None, true) => "no pixels".to_string(),
+        };
+        let verdict = match (p.present, p.dropped) {
+            (false, _) => "",
+            (true, true) => " → dropped",
+            (true, false) => " → kept",
+        };
+        lines.push(format!("  {}: {cost}{verdict}", p.part.name()));
+    }
+    if let Some(c) = &e.combined {
+        lines.push(format!(
+            "  all dropped together: mean {:.3}, max {:.3}",
+            c.mean, c.max
+        ));
+    }
+    lines.push(format!(
+        "  render time: {:.1} ms with the full model, {:.1} ms with what is kept",
+        e.full_seconds * 1e3,
+        e.reduced_seconds * 1e3
+    ));
+    lines
 }
 
 fn read_scene(
     args: &RenderArgs,
+    method: &MethodKind,
     profile: &Profile,
     white_luminance: f64,
     display_white: &Xyz,
@@ -283,10 +434,10 @@ fn read_scene(
         let image = read_pfm(path, display_white).map_err(|e| e.to_string())?;
         return Ok(image_scene(&image, placement, xyz_scale, white, None));
     }
-    let method_name = format!("{} ({})", args.method.name(), args.method.parameter());
+    let method_name = format!("{} ({})", method.name(), method.parameter());
     if let Some(path) = &args.spectra {
         let spectra = read_spectra(path)?;
-        let xyz = integrate_all(&args.method, &spectra, None)?;
+        let xyz = integrate_all(method, &spectra, None)?;
         let scale = absolute_spectra("--spectra")?;
         return Ok(ReadScene {
             scene: Scene {
@@ -301,7 +452,7 @@ fn read_scene(
         let reflectances = read_spectra(path)?;
         let illuminant = chromacal::color::spectrum::Illuminant::from(args.illuminant).spectrum();
         let light = onto_grid(illuminant.wavelengths_nm(), illuminant.values());
-        let xyz = integrate_all(&args.method, &reflectances, Some(&light))?;
+        let xyz = integrate_all(method, &reflectances, Some(&light))?;
         return Ok(ReadScene {
             scene: Scene {
                 pixels: at_centre(xyz, relative_scale),
@@ -313,7 +464,7 @@ fn read_scene(
     }
     if let Some(dir) = &args.spectral_image {
         let (width, height, spectra) = read_spectral_stack(dir)?;
-        let xyz = integrate_all(&args.method, &spectra, None)?;
+        let xyz = integrate_all(method, &spectra, None)?;
         let scale = absolute_spectra("--spectral-image")?;
         let image = XyzImage { width, height, xyz };
         return Ok(image_scene(

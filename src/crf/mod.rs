@@ -17,6 +17,7 @@
 //!
 //! Spectra become XYZ before this (`spectral`), by one of the survey's methods.
 
+pub mod explain;
 pub mod gamut;
 pub mod scene;
 pub mod spectral;

@@ -1,0 +1,238 @@
+//! "Model only what a scene needs": which parts of the monitor model a given scene's
+//! rendering depends on, measured by rendering it without each and looking at what
+//! the display would then show.
+//!
+//! A part's cost is the ΔE00, pixel by pixel, between what the display shows for
+//! the codes of the full model and for the codes of the model without that part (both
+//! judged by the full model, which is the best knowledge of the display). A part whose
+//! largest cost over the scene is below the threshold is dropped; parts are dropped in
+//! order of cost while the combined cost stays below it, so what is dropped together
+//! is also checked together.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::color::Xyz;
+use crate::fit::stats::ErrorStats;
+use crate::fit::validate::delta_e00_xyz;
+use crate::model::MonitorModel;
+use crate::model::monitor::AdditivityTerms;
+use crate::model::spatial::SpatialMap;
+use crate::model::transfer::{Power, TransferLaw};
+
+use super::{ColourReproduction, CrfError, RenderSettings, Rendering, Scene};
+
+/// A part of the monitor model that a rendering may do without.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Part {
+    /// The spatial gain map (K = 1 everywhere without it).
+    SpatialMap,
+    /// The black and flare offset (zero without it).
+    BlackOffset,
+    /// Channel interaction and drive-dependent chromaticity.
+    AdditivityTerms,
+    /// Each transfer law beyond a power law (a power law fitted to it without it).
+    LawFineStructure,
+}
+
+impl Part {
+    pub fn name(self) -> &'static str {
+        match self {
+            Part::SpatialMap => "spatial map",
+            Part::BlackOffset => "black offset",
+            Part::AdditivityTerms => "additivity terms",
+            Part::LawFineStructure => "transfer laws' fine structure",
+        }
+    }
+
+    /// Whether `model` has this part at all.
+    fn present(self, model: &MonitorModel) -> bool {
+        match self {
+            Part::SpatialMap => !matches!(model.spatial, SpatialMap::Uniform),
+            Part::BlackOffset => model.black != Xyz::zeros(),
+            Part::AdditivityTerms => !model.terms.is_empty(),
+            Part::LawFineStructure => !model
+                .laws
+                .iter()
+                .all(|l| matches!(l, TransferLaw::Power(_))),
+        }
+    }
+
+    /// `model` without this part.
+    fn remove(self, model: &MonitorModel) -> MonitorModel {
+        let mut reduced = model.clone();
+        match self {
+            Part::SpatialMap => reduced.spatial = SpatialMap::Uniform,
+            Part::BlackOffset => reduced.black = Xyz::zeros(),
+            Part::AdditivityTerms => reduced.terms = AdditivityTerms::default(),
+            Part::LawFineStructure => {
+                for c in 0..3 {
+                    let law = &model.laws[c];
+                    let full = law.full_drive_excitation();
+                    reduced.laws[c] = TransferLaw::Power(Power {
+                        gamma: power_exponent(law),
+                    });
+                    // A power law gives 1 at full drive: the column carries E(1).
+                    let column = model.matrix.column(c) * full;
+                    reduced.matrix.set_column(c, &column);
+                }
+            }
+        }
+        reduced
+    }
+}
+
+/// The exponent of the power law nearest to `law` in log–log, over drives 0.05 … 1
+/// (least squares through the origin of log E/E(1) against log v).
+fn power_exponent(law: &TransferLaw) -> f64 {
+    let full = law.full_drive_excitation();
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for k in 1..=20 {
+        let v = k as f64 / 20.0;
+        let e = law.excitation(v) / full;
+        if v < 1.0 && e > 0.0 && e.is_finite() {
+            let (x, y) = (v.ln(), e.ln());
+            sxy += x * y;
+            sxx += x * x;
+        }
+    }
+    if sxx > 0.0 && (sxy / sxx).is_finite() {
+        (sxy / sxx).clamp(0.1, 10.0)
+    } else {
+        2.2
+    }
+}
+
+/// What one part costs the scene.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PartCost {
+    pub part: Part,
+    pub present: bool,
+    /// ΔE00 over the scene's pixels without this part (alone).
+    pub cost: Option<ErrorStats>,
+    pub dropped: bool,
+}
+
+/// The analysis of a scene, and the model it leaves.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Explanation {
+    pub threshold: f64,
+    pub parts: Vec<PartCost>,
+    /// ΔE00 of everything dropped together.
+    pub combined: Option<ErrorStats>,
+    /// Seconds to render the scene with the full model and with what is kept.
+    pub full_seconds: f64,
+    pub reduced_seconds: f64,
+    #[serde(skip)]
+    pub reduced: MonitorModel,
+}
+
+const PARTS: [Part; 4] = [
+    Part::SpatialMap,
+    Part::BlackOffset,
+    Part::AdditivityTerms,
+    Part::LawFineStructure,
+];
+
+/// What the display shows, by `truth`, for the codes of `rendering`.
+fn shown_by(truth: &MonitorModel, scene: &Scene, rendering: &Rendering, bits: u32) -> Vec<Xyz> {
+    let top = ((1u64 << bits) - 1) as f64;
+    scene
+        .pixels
+        .iter()
+        .zip(&rendering.pixels)
+        .map(|(p, r)| truth.forward(r.codes.map(|c| c as f64 / top), p.position))
+        .collect()
+}
+
+fn render_timed(
+    model: &MonitorModel,
+    scene: &Scene,
+    settings: &RenderSettings,
+) -> Result<(Rendering, f64), CrfError> {
+    let start = Instant::now();
+    let rendering = ColourReproduction::new(model)?.render(scene, settings)?;
+    Ok((rendering, start.elapsed().as_secs_f64()))
+}
+
+/// Analyse `scene` for `model` and drop what costs it less than `threshold` ΔE00.
+pub fn explain(
+    model: &MonitorModel,
+    scene: &Scene,
+    settings: &RenderSettings,
+    threshold: f64,
+) -> Result<Explanation, CrfError> {
+    let (full, full_seconds) = render_timed(model, scene, settings)?;
+    let reference = shown_by(model, scene, &full, settings.bits);
+    let white = model.white();
+    let cost_of = |reduced: &MonitorModel| -> Result<Option<ErrorStats>, CrfError> {
+        let rendering = ColourReproduction::new(reduced)?.render(scene, settings)?;
+        let shown = shown_by(model, scene, &rendering, settings.bits);
+        let errors: Vec<f64> = shown
+            .iter()
+            .zip(&reference)
+            .map(|(s, r)| delta_e00_xyz(s, r, &white))
+            .collect();
+        Ok(ErrorStats::of(&errors))
+    };
+    let mut parts = Vec::new();
+    for part in PARTS {
+        let present = part.present(model);
+        let cost = if present {
+            cost_of(&part.remove(model))?
+        } else {
+            None
+        };
+        parts.push(PartCost {
+            part,
+            present,
+            cost,
+            dropped: false,
+        });
+    }
+    // Cheapest first, each kept out only if everything dropped so far stays below.
+    let mut order: Vec<usize> = (0..parts.len())
+        .filter(|k| parts[*k].cost.as_ref().is_some_and(|c| c.max < threshold))
+        .collect();
+    order.sort_by(|a, b| {
+        let cost = |k: &usize| parts[*k].cost.as_ref().map_or(0.0, |c| c.max);
+        cost(a).total_cmp(&cost(b))
+    });
+    let mut reduced = model.clone();
+    let mut combined = None;
+    for k in order {
+        let candidate = parts[k].part.remove(&reduced);
+        let cost = cost_of(&candidate)?;
+        if cost.as_ref().is_some_and(|c| c.max < threshold) {
+            reduced = candidate;
+            combined = cost;
+            parts[k].dropped = true;
+        }
+    }
+    let (_, reduced_seconds) = render_timed(&reduced, scene, settings)?;
+    Ok(Explanation {
+        threshold,
+        parts,
+        combined,
+        full_seconds,
+        reduced_seconds,
+        reduced,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::transfer::GainOffsetGamma;
+
+    #[test]
+    fn the_power_law_nearest_a_power_law_is_itself() {
+        let law = TransferLaw::Power(Power { gamma: 2.35 });
+        assert!((power_exponent(&law) - 2.35).abs() < 1e-12);
+        let gog = TransferLaw::GainOffsetGamma(GainOffsetGamma::from_cutoff(0.05, 2.4));
+        let g = power_exponent(&gog);
+        assert!(g > 2.4 && g < 4.0, "{g}");
+    }
+}
