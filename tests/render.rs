@@ -570,3 +570,46 @@ fn render_explain_chooses_a_cheaper_spectral_method_within_the_limit() {
     // The codes went to standard output.
     assert!(String::from_utf8_lossy(&out.stdout).starts_with("index,screen_x"));
 }
+
+#[test]
+fn check_weighs_the_verification_by_a_scenes_colours() {
+    let state = profile_path().parent().unwrap();
+    let journal = common::daemon_runs(state).pop().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let model = model();
+    let run = |scene: &[Xyz]| {
+        let csv = dir.path().join("scene.csv");
+        let mut text = String::from("X,Y,Z\n");
+        for x in scene {
+            text.push_str(&format!("{},{},{}\n", x.x, x.y, x.z));
+        }
+        std::fs::write(&csv, text).unwrap();
+        let out = chromacal()
+            .arg("check")
+            .arg(profile_path())
+            .arg(&journal)
+            .arg("--scene")
+            .arg(&csv)
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        json["scene_weighted"].clone()
+    };
+    let dark: Vec<Xyz> = (1..6)
+        .map(|k| model.forward([0.05 * k as f64; 3], ScreenPosition::CENTRE))
+        .collect();
+    let bright: Vec<Xyz> = (1..6)
+        .map(|k| model.forward([0.75 + 0.05 * k as f64; 3], ScreenPosition::CENTRE))
+        .collect();
+    let (d, b) = (run(&dark), run(&bright));
+    assert_eq!(d["colours"], 5);
+    // The two scenes sample different patches, so they see different errors.
+    assert_ne!(d["mean"], b["mean"], "{d} {b}");
+    assert!(d["patches_used"].as_u64().unwrap() >= 1);
+}

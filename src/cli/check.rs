@@ -2,6 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
+use chromacal::crf::explain::{SceneWeighted, scene_weighted};
+use chromacal::crf::scene::read_xyz_csv;
 use chromacal::fit::checks::AssumptionChecks;
 use chromacal::fit::validate::{Evaluation, evaluate};
 use chromacal::measurement::Units;
@@ -22,10 +24,21 @@ pub struct CheckArgs {
     /// How many of the worst patches to list.
     #[arg(long, default_value_t = 10)]
     worst: usize,
+    /// Weigh the error by a scene's colours: an XYZ list (X, Y, Z columns, in the
+    /// measurements' units), each colour counting for the measured patch nearest it in
+    /// CIELAB.
+    #[arg(long)]
+    scene: Option<PathBuf>,
 }
 
 pub fn run(args: CheckArgs) -> Result<(), Failure> {
-    check(&args.profile, &args.measurements, args.json, args.worst)
+    check(
+        &args.profile,
+        &args.measurements,
+        args.json,
+        args.worst,
+        args.scene.as_deref(),
+    )
 }
 
 fn check(
@@ -33,6 +46,7 @@ fn check(
     measurements: &Path,
     json: bool,
     worst: usize,
+    scene: Option<&Path>,
 ) -> Result<(), Failure> {
     let profile = Profile::read(profile_path)?;
     let set = read_measurements(measurements)?;
@@ -86,9 +100,27 @@ fn check(
             unscorable.join(", ")
         )));
     }
+    let scene_weighted = match scene {
+        None => None,
+        Some(path) => {
+            let colours: Vec<_> = read_xyz_csv(path, 1.0)
+                .map_err(|e| e.to_string())?
+                .into_iter()
+                .map(|p| p.xyz)
+                .collect();
+            let patches: Vec<_> = evaluation
+                .patches
+                .iter()
+                .map(|p| (p.measured, p.delta_e00))
+                .collect();
+            scene_weighted(&patches, &colours, &model.white())
+        }
+    };
     if json {
         #[derive(serde::Serialize)]
         struct Output<'a> {
+            #[serde(skip_serializing_if = "Option::is_none")]
+            scene_weighted: Option<&'a SceneWeighted>,
             profile: String,
             measurements: String,
             note: Option<&'a str>,
@@ -100,6 +132,7 @@ fn check(
         println!(
             "{}",
             serde_json::to_string_pretty(&Output {
+                scene_weighted: scene_weighted.as_ref(),
                 profile: profile_path.display().to_string(),
                 measurements: measurements.display().to_string(),
                 note,
@@ -119,6 +152,12 @@ fn check(
             println!("  note: {n}");
         }
         print!("{}", report::check_summary(&evaluation, worst));
+        if let Some(w) = &scene_weighted {
+            println!(
+                "  weighted by the scene's {} colours ({} of the patches nearest them): mean ΔE00 {:.3}, max {:.3}",
+                w.colours, w.patches_used, w.mean, w.max
+            );
+        }
     }
     Ok(())
 }

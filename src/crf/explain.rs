@@ -222,10 +222,75 @@ pub fn explain(
     })
 }
 
+/// A verification's error as a scene sees it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SceneWeighted {
+    /// Scene colours weighed.
+    pub colours: usize,
+    /// Measured patches that are the nearest of at least one scene colour.
+    pub patches_used: usize,
+    /// Σ w ΔE00 / Σ w, w the number of scene colours nearest each patch.
+    pub mean: f64,
+    /// Largest ΔE00 of a patch some scene colour is nearest to.
+    pub max: f64,
+}
+
+/// Weigh each measured patch's ΔE00 by how many of the scene's colours are nearest to
+/// it in CIELAB (against `white`): the error the scene's own colours would see,
+/// as far as the verification sampled them. `patches` are (measured XYZ, ΔE00).
+pub fn scene_weighted(patches: &[(Xyz, f64)], scene: &[Xyz], white: &Xyz) -> Option<SceneWeighted> {
+    use crate::color::xyz_to_lab;
+    if patches.is_empty() || scene.is_empty() {
+        return None;
+    }
+    let labs: Vec<_> = patches.iter().map(|(x, _)| xyz_to_lab(x, white)).collect();
+    let mut weights = vec![0usize; patches.len()];
+    for colour in scene {
+        let lab = xyz_to_lab(colour, white);
+        let distance = |k: usize| {
+            let p = &labs[k];
+            (p.l - lab.l).powi(2) + (p.a - lab.a).powi(2) + (p.b - lab.b).powi(2)
+        };
+        if let Some(nearest) =
+            (0..patches.len()).min_by(|a, b| distance(*a).total_cmp(&distance(*b)))
+        {
+            weights[nearest] += 1;
+        }
+    }
+    let used: Vec<usize> = (0..patches.len()).filter(|k| weights[*k] > 0).collect();
+    let total: usize = weights.iter().sum();
+    Some(SceneWeighted {
+        colours: scene.len(),
+        patches_used: used.len(),
+        mean: used
+            .iter()
+            .map(|k| weights[*k] as f64 * patches[*k].1)
+            .sum::<f64>()
+            / total as f64,
+        max: used.iter().map(|k| patches[*k].1).fold(0.0, f64::max),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::model::transfer::GainOffsetGamma;
+
+    #[test]
+    fn scene_weighting_follows_the_scene_colours() {
+        let white = Xyz::new(95.0, 100.0, 109.0);
+        let dark = Xyz::new(5.0, 5.0, 5.5);
+        let light = Xyz::new(80.0, 84.0, 92.0);
+        let patches = [(dark, 2.0), (light, 0.2)];
+        // A dark scene sees the dark patch's error, a light one the light patch's.
+        let near_dark = [Xyz::new(4.0, 4.2, 4.6), Xyz::new(6.0, 6.1, 6.8)];
+        let w = scene_weighted(&patches, &near_dark, &white).unwrap();
+        assert_eq!((w.patches_used, w.mean), (1, 2.0));
+        let mixed = [Xyz::new(4.0, 4.2, 4.6), light, light, light];
+        let w = scene_weighted(&patches, &mixed, &white).unwrap();
+        assert!((w.mean - (2.0 + 3.0 * 0.2) / 4.0).abs() < 1e-12);
+        assert_eq!(w.max, 2.0);
+    }
 
     #[test]
     fn the_power_law_nearest_a_power_law_is_itself() {
