@@ -613,3 +613,42 @@ fn check_weighs_the_verification_by_a_scenes_colours() {
     assert_ne!(d["mean"], b["mean"], "{d} {b}");
     assert!(d["patches_used"].as_u64().unwrap() >= 1);
 }
+
+#[test]
+fn an_openexr_image_renders_like_the_same_pfm() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = model();
+    let colour = model.forward([0.6, 0.3, 0.2], ScreenPosition::CENTRE);
+    let (x, y, z) = (colour.x as f32, colour.y as f32, colour.z as f32);
+    let exr = dir.path().join("scene.exr");
+    exr::prelude::write_rgb_file(&exr, 3, 2, |_, _| (x, y, z)).unwrap();
+    let pfm = dir.path().join("scene.pfm");
+    chromacal::crf::scene::write_pfm(
+        &pfm,
+        &chromacal::crf::scene::XyzImage {
+            width: 3,
+            height: 2,
+            xyz: vec![Xyz::new(x.into(), y.into(), z.into()); 6],
+        },
+    )
+    .unwrap();
+    let codes = |image: &std::path::Path| {
+        let out = chromacal()
+            .arg("render")
+            .arg(profile_path())
+            .arg("--image")
+            .arg(image)
+            .args(["-o", "-"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    let (a, b) = (codes(&exr), codes(&pfm));
+    assert_eq!(a.lines().count(), 7);
+    assert_eq!(a, b);
+}

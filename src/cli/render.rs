@@ -13,7 +13,7 @@ use chromacal::color::spectrum::{KM_PHOTOPIC, Observer};
 use chromacal::crf::explain::explain;
 use chromacal::crf::gamut::{GamutMapping, UniformSpace};
 use chromacal::crf::scene::{
-    Placement, XyzImage, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
+    Placement, XyzImage, read_exr, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
 };
 use chromacal::crf::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
 use chromacal::crf::spectral_table::standard_methods;
@@ -40,7 +40,7 @@ pub struct RenderArgs {
     #[arg(long, group = "scene")]
     xyz: Option<PathBuf>,
     /// XYZ image: a PFM (PF: X, Y, Z per pixel; Pf: Y alone, at the display white's
-    /// chromaticity).
+    /// chromaticity) or an OpenEXR (.exr: channels X, Y, Z, or R, G, B holding X, Y, Z).
     #[arg(long, group = "scene")]
     image: Option<PathBuf>,
     /// Emission spectra: wavelength_nm, then one column of radiance
@@ -431,7 +431,15 @@ fn read_scene(
         });
     }
     if let Some(path) = &args.image {
-        let image = read_pfm(path, display_white).map_err(|e| e.to_string())?;
+        let exr = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+        let image = if exr {
+            read_exr(path)
+        } else {
+            read_pfm(path, display_white)
+        }
+        .map_err(|e| e.to_string())?;
         return Ok(image_scene(&image, placement, xyz_scale, white, None));
     }
     let method_name = format!("{} ({})", method.name(), method.parameter());

@@ -1,4 +1,4 @@
-//! Scenes in and display codes out: XYZ lists (CSV), float images (PFM), and the
+//! Scenes in and display codes out: XYZ lists (CSV), float images (PFM, OpenEXR), and the
 //! codes as CSV or a 16-bit PNG.
 //!
 //! A list names each colour's screen position in optional `screen_x`, `screen_y`
@@ -283,6 +283,66 @@ pub fn read_pfm(path: &Path, grey: &Xyz) -> Result<XyzImage, SceneError> {
     Ok(XyzImage { width, height, xyz })
 }
 
+/// An OpenEXR image of XYZ: the first layer's channels `X`, `Y`, `Z`, or, when it has
+/// none of those, its `R`, `G`, `B` read as X, Y, Z (an XYZ image written by a tool
+/// that knows only RGB channels). Any sample type is read as 32-bit float.
+pub fn read_exr(path: &Path) -> Result<XyzImage, SceneError> {
+    use exr::prelude::{ReadChannels, ReadLayers, ReadSpecificChannel, read};
+    let bad = |what: String| SceneError::Format {
+        path: path.to_path_buf(),
+        what,
+    };
+    let size = std::fs::metadata(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if size.len() > (MAX_PIXELS * 16) as u64 {
+        return Err(bad(format!("larger than {} bytes", MAX_PIXELS * 16)));
+    }
+    let by_names = |names: [&str; 3]| {
+        read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .specific_channels()
+            .required(names[0])
+            .required(names[1])
+            .required(names[2])
+            .collect_pixels(
+                |resolution, _| (resolution.width(), vec![Xyz::zeros(); resolution.area()]),
+                |(width, pixels): &mut (usize, Vec<Xyz>), position, (x, y, z): (f32, f32, f32)| {
+                    pixels[position.y() * *width + position.x()] =
+                        Xyz::new(f64::from(x), f64::from(y), f64::from(z));
+                },
+            )
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(path)
+    };
+    let image = by_names(["X", "Y", "Z"])
+        .or_else(|_| by_names(["R", "G", "B"]))
+        .map_err(|e| {
+            bad(format!(
+                "not an OpenEXR image with X, Y, Z (or R, G, B) channels: {e}"
+            ))
+        })?;
+    let size = image.layer_data.size;
+    let (width, height) = (size.width(), size.height());
+    if width == 0 || height == 0 || width.saturating_mul(height) > MAX_PIXELS {
+        return Err(bad(format!(
+            "{width} × {height} pixels (at most {MAX_PIXELS})"
+        )));
+    }
+    let xyz = image.layer_data.channel_data.pixels.1;
+    if let Some(k) = xyz.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
+        return Err(bad(format!(
+            "pixel ({}, {}) is not a finite number",
+            k % width,
+            k / width
+        )));
+    }
+    Ok(XyzImage { width, height, xyz })
+}
+
 /// Write a PFM of XYZ (little-endian), rows from the bottom as the format has them.
 pub fn write_pfm(path: &Path, image: &XyzImage) -> Result<(), SceneError> {
     let mut out = format!("PF\n{} {}\n-1.0\n", image.width, image.height).into_bytes();
@@ -405,6 +465,33 @@ mod tests {
             e.contains("4 bytes of pixels where 2 × 2 × 3 floats take 48"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn an_exr_with_xyz_or_rgb_channels_is_read_as_xyz() {
+        use exr::prelude::{Image, SpecificChannels, WritableImage};
+        let dir = tempfile::tempdir().unwrap();
+        let named = dir.path().join("xyz.exr");
+        let pixels = SpecificChannels::build()
+            .with_channel("X")
+            .with_channel("Y")
+            .with_channel("Z")
+            .with_pixel_fn(|p| (p.0 as f32, p.1 as f32 * 10.0, 0.5f32));
+        Image::from_channels((3, 2), pixels)
+            .write()
+            .to_file(&named)
+            .unwrap();
+        let image = read_exr(&named).unwrap();
+        assert_eq!((image.width, image.height), (3, 2));
+        assert_eq!(image.xyz[5], Xyz::new(2.0, 10.0, 0.5));
+        let rgb = dir.path().join("rgb.exr");
+        exr::prelude::write_rgb_file(&rgb, 2, 2, |x, y| (x as f32, y as f32, 7.0f32)).unwrap();
+        let image = read_exr(&rgb).unwrap();
+        assert_eq!(image.xyz[3], Xyz::new(1.0, 1.0, 7.0));
+        let junk = dir.path().join("junk.exr");
+        std::fs::write(&junk, b"not an image").unwrap();
+        let e = read_exr(&junk).unwrap_err().to_string();
+        assert!(e.contains("not an OpenEXR image"), "{e}");
     }
 
     #[test]
