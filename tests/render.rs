@@ -652,3 +652,72 @@ fn an_openexr_image_renders_like_the_same_pfm() {
     assert_eq!(a.lines().count(), 7);
     assert_eq!(a, b);
 }
+
+#[test]
+fn the_readme_example_writes_the_colorchecker_as_a_png_laid_out_on_the_screen() {
+    let dir = tempfile::tempdir().unwrap();
+    let checker = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data/colorchecker/colorchecker_n_ohta_5nm.csv");
+    let run = |output: &std::path::Path| {
+        let out = chromacal()
+            .arg("render")
+            .arg(profile_path())
+            .arg("--reflectance")
+            .arg(&checker)
+            .args([
+                "--illuminant",
+                "D65",
+                "--white-luminance",
+                "90",
+                "--grid",
+                "6x4",
+                "--at",
+                "0.25,0.25,0.5,0.5",
+                "--gamut",
+                "grey-lab",
+                "--explain",
+                "-o",
+            ])
+            .arg(output)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    let png_path = dir.path().join("checker.png");
+    let said = run(&png_path);
+    assert!(said.contains("rendered 24 pixels"), "{said}");
+    let csv_path = dir.path().join("checker.csv");
+    run(&csv_path);
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(&png_path).unwrap(),
+    ));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buffer).unwrap();
+    assert_eq!((info.width, info.height), (6, 4));
+    // Row by row from the top left: the PNG's pixel k is the list's patch k, its
+    // codes those of the CSV, scaled from 8 bits to 16, and its place on the screen
+    // the middle half.
+    let csv = std::fs::read_to_string(&csv_path).unwrap();
+    for (k, line) in csv.lines().skip(1).enumerate() {
+        let fields: Vec<f64> = line.split(',').map(|f| f.parse().unwrap()).collect();
+        let (x, y) = (fields[1], fields[2]);
+        assert!((x - (0.25 + 0.5 * ((k % 6) as f64 + 0.5) / 6.0)).abs() < 1e-12);
+        assert!((y - (0.25 + 0.5 * ((k / 6) as f64 + 0.5) / 4.0)).abs() < 1e-12);
+        for c in 0..3 {
+            let at = (k * 3 + c) * 2;
+            let v = u16::from_be_bytes([buffer[at], buffer[at + 1]]);
+            assert_eq!(
+                v as f64,
+                fields[3 + c] * 257.0,
+                "patch {} channel {c}",
+                k + 1
+            );
+        }
+    }
+}

@@ -76,6 +76,11 @@ pub struct RenderArgs {
     /// Where an image sits on the screen: LEFT,TOP,WIDTH,HEIGHT in fractions.
     #[arg(long, default_value = "0,0,1,1")]
     at: String,
+    /// Lay a list (--xyz without positions, --spectra, --reflectance) out as an image
+    /// of COLUMNSxROWS, row by row from the top left, placed by --at: e.g. 6x4 for
+    /// the ColorChecker. Then a PNG can be written.
+    #[arg(long)]
+    grid: Option<String>,
     /// Tone reproduction.
     #[arg(long, value_enum, default_value = "colorimetric")]
     tone: ToneArg,
@@ -189,7 +194,10 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
     } else {
         args.method.clone()
     };
-    let read = read_with(&method)?;
+    let mut read = read_with(&method)?;
+    if let Some(grid) = &args.grid {
+        lay_out(&mut read, grid, &placement)?;
+    }
     let model = if args.explain {
         let explanation = explain(&profile.model, &read.scene, &settings, args.max_de00)
             .map_err(|e| e.to_string())?;
@@ -219,6 +227,41 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
         let mut out = std::io::stdout().lock();
         writeln!(out, "{text}").map_err(|e| format!("standard output: {e}"))?;
     }
+    Ok(())
+}
+
+/// Place a list's colours as a COLUMNSxROWS image.
+fn lay_out(read: &mut ReadScene, grid: &str, placement: &Placement) -> Result<(), Failure> {
+    let size = grid
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| {
+            Some((
+                w.trim().parse::<usize>().ok()?,
+                h.trim().parse::<usize>().ok()?,
+            ))
+        })
+        .filter(|(w, h)| *w > 0 && *h > 0);
+    let Some((width, height)) = size else {
+        return Err(Failure::from(format!(
+            "--grid '{grid}': COLUMNSxROWS is needed, e.g. 6x4"
+        )));
+    };
+    if read.size.is_some() {
+        return Err(Failure::from(
+            "--grid lays out a list; the scene is an image already",
+        ));
+    }
+    let n = read.scene.pixels.len();
+    if width.checked_mul(height) != Some(n) {
+        return Err(Failure::from(format!(
+            "--grid {width}x{height} holds {} colours, and the scene has {n}",
+            width.saturating_mul(height)
+        )));
+    }
+    for (k, pixel) in read.scene.pixels.iter_mut().enumerate() {
+        pixel.position = placement.position(k % width, k / width, width, height);
+    }
+    read.size = Some((width, height));
     Ok(())
 }
 
@@ -266,7 +309,7 @@ fn write_codes(
     {
         let Some((width, height)) = read.size else {
             return Err(Failure::from(
-                "a PNG needs an image scene (--image or --spectral-image); write a .csv for a list",
+                "a PNG needs an image scene (--image, --spectral-image, or a list laid out with --grid); write a .csv for a list",
             ));
         };
         return write_png16(&args.output, width, height, &rendering.pixels, args.bits)

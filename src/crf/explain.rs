@@ -85,14 +85,18 @@ impl Part {
 }
 
 /// The exponent of the power law nearest to `law` in log–log, over drives 0.05 … 1
-/// (least squares through the origin of log E/E(1) against log v).
+/// where the light is above a thousandth of full (least squares through the origin of
+/// log E/E(1) against log v).
 fn power_exponent(law: &TransferLaw) -> f64 {
     let full = law.full_drive_excitation();
     let (mut sxy, mut sxx) = (0.0, 0.0);
     for k in 1..=20 {
         let v = k as f64 / 20.0;
         let e = law.excitation(v) / full;
-        if v < 1.0 && e > 0.0 && e.is_finite() {
+        // Below a thousandth of full light a cut-off or a toe dominates the logarithm
+        // (a gain-offset-gamma law at its cut-off gives 1e-41): those drives say
+        // nothing of the power the rest of the curve follows.
+        if v < 1.0 && e > 1e-3 && e.is_finite() {
             let (x, y) = (v.ln(), e.ln());
             sxy += x * y;
             sxx += x * x;
