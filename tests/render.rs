@@ -721,3 +721,39 @@ fn the_readme_example_writes_the_colorchecker_as_a_png_laid_out_on_the_screen() 
         }
     }
 }
+
+#[test]
+fn the_fast_loop_round_trips_a_whole_screen_image_through_the_spatial_map() {
+    // 256 × 256 pixels over the whole screen, colours the display makes there: the
+    // batch loop's 16-bit codes show them, and agree with the exact inversion.
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let side = 256;
+    let at = |k: usize| {
+        ScreenPosition::new(
+            ((k % side) as f64 + 0.5) / side as f64,
+            ((k / side) as f64 + 0.5) / side as f64,
+        )
+    };
+    let asked: Vec<Xyz> = (0..side * side)
+        .map(|k| {
+            let f = |s: usize| 0.03 + 0.9 * (((k * 7919 + s * 104_729) % 1000) as f64 / 999.0);
+            model.forward([f(0), f(1), f(2)], at(k))
+        })
+        .collect();
+    let mut codes = vec![[0u16; 3]; asked.len()];
+    crf.codes16(&asked, at, &mut codes);
+    let white = model.white();
+    let (mut worst, mut worst_against_exact): (f64, f64) = (0.0, 0.0);
+    for (k, (x, c)) in asked.iter().zip(&codes).enumerate() {
+        let shown = model.forward(c.map(|v| v as f64 / 65535.0), at(k));
+        worst = worst.max(delta_e00_xyz(x, &shown, &white));
+        // Against the exact inversion, in what the display shows (near a law's
+        // cut-off drives differ by more than a code and give the same light).
+        let exact = crf.drive_exact_for(x, at(k));
+        let exact_shown = model.forward(exact, at(k));
+        worst_against_exact = worst_against_exact.max(delta_e00_xyz(&exact_shown, &shown, &white));
+    }
+    assert!(worst < 0.05, "worst ΔE00 {worst}");
+    assert!(worst_against_exact < 0.05, "{worst_against_exact}");
+}

@@ -246,7 +246,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',')]
     laws: Option<Vec<LawArg>>,
     /// Only these tables (comma-separated): fit-time, budget, sequential, argyll,
-    /// spectral.
+    /// spectral, render.
     #[arg(long, value_delimiter = ',', value_parser = TABLES)]
     only: Vec<String>,
     /// The same as --only, as words: `chromacal bench spectral`.
@@ -255,7 +255,14 @@ pub struct BenchArgs {
 }
 
 /// The tables `bench` prints.
-const TABLES: [&str; 5] = ["fit-time", "budget", "sequential", "argyll", "spectral"];
+const TABLES: [&str; 6] = [
+    "fit-time",
+    "budget",
+    "sequential",
+    "argyll",
+    "spectral",
+    "render",
+];
 
 pub fn run(args: BenchArgs) -> Result<(), Failure> {
     let data = args.data.unwrap_or_else(|| PathBuf::from("../shared/data"));
@@ -281,6 +288,9 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
     }
     if wanted("spectral") {
         super::bench_spectral::spectral_tables(&data, args.quick)?;
+    }
+    if wanted("render") {
+        super::bench_render::render_table(args.quick)?;
     }
     Ok(())
 }

@@ -19,6 +19,7 @@
 
 pub mod explain;
 pub mod gamut;
+pub mod inverse_table;
 pub mod scene;
 pub mod spectral;
 pub mod spectral_table;
@@ -33,6 +34,7 @@ use crate::fit::stats::ErrorStats;
 use crate::fit::validate::delta_e00_xyz;
 use crate::model::{Drive, MonitorModel, ScreenPosition};
 use gamut::{GamutAt, GamutMapping, StoneCowanBeatty};
+use inverse_table::InverseTable;
 use tone::{SceneLuminance, ToneCurve, ToneOperator};
 
 /// Why a scene could not be rendered.
@@ -131,6 +133,8 @@ pub struct ColourReproduction<'a> {
     matrix_inverse: Matrix3<f64>,
     /// E_c(1) of each channel.
     full: [f64; 3],
+    /// Each law's inverse, tabulated.
+    tables: [InverseTable; 3],
     /// The display's centre white: the reference white of every ΔE00 here.
     white: Xyz,
 }
@@ -142,6 +146,7 @@ impl<'a> ColourReproduction<'a> {
             model,
             matrix_inverse,
             full: [0, 1, 2].map(|c| model.laws[c].full_drive_excitation()),
+            tables: [0, 1, 2].map(|c| InverseTable::of(&model.laws[c])),
             white: model.white(),
         })
     }
@@ -168,7 +173,77 @@ impl<'a> ColourReproduction<'a> {
     /// The drive that shows `xyz` (inside the gamut) at `position`: cube coordinates
     /// to excitations, each law inverted; through the whole model's fixed point when
     /// the profile has additivity terms.
+    /// Each law's inverse comes from its table (`inverse_table`); `drive_exact_for`
+    /// inverts the laws themselves.
     pub fn drive_for(&self, xyz: &Xyz, position: ScreenPosition) -> Drive {
+        if !self.model.terms.is_empty() {
+            return self.drive_exact_for(xyz, position);
+        }
+        let k = self.model.spatial.gains(position);
+        let light = self.matrix_inverse * (xyz - self.model.black);
+        [0, 1, 2].map(|c| {
+            let scale = k[c] * self.full[c];
+            let share = if scale > 0.0 { light[c] / scale } else { 0.0 };
+            self.tables[c].drive(share)
+        })
+    }
+
+    /// 16-bit codes for many colours at one position each, the inner loop of a large
+    /// scene: `drive_for` written out for throughput (the matrix rows scaled by each
+    /// channel's full light at the position, the tables read in place). Profiles with
+    /// additivity terms go through `drive_for`.
+    pub fn codes16(
+        &self,
+        xyz: &[Xyz],
+        positions: impl Fn(usize) -> ScreenPosition,
+        out: &mut [[u16; 3]],
+    ) {
+        if !self.model.terms.is_empty() {
+            for (k, (x, o)) in xyz.iter().zip(out.iter_mut()).enumerate() {
+                *o = self
+                    .drive_for(x, positions(k))
+                    .map(|d| (d * 65535.0 + 0.5) as u16);
+            }
+            return;
+        }
+        let uniform = matches!(
+            self.model.spatial,
+            crate::model::spatial::SpatialMap::Uniform
+        );
+        let m = &self.matrix_inverse;
+        let rows =
+            [0, 1, 2].map(|c| [m[(c, 0)], m[(c, 1)], m[(c, 2)]].map(|v| (v / self.full[c]) as f32));
+        let black = self.model.black.map(|v| v as f32);
+        let tables = [&self.tables[0], &self.tables[1], &self.tables[2]];
+        use inverse_table::BLOCK;
+        let mut shares = [[0f32; BLOCK]; 3];
+        for (b, (block, codes)) in xyz.chunks(BLOCK).zip(out.chunks_mut(BLOCK)).enumerate() {
+            for (j, x) in block.iter().enumerate() {
+                let d = [
+                    x.x as f32 - black.x,
+                    x.y as f32 - black.y,
+                    x.z as f32 - black.z,
+                ];
+                let gains = if uniform {
+                    [1.0; 3]
+                } else {
+                    self.model
+                        .spatial
+                        .gains(positions(b * BLOCK + j))
+                        .map(|g| g as f32)
+                };
+                for c in 0..3 {
+                    let r = &rows[c];
+                    shares[c][j] = (r[0] * d[0] + r[1] * d[1] + r[2] * d[2]) / gains[c];
+                }
+            }
+            inverse_table::codes16_of_shares(tables, &mut shares, block.len(), codes);
+        }
+    }
+
+    /// As `drive_for`, each law inverted exactly (and the additivity terms' fixed
+    /// point when the profile has them): slower, for checking the tables.
+    pub fn drive_exact_for(&self, xyz: &Xyz, position: ScreenPosition) -> Drive {
         if !self.model.terms.is_empty() {
             return match self.model.inverse(xyz, position) {
                 Ok(r) => r.drive,

@@ -65,12 +65,29 @@ pub struct Surface {
 }
 
 impl Surface {
+    /// K(p), the monomials of `surface_basis` in the same order, made on the way (no
+    /// allocation: this runs once a pixel when a scene is rendered).
     pub fn gain(&self, position: ScreenPosition) -> f64 {
-        1.0 + surface_basis(position, self.degree)
-            .iter()
-            .zip(&self.coefficients)
-            .map(|(phi, c)| phi * c)
-            .sum::<f64>()
+        let degree = (self.degree as usize).min(MAX_SURFACE_DEGREE as usize);
+        let (mut u, mut v) = (
+            [1.0; MAX_SURFACE_DEGREE as usize + 1],
+            [1.0; MAX_SURFACE_DEGREE as usize + 1],
+        );
+        for k in 1..=degree {
+            u[k] = u[k - 1] * (2.0 * position.x - 1.0);
+            v[k] = v[k - 1] * (2.0 * position.y - 1.0);
+        }
+        let mut coefficients = self.coefficients.iter();
+        let mut sum = 1.0;
+        for total in 1..=degree {
+            for i in (0..=total).rev() {
+                let Some(c) = coefficients.next() else {
+                    return sum;
+                };
+                sum += c * u[i] * v[total - i];
+            }
+        }
+        sum
     }
 }
 
@@ -181,5 +198,14 @@ mod tests {
         assert!((s.gain(ScreenPosition::CENTRE) - 1.0).abs() < 1e-15);
         // At the right edge (u = 1, v = 0): 1 + 0.1 − 0.05.
         assert!((s.gain(ScreenPosition::new(1.0, 0.5)) - 1.05).abs() < 1e-12);
+        // Anywhere: the sum over the basis.
+        let p = ScreenPosition::new(0.13, 0.71);
+        let by_basis: f64 = 1.0
+            + surface_basis(p, 2)
+                .iter()
+                .zip(&s.coefficients)
+                .map(|(phi, c)| phi * c)
+                .sum::<f64>();
+        assert!((s.gain(p) - by_basis).abs() < 1e-15);
     }
 }
