@@ -722,6 +722,17 @@ fn the_readme_example_writes_the_colorchecker_as_a_png_laid_out_on_the_screen() 
     }
 }
 
+/// Screen position of pixel k of a `side` × `side` image over the whole screen, row
+/// by row from the top left.
+fn row_major(side: usize) -> impl Fn(usize) -> ScreenPosition + Copy {
+    move |k| {
+        ScreenPosition::new(
+            ((k % side) as f64 + 0.5) / side as f64,
+            ((k / side) as f64 + 0.5) / side as f64,
+        )
+    }
+}
+
 #[test]
 fn the_fast_loop_round_trips_a_whole_screen_image_through_the_spatial_map() {
     // 256 × 256 pixels over the whole screen, colours the display makes there: the
@@ -729,12 +740,7 @@ fn the_fast_loop_round_trips_a_whole_screen_image_through_the_spatial_map() {
     let model = model();
     let crf = ColourReproduction::new(&model).unwrap();
     let side = 256;
-    let at = |k: usize| {
-        ScreenPosition::new(
-            ((k % side) as f64 + 0.5) / side as f64,
-            ((k / side) as f64 + 0.5) / side as f64,
-        )
-    };
+    let at = row_major(side);
     let asked: Vec<Xyz> = (0..side * side)
         .map(|k| {
             let f = |s: usize| 0.03 + 0.9 * (((k * 7919 + s * 104_729) % 1000) as f64 / 999.0);
@@ -756,4 +762,120 @@ fn the_fast_loop_round_trips_a_whole_screen_image_through_the_spatial_map() {
     }
     assert!(worst < 0.05, "worst ΔE00 {worst}");
     assert!(worst_against_exact < 0.05, "{worst_against_exact}");
+}
+
+#[test]
+fn a_four_megapixel_image_renders_through_the_whole_model() {
+    // 2048 × 2048 over the whole screen, through the spatial map; the round trip is
+    // checked on a spread sample of 16,384 pixels.
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let side = 2048;
+    let at = row_major(side);
+    // Colours the display makes where they are shown: a drive pattern that varies
+    // over the screen, put through the forward model row by row.
+    let drive = |k: usize| {
+        let (x, y) = (k % side, k / side);
+        [
+            0.05 + 0.9 * (x as f64 / (side - 1) as f64),
+            0.05 + 0.9 * (y as f64 / (side - 1) as f64),
+            0.05 + 0.9 * (((x * 31 + y * 17) % 997) as f64 / 996.0),
+        ]
+    };
+    let asked: Vec<Xyz> = (0..side * side)
+        .map(|k| model.forward(drive(k), at(k)))
+        .collect();
+    let mut codes = vec![[0u16; 3]; asked.len()];
+    crf.codes16(&asked, at, &mut codes);
+    let white = model.white();
+    let worst = (0..asked.len())
+        .step_by(256)
+        .map(|k| {
+            let shown = model.forward(codes[k].map(|v| v as f64 / 65535.0), at(k));
+            delta_e00_xyz(&asked[k], &shown, &white)
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 0.05, "worst ΔE00 {worst}");
+}
+
+#[test]
+fn spectra_and_a_spectral_image_render_as_their_xyz_would() {
+    // Three emission spectra (the CRT preset's own primaries at full drive, radiance
+    // scaled to a few cd/m²) as a CSV, and the same three as a 3 × 1 spectral image of
+    // per-wavelength PFM planes: both give the codes of their XYZ.
+    let dir = tempfile::tempdir().unwrap();
+    let spd = common::shared_table("displays/spd/colour_typical_crt_brainard1997_5nm.csv");
+    let scale = 0.0005;
+    let mut csv = String::from("wavelength_nm,r,g,b\n");
+    for row in &spd {
+        csv.push_str(&format!(
+            "{},{},{},{}\n",
+            row[0],
+            row[1] * scale,
+            row[2] * scale,
+            row[3] * scale
+        ));
+    }
+    let spectra = dir.path().join("spectra.csv");
+    std::fs::write(&spectra, csv).unwrap();
+    let stack = dir.path().join("stack");
+    std::fs::create_dir(&stack).unwrap();
+    for row in &spd {
+        let plane = chromacal::crf::scene::XyzImage {
+            width: 3,
+            height: 1,
+            xyz: (1..4).map(|c| Xyz::new(0.0, row[c] * scale, 0.0)).collect(),
+        };
+        // Each plane a PFM whose Y is the radiance at its wavelength (the stack reader
+        // takes Y from a three-channel plane and the value from a one-channel one).
+        chromacal::crf::scene::write_pfm(&stack.join(format!("{}.pfm", row[0])), &plane).unwrap();
+    }
+    let run = |args: &[&std::ffi::OsStr]| {
+        let out = chromacal()
+            .arg("render")
+            .arg(profile_path())
+            .args(args)
+            .args(["-o", "-"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        text.lines()
+            .skip(1)
+            .map(|l| {
+                l.split(',')
+                    .skip(3)
+                    .take(6)
+                    .map(|v| v.parse::<f64>().unwrap())
+                    .collect::<Vec<_>>()
+            })
+            .collect::<Vec<_>>()
+    };
+    // The list laid out as the image is, so that both sit at the same places.
+    let from_csv = run(&[
+        "--spectra".as_ref(),
+        spectra.as_os_str(),
+        "--grid".as_ref(),
+        "3x1".as_ref(),
+    ]);
+    let from_stack = run(&["--spectral-image".as_ref(), stack.as_os_str()]);
+    assert_eq!(from_csv.len(), 3);
+    // The same targets and codes, whatever the file form.
+    for (a, b) in from_csv.iter().zip(&from_stack) {
+        for k in 0..6 {
+            assert!(
+                (a[k] - b[k]).abs() <= 1e-6 * a[k].abs().max(1.0),
+                "{a:?} {b:?}"
+            );
+        }
+    }
+    // Red's spectrum gives mostly red code.
+    assert!(
+        from_csv[0][0] > from_csv[0][1] && from_csv[0][0] > from_csv[0][2],
+        "{from_csv:?}"
+    );
 }

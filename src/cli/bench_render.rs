@@ -348,9 +348,11 @@ fn lcms_row(
     let speed = throughput(repeats, || transform.transform_pixels(pcs, &mut output));
     let error = error_of(model, asked, &|_| ScreenPosition::CENTRE, &|k| output[k]);
     Ok(Row {
+        // Little CMS numbers its versions as 1000 × major + 10 × minor: 2190 is 2.19.
         tool: format!(
-            "Little CMS {} (the exported ICC v4, double)",
-            lcms2::version()
+            "Little CMS {}.{} (the exported ICC v4, double)",
+            lcms2::version() / 1000,
+            lcms2::version() % 1000 / 10
         ),
         cores: "1".into(),
         pixels_per_second: speed,
