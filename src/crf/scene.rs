@@ -299,6 +299,16 @@ pub fn read_exr(path: &Path) -> Result<XyzImage, SceneError> {
     if size.len() > (MAX_PIXELS * 16) as u64 {
         return Err(bad(format!("larger than {} bytes", MAX_PIXELS * 16)));
     }
+    // The headers first: a small file may claim a huge image, and the pixels are
+    // allocated from what it claims.
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| bad(format!("not an OpenEXR image: {e}")))?;
+    for header in &meta.headers {
+        let (w, h) = (header.layer_size.width(), header.layer_size.height());
+        if w.saturating_mul(h) > MAX_PIXELS {
+            return Err(bad(format!("{w} × {h} pixels (at most {MAX_PIXELS})")));
+        }
+    }
     let by_names = |names: [&str; 3]| {
         read()
             .no_deep_data()
@@ -488,6 +498,17 @@ mod tests {
         exr::prelude::write_rgb_file(&rgb, 2, 2, |x, y| (x as f32, y as f32, 7.0f32)).unwrap();
         let image = read_exr(&rgb).unwrap();
         assert_eq!(image.xyz[3], Xyz::new(1.0, 1.0, 7.0));
+        // A small file whose header claims 100001 × 100001 pixels (its data window
+        // patched) is refused before anything that size is made.
+        let mut bytes = std::fs::read(&rgb).unwrap();
+        let key = b"dataWindow\0box2i\0";
+        let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+        bytes[at + 8..at + 12].copy_from_slice(&100_000i32.to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&100_000i32.to_le_bytes());
+        let huge = dir.path().join("huge.exr");
+        std::fs::write(&huge, bytes).unwrap();
+        let e = read_exr(&huge).unwrap_err().to_string();
+        assert!(e.contains("100001 × 100001 pixels (at most"), "{e}");
         let junk = dir.path().join("junk.exr");
         std::fs::write(&junk, b"not an image").unwrap();
         let e = read_exr(&junk).unwrap_err().to_string();
