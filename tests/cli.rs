@@ -293,7 +293,8 @@ fn spectrum_integrates_emission_and_reflectance() {
     assert!((relative[0]["xyz"][1].as_f64().unwrap() - 100.0).abs() < 1e-9);
     assert_ne!(relative[0]["x"], result[0]["x"], "the 10° observer differs");
 
-    // Reflectance: the ColorChecker under D65 matches the library call.
+    // Reflectance: the ColorChecker under D65 matches the library call (the
+    // illuminant written as the README writes it: either case is taken).
     let checker = shared_path("colorchecker/colorchecker_n_ohta_5nm.csv");
     let out = chromacal()
         .args([
@@ -301,7 +302,7 @@ fn spectrum_integrates_emission_and_reflectance() {
             checker.to_str().unwrap(),
             "--reflectance",
             "--illuminant",
-            "d65",
+            "D65",
             "--json",
         ])
         .output()

@@ -37,7 +37,7 @@ pub struct SpectrumArgs {
     relative: bool,
     /// Illuminant for --reflectance; for emission, the chromaticity of the
     /// reference white of L*a*b* and L*u*v*.
-    #[arg(long, value_enum, default_value = "d65")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "d65")]
     illuminant: IlluminantArg,
     /// Emission: luminance of the reference white [default: the brightest sample's].
     #[arg(long)]
