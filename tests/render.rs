@@ -4,6 +4,7 @@
 //! asked, everywhere on the screen, and each gamut mapping and tone operator is held
 //! to what it promises.
 
+use std::ffi::OsStr;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
@@ -40,6 +41,42 @@ fn profile_path() -> &'static PathBuf {
         );
         state.join("current.toml")
     })
+}
+
+/// `chromacal render PROFILE ARGS…` with the default calibration's profile.
+fn render_command(args: &[&OsStr]) -> std::process::Output {
+    chromacal()
+        .arg("render")
+        .arg(profile_path())
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// The same, which must succeed: its standard output.
+fn render_ok(args: &[&OsStr]) -> String {
+    let out = render_command(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+/// Width, height and samples (R, G, B a pixel) of a 16-bit RGB PNG, as the `png`
+/// crate decodes it.
+fn read_png16(path: &std::path::Path) -> (u32, u32, Vec<u16>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buffer).unwrap();
+    assert_eq!(info.bit_depth, png::BitDepth::Sixteen);
+    let samples = buffer[..info.buffer_size()]
+        .chunks(2)
+        .map(|b| u16::from_be_bytes([b[0], b[1]]))
+        .collect();
+    (info.width, info.height, samples)
 }
 
 fn model() -> MonitorModel {
@@ -396,33 +433,18 @@ fn render_writes_codes_a_png_reader_gets_back() {
     let pfm = dir.path().join("grey.pfm");
     chromacal::crf::scene::write_pfm(&pfm, &image).unwrap();
     let png = dir.path().join("grey.png");
-    let out = chromacal()
-        .arg("render")
-        .arg(profile_path())
-        .arg("--image")
-        .arg(&pfm)
-        .arg("-o")
-        .arg(&png)
-        .args(["--bits", "10"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = render_ok(&[
+        "--image".as_ref(),
+        pfm.as_os_str(),
+        "-o".as_ref(),
+        png.as_os_str(),
+        "--bits".as_ref(),
+        "10".as_ref(),
+    ]);
     assert!(stdout.contains("rendered 12 pixels"), "{stdout}");
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buffer = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buffer).unwrap();
-    assert_eq!((info.width, info.height), (4, 3));
-    assert_eq!(info.bit_depth, png::BitDepth::Sixteen);
-    let value = |pixel: usize, c: usize| {
-        let k = (pixel * 3 + c) * 2;
-        u16::from_be_bytes([buffer[k], buffer[k + 1]]) as f64 / 65535.0
-    };
+    let (width, height, samples) = read_png16(&png);
+    assert_eq!((width, height), (4, 3));
+    let value = |pixel: usize, c: usize| samples[pixel * 3 + c] as f64 / 65535.0;
     // The centre pixels are driven at about half; the corners, dimmer, harder.
     let centre = value(5, 1);
     assert!((centre - 0.5).abs() < 0.02, "{centre}");
@@ -437,45 +459,38 @@ fn render_writes_codes_a_png_reader_gets_back() {
 fn render_refuses_bad_scenes_naming_what_is_wrong() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("scene.csv");
-    std::fs::write(&csv, "X,Y,Z,screen_x,screen_y\n10,10,10,1.5,0.5\n").unwrap();
-    let out = chromacal()
-        .arg("render")
-        .arg(profile_path())
-        .arg("--xyz")
-        .arg(&csv)
-        .args(["-o", "-"])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        stderr.contains("row 1: screen position (1.5, 0.5) is not on the screen"),
-        "{stderr}"
-    );
-    std::fs::write(&csv, "X,Y,Q\n1,2,3\n").unwrap();
-    let out = chromacal()
-        .arg("render")
-        .arg(profile_path())
-        .arg("--xyz")
-        .arg(&csv)
-        .args(["-o", "-"])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("no column named 'Z'"), "{stderr}");
-    // A list cannot be a PNG.
-    std::fs::write(&csv, "X,Y,Z\n1,2,3\n").unwrap();
-    let out = chromacal()
-        .arg("render")
-        .arg(profile_path())
-        .arg("--xyz")
-        .arg(&csv)
-        .arg("-o")
-        .arg(dir.path().join("list.png"))
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("a PNG needs an image scene"), "{stderr}");
+    let list_png = dir.path().join("list.png");
+    let to_stdout: [&OsStr; 4] = [
+        "--xyz".as_ref(),
+        csv.as_os_str(),
+        "-o".as_ref(),
+        "-".as_ref(),
+    ];
+    for (text, args, named) in [
+        (
+            "X,Y,Z,screen_x,screen_y\n10,10,10,1.5,0.5\n",
+            to_stdout,
+            "row 1: screen position (1.5, 0.5) is not on the screen",
+        ),
+        ("X,Y,Q\n1,2,3\n", to_stdout, "no column named 'Z'"),
+        // A list cannot be a PNG.
+        (
+            "X,Y,Z\n1,2,3\n",
+            [
+                "--xyz".as_ref(),
+                csv.as_os_str(),
+                "-o".as_ref(),
+                list_png.as_os_str(),
+            ],
+            "a PNG needs an image scene",
+        ),
+    ] {
+        std::fs::write(&csv, text).unwrap();
+        let out = render_command(&args);
+        assert!(!out.status.success(), "{text}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(named), "{stderr}");
+    }
 }
 
 #[test]
@@ -522,24 +537,18 @@ fn explain_drops_the_spatial_map_for_a_centre_scene_and_keeps_it_for_a_full_scre
 
 #[test]
 fn render_explain_chooses_a_cheaper_spectral_method_within_the_limit() {
-    let out = chromacal()
-        .arg("render")
-        .arg(profile_path())
-        .arg("--reflectance")
-        .arg(common::shared_path(
-            "colorchecker/colorchecker_n_ohta_5nm.csv",
-        ))
-        .args([
-            "--illuminant",
-            "D65",
-            "--explain",
-            "--max-de00",
-            "0.5",
-            "-o",
-            "-",
-        ])
-        .output()
-        .unwrap();
+    let checker = common::shared_path("colorchecker/colorchecker_n_ohta_5nm.csv");
+    let out = render_command(&[
+        "--reflectance".as_ref(),
+        checker.as_os_str(),
+        "--illuminant".as_ref(),
+        "D65".as_ref(),
+        "--explain".as_ref(),
+        "--max-de00".as_ref(),
+        "0.5".as_ref(),
+        "-o".as_ref(),
+        "-".as_ref(),
+    ]);
     assert!(
         out.status.success(),
         "{}",
@@ -633,20 +642,12 @@ fn an_openexr_image_renders_like_the_same_pfm() {
     )
     .unwrap();
     let codes = |image: &std::path::Path| {
-        let out = chromacal()
-            .arg("render")
-            .arg(profile_path())
-            .arg("--image")
-            .arg(image)
-            .args(["-o", "-"])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        String::from_utf8_lossy(&out.stdout).to_string()
+        render_ok(&[
+            "--image".as_ref(),
+            image.as_os_str(),
+            "-o".as_ref(),
+            "-".as_ref(),
+        ])
     };
     let (a, b) = (codes(&exr), codes(&pfm));
     assert_eq!(a.lines().count(), 7);
@@ -659,47 +660,33 @@ fn the_readme_example_writes_the_colorchecker_as_a_png_laid_out_on_the_screen() 
     let checker = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("data/colorchecker/colorchecker_n_ohta_5nm.csv");
     let run = |output: &std::path::Path| {
-        let out = chromacal()
-            .arg("render")
-            .arg(profile_path())
-            .arg("--reflectance")
-            .arg(&checker)
-            .args([
-                "--illuminant",
-                "D65",
-                "--white-luminance",
-                "90",
-                "--grid",
-                "6x4",
-                "--at",
-                "0.25,0.25,0.5,0.5",
-                "--gamut",
-                "grey-lab",
-                "--explain",
-                "-o",
-            ])
-            .arg(output)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        String::from_utf8_lossy(&out.stdout).to_string()
+        let mut args: Vec<&OsStr> = vec!["--reflectance".as_ref(), checker.as_os_str()];
+        for a in [
+            "--illuminant",
+            "D65",
+            "--white-luminance",
+            "90",
+            "--grid",
+            "6x4",
+            "--at",
+            "0.25,0.25,0.5,0.5",
+            "--gamut",
+            "grey-lab",
+            "--explain",
+            "-o",
+        ] {
+            args.push(a.as_ref());
+        }
+        args.push(output.as_os_str());
+        render_ok(&args)
     };
     let png_path = dir.path().join("checker.png");
     let said = run(&png_path);
     assert!(said.contains("rendered 24 pixels"), "{said}");
     let csv_path = dir.path().join("checker.csv");
     run(&csv_path);
-    let decoder = png::Decoder::new(std::io::BufReader::new(
-        std::fs::File::open(&png_path).unwrap(),
-    ));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buffer = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buffer).unwrap();
-    assert_eq!((info.width, info.height), (6, 4));
+    let (width, height, samples) = read_png16(&png_path);
+    assert_eq!((width, height), (6, 4));
     // Row by row from the top left: the PNG's pixel k is the list's patch k, its
     // codes those of the CSV, scaled from 8 bits to 16, and its place on the screen
     // the middle half.
@@ -710,8 +697,7 @@ fn the_readme_example_writes_the_colorchecker_as_a_png_laid_out_on_the_screen() 
         assert!((x - (0.25 + 0.5 * ((k % 6) as f64 + 0.5) / 6.0)).abs() < 1e-12);
         assert!((y - (0.25 + 0.5 * ((k / 6) as f64 + 0.5) / 4.0)).abs() < 1e-12);
         for c in 0..3 {
-            let at = (k * 3 + c) * 2;
-            let v = u16::from_be_bytes([buffer[at], buffer[at + 1]]);
+            let v = samples[k * 3 + c];
             assert_eq!(
                 v as f64,
                 fields[3 + c] * 257.0,
@@ -830,20 +816,10 @@ fn spectra_and_a_spectral_image_render_as_their_xyz_would() {
         // takes Y from a three-channel plane and the value from a one-channel one).
         chromacal::crf::scene::write_pfm(&stack.join(format!("{}.pfm", row[0])), &plane).unwrap();
     }
-    let run = |args: &[&std::ffi::OsStr]| {
-        let out = chromacal()
-            .arg("render")
-            .arg(profile_path())
-            .args(args)
-            .args(["-o", "-"])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let text = String::from_utf8_lossy(&out.stdout).to_string();
+    let run = |args: &[&OsStr]| {
+        let mut args = args.to_vec();
+        args.extend::<[&OsStr; 2]>(["-o".as_ref(), "-".as_ref()]);
+        let text = render_ok(&args);
         text.lines()
             .skip(1)
             .map(|l| {

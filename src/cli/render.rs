@@ -143,6 +143,7 @@ enum GamutArg {
 }
 
 /// A scene as read: its pixels, and its image size when it is an image.
+#[derive(Clone)]
 struct ReadScene {
     scene: Scene,
     size: Option<(usize, usize)>,
@@ -171,18 +172,10 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
     }
     let placement = Placement::parse(&args.at).map_err(|e| e.to_string())?;
     let settings = settings_of(&args)?;
-    let read_with = |method: &MethodKind| {
-        read_scene(
-            &args,
-            method,
-            &profile,
-            white_luminance,
-            &display_white,
-            &placement,
-        )
-    };
+    let source = read_source(&args, &profile, white_luminance, &display_white, &placement)?;
+    let read_with = |method: &MethodKind| source.scene(method, &placement);
     let mut lines = Vec::new();
-    let method = if args.explain && is_spectral(&args) {
+    let method = if args.explain && matches!(source, Source::Spectra { .. }) {
         let (method, report) = choose_method(
             &read_with,
             args.reflectance.is_some(),
@@ -326,10 +319,6 @@ fn write_codes(
         .map_err(|e| Failure::from(format!("{}: {e}", args.output.display())))
 }
 
-fn is_spectral(args: &RenderArgs) -> bool {
-    args.spectra.is_some() || args.reflectance.is_some() || args.spectral_image.is_some()
-}
-
 /// The cheapest of the survey's methods whose largest ΔE00 on this scene, against
 /// the direct sum, is below `limit`; and the lines that say so.
 fn choose_method(
@@ -410,14 +399,14 @@ fn describe_explanation(e: &chromacal::crf::explain::Explanation) -> Vec<String>
     lines
 }
 
-fn read_scene(
+/// Read the scene's files, once.
+fn read_source(
     args: &RenderArgs,
-    method: &MethodKind,
     profile: &Profile,
     white_luminance: f64,
     display_white: &Xyz,
     placement: &Placement,
-) -> Result<ReadScene, Failure> {
+) -> Result<Source, Failure> {
     // Relative values (white Y = 100) scaled to the profile's units.
     let relative_scale = match profile.units {
         Units::Absolute => white_luminance / 100.0,
@@ -467,11 +456,11 @@ fn read_scene(
     };
     if let Some(path) = &args.xyz {
         let pixels = read_xyz_csv(path, xyz_scale).map_err(|e| e.to_string())?;
-        return Ok(ReadScene {
+        return Ok(Source::Colours(ReadScene {
             scene: Scene { pixels, white },
             size: None,
             spectral: None,
-        });
+        }));
     }
     if let Some(path) = &args.image {
         let exr = path
@@ -483,52 +472,93 @@ fn read_scene(
             read_pfm(path, display_white)
         }
         .map_err(|e| e.to_string())?;
-        return Ok(image_scene(&image, placement, xyz_scale, white, None));
+        return Ok(Source::Colours(image_scene(
+            &image, placement, xyz_scale, white, None,
+        )));
     }
-    let method_name = format!("{} ({})", method.name(), method.parameter());
     if let Some(path) = &args.spectra {
-        let spectra = read_spectra(path)?;
-        let xyz = integrate_all(method, &spectra, None)?;
-        let scale = absolute_spectra("--spectra")?;
-        return Ok(ReadScene {
-            scene: Scene {
-                pixels: at_centre(xyz, scale),
-                white,
-            },
+        return Ok(Source::Spectra {
+            spectra: read_spectra(path)?,
+            light: None,
+            scale: absolute_spectra("--spectra")?,
             size: None,
-            spectral: Some(method_name),
+            white,
         });
     }
     if let Some(path) = &args.reflectance {
-        let reflectances = read_spectra(path)?;
         let illuminant = chromacal::color::spectrum::Illuminant::from(args.illuminant).spectrum();
-        let light = onto_grid(illuminant.wavelengths_nm(), illuminant.values());
-        let xyz = integrate_all(method, &reflectances, Some(&light))?;
-        return Ok(ReadScene {
-            scene: Scene {
-                pixels: at_centre(xyz, relative_scale),
-                white,
-            },
+        return Ok(Source::Spectra {
+            spectra: read_spectra(path)?,
+            light: Some(onto_grid(illuminant.wavelengths_nm(), illuminant.values())),
+            scale: relative_scale,
             size: None,
-            spectral: Some(method_name),
+            white,
         });
     }
     if let Some(dir) = &args.spectral_image {
         let (width, height, spectra) = read_spectral_stack(dir)?;
-        let xyz = integrate_all(method, &spectra, None)?;
-        let scale = absolute_spectra("--spectral-image")?;
-        let image = XyzImage { width, height, xyz };
-        return Ok(image_scene(
-            &image,
-            placement,
-            scale,
+        return Ok(Source::Spectra {
+            spectra,
+            light: None,
+            scale: absolute_spectra("--spectral-image")?,
+            size: Some((width, height)),
             white,
-            Some(method_name),
-        ));
+        });
     }
     Err(Failure::from(
         "no scene: give --xyz, --image, --spectra, --reflectance or --spectral-image",
     ))
+}
+
+/// A scene's files as read, once: its colours, or its spectra still to be turned
+/// into colours by a method (which `--explain` tries one after another).
+enum Source {
+    Colours(ReadScene),
+    Spectra {
+        /// On the 5 nm grid: radiances, or reflectances under `light`.
+        spectra: Vec<Vec<f64>>,
+        light: Option<Vec<f64>>,
+        /// From the method's integral to the profile's units.
+        scale: f64,
+        /// A spectral image's size (pixels row by row, placed by --at).
+        size: Option<(usize, usize)>,
+        white: Option<Xyz>,
+    },
+}
+
+impl Source {
+    /// The scene, spectra turned into XYZ by `method`.
+    fn scene(&self, method: &MethodKind, placement: &Placement) -> Result<ReadScene, Failure> {
+        let (spectra, light, scale, size, white) = match self {
+            Source::Colours(read) => return Ok(read.clone()),
+            Source::Spectra {
+                spectra,
+                light,
+                scale,
+                size,
+                white,
+            } => (spectra, light, *scale, *size, *white),
+        };
+        let xyz = integrate_all(method, spectra, light.as_ref())?;
+        let spectral = Some(format!("{} ({})", method.name(), method.parameter()));
+        Ok(match size {
+            Some((width, height)) => image_scene(
+                &XyzImage { width, height, xyz },
+                placement,
+                scale,
+                white,
+                spectral,
+            ),
+            None => ReadScene {
+                scene: Scene {
+                    pixels: at_centre(xyz, scale),
+                    white,
+                },
+                size: None,
+                spectral,
+            },
+        })
+    }
 }
 
 fn image_scene(

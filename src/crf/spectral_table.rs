@@ -274,14 +274,12 @@ pub fn family_table(
 ) -> Result<Vec<Row>, SpectralError> {
     let reference = SpectralMethod::new(MethodKind::Direct, observer, &[])?;
     let truth = convert(&reference, family);
-    let white = |k: usize| match &family.light {
-        Some(light) => {
-            let l = reference.represent(light);
-            let y = reference.integrate(&l).y;
-            reference.integrate(&l) * (100.0 / y)
-        }
-        None => truth[k] * (100.0 / truth[k].y),
-    };
+    // The white of the ΔE: the light's (Y = 100), or each emission's own.
+    let light_white = family.light.as_ref().map(|light| {
+        let xyz = reference.integrate(&reference.represent(light));
+        xyz * (100.0 / xyz.y)
+    });
+    let white = |k: usize| light_white.unwrap_or_else(|| truth[k] * (100.0 / truth[k].y));
     let representative = family.representative();
     let mut rows = Vec::new();
     for kind in methods {
