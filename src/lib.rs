@@ -28,6 +28,7 @@ pub mod display;
 pub mod durable;
 pub mod export;
 pub mod fit;
+pub mod html_report;
 pub mod instrument;
 pub mod journal;
 pub mod linalg;

@@ -9,7 +9,7 @@ mod cli;
 
 use cli::{
     bench, calibrate, check, daemon, emulate, export, fit, instruments, measure, profile, render,
-    spectrum,
+    report, spectrum,
 };
 
 #[derive(Parser)]
@@ -32,6 +32,7 @@ enum Command {
     Check(check::CheckArgs),
     Spectrum(spectrum::SpectrumArgs),
     Render(render::RenderArgs),
+    Report(report::ReportArgs),
     Emulate(emulate::EmulateArgs),
     Measure(measure::MeasureArgs),
     Instruments(instruments::InstrumentsArgs),
@@ -55,6 +56,7 @@ fn main() -> ExitCode {
         Command::Check(args) => check::run(args),
         Command::Spectrum(args) => spectrum::run(args),
         Command::Render(args) => render::run(args),
+        Command::Report(args) => report::run(args),
         Command::Emulate(args) => emulate::run(args),
         Command::Measure(args) => measure::run(args),
         Command::Instruments(args) => instruments::run(args),

@@ -125,6 +125,21 @@ pub struct MeasurementSet {
 }
 
 impl MeasurementSet {
+    /// Seconds of integration over every reading, when each records its own (a run
+    /// journal does; a .ti3 does not, and then it is unknown).
+    pub fn instrument_seconds(&self) -> Option<f64> {
+        let known = self
+            .measurements
+            .iter()
+            .all(|m| m.reading.integration_s > 0.0);
+        (known && !self.measurements.is_empty()).then(|| {
+            self.measurements
+                .iter()
+                .map(|m| m.reading.integration_s)
+                .sum()
+        })
+    }
+
     /// Mean of the usable readings of full white at the standard condition (centre,
     /// black surround), the white a set is normalised by and scored against.
     pub fn mean_white(&self) -> Option<Xyz> {

@@ -39,6 +39,7 @@ fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
         },
         report: fit.report.clone(),
         calibration: None,
+        cost: None,
     };
     let text = profile.to_toml().unwrap();
     fn all_finite(value: &toml::Value, path: &str) {

@@ -40,6 +40,8 @@ const LAYERS: &[&[&str]] = &[
     &["export"],
     &["config"],
     &["calibrate"],
+    // The HTML report: a profile, its readings and its history as a page.
+    &["html_report"],
     // The service, the text a command prints, and comparisons with other tools.
     &["daemon", "report", "comparison"],
 ];

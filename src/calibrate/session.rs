@@ -19,7 +19,7 @@ use crate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, Jou
 use crate::measurement::{MeasurementSet, Units};
 use crate::plan::{Plan, PlanError, make_plan};
 use crate::profile::store::ProfileStore;
-use crate::profile::{Profile, ProfileError, Provenance, SCHEMA_VERSION};
+use crate::profile::{Cost, Profile, ProfileError, Provenance, SCHEMA_VERSION};
 use crate::sim::monitor::SimError;
 
 /// Name of the file in a run's directory that says the run ended in a profile.
@@ -564,6 +564,11 @@ pub async fn finish_run(
         },
         report: fitted.report.clone(),
         calibration,
+        cost: Some(Cost {
+            readings: journal.entries().len(),
+            instrument_s: Some(instrument_seconds),
+            fit_s: fit_seconds,
+        }),
     };
     let text = profile.to_toml()?;
     let rejection = publish_rejection(&fitted, &config.publish);

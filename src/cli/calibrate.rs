@@ -41,6 +41,9 @@ pub struct CalibrateArgs {
     /// Print the profile's report as JSON instead of the summary.
     #[arg(long)]
     json: bool,
+    /// Also write the HTML report of the profile (`chromacal report`) to this file.
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
     #[command(flatten)]
     devices: DeviceArgs,
 }
@@ -56,6 +59,7 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
         }),
         args.realtime.then_some(args.time_scale),
         args.json,
+        args.report.as_deref(),
         overrides,
     )
 }
@@ -66,6 +70,7 @@ fn calibrate(
     resume: Option<Resume>,
     realtime_scale: Option<f64>,
     json: bool,
+    report_path: Option<&Path>,
     overrides: Overrides,
 ) -> Result<(), Failure> {
     let loaded = load_config(config)?;
@@ -105,6 +110,10 @@ fn calibrate(
     ));
     bar.finish_and_clear();
     let outcome = outcome?;
+    if let Some(path) = report_path {
+        let readings = chromacal::measurement_file::read_measurements(&outcome.journal_path)?;
+        super::report::write_for(&outcome.profile, Some(&readings), path)?;
+    }
     if json {
         println!("{}", serde_json::to_string_pretty(&outcome.profile.report)?);
     } else {

@@ -20,8 +20,8 @@ use super::shared::Failure;
 /// verify on a schedule and recalibrate when the screen moved, and answer the
 /// control API (HTTP on a unix socket, mode 0600; optionally loopback TCP with a
 /// token): GET /status, POST /jobs {"kind": …}, POST /jobs/cancel, GET /events
-/// (server-sent events), GET /profile[?format=json|icc4|icc2|ti3|cal|psychopy],
-/// GET /history, POST /rollback.
+/// (server-sent events), GET /profile[?format=toml|json|icc4|icc2|ti3|cal|psychopy],
+/// GET /history, GET /report (HTML), POST /rollback.
 /// Stops on SIGTERM after the reading under way; an interrupted calibration
 /// resumes at the next start.
 #[derive(clap::Args)]

@@ -8,7 +8,7 @@ use chromacal::config::load_config;
 use chromacal::fit::{FitOptions, fit_monitor};
 use chromacal::measurement_file::read_measurements;
 use chromacal::model::transfer::LawKind;
-use chromacal::profile::{Profile, Provenance, SCHEMA_VERSION};
+use chromacal::profile::{Cost, Profile, Provenance, SCHEMA_VERSION};
 use chromacal::report;
 
 use super::shared::Failure;
@@ -28,6 +28,9 @@ pub struct FitArgs {
     laws: Option<Vec<LawArg>>,
     #[arg(long)]
     json: bool,
+    /// Also write the HTML report of the profile (`chromacal report`) to this file.
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
 }
 
 pub fn run(args: FitArgs) -> Result<(), Failure> {
@@ -37,6 +40,7 @@ pub fn run(args: FitArgs) -> Result<(), Failure> {
         args.config.as_deref(),
         args.laws,
         args.json,
+        args.report.as_deref(),
     )
 }
 
@@ -68,6 +72,7 @@ fn fit(
     config: Option<&Path>,
     laws: Option<Vec<LawArg>>,
     json: bool,
+    report_path: Option<&Path>,
 ) -> Result<(), Failure> {
     let mut options = match config {
         Some(path) => load_config(Some(path))?.config.fit,
@@ -99,8 +104,16 @@ fn fit(
         },
         report: fitted.report.clone(),
         calibration: None,
+        cost: Some(Cost {
+            readings: set.measurements.len(),
+            instrument_s: set.instrument_seconds(),
+            fit_s: fit_seconds,
+        }),
     };
     profile.write(output)?;
+    if let Some(path) = report_path {
+        super::report::write_for(&profile, Some(&set), path)?;
+    }
     if json {
         println!("{}", serde_json::to_string_pretty(&fitted.report)?);
     } else {

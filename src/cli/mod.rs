@@ -15,5 +15,6 @@ pub mod instruments;
 pub mod measure;
 pub mod profile;
 pub mod render;
+pub mod report;
 pub mod shared;
 pub mod spectrum;

@@ -199,6 +199,29 @@ pub fn lab_to_lch(lab: &Lab) -> (f64, f64, f64) {
     (lab.l, c, h)
 }
 
+/// XYZ of a D65 scene (white at Y = 1) to linear sRGB: the matrix of IEC
+/// 61966-2-1:1999 §5.2, eq. (5), as the standard gives it to four decimals.
+const XYZ_TO_LINEAR_SRGB: [[f64; 3]; 3] = [
+    [3.2406, -1.5372, -0.4986],
+    [-0.9689, 1.8758, 0.0415],
+    [0.0557, -0.2040, 1.0570],
+];
+
+/// 8-bit sRGB of XYZ relative to a D65 white at Y = 1 (IEC 61966-2-1:1999 eqs. 5
+/// and 6): linear values clipped to [0, 1], then 12.92·v below 0.0031308 and
+/// 1.055·v^(1/2.4) − 0.055 above. For showing a colour on a page, not for measuring it.
+pub fn xyz_to_srgb8(xyz: &Xyz) -> [u8; 3] {
+    XYZ_TO_LINEAR_SRGB.map(|row| {
+        let linear = (row[0] * xyz.x + row[1] * xyz.y + row[2] * xyz.z).clamp(0.0, 1.0);
+        let encoded = if linear <= 0.003_130_8 {
+            12.92 * linear
+        } else {
+            1.055 * linear.powf(1.0 / 2.4) - 0.055
+        };
+        (encoded * 255.0).round() as u8
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -275,5 +298,25 @@ mod tests {
         let a = xyz_to_uv_prime(&xyz, UvPrime { u: 0.0, v: 0.0 });
         let b = xy_to_uv_prime(xyy.x, xyy.y);
         assert!((a.u - b.u).abs() < 1e-12 && (a.v - b.v).abs() < 1e-12);
+    }
+
+    #[test]
+    fn srgb_of_d65_white_and_of_the_srgb_primaries() {
+        // D65 at Y = 1 is sRGB white; half its luminance encodes to 0.7354 (188/255).
+        let d65 = xyy_to_xyz(&Xyy {
+            x: 0.3127,
+            y: 0.3290,
+            big_y: 1.0,
+        });
+        assert_eq!(xyz_to_srgb8(&d65), [255, 255, 255]);
+        assert_eq!(xyz_to_srgb8(&(d65 * 0.5)), [188, 188, 188]);
+        // The sRGB red primary (x 0.64, y 0.33, Y 0.2126) is pure red.
+        let red = xyy_to_xyz(&Xyy {
+            x: 0.64,
+            y: 0.33,
+            big_y: 0.2126,
+        });
+        assert_eq!(xyz_to_srgb8(&red), [255, 0, 0]);
+        assert_eq!(xyz_to_srgb8(&Xyz::zeros()), [0, 0, 0]);
     }
 }

@@ -145,6 +145,7 @@ pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
         .route("/events", get(events))
         .route("/profile", get(profile))
         .route("/history", get(history))
+        .route("/report", get(report))
         .route("/rollback", post(rollback))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
@@ -545,6 +546,40 @@ async fn profile(
             response
         }
         Ok(Err(e)) => refusal(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()),
+        Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+    }
+}
+
+/// `GET /report`: the current profile's HTML report, with the readings of its run
+/// and the store's history of profiles and verifications.
+async fn report(State(state): State<Shared>) -> Response {
+    use crate::html_report::{HistoryView, ReportInput, readings_of, report_html};
+    let profile = match read_current(&state.daemon) {
+        Ok(Some((profile, _))) => profile,
+        Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
+        Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
+    };
+    let daemon = state.daemon.clone();
+    // Reading the journal and drawing the figures take tens of milliseconds: off the
+    // async workers, as a fit is.
+    let page = tokio::task::spawn_blocking(move || {
+        let (readings, readings_note) = match readings_of(&profile) {
+            Ok(set) => (Some(set), None),
+            Err(why) => (None, Some(why)),
+        };
+        report_html(&ReportInput {
+            profile: &profile,
+            readings: readings.as_ref(),
+            readings_note,
+            history: Some(HistoryView::from_store(daemon.store())),
+        })
+    })
+    .await;
+    match page {
+        Ok(Ok(page)) => {
+            ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], page).into_response()
+        }
+        Ok(Err(e)) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
         Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
 }

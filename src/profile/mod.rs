@@ -79,6 +79,24 @@ pub struct Profile {
     /// Calibration curves to a target, with their measured check (`[target]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<StoredCalibration>,
+    /// What the profile cost to make (absent in profiles made before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost: Option<Cost>,
+}
+
+/// What a profile cost: readings taken, instrument time, fit time. Every claim of
+/// accuracy in a report comes with it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Cost {
+    /// Readings the fit was given (the run's, or the file's).
+    pub readings: usize,
+    /// Seconds the instrument spent: integration and settling of every patch. Unknown
+    /// for a measurement file that does not record it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instrument_s: Option<f64>,
+    /// Wall-clock seconds of the fit.
+    pub fit_s: f64,
 }
 
 /// Line and column (1-based) of a byte offset in `text`.

@@ -489,6 +489,7 @@ mod tests {
             },
             report: fitted.report.clone(),
             calibration: None,
+            cost: None,
         }
         .to_toml()
         .unwrap()

@@ -2,6 +2,8 @@
 //! page, then take screenshots when the test decides (after the page acknowledged a
 //! patch), not when the page happens to finish loading.
 
+#![allow(dead_code)]
+
 use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -184,5 +186,64 @@ impl Browser {
             .decode(result["data"].as_str().unwrap())
             .unwrap();
         Image::from_png(&data)
+    }
+
+    /// Go to `url` and wait for its load event. Returns what the page reported as
+    /// going wrong on the way: console errors, uncaught exceptions, log entries at
+    /// error level (a resource that failed to load) and a navigation error.
+    pub fn navigate(&mut self, url: &str) -> Vec<String> {
+        for domain in ["Page", "Runtime", "Log"] {
+            self.call(&format!("{domain}.enable"), json!({}));
+        }
+        let id = self.next_id;
+        self.next_id += 1;
+        let request = json!({"id": id, "method": "Page.navigate", "params": {"url": url}});
+        self.socket
+            .send(Message::text(request.to_string()))
+            .unwrap();
+        let (mut errors, mut replied, mut loaded) = (Vec::new(), false, false);
+        while !(replied && loaded) {
+            let Message::Text(text) = self.socket.read().unwrap() else {
+                continue;
+            };
+            let message: Value = serde_json::from_str(text.as_str()).unwrap();
+            if message["id"] == id {
+                replied = true;
+                if let Some(e) = message["result"]["errorText"].as_str() {
+                    errors.push(format!("navigation: {e}"));
+                }
+                continue;
+            }
+            let params = &message["params"];
+            match message["method"].as_str() {
+                Some("Page.loadEventFired") => loaded = true,
+                Some("Runtime.consoleAPICalled")
+                    if matches!(params["type"].as_str(), Some("error" | "assert")) =>
+                {
+                    errors.push(format!("console: {}", params["args"]));
+                }
+                Some("Runtime.exceptionThrown") => {
+                    errors.push(format!("exception: {}", params["exceptionDetails"]));
+                }
+                Some("Log.entryAdded") if params["entry"]["level"] == "error" => {
+                    errors.push(format!("log: {}", params["entry"]["text"]));
+                }
+                _ => {}
+            }
+        }
+        errors
+    }
+
+    /// The value of a JavaScript expression evaluated in the page.
+    pub fn evaluate(&mut self, expression: &str) -> Value {
+        let result = self.call(
+            "Runtime.evaluate",
+            json!({"expression": expression, "returnByValue": true}),
+        );
+        assert!(
+            result.get("exceptionDetails").is_none(),
+            "{expression}: {result}"
+        );
+        result["result"]["value"].clone()
     }
 }

@@ -1,0 +1,86 @@
+//! `chromacal report`: a profile as a self-contained HTML page with its figures
+//! (`chromacal::html_report`). `calibrate --report` and `fit --report` write the same
+//! page through [`write_page`].
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use chromacal::html_report::{ReportInput, readings_of, report_html};
+use chromacal::measurement::MeasurementSet;
+use chromacal::measurement_file::read_measurements;
+use chromacal::profile::Profile;
+
+use super::shared::Failure;
+
+/// Write an HTML report of a profile: transfer curves with the measured points, the
+/// primaries on the u′v′ diagram, the uniformity map, the held-out error with the
+/// worst patches, the assumption checks and the law selection. One file, no network.
+#[derive(clap::Args)]
+pub struct ReportArgs {
+    /// The profile to report on: a chromacal profile (TOML), e.g. a state directory's
+    /// `current.toml` or what `chromacal fit -o` wrote.
+    profile: PathBuf,
+    /// Where to write the page; `-` writes it to standard output.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// The readings the profile was fitted on (a run journal or a .ti3), for the
+    /// measured points [default: the source the profile names, if it is still there].
+    #[arg(long)]
+    readings: Option<PathBuf>,
+}
+
+pub fn run(args: ReportArgs) -> Result<(), Failure> {
+    let profile = Profile::read(&args.profile)?;
+    let (readings, note) = match &args.readings {
+        Some(path) => (Some(read_measurements(path)?), None),
+        None => match readings_of(&profile) {
+            Ok(set) => (Some(set), None),
+            Err(why) => (None, Some(why)),
+        },
+    };
+    if let Some(why) = &note {
+        eprintln!("chromacal: {why}");
+    }
+    write_page(
+        &ReportInput {
+            profile: &profile,
+            readings: readings.as_ref(),
+            readings_note: note,
+            history: None,
+        },
+        &args.output,
+    )
+}
+
+/// Render `input` and write it to `output` (`-`: standard output), saying where on
+/// standard error so that a page sent to standard output stays clean.
+pub fn write_page(input: &ReportInput, output: &Path) -> Result<(), Failure> {
+    let page = report_html(input)?;
+    if output == Path::new("-") {
+        let mut stdout = std::io::stdout().lock();
+        stdout.write_all(page.as_bytes())?;
+        stdout.flush()?;
+        return Ok(());
+    }
+    chromacal::durable::write_atomic(output, page.as_bytes())
+        .map_err(|e| Failure::from(format!("cannot write {}: {e}", output.display())))?;
+    eprintln!("chromacal: report written to {}", output.display());
+    Ok(())
+}
+
+/// The report of a profile just made from `readings`, for `calibrate` and `fit`.
+pub fn write_for(
+    profile: &Profile,
+    readings: Option<&MeasurementSet>,
+    output: &Path,
+) -> Result<(), Failure> {
+    write_page(
+        &ReportInput {
+            profile,
+            readings,
+            readings_note: None,
+            history: None,
+        },
+        output,
+    )
+}
