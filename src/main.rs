@@ -21,6 +21,13 @@ use cli::{
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// More on stderr: -v says what is done, -vv debug, -vvv trace. CHROMACAL_LOG or
+    /// RUST_LOG (a tracing filter such as `chromacal=debug`), when set, decide instead.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+    /// Only errors on stderr (no warnings).
+    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    quiet: bool,
 }
 
 /// Every command; the doc comment of each one's arguments is its help.
@@ -48,7 +55,11 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    cli::shared::init_logging(matches!(cli.command, Command::Daemon(_)));
+    cli::shared::init_logging(
+        matches!(cli.command, Command::Daemon(_)),
+        cli.verbose,
+        cli.quiet,
+    );
     let result = match cli.command {
         Command::Calibrate(args) => calibrate::run(args),
         Command::Runs(args) => calibrate::run_runs(args),

@@ -81,8 +81,27 @@ fn calibrate_json_and_a_profile_that_fails_the_limits() {
         Some(3),
         "a profile over the limits is not published"
     );
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert!(report["held_out"]["mean"].as_f64().unwrap() > 0.001);
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(summary["report"]["held_out"]["mean"].as_f64().unwrap() > 0.001);
+    assert_eq!(summary["published"], false);
+    assert!(
+        summary["not_published_because"]
+            .as_str()
+            .unwrap()
+            .contains("0.001"),
+        "{summary}"
+    );
+    // The run, the profile and where they are, for a script to go on with.
+    let id = summary["run_id"].as_str().unwrap();
+    assert_eq!(summary["profile_id"], id);
+    let profile_path = std::path::PathBuf::from(summary["profile_path"].as_str().unwrap());
+    assert!(
+        profile_path.ends_with(format!("profiles/{id}.toml")),
+        "{summary}"
+    );
+    assert!(profile_path.exists());
+    assert!(std::path::Path::new(summary["journal"].as_str().unwrap()).exists());
+    assert!(summary["readings"].as_u64().unwrap() > 0);
     assert!(!state.path().join("current.toml").exists());
     assert_eq!(
         std::fs::read_dir(state.path().join("profiles"))
@@ -357,4 +376,100 @@ fn spectrum_integrates_emission_and_reflectance() {
         help.contains("1 nm grid") && help.contains("weighted ordinates"),
         "{help}"
     );
+}
+
+#[test]
+fn a_stopped_emulator_leaves_no_screen_socket_behind() {
+    for signal in ["-TERM", "-INT"] {
+        let mut emulator = common::emulate(&["--instrument", "pr670"]);
+        let screen = std::path::PathBuf::from(&emulator.screen);
+        assert!(screen.exists(), "{}", screen.display());
+        let status = std::process::Command::new("kill")
+            .args([signal, &emulator.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let exit = emulator.child.wait().unwrap();
+        assert!(exit.success(), "{signal}: {exit}");
+        assert!(!screen.exists(), "{signal}: {} is left", screen.display());
+    }
+}
+
+#[test]
+fn a_file_that_is_not_a_profile_is_named_for_what_it_is() {
+    let dir = tempfile::tempdir().unwrap();
+    let ti3 = fixture("ti3/crt-default.ti3");
+    let profile = dir.path().join("crt.toml");
+    let (ok, _, stderr) = run(&["fit", path(&ti3), "-o", path(&profile)]);
+    assert!(ok, "{stderr}");
+    let icc = dir.path().join("crt.icc");
+    let (ok, _, stderr) = run(&[
+        "export",
+        path(&profile),
+        "--format",
+        "icc4",
+        "-o",
+        path(&icc),
+    ]);
+    assert!(ok, "{stderr}");
+    for command in ["profile show", "report", "check"] {
+        let mut args: Vec<&str> = command.split(' ').collect();
+        args.push(path(&icc));
+        match command {
+            "report" => args.extend(["-o", "/dev/null"]),
+            "check" => args.push(path(&ti3)),
+            _ => {}
+        }
+        let (ok, _, stderr) = run(&args);
+        assert!(!ok);
+        assert!(
+            stderr.contains("is an ICC profile (version 4.")
+                && stderr.contains("class 'mntr'")
+                && stderr.contains("not a chromacal profile")
+                && stderr.contains("chromacal export"),
+            "{command}: {stderr}"
+        );
+        assert!(!stderr.contains("UTF-8"), "{stderr}");
+    }
+    let (ok, _, stderr) = run(&["profile", "show", path(&ti3)]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("is an ArgyllCMS CTI3 file") && stderr.contains("chromacal fit"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn verbosity_flags_and_log_variables_set_what_reaches_stderr() {
+    let dir = tempfile::tempdir().unwrap();
+    let ti3 = fixture("ti3/crt-default.ti3");
+    let profile = dir.path().join("p.toml");
+    let fit = |extra: &[&str], env: &[(&str, &str)]| {
+        let mut command = chromacal();
+        command
+            .args(extra)
+            .args(["fit", path(&ti3), "-o", path(&profile)])
+            .env_remove("CHROMACAL_LOG")
+            .env_remove("RUST_LOG");
+        for (k, v) in env {
+            command.env(k, v);
+        }
+        let out = command.output().unwrap();
+        assert!(out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    // Quiet by default; -vv and RUST_LOG=debug say what the fit does, in debug lines.
+    assert!(!fit(&[], &[]).contains("DEBUG"));
+    assert!(fit(&["-vv"], &[]).contains("DEBUG"));
+    assert!(fit(&[], &[("RUST_LOG", "debug")]).contains("DEBUG"));
+    // CHROMACAL_LOG wins over -vv; -q with -v is refused.
+    assert!(!fit(&["-vv"], &[("CHROMACAL_LOG", "error")]).contains("DEBUG"));
+    let out = chromacal()
+        .args(["-q", "-v", "fit", path(&ti3), "-o", path(&profile)])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    // No escape sequences with NO_COLOR, even when forced to log.
+    let said = fit(&["-vv"], &[("NO_COLOR", "1")]);
+    assert!(!said.contains('\u{1b}'), "{said:?}");
 }

@@ -30,6 +30,12 @@ fn calibrate(dir: &Path, name: &str, config: &str) -> (Profile, PathBuf) {
 }
 
 fn export(profile: &Path, format: &str, output: &Path, extra: &[&str]) -> String {
+    let (stdout, stderr) = export_said(profile, format, output, extra);
+    stdout + &stderr
+}
+
+/// What `chromacal export` says about a file it writes: stdout and stderr.
+fn export_said(profile: &Path, format: &str, output: &Path, extra: &[&str]) -> (String, String) {
     let out = chromacal()
         .arg("export")
         .arg(profile)
@@ -43,7 +49,10 @@ fn export(profile: &Path, format: &str, output: &Path, extra: &[&str]) -> String
         "export {format}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    String::from_utf8_lossy(&out.stdout).to_string()
+    (
+        String::from_utf8_lossy(&out.stdout).to_string(),
+        String::from_utf8_lossy(&out.stderr).to_string(),
+    )
 }
 
 /// The model's colour of `rgb` as an ICC reader should give it: relative to the
@@ -778,4 +787,67 @@ fn terms_an_icc_profile_cannot_carry_are_named_and_the_rest_is_exact() {
         text.contains("chromaticity_shift") && text.contains("interaction"),
         "{text}"
     );
+}
+
+#[test]
+fn export_says_only_what_it_writes_and_where() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, path) = calibrate(dir.path(), "crt", "[monitor]\npreset = \"crt\"\n");
+    // A PsychoPy file or a .ti3 has no place for calibration curves: asked for, they
+    // are said not carried (on stderr), never said written.
+    for format in ["psychopy", "ti3"] {
+        let file = dir.path().join(format!("x.{format}"));
+        let (stdout, stderr) =
+            export_said(&path, format, &file, &["--white", "D65", "--tone", "srgb"]);
+        assert!(stdout.contains("wrote"), "{stdout}");
+        assert!(!stdout.contains("calibration curves"), "{stdout}");
+        assert!(!stdout.contains("not carried"), "{stdout}");
+        assert!(
+            stderr.contains("not carried: calibration curves to white x 0.3127 y 0.3290"),
+            "{stderr}"
+        );
+    }
+    // An ICC profile carries them, and says so on stdout; what it leaves out goes to
+    // stderr.
+    let icc = dir.path().join("x.icc");
+    let (stdout, stderr) = export_said(&path, "icc4", &icc, &["--white", "d65"]);
+    assert!(stdout.contains("calibration curves to white"), "{stdout}");
+    assert!(stderr.contains("not carried: the spatial map"), "{stderr}");
+    assert!(!stdout.contains("not carried"), "{stdout}");
+    // `-o -`: the file's bytes on stdout, the same as written to a file, and no file
+    // named `-`.
+    let out = chromacal()
+        .current_dir(dir.path())
+        .arg("export")
+        .arg(&path)
+        .args(["--format", "icc4", "--white", "D65", "-o", "-"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert_eq!(out.stdout, std::fs::read(&icc).unwrap());
+    assert!(!dir.path().join("-").exists());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("calibration curves to white"));
+    // The name a system picker shows is short (display, day, white and tone), as Little
+    // CMS reads it; the profile id, error and what is not carried are in `dmdd`.
+    for format in ["icc4", "icc2"] {
+        let file = dir.path().join(format!("short.{format}.icc"));
+        export_said(&path, format, &file, &["--white", "D65", "--tone", "srgb"]);
+        let icc = lcms2::Profile::new_icc(&std::fs::read(&file).unwrap()).unwrap();
+        let name = icc
+            .info(lcms2::InfoType::Description, lcms2::Locale::none())
+            .unwrap();
+        let day = &chromacal::profile::Profile::read(&path).unwrap().created[..10];
+        assert_eq!(
+            name,
+            format!("virtual monitor 'crt' {day} D65 sRGB"),
+            "{format}"
+        );
+        let details = icc
+            .info(lcms2::InfoType::Model, lcms2::Locale::none())
+            .unwrap();
+        assert!(
+            details.contains("held-out mean dE00") && details.contains("not carried"),
+            "{format}: {details}"
+        );
+    }
 }

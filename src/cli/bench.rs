@@ -243,14 +243,14 @@ pub struct BenchArgs {
     #[arg(long)]
     data: Option<PathBuf>,
     /// Candidate laws for the ArgyllCMS comparison (comma-separated) [default: all].
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', ignore_case = true)]
     laws: Option<Vec<LawArg>>,
     /// Only these tables (comma-separated): fit-time, budget, sequential, argyll,
     /// spectral, render.
-    #[arg(long, value_delimiter = ',', value_parser = TABLES)]
+    #[arg(long, value_delimiter = ',', value_parser = TABLES, ignore_case = true)]
     only: Vec<String>,
     /// The same as --only, as words: `chromacal bench spectral`.
-    #[arg(value_parser = TABLES)]
+    #[arg(value_parser = TABLES, ignore_case = true)]
     tables: Vec<String>,
 }
 

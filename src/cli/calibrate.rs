@@ -38,7 +38,9 @@ pub struct CalibrateArgs {
     /// Real seconds per simulated second with --realtime.
     #[arg(long, default_value_t = 1.0, requires = "realtime")]
     time_scale: f64,
-    /// Print the profile's report as JSON instead of the summary.
+    /// Print JSON instead of the summary: run_id, profile_id, profile_path, journal,
+    /// published (and not_published_because), readings, instrument_s, fit_s, and the
+    /// fit's whole report under `report`.
     #[arg(long)]
     json: bool,
     /// Also write the HTML report of the profile (`chromacal report`) to this file.
@@ -84,7 +86,7 @@ fn calibrate(
     let bar = indicatif::ProgressBar::new(0);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
-            "{spinner} measuring [{bar:40}] {pos}/{len} patches  {msg}",
+            "{spinner} measuring [{bar:40}] {pos}/{len} patches, {elapsed} so far, about {eta} to go  {msg}",
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
         .progress_chars("=> "),
@@ -115,7 +117,19 @@ fn calibrate(
         super::report::write_for(&outcome.profile, Some(&readings), path)?;
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&outcome.profile.report)?);
+        let summary = serde_json::json!({
+            "run_id": outcome.run_id,
+            "profile_id": outcome.profile.id,
+            "profile_path": outcome.profile_path,
+            "journal": outcome.journal_path,
+            "published": outcome.rejection.is_none(),
+            "not_published_because": outcome.rejection,
+            "readings": outcome.profile.cost.as_ref().map(|c| c.readings),
+            "instrument_s": outcome.instrument_seconds,
+            "fit_s": outcome.fit_seconds,
+            "report": outcome.profile.report,
+        });
+        println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         let mut out = format!(
             "chromacal: calibrated {} with {}\n",

@@ -121,6 +121,7 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
     });
     let screen =
         serve_screen(&screen, monitor.clone()).map_err(|e| format!("{}: {e}", screen.display()))?;
+    remove_when_stopped(screen.clone());
     if let Some(address) = &args.resolve {
         let options = ClientOptions {
             settle_s: loaded.config.display.settle_s,
@@ -152,5 +153,37 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
     let _ = out.flush();
     drop(out);
     emulator.wait();
+    let _ = std::fs::remove_file(&screen);
     Err(format!("the emulated {kind} vanished (an injected fault)"))
+}
+
+/// On SIGTERM, SIGINT or SIGHUP, remove the screen socket and exit 0, so that a
+/// stopped emulator leaves nothing behind in the temporary directory. (SIGKILL cannot
+/// be caught; a socket left by one is replaced when its path is bound again.)
+fn remove_when_stopped(socket: PathBuf) {
+    std::thread::spawn(move || {
+        let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+        else {
+            return;
+        };
+        runtime.block_on(async move {
+            use tokio::signal::unix::{SignalKind, signal};
+            let (Ok(mut term), Ok(mut interrupt), Ok(mut hangup)) = (
+                signal(SignalKind::terminate()),
+                signal(SignalKind::interrupt()),
+                signal(SignalKind::hangup()),
+            ) else {
+                return;
+            };
+            tokio::select! {
+                _ = term.recv() => {}
+                _ = interrupt.recv() => {}
+                _ = hangup.recv() => {}
+            }
+            let _ = std::fs::remove_file(&socket);
+            std::process::exit(0);
+        });
+    });
 }

@@ -18,20 +18,26 @@ pub struct ExportArgs {
     profile: PathBuf,
     #[arg(long, value_parser = ["icc4", "icc2", "ti3", "cal", "psychopy", "json", "toml"])]
     format: String,
-    /// Where to write it.
+    /// Where to write it; `-` writes it to standard output (and what is said, to
+    /// standard error).
     #[arg(short, long)]
     output: PathBuf,
     /// The measurements for .ti3 and PsychoPy spectra [default: the run journal the
     /// profile names].
     #[arg(long)]
     measurements: Option<PathBuf>,
-    /// Calibration target white: native, D50, D55, D65, D75, 6500K or x,y.
+    /// Calibration target white: native, D50, D55, D65, D75, 6500K or x,y (either
+    /// case). Any of --white, --tone, --luminance asks for curves computed from the
+    /// model, which icc4, icc2 and cal carry; without them, the curves the profile
+    /// measured into place, if it has them. cal needs one or the other.
     #[arg(long)]
     white: Option<String>,
-    /// Calibration target tone curve: gamma:G, srgb, bt1886 or lstar [default: gamma:2.2].
+    /// Calibration target tone curve: gamma:G, srgb, bt1886 or lstar (gamma:2.2 when
+    /// --white or --luminance is given alone).
     #[arg(long)]
     tone: Option<String>,
-    /// Calibration target white luminance in cd/m², or max [default: max].
+    /// Calibration target white luminance in cd/m², or max (max when --white or
+    /// --tone is given alone).
     #[arg(long)]
     luminance: Option<String>,
     /// Also make the ICC file the default profile of this display in colord
@@ -62,6 +68,12 @@ fn export(
 ) -> Result<(), Failure> {
     let profile = Profile::read(profile_path).map_err(Failure::from)?;
     let format = Format::parse(format).map_err(|e| Failure::from(e.to_string()))?;
+    if register_colord.is_some() && output == Path::new("-") {
+        return Err(Failure::from(
+            "--register-colord needs the profile in a file (-o FILE), not on standard output"
+                .to_string(),
+        ));
+    }
     if register_colord.is_some() && !matches!(format, Format::Icc4 | Format::Icc2) {
         return Err(Failure::from(
             "--register-colord needs an ICC format (icc4 or icc2)".to_string(),
@@ -80,35 +92,58 @@ fn export(
     };
     let exported = chromacal::export::export(&profile, format, &options)
         .map_err(|e| Failure::from(e.to_string()))?;
-    std::fs::write(output, &exported.bytes)
-        .map_err(|e| Failure::from(format!("{}: {e}", output.display())))?;
-    println!(
-        "wrote {} ({}, {} bytes)",
-        output.display(),
-        format.name(),
-        exported.bytes.len()
-    );
-    match (&options.target, &profile.calibration, &exported.calibration) {
-        (None, Some(stored), Some(_)) => println!(
+    // What was written goes to standard output, unless the file itself does.
+    let to_stdout = output == Path::new("-");
+    let say = |line: String| {
+        if to_stdout {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    };
+    if to_stdout {
+        use std::io::Write as _;
+        let mut stdout = std::io::stdout().lock();
+        stdout.write_all(&exported.bytes)?;
+        stdout.flush()?;
+    } else {
+        std::fs::write(output, &exported.bytes)
+            .map_err(|e| Failure::from(format!("{}: {e}", output.display())))?;
+        say(format!(
+            "wrote {} ({}, {} bytes)",
+            output.display(),
+            format.name(),
+            exported.bytes.len()
+        ));
+    }
+    let curves = exported.calibration.as_ref();
+    match (&options.target, &profile.calibration, curves) {
+        (Some(_), _, Some(k)) if !format.carries_curves() => eprintln!(
+            "not carried: calibration curves to {} (a {} file has no place for them: icc4, icc2 and cal do)",
+            k.target.describe(),
+            format.name()
+        ),
+        (None, _, _) if !format.carries_curves() => {}
+        (None, Some(stored), Some(_)) => say(format!(
             "calibration curves to {} (the profile's, measured into place): measured white ΔE00 {:.3}, tone within {:.2} % at {} levels",
             stored.curves.target.describe(),
             stored.measured_white_de00,
             100.0 * stored.measured_tone_error,
             stored.levels.len()
-        ),
-        (_, _, Some(k)) => println!(
+        )),
+        (_, _, Some(k)) => say(format!(
             "calibration curves to {} (from the model): predicted white ΔE00 {:.3}, tone within {:.2} % at 9 levels",
             k.target.describe(),
             k.predicted_white_de00,
             100.0 * k.predicted_tone_error
-        ),
+        )),
         _ => {}
     }
     for note in &exported.not_carried {
-        println!("not carried: {note}");
+        eprintln!("not carried: {note}");
     }
     for warning in &exported.warnings {
-        println!("warning: {warning}");
+        eprintln!("warning: {warning}");
     }
     if let Some(device) = register_colord {
         let runtime = tokio::runtime::Builder::new_current_thread()
@@ -120,7 +155,7 @@ fn export(
                 message: format!("colord: {e}"),
                 code: COLORD_UNAVAILABLE,
             })?;
-        println!(
+        say(format!(
             "colord: {} is the default profile of {} ({}{})",
             registered.profile_id,
             device,
@@ -130,7 +165,7 @@ fn export(
             } else {
                 ", a device chromacal created"
             }
-        );
+        ));
     }
     Ok(())
 }

@@ -24,7 +24,7 @@ pub struct FitArgs {
     #[arg(long)]
     config: Option<PathBuf>,
     /// Candidate laws (comma-separated), instead of the config's.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', ignore_case = true)]
     laws: Option<Vec<LawArg>>,
     #[arg(long)]
     json: bool,

@@ -60,7 +60,7 @@ pub struct RenderArgs {
     #[arg(short, long)]
     output: PathBuf,
     /// Units of --xyz and --image values.
-    #[arg(long, value_enum, default_value = "absolute")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "absolute")]
     units: UnitsArg,
     /// Luminance (cd/m²) of Y = 100 in a relative scene and of the white of a
     /// reflectance scene [default: the display's white].
@@ -82,13 +82,13 @@ pub struct RenderArgs {
     #[arg(long)]
     grid: Option<String>,
     /// Tone reproduction.
-    #[arg(long, value_enum, default_value = "colorimetric")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "colorimetric")]
     tone: ToneArg,
     /// Usable contrast of the display for Tumblin–Rushmeier (the survey's 35).
     #[arg(long, default_value_t = TUMBLIN_RUSHMEIER_CONTRAST)]
     display_contrast: f64,
     /// Gamut mapping of colours the display cannot show where they are.
-    #[arg(long, value_enum, default_value = "clip")]
+    #[arg(long, value_enum, ignore_case = true, default_value = "clip")]
     gamut: GamutArg,
     /// Stone–Cowan–Beatty: the share of colours its transform may leave outside
     /// (then projected).

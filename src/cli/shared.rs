@@ -29,17 +29,29 @@ pub const NOT_PUBLISHED: u8 = 3;
 /// Exit code when an export was written but colord could not take it.
 pub const COLORD_UNAVAILABLE: u8 = 4;
 
-/// Log through tracing to stderr. A service logs what it does; a command only what went
-/// wrong. One line per event, without colour when stderr is not a terminal (the
-/// systemd journal). `CHROMACAL_LOG` overrides the level.
-pub fn init_logging(service: bool) {
-    let default_level = if service { "info" } else { "warn" };
+/// The log level: a service logs what it does, a command only what went wrong; each
+/// `-v` one level more, `-q` errors only.
+pub fn log_level(service: bool, verbose: u8, quiet: bool) -> &'static str {
+    const LEVELS: [&str; 5] = ["error", "warn", "info", "debug", "trace"];
+    let base = if service { 2 } else { 1 };
+    if quiet {
+        return LEVELS[0];
+    }
+    LEVELS[(base + verbose as usize).min(LEVELS.len() - 1)]
+}
+
+/// Log through tracing to stderr, one line per event. `CHROMACAL_LOG`, else
+/// `RUST_LOG`, sets the filter when present; else [`log_level`]. No colour when stderr
+/// is not a terminal (the systemd journal) or `NO_COLOR` is set (no-color.org).
+pub fn init_logging(service: bool, verbose: u8, quiet: bool) {
+    let filter = ["CHROMACAL_LOG", "RUST_LOG"]
+        .into_iter()
+        .find_map(|name| tracing_subscriber::EnvFilter::try_from_env(name).ok())
+        .unwrap_or_else(|| tracing_subscriber::EnvFilter::new(log_level(service, verbose, quiet)));
+    let no_color = std::env::var_os("NO_COLOR").is_some_and(|v| !v.is_empty());
     tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("CHROMACAL_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level)),
-        )
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_env_filter(filter)
+        .with_ansi(!no_color && std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_writer(std::io::stderr)
         .init();
 }

@@ -104,7 +104,7 @@ impl Sink {
     }
 
     pub fn parse(text: &str) -> Result<Sink, String> {
-        match text {
+        match text.to_ascii_lowercase().as_str() {
             "simulated" => Ok(Sink::Simulated),
             "emulator" => Ok(Sink::Emulator),
             "resolve" => Ok(Sink::Resolve),

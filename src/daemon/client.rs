@@ -177,32 +177,91 @@ pub async fn follow_events(
             body: bytes,
         }));
     }
-    let mut buffer = String::new();
-    let (mut name, mut data) = (String::new(), String::new());
+    let mut parser = EventStreamParser::default();
     while let Some(frame) = body.frame().await {
         let frame = frame.map_err(|e| http_error(e.to_string()))?;
         let Ok(chunk) = frame.into_data() else {
             continue;
         };
-        buffer.push_str(&String::from_utf8_lossy(&chunk));
-        while let Some(end) = buffer.find('\n') {
-            let line: String = buffer.drain(..=end).collect();
-            let line = line.trim_end_matches(['\r', '\n']);
-            if line.is_empty() {
-                if !data.is_empty() && !on_event(&name, &data) {
-                    return Ok(None);
-                }
-                name.clear();
-                data.clear();
-            } else if let Some(v) = line.strip_prefix("event:") {
-                name = v.trim().to_string();
-            } else if let Some(v) = line.strip_prefix("data:") {
-                if !data.is_empty() {
-                    data.push('\n');
-                }
-                data.push_str(v.trim_start());
+        for (name, data) in parser.push(&chunk) {
+            if !on_event(&name, &data) {
+                return Ok(None);
             }
         }
     }
     Ok(None)
+}
+
+/// Server-sent events (the WHATWG HTML standard, §9.2 "Server-sent events") from
+/// the body's chunks as they come. Bytes are kept until a line is whole, so a
+/// character that HTTP split between two chunks ("Δ" is two bytes) is decoded whole:
+/// a line break never falls inside a UTF-8 sequence.
+#[derive(Debug, Default)]
+pub struct EventStreamParser {
+    pending: Vec<u8>,
+    name: String,
+    data: String,
+}
+
+impl EventStreamParser {
+    /// Feed a chunk; returns the events it completed, as (name, data).
+    pub fn push(&mut self, chunk: &[u8]) -> Vec<(String, String)> {
+        self.pending.extend_from_slice(chunk);
+        let mut events = Vec::new();
+        while let Some(end) = self.pending.iter().position(|b| *b == b'\n') {
+            let raw: Vec<u8> = self.pending.drain(..=end).collect();
+            let line = String::from_utf8_lossy(&raw);
+            let line = line.trim_end_matches(['\r', '\n']);
+            if line.is_empty() {
+                if !self.data.is_empty() {
+                    events.push((
+                        std::mem::take(&mut self.name),
+                        std::mem::take(&mut self.data),
+                    ));
+                }
+                self.name.clear();
+            } else if let Some(v) = line.strip_prefix("event:") {
+                self.name = v.trim().to_string();
+            } else if let Some(v) = line.strip_prefix("data:") {
+                if !self.data.is_empty() {
+                    self.data.push('\n');
+                }
+                self.data.push_str(v.strip_prefix(' ').unwrap_or(v));
+            }
+        }
+        events
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::EventStreamParser;
+
+    #[test]
+    fn an_event_split_inside_a_character_is_decoded_whole() {
+        let stream = "event: progress\ndata: {\"de\": \"ΔE00 0.2 cd/m²\"}\n\nevent: done\ndata: a\ndata: b\n\n";
+        let bytes = stream.as_bytes();
+        let delta = stream.find('Δ').unwrap();
+        let squared = stream.find('²').unwrap();
+        // Cut inside "Δ" and inside "²" (both two bytes), and byte by byte.
+        for cuts in [vec![delta + 1, squared + 1], (1..bytes.len()).collect()] {
+            let mut parser = EventStreamParser::default();
+            let mut events = Vec::new();
+            let mut start = 0;
+            for cut in cuts.into_iter().chain([bytes.len()]) {
+                events.extend(parser.push(&bytes[start..cut]));
+                start = cut;
+            }
+            assert_eq!(
+                events,
+                vec![
+                    (
+                        "progress".to_string(),
+                        "{\"de\": \"ΔE00 0.2 cd/m²\"}".to_string()
+                    ),
+                    ("done".to_string(), "a\nb".to_string()),
+                ]
+            );
+        }
+    }
 }

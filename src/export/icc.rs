@@ -38,7 +38,10 @@ pub const CURV_ENTRIES: usize = 1024;
 /// What goes into the profile besides the model.
 #[derive(Debug, Clone)]
 pub struct IccText {
+    /// `desc`: the name system pickers show, so short.
     pub description: String,
+    /// `dmdd` (device model description): everything else worth saying.
+    pub details: String,
     pub copyright: String,
     /// Creation time, UTC: year, month, day, hour, minute, second.
     pub created: [u16; 6],
@@ -226,12 +229,14 @@ pub fn encode(profile: &MatrixTrc, text: &IccText, version: IccVersion) -> Vec<u
     match version {
         IccVersion::V4 => {
             tags.push((*b"desc", mluc(&text.description)));
+            tags.push((*b"dmdd", mluc(&text.details)));
             tags.push((*b"cprt", mluc(&text.copyright)));
             tags.push((*b"wtpt", xyz_type(&d50)));
             tags.push((*b"chad", sf32_matrix(&profile.chad())));
         }
         IccVersion::V2 => {
             tags.push((*b"desc", text_description(&text.description)));
+            tags.push((*b"dmdd", text_description(&text.details)));
             tags.push((*b"cprt", text_type(&text.copyright)));
             tags.push((*b"wtpt", xyz_type(&profile.relative_white())));
             tags.push((*b"bkpt", xyz_type(&profile.black_d50())));
@@ -357,6 +362,7 @@ mod tests {
     fn text() -> IccText {
         IccText {
             description: "test display".into(),
+            details: "test details".into(),
             copyright: "no copyright".into(),
             created: [2026, 11, 23, 12, 0, 0],
         }

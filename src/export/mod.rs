@@ -52,6 +52,12 @@ impl Format {
         })
     }
 
+    /// The formats with a place for calibration curves: the ICC `vcgt` tag and the
+    /// ArgyllCMS `.cal` file.
+    pub fn carries_curves(self) -> bool {
+        matches!(self, Format::Icc4 | Format::Icc2 | Format::Cal)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Format::Icc4 => "icc4",
@@ -223,12 +229,38 @@ fn measurements(profile: &Profile, options: &ExportOptions) -> Result<Measuremen
     })
 }
 
-/// A one-line description for ICC `desc`.
-fn description(
-    profile: &Profile,
-    notes: &[String],
-    calibration: Option<&CalibrationCurves>,
-) -> String {
+/// The ICC `desc`, which system pickers show as the profile's name: short, the
+/// display, the day it was made and what it is calibrated to (`native` without
+/// curves). The rest goes to [`details`].
+fn short_description(profile: &Profile, calibration: Option<&CalibrationCurves>) -> String {
+    let display: String = profile
+        .provenance
+        .display
+        .clone()
+        .unwrap_or_else(|| "display".into())
+        .chars()
+        .take(40)
+        .collect();
+    let day = profile.created.get(..10).unwrap_or(&profile.created);
+    let calibrated = calibration.map_or("native".to_string(), |k| {
+        use crate::model::target::WhiteTarget;
+        let white = match k.target.white {
+            WhiteTarget::Native => "native white".to_string(),
+            WhiteTarget::Chromaticity([x, y])
+                if (x - 0.3127).abs() < 5e-5 && (y - 0.3290).abs() < 5e-5 =>
+            {
+                "D65".to_string()
+            }
+            WhiteTarget::Chromaticity([x, y]) => format!("x{x:.3} y{y:.3}"),
+            WhiteTarget::Daylight(t) => format!("{t:.0}K"),
+        };
+        format!("{white} {}", k.target.tone.describe())
+    });
+    format!("{display} {day} {calibrated}")
+}
+
+/// The long description: profile id, held-out error, target, what is not carried.
+fn details(profile: &Profile, notes: &[String], calibration: Option<&CalibrationCurves>) -> String {
     let display = profile
         .provenance
         .display
@@ -283,7 +315,8 @@ pub fn export(
                 notes.push("the black's chromaticity (outside the primaries' triangle)".into());
             }
             let text = IccText {
-                description: description(profile, &notes, calibration.as_ref()),
+                description: short_description(profile, calibration.as_ref()),
+                details: details(profile, &notes, calibration.as_ref()),
                 copyright: "No copyright. Made by chromacal from measurements of this display."
                     .into(),
                 created,
@@ -305,7 +338,7 @@ pub fn export(
         }
         Format::Psychopy => {
             let set = measurements(profile, options).ok();
-            let mut text = description(profile, &notes, None);
+            let mut text = details(profile, &notes, None);
             if profile.units == Units::Relative {
                 text += "; luminances are relative (white = 100), not cd/m²";
             }

@@ -215,6 +215,26 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
     if cancel::requested() {
         return Err(FitError::Stopped);
     }
+    if let Ok(f) = &fitted {
+        let r = &f.report;
+        tracing::debug!(
+            readings = r.counts.readings,
+            usable = r.counts.usable,
+            held_out = r.counts.held_out,
+            "fitted {}",
+            set.source
+        );
+        tracing::debug!(
+            law = %r.chosen_law().map_or("none", |l| l.name()),
+            condition_number = r.condition_number,
+            terms = ?r.terms.iter().find(|t| t.kept).map(|t| t.terms.name()),
+            spatial = %f.model.spatial.describe(),
+            "model chosen"
+        );
+        if let Some(h) = &r.held_out {
+            tracing::debug!(mean = h.mean, p95 = h.p95, max = h.max, "held-out ΔE00");
+        }
+    }
     fitted
 }
 

@@ -35,6 +35,14 @@ pub enum ProfileError {
         column: usize,
         message: String,
     },
+    #[error(
+        "{path} is {what}, not a chromacal profile (a TOML file that `calibrate`, `fit` or the daemon writes, such as <state>/current.toml){hint}"
+    )]
+    OtherKind {
+        path: String,
+        what: String,
+        hint: &'static str,
+    },
     #[error("{path}: schema version {found}, this program reads version {SCHEMA_VERSION}")]
     Version { path: String, found: u32 },
     #[error(
@@ -164,10 +172,24 @@ impl Profile {
 
     pub fn read(path: &Path) -> Result<Self, ProfileError> {
         let text = crate::durable::read_text_limited(path, crate::durable::limits::PROFILE)
-            .map_err(|source| ProfileError::Io {
-                path: path.display().to_string(),
-                source,
+            .map_err(|source| match other_kind(path) {
+                Some((what, hint)) => ProfileError::OtherKind {
+                    path: path.display().to_string(),
+                    what,
+                    hint,
+                },
+                None => ProfileError::Io {
+                    path: path.display().to_string(),
+                    source,
+                },
             })?;
+        if let Some((what, hint)) = other_kind(path) {
+            return Err(ProfileError::OtherKind {
+                path: path.display().to_string(),
+                what,
+                hint,
+            });
+        }
         Self::from_toml(&text, &path.display().to_string())
     }
 
@@ -193,6 +215,54 @@ impl Profile {
             source,
         })
     }
+}
+
+/// What a file that is not a chromacal profile is, judged from its first bytes, for
+/// the files people mistake for one: an ICC profile (ICC.1:2022 §7.2: 'acsp' at byte
+/// 36, the version at byte 8, the class at 12, the colour space at 16), an ArgyllCMS
+/// CGATS file, or anything that is not text. `None` for text that may be TOML.
+fn other_kind(path: &Path) -> Option<(String, &'static str)> {
+    use std::io::Read as _;
+    let mut head = Vec::with_capacity(128);
+    std::fs::File::open(path)
+        .ok()?
+        .take(128)
+        .read_to_end(&mut head)
+        .ok()?;
+    if head.len() >= 40 && &head[36..40] == b"acsp" {
+        let word = |at: usize| {
+            String::from_utf8_lossy(&head[at..at + 4])
+                .trim()
+                .to_string()
+        };
+        return Some((
+            format!(
+                "an ICC profile (version {}.{}, class '{}', colour space '{}')",
+                head[8],
+                head[9] >> 4,
+                word(12),
+                word(16)
+            ),
+            ": give the .toml profile it was made from (`chromacal export` writes ICC from it)",
+        ));
+    }
+    let text = String::from_utf8_lossy(&head);
+    if let Some(kind) = ["CTI3", "CTI1", "CAL", "CGATS"]
+        .into_iter()
+        .find(|k| text.trim_start().starts_with(k))
+    {
+        return Some((
+            format!("an ArgyllCMS {kind} file"),
+            ": to make a profile from measurements, run `chromacal fit FILE -o PROFILE.toml`",
+        ));
+    }
+    std::str::from_utf8(&head)
+        .is_err()
+        .then(|| ("not text (UTF-8)".to_string(), ""))
+        .filter(|_| {
+            // A multi-byte character cut at byte 128 is not binary.
+            head.len() < 128 || std::str::from_utf8(&head[..120]).is_err()
+        })
 }
 
 /// The first key under `value` holding a float that is not finite.

@@ -33,7 +33,7 @@ pub const PRESET_NAMES: [&str; 2] = ["crt", "lcd"];
 ///   whose toe is lifted as LCD curves are, 160 cd/m² white, 1000:1 contrast, 5 %
 ///   falloff.
 pub fn preset(name: &str) -> Result<MonitorSpec, SimError> {
-    match name {
+    match name.to_ascii_lowercase().as_str() {
         "crt" => Ok(MonitorSpec {
             name: "crt".into(),
             primaries: PrimarySpectra::typical_crt(),
