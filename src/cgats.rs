@@ -364,7 +364,9 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
         let spectrum = if spectral.len() >= 2 {
             let values = spectral
                 .iter()
-                .map(|(f, _)| number(*line, *f, &row[*f]).map(|v| v * scale))
+                .map(|(f, _)| {
+                    number(*line, *f, &row[*f]).map(|v| v * scale / ARGYLL_SPECTRAL_MILLI)
+                })
                 .collect::<Result<Vec<f64>, _>>()?;
             Spectrum::new(wavelengths.clone(), values).ok()
         } else {
@@ -396,6 +398,10 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
     })
 }
 
+/// ArgyllCMS writes a display's spectra in mW·sr⁻¹·m⁻²·nm⁻¹ (its `spec2cie` gives the
+/// file's XYZ from them with 683 lm/W over 1000), chromacal holds them in W.
+const ARGYLL_SPECTRAL_MILLI: f64 = 1000.0;
+
 /// A `.ti3` text of the usable readings taken at the centre on a black surround (the
 /// only condition the format can describe). Absolute sets are written normalised to
 /// white Y = 100 with `LUMINANCE_XYZ_CDM2`, as ArgyllCMS writes display files.
@@ -423,12 +429,43 @@ pub fn to_ti3(set: &MeasurementSet) -> String {
         None if set.units == Units::Absolute => out += "NORMALIZED_TO_Y_100 \"NO\"\n",
         None => out += "NORMALIZED_TO_Y_100 \"YES\"\n",
     }
-    out += "\nNUMBER_OF_FIELDS 7\nBEGIN_DATA_FORMAT\nSAMPLE_ID RGB_R RGB_G RGB_B XYZ_X XYZ_Y XYZ_Z\nEND_DATA_FORMAT\n\n";
+    // A spectral instrument's spectra go along as SPEC_nnn fields (ArgyllCMS's
+    // dispread writes them so), in mW and scaled as XYZ is, when every row has one on
+    // the same wavelengths.
+    let wavelengths = rows
+        .first()
+        .and_then(|(m, _)| m.reading.spectrum.as_ref())
+        .map(|s| s.wavelengths_nm().to_vec())
+        .filter(|w| w.len() >= 2)
+        .filter(|w| {
+            rows.iter().all(|(m, _)| {
+                m.reading
+                    .spectrum
+                    .as_ref()
+                    .is_some_and(|s| s.wavelengths_nm() == w.as_slice())
+            })
+        });
+    let mut fields = String::from("SAMPLE_ID RGB_R RGB_G RGB_B XYZ_X XYZ_Y XYZ_Z");
+    if let Some(w) = &wavelengths {
+        let (first, last) = (w[0], w[w.len() - 1]);
+        out += "INSTRUMENT_TYPE_SPECTRAL \"YES\"\n";
+        out += &format!(
+            "SPECTRAL_BANDS \"{}\"\nSPECTRAL_START_NM \"{first:.6}\"\nSPECTRAL_END_NM \"{last:.6}\"\n",
+            w.len()
+        );
+        for nm in w {
+            fields += &format!(" SPEC_{:.0}", nm);
+        }
+    }
+    out += &format!(
+        "\nNUMBER_OF_FIELDS {}\nBEGIN_DATA_FORMAT\n{fields}\nEND_DATA_FORMAT\n\n",
+        fields.split(' ').count()
+    );
     out += &format!("NUMBER_OF_SETS {}\nBEGIN_DATA\n", rows.len());
     for (i, (m, xyz)) in rows.iter().enumerate() {
         let v = xyz * scale;
         out += &format!(
-            "{} {:.4} {:.4} {:.4} {:.6} {:.6} {:.6}\n",
+            "{} {:.4} {:.4} {:.4} {:.6} {:.6} {:.6}",
             i + 1,
             m.drive[0] * 100.0,
             m.drive[1] * 100.0,
@@ -437,6 +474,12 @@ pub fn to_ti3(set: &MeasurementSet) -> String {
             v.y,
             v.z
         );
+        if let (Some(_), Some(s)) = (&wavelengths, &m.reading.spectrum) {
+            for value in s.values() {
+                out += &format!(" {:.8e}", value * scale * ARGYLL_SPECTRAL_MILLI);
+            }
+        }
+        out += "\n";
     }
     out += "END_DATA\n";
     out

@@ -8,15 +8,16 @@ use clap::{Parser, Subcommand};
 mod cli;
 
 use cli::{
-    bench, calibrate, check, daemon, emulate, export, fit, instruments, measure, profile, render,
-    report, spectrum,
+    bench, calibrate, check, config, daemon, emulate, export, fit, instruments, measure, profile,
+    render, report, spectrum,
 };
 
 #[derive(Parser)]
 #[command(
     name = "chromacal",
     version,
-    about = "Monitor calibration: measure, fit a physical model, test its assumptions, publish a profile"
+    about = "Monitor calibration: measure, fit a physical model, test its assumptions, publish a profile",
+    after_help = cli::shared::EXIT_CODES
 )]
 struct Cli {
     #[command(subcommand)]
@@ -51,6 +52,7 @@ enum Command {
     History(daemon::HistoryArgs),
     Rollback(daemon::RollbackArgs),
     Bench(bench::BenchArgs),
+    Config(config::ConfigArgs),
 }
 
 fn main() -> ExitCode {
@@ -79,6 +81,7 @@ fn main() -> ExitCode {
         Command::History(args) => daemon::run_history(args),
         Command::Rollback(args) => daemon::run_rollback(args),
         Command::Bench(args) => bench::run(args),
+        Command::Config(args) => config::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

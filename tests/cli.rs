@@ -473,3 +473,126 @@ fn verbosity_flags_and_log_variables_set_what_reaches_stderr() {
     let said = fit(&["-vv"], &[("NO_COLOR", "1")]);
     assert!(!said.contains('\u{1b}'), "{said:?}");
 }
+
+#[test]
+fn config_show_says_what_is_in_effect_and_the_user_config_is_found() {
+    let dir = tempfile::tempdir().unwrap();
+    let show = |xdg: &Path, extra: &[&str]| {
+        let out = chromacal()
+            .env("XDG_CONFIG_HOME", xdg)
+            .args(["config", "show"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let built_in = show(dir.path(), &[]);
+    assert!(
+        built_in.contains("read from built-in config/default.toml"),
+        "{built_in}"
+    );
+    assert!(
+        built_in.contains("chromacal/config.toml (absent)"),
+        "{built_in}"
+    );
+    assert!(built_in.contains("budget = 48"), "{built_in}");
+    // What it prints is a config that reads back as itself.
+    let printed = dir.path().join("printed.toml");
+    std::fs::write(&printed, &built_in).unwrap();
+    let again = show(dir.path(), &["--config", path(&printed)]);
+    let body = |s: &str| {
+        s.lines()
+            .filter(|l| !l.starts_with('#'))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    assert_eq!(body(&again), body(&built_in));
+
+    // A user config in $XDG_CONFIG_HOME/chromacal/ is found and used by the commands.
+    let user = dir.path().join("chromacal/config.toml");
+    std::fs::create_dir_all(user.parent().unwrap()).unwrap();
+    std::fs::write(&user, "[fit]\nlaws = [\"power\"]\n").unwrap();
+    let found = show(dir.path(), &[]);
+    assert!(
+        found.contains(&format!("read from {}", user.display())),
+        "{found}"
+    );
+    assert!(found.contains("laws = [\"power\"]"), "{found}");
+    let profile = dir.path().join("p.toml");
+    let out = chromacal()
+        .env("XDG_CONFIG_HOME", dir.path())
+        .arg("fit")
+        .arg(fixture("ti3/crt-default.ti3"))
+        .arg("-o")
+        .arg(&profile)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let fitted = chromacal::profile::Profile::read(&profile).unwrap();
+    let laws: Vec<_> = fitted.report.laws.iter().map(|l| l.law.name()).collect();
+    assert_eq!(laws, ["power"]);
+}
+
+#[test]
+fn ctrl_c_stops_a_calibration_keeping_its_readings_for_resume() {
+    let state = tempfile::tempdir().unwrap();
+    let child = chromacal()
+        .args([
+            "calibrate",
+            "--realtime",
+            "--time-scale",
+            "0.05",
+            "--state-dir",
+        ])
+        .arg(state.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait for a few readings in the journal, then press Ctrl-C.
+    let journal = || {
+        let runs = state.path().join("runs");
+        let run = std::fs::read_dir(&runs).ok()?.next()?.ok()?.path();
+        Some(run.join("journal.jsonl"))
+    };
+    let lines = |path: &Path| std::fs::read_to_string(path).map_or(0, |t| t.lines().count());
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while journal().is_none_or(|j| lines(&j) < 6) {
+        assert!(std::time::Instant::now() < deadline, "no readings");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let status = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("stopping after the reading under way"),
+        "{stderr}"
+    );
+    // It says how many readings are kept, where, and how to go on; the journal holds
+    // exactly that many.
+    let journal = journal().unwrap();
+    let kept = lines(&journal) - 1;
+    assert!(
+        stderr.contains(&format!("stopped on request after {kept} of ")),
+        "{kept}: {stderr}"
+    );
+    assert!(stderr.contains("chromacal calibrate --resume"), "{stderr}");
+    assert!(!state.path().join("current.toml").exists());
+    let (ok, stdout, stderr) = run(&["calibrate", "--resume", "--state-dir", path(state.path())]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains(&format!("resumed: {kept} patches were in the journal")),
+        "{stdout}"
+    );
+    assert!(state.path().join("current.toml").exists());
+}

@@ -30,6 +30,7 @@ async fn run(text: &str) -> chromacal::calibrate::session::CalibrationOutcome {
         resume_settings: false,
         realtime_scale: None,
         overrides: Default::default(),
+        stop: None,
     };
     calibrate(&loaded, &options, &mut |_| {}, None)
         .await

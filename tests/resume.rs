@@ -47,6 +47,7 @@ async fn an_interrupted_journal_resumes_to_the_uninterrupted_readings() {
         resume_settings: false,
         realtime_scale: None,
         overrides: Default::default(),
+        stop: None,
     };
     let outcome = calibrate(&loaded, &options, &mut |_| {}, None)
         .await

@@ -68,6 +68,7 @@ async fn a_resumed_sequential_run_continues_the_same_sequence() {
         resume_settings: false,
         realtime_scale: None,
         overrides: Default::default(),
+        stop: None,
     };
     let outcome = calibrate(&load_config(None).unwrap(), &options, &mut |_| {}, None)
         .await

@@ -74,7 +74,7 @@ pub enum CalibrateError {
 }
 
 /// How to run a calibration.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct CalibrateOptions {
     pub state_dir: PathBuf,
     /// Resume an unfinished run instead of starting one.
@@ -87,6 +87,9 @@ pub struct CalibrateOptions {
     pub realtime_scale: Option<f64>,
     /// Command-line settings that win over the config's.
     pub overrides: Overrides,
+    /// Asked before each patch whether to stop (Ctrl-C): the reading under way is
+    /// finished and journaled, the display blanked, and the run left to `--resume`.
+    pub stop: Option<crate::fit::cancel::StopCheck>,
 }
 
 /// Which unfinished run to resume.
@@ -666,7 +669,7 @@ pub async fn calibrate<'a>(
     let mut hooks = RunHooks {
         progress,
         prompt,
-        stop: None,
+        stop: options.stop.clone(),
     };
     let outcome = finish_run(run, &mut devices, &store, &mut hooks).await;
     devices.instrument.close();

@@ -2,13 +2,17 @@
 //! and a summary.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use chromacal::calibrate::devices::Overrides;
 use chromacal::calibrate::run::Progress;
 use chromacal::calibrate::session::{
     CalibrateOptions, Resume, calibrate as calibrate_session, newest_resumable, unfinished_runs,
 };
-use chromacal::config::{LoadedConfig, Sink, check_config, load_config};
+use chromacal::config::{
+    LoadedConfig, Sink, check_config, config_search_paths, load_config_searching,
+};
 use chromacal::model::ScreenPosition;
 use chromacal::profile::store::default_state_dir;
 use chromacal::report;
@@ -75,8 +79,12 @@ fn calibrate(
     report_path: Option<&Path>,
     overrides: Overrides,
 ) -> Result<(), Failure> {
-    let loaded = load_config(config)?;
+    let loaded = load_config_searching(config, &config_search_paths())?;
+    // Ctrl-C (or SIGTERM) stops after the reading under way; a second one at once.
+    let stop_requested = Arc::new(AtomicBool::new(false));
+    let flag = stop_requested.clone();
     let options = CalibrateOptions {
+        stop: Some(Arc::new(move || flag.load(Ordering::SeqCst))),
         state_dir: state_dir.unwrap_or_else(default_state_dir),
         resume_settings: resume.is_some() && config.is_some(),
         resume,
@@ -104,6 +112,7 @@ fn calibrate(
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
+    runtime.spawn(stop_on_signal(stop_requested.clone(), bar.clone()));
     let outcome = runtime.block_on(calibrate_session(
         &loaded,
         &options,
@@ -111,7 +120,16 @@ fn calibrate(
         Some(&mut ask),
     ));
     bar.finish_and_clear();
-    let outcome = outcome?;
+    // Stopped on request, the error says how many readings the journal keeps and
+    // that `--resume` goes on; the exit code is a shell's for an interrupt.
+    let outcome = outcome.map_err(|e| Failure {
+        message: e.to_string(),
+        code: if stop_requested.load(Ordering::SeqCst) {
+            INTERRUPTED
+        } else {
+            1
+        },
+    })?;
     if let Some(path) = report_path {
         let readings = chromacal::measurement_file::read_measurements(&outcome.journal_path)?;
         super::report::write_for(&outcome.profile, Some(&readings), path)?;
@@ -278,4 +296,33 @@ pub fn run_runs(args: RunsArgs) -> Result<(), Failure> {
         println!("{:<30} {:>9}  {state}", run.id, run.readings);
     }
     Ok(())
+}
+
+/// Exit code of a calibration stopped by Ctrl-C or SIGTERM (128 + SIGINT).
+const INTERRUPTED: u8 = 130;
+
+/// The first Ctrl-C or SIGTERM asks the run to stop after the reading under way (the
+/// display is blanked and the journal keeps every reading); a second one exits at once,
+/// which loses nothing either: each reading is in the journal when it is taken.
+async fn stop_on_signal(stop: Arc<AtomicBool>, bar: indicatif::ProgressBar) {
+    use tokio::signal::unix::{SignalKind, signal};
+    let Ok(mut terminate) = signal(SignalKind::terminate()) else {
+        return;
+    };
+    loop {
+        tokio::select! {
+            pressed = tokio::signal::ctrl_c() => if pressed.is_err() { return },
+            _ = terminate.recv() => {}
+        }
+        if stop.swap(true, Ordering::SeqCst) {
+            bar.abandon();
+            eprintln!(
+                "chromacal: stopped at once; every reading taken is in the journal, and `chromacal calibrate --resume` goes on"
+            );
+            std::process::exit(INTERRUPTED.into());
+        }
+        bar.suspend(|| {
+            eprintln!("chromacal: stopping after the reading under way (again to stop at once)")
+        });
+    }
 }

@@ -16,7 +16,9 @@ use super::shared::Failure;
 /// Predict every measured patch from a profile and report the ΔE00.
 #[derive(clap::Args)]
 pub struct CheckArgs {
+    /// The profile to check: a chromacal profile (TOML).
     profile: PathBuf,
+    /// Measurements to predict: a run journal or an ArgyllCMS .ti3.
     measurements: PathBuf,
     /// Machine-readable output with every patch's prediction.
     #[arg(long)]

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use bytes::Bytes;
-use chromacal::config::load_config;
+use chromacal::config::{config_search_paths, load_config_searching};
 use chromacal::daemon::api::StatusReply;
 use chromacal::daemon::client::{Endpoint, Reply, follow_events, request};
 use chromacal::daemon::default_socket;
@@ -49,6 +49,7 @@ pub struct DaemonArgs {
 pub struct StatusArgs {
     #[command(flatten)]
     api: ApiArgs,
+    /// Print the daemon's whole answer (GET /status) as JSON.
     #[arg(long)]
     json: bool,
 }
@@ -67,6 +68,7 @@ pub struct JobArgs {
 pub struct HistoryArgs {
     #[command(flatten)]
     api: ApiArgs,
+    /// Print the daemon's whole answer (GET /history) as JSON.
     #[arg(long)]
     json: bool,
 }
@@ -107,7 +109,7 @@ fn daemon(
     tcp: Option<String>,
     time_scale: Option<f64>,
 ) -> Result<(), Failure> {
-    let mut loaded = load_config(config)?;
+    let mut loaded = load_config_searching(config, &config_search_paths())?;
     if let Some(scale) = time_scale {
         loaded.config.daemon.simulated_time_scale = scale;
         loaded.config.daemon.check().map_err(Failure::from)?;
@@ -566,16 +568,36 @@ pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), String> {
     })
 }
 
+/// `text` percent-encoded for a query string (RFC 3986 §2.1): every byte but the
+/// unreserved ones and the few a target is written with (`,`, `:`, `.`).
+fn query_value(text: &str) -> String {
+    text.bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'_' | b'.' | b'~' | b',' | b':' => {
+                (b as char).to_string()
+            }
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
+}
+
 pub fn current_profile(
     api: &ApiArgs,
     json: bool,
     format: Option<&str>,
+    target: [(&str, Option<String>); 3],
     output: Option<&std::path::Path>,
 ) -> Result<(), String> {
     let endpoint = api.endpoint()?;
     let format = format.unwrap_or(if json { "json" } else { "toml" });
+    let mut query = format!("/profile?format={}", query_value(format));
+    for (key, value) in target {
+        if let Some(value) = value {
+            query += &format!("&{key}={}", query_value(&value));
+        }
+    }
     runtime()?.block_on(async {
-        let reply = get(&endpoint, &format!("/profile?format={format}")).await?;
+        let reply = get(&endpoint, &query).await?;
         match output {
             Some(path) => {
                 std::fs::write(path, &reply.body)

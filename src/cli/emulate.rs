@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 
-use chromacal::config::load_config;
+use chromacal::config::{config_search_paths, load_config_searching};
 use chromacal::display::resolve::{ClientOptions, run_client};
 use chromacal::instrument::devices::DeviceKind;
 use chromacal::instrument::emulator::Meter;
@@ -68,7 +68,8 @@ pub fn run(args: EmulateArgs) -> Result<(), Failure> {
 
 fn emulate(args: EmulateArgs) -> Result<(), String> {
     let kind = DeviceKind::parse(&args.instrument)?;
-    let loaded = load_config(args.config.as_deref()).map_err(|e| e.to_string())?;
+    let loaded = load_config_searching(args.config.as_deref(), &config_search_paths())
+        .map_err(|e| e.to_string())?;
     let mut monitor_config = loaded.config.monitor.clone();
     if let Some(preset) = &args.monitor {
         monitor_config.preset = Some(preset.clone());

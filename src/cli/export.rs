@@ -16,7 +16,9 @@ use super::shared::{COLORD_UNAVAILABLE, Failure};
 pub struct ExportArgs {
     /// The profile (a chromacal .toml).
     profile: PathBuf,
-    #[arg(long, value_parser = ["icc4", "icc2", "ti3", "cal", "psychopy", "json", "toml"])]
+    /// icc4, icc2 (display profiles), ti3 (the measurements), cal (calibration
+    /// curves), psychopy (a monitor file), json or toml (the whole profile).
+    #[arg(long, ignore_case = true, value_parser = ["icc4", "icc2", "ti3", "cal", "psychopy", "json", "toml"])]
     format: String,
     /// Where to write it; `-` writes it to standard output (and what is said, to
     /// standard error).

@@ -4,8 +4,8 @@ use std::path::{Path, PathBuf};
 
 use clap::ValueEnum;
 
-use chromacal::config::load_config;
-use chromacal::fit::{FitOptions, fit_monitor};
+use chromacal::config::{config_search_paths, load_config_searching};
+use chromacal::fit::fit_monitor;
 use chromacal::measurement_file::read_measurements;
 use chromacal::model::transfer::LawKind;
 use chromacal::profile::{Cost, Profile, Provenance, SCHEMA_VERSION};
@@ -16,6 +16,8 @@ use super::shared::Failure;
 /// Fit a profile to recorded measurements: a run journal or an ArgyllCMS .ti3.
 #[derive(clap::Args)]
 pub struct FitArgs {
+    /// The measurements: a run journal (`<state>/runs/<run>/journal.jsonl`) or an
+    /// ArgyllCMS .ti3.
     measurements: PathBuf,
     /// Where to write the profile (TOML).
     #[arg(short, long)]
@@ -26,6 +28,7 @@ pub struct FitArgs {
     /// Candidate laws (comma-separated), instead of the config's.
     #[arg(long, value_delimiter = ',', ignore_case = true)]
     laws: Option<Vec<LawArg>>,
+    /// Print the fit's whole report as JSON instead of the summary.
     #[arg(long)]
     json: bool,
     /// Also write the HTML report of the profile (`chromacal report`) to this file.
@@ -74,10 +77,9 @@ fn fit(
     json: bool,
     report_path: Option<&Path>,
 ) -> Result<(), Failure> {
-    let mut options = match config {
-        Some(path) => load_config(Some(path))?.config.fit,
-        None => FitOptions::default(),
-    };
+    let mut options = load_config_searching(config, &config_search_paths())?
+        .config
+        .fit;
     if let Some(laws) = laws {
         options.laws = laws.into_iter().map(LawKind::from).collect();
     }

@@ -10,6 +10,7 @@ pub struct InstrumentsArgs {
     /// Also probe this port (pseudo-terminals are not listed by the system).
     #[arg(long)]
     port: Vec<String>,
+    /// Print the ports and what answered on them as JSON.
     #[arg(long)]
     json: bool,
 }

@@ -11,11 +11,13 @@ pub struct MeasureArgs {
     /// KIND:PORT, e.g. pr670:/dev/ttyACM0.
     #[arg(long)]
     instrument: String,
+    /// How many readings to take.
     #[arg(long, default_value_t = 1)]
     count: usize,
     /// Multiplies the protocol's timeouts (for emulators run faster than real time).
     #[arg(long, default_value_t = 1.0)]
     timing_scale: f64,
+    /// Print each reading (XYZ, spectrum, the instrument's code and reply) as JSON.
     #[arg(long)]
     json: bool,
 }

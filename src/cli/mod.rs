@@ -7,6 +7,7 @@ pub mod bench_render;
 pub mod bench_spectral;
 pub mod calibrate;
 pub mod check;
+pub mod config;
 pub mod daemon;
 pub mod emulate;
 pub mod export;
@@ -18,3 +19,34 @@ pub mod render;
 pub mod report;
 pub mod shared;
 pub mod spectrum;
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// Every argument of every command, positionals included, says what it is in
+    /// `--help`.
+    #[test]
+    fn every_argument_has_help() {
+        fn walk(command: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for arg in command.get_arguments() {
+                let id = arg.get_id().as_str();
+                if matches!(id, "help" | "version") {
+                    continue;
+                }
+                if arg.get_help().is_none() && arg.get_long_help().is_none() {
+                    missing.push(format!("{path} {id}"));
+                }
+            }
+            for sub in command.get_subcommands() {
+                if sub.get_name() != "help" {
+                    walk(sub, &format!("{path} {}", sub.get_name()), missing);
+                }
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&crate::Cli::command(), "chromacal", &mut missing);
+        assert!(missing.is_empty(), "arguments without help: {missing:#?}");
+        crate::Cli::command().debug_assert();
+    }
+}

@@ -21,19 +21,34 @@ pub struct ProfileArgs {
 #[derive(Subcommand)]
 enum ProfileCommand {
     /// Print the model in words and numbers.
-    Show { profile: PathBuf },
+    Show {
+        /// A chromacal profile (TOML), e.g. <state>/current.toml.
+        profile: PathBuf,
+    },
     /// The current profile of a running daemon (TOML, or JSON).
     Current {
         #[command(flatten)]
         api: ApiArgs,
+        /// The profile as JSON (the same as --format json).
         #[arg(long)]
         json: bool,
-        /// Any export format (the daemon exports it): icc4, icc2, ti3, psychopy, json, toml.
-        #[arg(long, value_parser = ["icc4", "icc2", "ti3", "psychopy", "json", "toml"])]
+        /// Any export format (the daemon exports it): icc4, icc2, ti3, cal, psychopy,
+        /// json, toml.
+        #[arg(long, ignore_case = true, value_parser = ["icc4", "icc2", "ti3", "cal", "psychopy", "json", "toml"])]
         format: Option<String>,
         /// Write to this file instead of standard output.
         #[arg(short, long)]
         output: Option<PathBuf>,
+        /// Calibration target white for the curves (icc4, icc2, cal), as `export`
+        /// takes it: native, D50, D55, D65, D75, 6500K or x,y.
+        #[arg(long)]
+        white: Option<String>,
+        /// Calibration target tone curve: gamma:G, srgb, bt1886 or lstar.
+        #[arg(long)]
+        tone: Option<String>,
+        /// Calibration target white luminance in cd/m², or max.
+        #[arg(long)]
+        luminance: Option<String>,
     },
 }
 
@@ -47,8 +62,16 @@ pub fn run(args: ProfileArgs) -> Result<(), Failure> {
             json,
             format,
             output,
-        } => {
-            current_profile(&api, json, format.as_deref(), output.as_deref()).map_err(Failure::from)
-        }
+            white,
+            tone,
+            luminance,
+        } => current_profile(
+            &api,
+            json,
+            format.as_deref(),
+            [("white", white), ("tone", tone), ("luminance", luminance)],
+            output.as_deref(),
+        )
+        .map_err(Failure::from),
     }
 }

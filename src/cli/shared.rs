@@ -23,6 +23,12 @@ impl<E: std::fmt::Display> From<E> for Failure {
     }
 }
 
+/// The exit codes, for `--help`.
+pub const EXIT_CODES: &str = "Exit codes: 0 done; 1 failed (the message says why); 2 the command line is wrong; \
+3 a profile was made but missed the [publish] limits (kept, not made current); \
+4 an export was written but colord could not take it; \
+130 stopped by Ctrl-C or SIGTERM (the journal keeps every reading: `chromacal calibrate --resume`).";
+
 /// Exit code when a profile was made but did not pass the publishing limits.
 pub const NOT_PUBLISHED: u8 = 3;
 

@@ -24,6 +24,7 @@ use super::shared::{Failure, IlluminantArg};
 /// illuminant are all defined; nothing is extrapolated.
 #[derive(clap::Args)]
 pub struct SpectrumArgs {
+    /// A CSV of spectra: wavelength (nm) in the first column, one sample a column.
     file: PathBuf,
     /// Columns are radiance spectra (the default).
     #[arg(long, conflicts_with = "reflectance")]
@@ -45,6 +46,7 @@ pub struct SpectrumArgs {
     /// Standard observer: 2 (CIE 1931) or 10 (CIE 1964).
     #[arg(long, default_value = "2", value_parser = ["2", "10"])]
     observer: String,
+    /// Print the figures as JSON.
     #[arg(long)]
     json: bool,
 }

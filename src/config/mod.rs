@@ -446,9 +446,58 @@ pub fn load_config(path: Option<&Path>) -> Result<LoadedConfig, ConfigError> {
     }
 }
 
+/// Where a config is looked for when none is named, first found first: the user's
+/// (`$XDG_CONFIG_HOME/chromacal/config.toml`, else `~/.config/chromacal/config.toml`,
+/// per the XDG Base Directory specification), then the system's
+/// (`/etc/chromacal/config.toml`, where the systemd unit reads it).
+pub fn config_search_paths() -> Vec<PathBuf> {
+    let user = std::env::var_os("XDG_CONFIG_HOME")
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|home| PathBuf::from(home).join(".config")));
+    user.map(|dir| dir.join("chromacal").join("config.toml"))
+        .into_iter()
+        .chain([PathBuf::from("/etc/chromacal/config.toml")])
+        .collect()
+}
+
+/// Load the config named, else the first of `search` that exists, else the built-in
+/// one. `LoadedConfig::origin` says which.
+pub fn load_config_searching(
+    path: Option<&Path>,
+    search: &[PathBuf],
+) -> Result<LoadedConfig, ConfigError> {
+    match path {
+        Some(path) => load_config(Some(path)),
+        None => load_config(search.iter().find(|p| p.is_file()).map(PathBuf::as_path)),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn without_a_name_the_first_config_found_is_read_else_the_built_in_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let user = dir.path().join("user.toml");
+        let system = dir.path().join("system.toml");
+        let search = [user.clone(), system.clone()];
+        let origin = |path: Option<&Path>| load_config_searching(path, &search).unwrap().origin;
+        assert_eq!(origin(None), "built-in config/default.toml");
+        std::fs::write(&system, "[plan]\nbudget = 60\n").unwrap();
+        assert_eq!(origin(None), system.display().to_string());
+        std::fs::write(&user, "[plan]\nbudget = 70\n").unwrap();
+        let loaded = load_config_searching(None, &search).unwrap();
+        assert_eq!(loaded.origin, user.display().to_string());
+        assert_eq!(loaded.config.plan.budget, 70);
+        // One named wins over both; a broken one found is an error, not skipped.
+        let named = dir.path().join("named.toml");
+        std::fs::write(&named, "[plan]\nbudget = 80\n").unwrap();
+        assert_eq!(origin(Some(&named)), named.display().to_string());
+        std::fs::write(&user, "[plan]\nbugdet = 70\n").unwrap();
+        assert!(load_config_searching(None, &search).is_err());
+    }
 
     #[test]
     fn a_light_meter_without_chromaticities_is_refused_before_measuring() {

@@ -44,7 +44,10 @@ pub const LCD_CONFIG: &str =
 
 /// Path of the built `chromacal` binary.
 pub fn chromacal() -> std::process::Command {
-    std::process::Command::new(env!("CARGO_BIN_EXE_chromacal"))
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_chromacal"));
+    // A config in the tester's own ~/.config must not change what the tests run.
+    command.env("XDG_CONFIG_HOME", "/nonexistent/chromacal-tests-config");
+    command
 }
 
 /// Simulate the run a config describes (relative paths from `base_dir`), and return
