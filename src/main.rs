@@ -3,13 +3,13 @@
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 mod cli;
 
 use cli::{
-    bench, calibrate, check, config, daemon, emulate, export, fit, instruments, measure, profile,
-    render, report, spectrum,
+    bench, calibrate, check, completions, config, daemon, emulate, export, fit, instruments,
+    measure, profile, render, report, spectrum,
 };
 
 #[derive(Parser)]
@@ -53,6 +53,8 @@ enum Command {
     Rollback(daemon::RollbackArgs),
     Bench(bench::BenchArgs),
     Config(config::ConfigArgs),
+    Completions(completions::CompletionsArgs),
+    Man(completions::ManArgs),
 }
 
 fn main() -> ExitCode {
@@ -82,6 +84,8 @@ fn main() -> ExitCode {
         Command::Rollback(args) => daemon::run_rollback(args),
         Command::Bench(args) => bench::run(args),
         Command::Config(args) => config::run(args),
+        Command::Completions(args) => completions::run_completions(args, Cli::command()),
+        Command::Man(args) => completions::run_man(args, Cli::command()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -596,3 +596,65 @@ fn ctrl_c_stops_a_calibration_keeping_its_readings_for_resume() {
     );
     assert!(state.path().join("current.toml").exists());
 }
+
+#[test]
+fn completions_and_manual_pages_come_from_the_command_line_definitions() {
+    // bash takes the script and completes the subcommands from it.
+    let out = chromacal().args(["completions", "bash"]).output().unwrap();
+    assert!(out.status.success());
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("chromacal.bash");
+    std::fs::write(&script, &out.stdout).unwrap();
+    let probe = format!(
+        "source {}; COMP_WORDS=(chromacal rep); COMP_CWORD=1; _chromacal chromacal rep chromacal; echo \"${{COMPREPLY[@]}}\"",
+        script.display()
+    );
+    let completed = std::process::Command::new("bash")
+        .args(["-c", &probe])
+        .output()
+        .unwrap();
+    let words = String::from_utf8_lossy(&completed.stdout);
+    assert!(
+        words.split_whitespace().any(|w| w == "report"),
+        "bash completed 'rep' to {words:?}: {}",
+        String::from_utf8_lossy(&completed.stderr)
+    );
+    for shell in ["zsh", "fish", "Elvish", "powershell"] {
+        let out = chromacal().args(["completions", shell]).output().unwrap();
+        assert!(out.status.success() && out.stdout.len() > 1000, "{shell}");
+    }
+    // The manual pages read back through groff: a page a command, the options there.
+    let pages = dir.path().join("man");
+    let out = chromacal()
+        .args(["man", "-o"])
+        .arg(&pages)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for page in ["chromacal.1", "chromacal-calibrate.1", "chromacal-report.1"] {
+        assert!(pages.join(page).exists(), "no {page}");
+    }
+    let rendered = std::process::Command::new("groff")
+        .args(["-man", "-Tascii"])
+        .arg(pages.join("chromacal-calibrate.1"))
+        .output()
+        .unwrap();
+    // groff overstrikes bold as "c\bc": keep the last of each.
+    let mut text = String::new();
+    for c in String::from_utf8_lossy(&rendered.stdout).chars() {
+        if c == '\u{8}' {
+            text.pop();
+        } else {
+            text.push(c);
+        }
+    }
+    assert!(rendered.status.success());
+    assert!(
+        text.contains("--resume") && text.contains("--report"),
+        "{text}"
+    );
+}

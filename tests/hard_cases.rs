@@ -398,11 +398,20 @@ fn a_uniformity_grid_with_missing_cells() {
 #[test]
 fn infinite_and_missing_values_in_imported_files_are_errors() {
     let text = std::fs::read_to_string(fixture("ti3/crt-default.ti3")).unwrap();
+    // The row's fields past XYZ (the spectra of a spectral instrument) are zeros.
+    let fields: usize = text
+        .lines()
+        .find_map(|l| l.strip_prefix("NUMBER_OF_FIELDS "))
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    let spectra = " 0".repeat(fields - 7);
     for bad in ["inf", "-inf", "NaN", "1e999", "x"] {
         let broken = text
             .replacen(
                 "\nEND_DATA\n",
-                &format!("\n99 0 0 0 1 {bad} 1\nEND_DATA\n"),
+                &format!("\n99 0 0 0 1 {bad} 1{spectra}\nEND_DATA\n"),
                 1,
             )
             .replace("NUMBER_OF_SETS 71", "NUMBER_OF_SETS 72");

@@ -196,4 +196,23 @@ fn bench_spectral_prints_the_table_with_the_survey_beside() {
     }
     assert!(text.contains("integration 192 × 189 +"), "{text}");
     assert!(text.contains("Cheapest method per conversion"), "{text}");
+    // Without --data, from any working directory, it finds the shared data beside the
+    // project and prints the same tables (the display primaries need it; the times
+    // differ from run to run, the operation counts do not).
+    let elsewhere = tempfile::tempdir().unwrap();
+    let again = chromacal()
+        .current_dir(elsewhere.path())
+        .args(["bench", "spectral", "--quick"])
+        .output()
+        .unwrap();
+    assert!(again.status.success());
+    let again = String::from_utf8_lossy(&again.stdout);
+    let counts = |t: &str| -> Vec<String> {
+        t.lines()
+            .map(|l| l.split(" µs").next().unwrap_or(l).to_string())
+            .filter(|l| l.contains("display primaries") || l.contains(" × "))
+            .collect()
+    };
+    assert!(again.contains("display primaries"), "{again}");
+    assert_eq!(counts(&again).len(), counts(&text).len());
 }

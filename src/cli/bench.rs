@@ -239,7 +239,8 @@ pub struct BenchArgs {
     /// Fewer repeats, for a quick look.
     #[arg(long)]
     quick: bool,
-    /// Directory of the shared reference data [default: ../shared/data].
+    /// Directory of the shared reference data [default: ../shared/data beside the
+    /// project chromacal was built from, else beside the working directory].
     #[arg(long)]
     data: Option<PathBuf>,
     /// Candidate laws for the ArgyllCMS comparison (comma-separated) [default: all].
@@ -264,8 +265,19 @@ const TABLES: [&str; 6] = [
     "render",
 ];
 
+/// The shared reference data: `../shared/data` from the project chromacal was built
+/// in, so that `bench` finds it from any working directory; else from the working
+/// directory (a binary moved elsewhere); the first that exists.
+fn shared_data() -> PathBuf {
+    let built_in = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    if built_in.is_dir() {
+        return built_in;
+    }
+    PathBuf::from("../shared/data")
+}
+
 pub fn run(args: BenchArgs) -> Result<(), Failure> {
-    let data = args.data.unwrap_or_else(|| PathBuf::from("../shared/data"));
+    let data = args.data.unwrap_or_else(shared_data);
     let only: Vec<&String> = args.only.iter().chain(&args.tables).collect();
     let wanted = |table: &str| only.is_empty() || only.iter().any(|o| *o == table);
     if wanted("fit-time") || wanted("budget") {

@@ -23,7 +23,9 @@ use super::shared::{DeviceArgs, Failure, NOT_PUBLISHED};
 /// publish the profile to the state directory.
 #[derive(clap::Args)]
 pub struct CalibrateArgs {
-    /// Configuration file (TOML); the built-in config/default.toml when absent.
+    /// Configuration file (TOML) [default: $XDG_CONFIG_HOME/chromacal/config.toml, else
+    /// /etc/chromacal/config.toml, else the built-in config/default.toml; see
+    /// `chromacal config show`].
     #[arg(long)]
     config: Option<PathBuf>,
     /// Profile store and run journals [default: $STATE_DIRECTORY, else

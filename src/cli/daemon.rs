@@ -26,7 +26,9 @@ use super::shared::Failure;
 /// resumes at the next start.
 #[derive(clap::Args)]
 pub struct DaemonArgs {
-    /// Configuration file [default: the built-in one].
+    /// Configuration file (TOML) [default: $XDG_CONFIG_HOME/chromacal/config.toml, else
+    /// /etc/chromacal/config.toml, else the built-in config/default.toml; see
+    /// `chromacal config show`].
     #[arg(long)]
     config: Option<PathBuf>,
     /// Profile store, journals, history [default: as for calibrate].

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 
-use chromacal::config::{config_search_paths, load_config_searching};
+use chromacal::config::load_config;
 use chromacal::display::resolve::{ClientOptions, run_client};
 use chromacal::instrument::devices::DeviceKind;
 use chromacal::instrument::emulator::Meter;
@@ -31,7 +31,9 @@ pub struct EmulateArgs {
     /// Virtual monitor preset (crt, lcd) [default: the config's monitor].
     #[arg(long)]
     pub monitor: Option<String>,
-    /// Take [monitor] and [instrument.simulated] (noise, seed) from this config.
+    /// Take [monitor] and [instrument.simulated] (noise, seed) from this config
+    /// [default: the built-in one; an emulator is a test device, so no user or system
+    /// config is looked for].
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Faults to inject, e.g. "no_reply=0.05,garbage=0.02,low_light=0.1,seed=7".
@@ -68,8 +70,7 @@ pub fn run(args: EmulateArgs) -> Result<(), Failure> {
 
 fn emulate(args: EmulateArgs) -> Result<(), String> {
     let kind = DeviceKind::parse(&args.instrument)?;
-    let loaded = load_config_searching(args.config.as_deref(), &config_search_paths())
-        .map_err(|e| e.to_string())?;
+    let loaded = load_config(args.config.as_deref()).map_err(|e| e.to_string())?;
     let mut monitor_config = loaded.config.monitor.clone();
     if let Some(preset) = &args.monitor {
         monitor_config.preset = Some(preset.clone());
@@ -161,23 +162,30 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
 /// On SIGTERM, SIGINT or SIGHUP, remove the screen socket and exit 0, so that a
 /// stopped emulator leaves nothing behind in the temporary directory. (SIGKILL cannot
 /// be caught; a socket left by one is replaced when its path is bound again.)
+///
+/// The handlers are in place when this returns (before the emulator says where it
+/// is), so a stop that comes at once is caught too.
 fn remove_when_stopped(socket: PathBuf) {
+    use tokio::signal::unix::{SignalKind, signal};
+    let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    else {
+        return;
+    };
+    let handlers = {
+        let _context = runtime.enter();
+        (
+            signal(SignalKind::terminate()),
+            signal(SignalKind::interrupt()),
+            signal(SignalKind::hangup()),
+        )
+    };
+    let (Ok(mut term), Ok(mut interrupt), Ok(mut hangup)) = handlers else {
+        return;
+    };
     std::thread::spawn(move || {
-        let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-        else {
-            return;
-        };
         runtime.block_on(async move {
-            use tokio::signal::unix::{SignalKind, signal};
-            let (Ok(mut term), Ok(mut interrupt), Ok(mut hangup)) = (
-                signal(SignalKind::terminate()),
-                signal(SignalKind::interrupt()),
-                signal(SignalKind::hangup()),
-            ) else {
-                return;
-            };
             tokio::select! {
                 _ = term.recv() => {}
                 _ = interrupt.recv() => {}

@@ -22,7 +22,9 @@ pub struct FitArgs {
     /// Where to write the profile (TOML).
     #[arg(short, long)]
     output: PathBuf,
-    /// Take the [fit] options from this configuration file.
+    /// Take the [fit] options from this configuration file [default: $XDG_CONFIG_HOME/chromacal/config.toml, else
+    /// /etc/chromacal/config.toml, else the built-in config/default.toml; see
+    /// `chromacal config show`].
     #[arg(long)]
     config: Option<PathBuf>,
     /// Candidate laws (comma-separated), instead of the config's.

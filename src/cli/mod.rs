@@ -7,6 +7,7 @@ pub mod bench_render;
 pub mod bench_spectral;
 pub mod calibrate;
 pub mod check;
+pub mod completions;
 pub mod config;
 pub mod daemon;
 pub mod emulate;
