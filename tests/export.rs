@@ -924,3 +924,71 @@ fn a_spectral_run_exports_its_spectra_in_the_ti3_as_argyll_reads_them() {
         assert!((a - b).abs() < 0.01 * peak, "{a} against {b}");
     }
 }
+
+#[test]
+fn the_psychopy_calibration_is_named_in_local_time_and_the_icc_date_in_utc() {
+    let dir = tempfile::tempdir().unwrap();
+    let profile = dir.path().join("crt.toml");
+    let out = chromacal()
+        .arg("fit")
+        .arg(common::fixture("ti3/crt-default.ti3"))
+        .arg("-o")
+        .arg(&profile)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let name_in = |tz: &str| {
+        let file = dir.path().join(format!("{}.json", tz.replace('/', "_")));
+        let out = chromacal()
+            .env("TZ", tz)
+            .arg("export")
+            .arg(&profile)
+            .args(["--format", "psychopy", "-o"])
+            .arg(&file)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+        let name = json.as_object().unwrap().keys().next().unwrap().clone();
+        jiff::civil::DateTime::strptime("%Y_%m_%d %H:%M", &name).unwrap()
+    };
+    let utc = name_in("UTC");
+    let tokyo = name_in("Asia/Tokyo");
+    assert_eq!(tokyo, utc + jiff::Span::new().hours(9));
+    // The profile's own time, in UTC, is what the name says in UTC.
+    let created: jiff::Timestamp = Profile::read(&profile).unwrap().created.parse().unwrap();
+    let made = created.to_zoned(jiff::tz::TimeZone::UTC).datetime();
+    assert_eq!(utc, made.with().second(0).build().unwrap());
+    // The ICC header's date (bytes 24–35) is UTC whatever the zone.
+    for tz in ["UTC", "Asia/Tokyo"] {
+        let icc = dir.path().join("p.icc");
+        let out = chromacal()
+            .env("TZ", tz)
+            .arg("export")
+            .arg(&profile)
+            .args(["--format", "icc4", "-o"])
+            .arg(&icc)
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        let bytes = std::fs::read(&icc).unwrap();
+        let n = |i: usize| u16::from_be_bytes([bytes[24 + 2 * i], bytes[25 + 2 * i]]) as i16;
+        assert_eq!(
+            [n(0), n(1), n(2), n(3), n(4), n(5)],
+            [
+                made.year(),
+                made.month() as i16,
+                made.day() as i16,
+                made.hour() as i16,
+                made.minute() as i16,
+                made.second() as i16
+            ],
+            "{tz}"
+        );
+    }
+}

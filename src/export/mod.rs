@@ -194,25 +194,24 @@ pub fn limitations(profile: &Profile) -> Vec<String> {
 }
 
 /// When the profile was made (its RFC 3339 `created`; now if that cannot be read).
-fn created_time(created: &str) -> std::time::SystemTime {
-    humantime::parse_rfc3339_weak(created.trim_end_matches('Z'))
-        .or_else(|_| humantime::parse_rfc3339(created))
-        .unwrap_or_else(|_| std::time::SystemTime::now())
+fn created_time(created: &str) -> jiff::Timestamp {
+    created
+        .trim()
+        .parse::<jiff::Timestamp>()
+        .unwrap_or_else(|_| jiff::Timestamp::now())
 }
 
-/// The six numbers ICC headers use for a time (UTC).
-fn icc_date_time(time: std::time::SystemTime) -> [u16; 6] {
-    let text = humantime::format_rfc3339_seconds(time).to_string();
-    let number = |range: std::ops::Range<usize>| -> u16 {
-        text.get(range).and_then(|s| s.parse().ok()).unwrap_or(0)
-    };
+/// An ICC dateTimeNumber (ICC.1:2022 §4.2): year, month, day, hours, minutes and
+/// seconds, in UTC.
+fn icc_date_time(time: jiff::Timestamp) -> [u16; 6] {
+    let t = time.to_zoned(jiff::tz::TimeZone::UTC);
     [
-        number(0..4),
-        number(5..7),
-        number(8..10),
-        number(11..13),
-        number(14..16),
-        number(17..19),
+        t.year() as u16,
+        t.month() as u16,
+        t.day() as u16,
+        t.hour() as u16,
+        t.minute() as u16,
+        t.second() as u16,
     ]
 }
 
@@ -241,7 +240,9 @@ fn short_description(profile: &Profile, calibration: Option<&CalibrationCurves>)
         .chars()
         .take(40)
         .collect();
-    let day = profile.created.get(..10).unwrap_or(&profile.created);
+    let day = created_time(&profile.created)
+        .to_zoned(jiff::tz::TimeZone::UTC)
+        .date();
     let calibrated = calibration.map_or("native".to_string(), |k| {
         use crate::model::target::WhiteTarget;
         let white = match k.target.white {
@@ -345,10 +346,8 @@ pub fn export(
             psychopy::monitor_file(
                 &profile.model,
                 set.as_ref(),
-                &psychopy::calibration_name(&created),
-                created_at
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0.0, |d| d.as_secs_f64()),
+                &psychopy::calibration_name(created_at, &jiff::tz::TimeZone::system()),
+                created_at.as_millisecond() as f64 / 1000.0,
                 &text,
             )
             .into_bytes()

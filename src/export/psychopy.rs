@@ -201,12 +201,12 @@ fn primary_spectra(set: &MeasurementSet) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
     Some((grid?, rows))
 }
 
-/// PsychoPy's calibration name for a time: `%Y_%m_%d %H:%M`.
-pub fn calibration_name(created: &[u16; 6]) -> String {
-    format!(
-        "{:04}_{:02}_{:02} {:02}:{:02}",
-        created[0], created[1], created[2], created[3], created[4]
-    )
+/// PsychoPy's name for a calibration made at `time`: `%Y_%m_%d %H:%M` in local time,
+/// as its Monitor Center names one (`time.strftime` on the calibrating machine).
+pub fn calibration_name(time: jiff::Timestamp, local: &jiff::tz::TimeZone) -> String {
+    time.to_zoned(local.clone())
+        .strftime("%Y_%m_%d %H:%M")
+        .to_string()
 }
 
 #[cfg(test)]
@@ -217,5 +217,17 @@ mod tests {
     fn gamma_is_recovered_from_a_power_curve() {
         let shares: Vec<f64> = (0..256).map(|i| (i as f64 / 255.0).powf(2.37)).collect();
         assert!((fit_gamma(&shares) - 2.37).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_calibration_is_named_in_local_time() {
+        let made: jiff::Timestamp = "2026-12-02T22:30:00Z".parse().unwrap();
+        let utc = jiff::tz::TimeZone::UTC;
+        assert_eq!(calibration_name(made, &utc), "2026_12_02 22:30");
+        // Tokyo is nine hours ahead: the next day there.
+        let tokyo = jiff::tz::TimeZone::fixed(jiff::tz::offset(9));
+        assert_eq!(calibration_name(made, &tokyo), "2026_12_03 07:30");
+        let new_york = jiff::tz::TimeZone::fixed(jiff::tz::offset(-5));
+        assert_eq!(calibration_name(made, &new_york), "2026_12_02 17:30");
     }
 }
