@@ -14,7 +14,7 @@ use std::time::Duration;
 use browser::Browser;
 use chromacal::measurement_file::read_measurements;
 use common::daemon::{events_of_job, get, start_daemon, start_job, subscribe};
-use common::{chromacal, shared_path};
+use common::{chromacal, shared_path, succeed};
 
 const TARGET: &str = "[target]\nwhite = \"D65\"\ntone = \"srgb\"\nluminance = 80.0\n";
 
@@ -85,20 +85,15 @@ fn a_simulated_calibration_writes_a_report_with_every_figure() {
     let config = dir.path().join("config.toml");
     std::fs::write(&config, TARGET).unwrap();
     let page = dir.path().join("report.html");
-    let out = chromacal()
-        .arg("calibrate")
-        .arg("--config")
-        .arg(&config)
-        .arg("--state-dir")
-        .arg(dir.path().join("state"))
-        .arg("--report")
-        .arg(&page)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        chromacal()
+            .arg("calibrate")
+            .arg("--config")
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(dir.path().join("state"))
+            .arg("--report")
+            .arg(&page),
     );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("report written to"), "{stderr}");
@@ -160,35 +155,25 @@ fn a_real_ti3_fit_reports_alike_from_fit_and_from_report_and_says_what_it_lacks(
     .unwrap();
     let profile = dir.path().join("samsung.toml");
     let from_fit = dir.path().join("fit.html");
-    let out = chromacal()
-        .arg("fit")
-        .arg(&ti3)
-        .arg("-o")
-        .arg(&profile)
-        .arg("--report")
-        .arg(&from_fit)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeed(
+        chromacal()
+            .arg("fit")
+            .arg(&ti3)
+            .arg("-o")
+            .arg(&profile)
+            .arg("--report")
+            .arg(&from_fit),
     );
 
     // `report` finds the readings the profile names and writes the same page, to a
     // file or to standard output.
     let from_report = dir.path().join("report.html");
-    let out = chromacal()
-        .arg("report")
-        .arg(&profile)
-        .arg("-o")
-        .arg(&from_report)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        chromacal()
+            .arg("report")
+            .arg(&profile)
+            .arg("-o")
+            .arg(&from_report),
     );
     assert!(
         out.stdout.is_empty(),

@@ -3,6 +3,7 @@
 //! `super` computes from a profile, so what is drawn and how it is computed read apart.
 
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::colors::colormaps::ViridisRGB;
 
@@ -56,6 +57,53 @@ fn text<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
 
+/// A chart of two f64 axes drawn into an SVG.
+type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A titled chart on `area` over `x` × `y`, with room for the axes' labels
+/// (`y_labels` pixels for the y axis).
+fn titled<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    title: &str,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+    y_labels: u32,
+) -> Result<Chart<'a, 'b>, String> {
+    ChartBuilder::on(area)
+        .caption(title, (FONT, 16))
+        .margin(8)
+        .x_label_area_size(34)
+        .y_label_area_size(y_labels)
+        .build_cartesian_2d(x, y)
+        .map_err(text)
+}
+
+/// The grid and the axes' names.
+fn axes(chart: &mut Chart, x: &str, y: &str) -> Result<(), String> {
+    chart
+        .configure_mesh()
+        .x_desc(x)
+        .y_desc(y)
+        .light_line_style(RGBColor(238, 238, 238))
+        .draw()
+        .map_err(text)
+}
+
+/// The legend of the series that have a label, at `position`.
+fn legend<'a, 'b: 'a>(
+    chart: &mut Chart<'a, 'b>,
+    position: SeriesLabelPosition,
+) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(200, 200, 200))
+        .label_font((FONT, 11))
+        .draw()
+        .map_err(text)
+}
+
 /// (lowest, highest) of `values`, widened by `pad` of the span, and never empty.
 fn padded_range(values: impl Iterator<Item = f64>, pad: f64) -> (f64, f64) {
     let (lo, hi) = values
@@ -86,20 +134,8 @@ pub fn transfer(
             .chain(chosen.1.iter().map(|p| p.1))
             .fold(1.0_f64, f64::max)
             * 1.05;
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, (FONT, 16))
-            .margin(8)
-            .x_label_area_size(34)
-            .y_label_area_size(44)
-            .build_cartesian_2d(0.0..1.0, 0.0..top)
-            .map_err(text)?;
-        chart
-            .configure_mesh()
-            .x_desc("drive")
-            .y_desc("share of full drive")
-            .light_line_style(RGBColor(238, 238, 238))
-            .draw()
-            .map_err(text)?;
+        let mut chart = titled(root, title, 0.0..1.0, 0.0..top, 44)?;
+        axes(&mut chart, "drive", "share of full drive")?;
         for (i, (name, curve)) in candidates.iter().enumerate() {
             let c = CANDIDATE_COLOURS[i % CANDIDATE_COLOURS.len()];
             chart
@@ -134,14 +170,7 @@ pub fn transfer(
                 .label("measured")
                 .legend(move |(x, y)| Circle::new((x + 8, y), 3, colour.filled()));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)
     })
 }
 
@@ -150,20 +179,14 @@ pub fn residuals(series: &[Vec<(f64, f64)>; 3]) -> Result<String, FigureError> {
     svg("residuals", (640, 300), |root| {
         let (lo, hi) = padded_range(series.iter().flatten().map(|p| p.1).chain([0.0]), 0.1);
         let reach = lo.abs().max(hi.abs());
-        let mut chart = ChartBuilder::on(root)
-            .caption("Residuals of the chosen law", (FONT, 16))
-            .margin(8)
-            .x_label_area_size(34)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..1.0, -reach..reach)
-            .map_err(text)?;
-        chart
-            .configure_mesh()
-            .x_desc("drive")
-            .y_desc("measured − law (share)")
-            .light_line_style(RGBColor(238, 238, 238))
-            .draw()
-            .map_err(text)?;
+        let mut chart = titled(
+            root,
+            "Residuals of the chosen law",
+            0.0..1.0,
+            -reach..reach,
+            60,
+        )?;
+        axes(&mut chart, "drive", "measured − law (share)")?;
         chart
             .draw_series(LineSeries::new(
                 [(0.0, 0.0), (1.0, 0.0)],
@@ -182,14 +205,7 @@ pub fn residuals(series: &[Vec<(f64, f64)>; 3]) -> Result<String, FigureError> {
                 .label(["red", "green", "blue"][channel])
                 .legend(move |(x, y)| Circle::new((x + 8, y), 3, colour.filled()));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::UpperRight)
     })
 }
 
@@ -197,20 +213,8 @@ pub fn residuals(series: &[Vec<(f64, f64)>; 3]) -> Result<String, FigureError> {
 pub fn greys(model: &Curve, measured: &[(f64, f64)]) -> Result<String, FigureError> {
     svg("greys", (420, 340), |root| {
         let top = measured.iter().map(|p| p.1).fold(1.0_f64, f64::max) * 1.05;
-        let mut chart = ChartBuilder::on(root)
-            .caption("Greys (all three channels)", (FONT, 16))
-            .margin(8)
-            .x_label_area_size(34)
-            .y_label_area_size(44)
-            .build_cartesian_2d(0.0..1.0, 0.0..top)
-            .map_err(text)?;
-        chart
-            .configure_mesh()
-            .x_desc("drive")
-            .y_desc("Y / Y white")
-            .light_line_style(RGBColor(238, 238, 238))
-            .draw()
-            .map_err(text)?;
+        let mut chart = titled(root, "Greys (all three channels)", 0.0..1.0, 0.0..top, 44)?;
+        axes(&mut chart, "drive", "Y / Y white")?;
         chart
             .draw_series(LineSeries::new(
                 model.iter().copied(),
@@ -228,14 +232,7 @@ pub fn greys(model: &Curve, measured: &[(f64, f64)]) -> Result<String, FigureErr
             .map_err(text)?
             .label("measured")
             .legend(|(x, y)| Circle::new((x + 8, y), 3, RGBColor(90, 90, 90).filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)
     })
 }
 
@@ -255,20 +252,14 @@ pub struct Chromaticities {
 /// them and the reference gamuts for scale.
 pub fn chromaticity(c: &Chromaticities) -> Result<String, FigureError> {
     svg("chromaticity", (520, 500), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption("Primaries and white, CIE 1976 u′v′", (FONT, 16))
-            .margin(8)
-            .x_label_area_size(34)
-            .y_label_area_size(44)
-            .build_cartesian_2d(0.0..0.65, 0.0..0.62)
-            .map_err(text)?;
-        chart
-            .configure_mesh()
-            .x_desc("u′")
-            .y_desc("v′")
-            .light_line_style(RGBColor(238, 238, 238))
-            .draw()
-            .map_err(text)?;
+        let mut chart = titled(
+            root,
+            "Primaries and white, CIE 1976 u′v′",
+            0.0..0.65,
+            0.0..0.62,
+            44,
+        )?;
+        axes(&mut chart, "u′", "v′")?;
         let mut closed = c.locus.clone();
         if let Some(first) = c.locus.first() {
             closed.push(*first);
@@ -320,14 +311,7 @@ pub fn chromaticity(c: &Chromaticities) -> Result<String, FigureError> {
             .map_err(text)?
             .label("white")
             .legend(|(x, y)| Cross::new((x + 8, y), 4, BLACK.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::LowerRight)
     })
 }
 
@@ -446,13 +430,7 @@ pub fn histogram(values: &[f64], title: &str) -> Result<String, FigureError> {
             counts[i] += 1;
         }
         let top = counts.iter().copied().max().unwrap_or(0).max(1) as f64 * 1.1;
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, (FONT, 16))
-            .margin(8)
-            .x_label_area_size(34)
-            .y_label_area_size(44)
-            .build_cartesian_2d(0.0..width * bins as f64, 0.0..top)
-            .map_err(text)?;
+        let mut chart = titled(root, title, 0.0..width * bins as f64, 0.0..top, 44)?;
         chart
             .configure_mesh()
             .x_desc("ΔE00")
@@ -482,20 +460,8 @@ pub fn histogram(values: &[f64], title: &str) -> Result<String, FigureError> {
 /// The calibration curves: drive out of each channel against input.
 pub fn calibration(curves: &[Curve; 3]) -> Result<String, FigureError> {
     svg("calibration", (420, 340), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption("Calibration curves", (FONT, 16))
-            .margin(8)
-            .x_label_area_size(34)
-            .y_label_area_size(44)
-            .build_cartesian_2d(0.0..1.0, 0.0..1.0)
-            .map_err(text)?;
-        chart
-            .configure_mesh()
-            .x_desc("input")
-            .y_desc("drive out")
-            .light_line_style(RGBColor(238, 238, 238))
-            .draw()
-            .map_err(text)?;
+        let mut chart = titled(root, "Calibration curves", 0.0..1.0, 0.0..1.0, 44)?;
+        axes(&mut chart, "input", "drive out")?;
         for (channel, curve) in curves.iter().enumerate() {
             let colour = CHANNEL_COLOURS[channel];
             chart
@@ -507,14 +473,7 @@ pub fn calibration(curves: &[Curve; 3]) -> Result<String, FigureError> {
                 .label(["red", "green", "blue"][channel])
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)
     })
 }
 
@@ -543,20 +502,8 @@ pub fn over_time(
                 .chain([0.0]),
             0.1,
         );
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, (FONT, 16))
-            .margin(8)
-            .x_label_area_size(34)
-            .y_label_area_size(54)
-            .build_cartesian_2d(x0..x1, 0.0..y1)
-            .map_err(text)?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .light_line_style(RGBColor(238, 238, 238))
-            .draw()
-            .map_err(text)?;
+        let mut chart = titled(root, title, x0..x1, 0.0..y1, 54)?;
+        axes(&mut chart, x_label, y_label)?;
         for (i, s) in series.iter().enumerate() {
             let colour = CANDIDATE_COLOURS[i % CANDIDATE_COLOURS.len()];
             chart
@@ -571,13 +518,6 @@ pub fn over_time(
                 .draw_series(s.points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
                 .map_err(text)?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::LowerRight)
     })
 }

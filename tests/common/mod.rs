@@ -50,6 +50,17 @@ pub fn chromacal() -> std::process::Command {
     command
 }
 
+/// Run `command`; its output, or the test fails with its stderr.
+pub fn succeed(command: &mut std::process::Command) -> std::process::Output {
+    let out = command.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{command:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// Simulate the run a config describes (relative paths from `base_dir`), and return
 /// its measurements with the virtual monitor's true model.
 pub fn simulate(
