@@ -658,3 +658,18 @@ fn completions_and_manual_pages_come_from_the_command_line_definitions() {
         "{text}"
     );
 }
+
+#[test]
+fn help_names_the_exit_codes() {
+    let (ok, stdout, _) = run(&["--help"]);
+    assert!(ok);
+    for code in [
+        "Exit codes",
+        "0 done",
+        "3 a profile was made",
+        "4 an export",
+        "130 stopped",
+    ] {
+        assert!(stdout.contains(code), "{code}: {stdout}");
+    }
+}
