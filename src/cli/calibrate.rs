@@ -17,7 +17,7 @@ use chromacal::model::ScreenPosition;
 use chromacal::profile::store::default_state_dir;
 use chromacal::report;
 
-use super::shared::{DeviceArgs, Failure, NOT_PUBLISHED};
+use super::shared::{DeviceArgs, Failure, INTERRUPTED, NOT_PUBLISHED};
 
 /// Run a calibration (by default of the simulated CRT, no hardware needed) and
 /// publish the profile to the state directory.
@@ -299,9 +299,6 @@ pub fn run_runs(args: RunsArgs) -> Result<(), Failure> {
     }
     Ok(())
 }
-
-/// Exit code of a calibration stopped by Ctrl-C or SIGTERM (128 + SIGINT).
-const INTERRUPTED: u8 = 130;
 
 /// The first Ctrl-C or SIGTERM asks the run to stop after the reading under way (the
 /// display is blanked and the journal keeps every reading); a second one exits at once,

@@ -32,6 +32,10 @@ pub const EXIT_CODES: &str = "Exit codes: 0 done; 1 failed (the message says why
 /// Exit code when a profile was made but did not pass the publishing limits.
 pub const NOT_PUBLISHED: u8 = 3;
 
+/// Exit code of a calibration stopped by Ctrl-C or SIGTERM (128 + SIGINT, as a shell
+/// gives it).
+pub const INTERRUPTED: u8 = 130;
+
 /// Exit code when an export was written but colord could not take it.
 pub const COLORD_UNAVAILABLE: u8 = 4;
 

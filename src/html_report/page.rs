@@ -513,10 +513,6 @@ fn held_out(out: &mut String, profile: &Profile) -> Result<(), ReportError> {
     Ok(())
 }
 
-fn verdict(v: &Verdict) -> String {
-    v.to_string()
-}
-
 fn checks(out: &mut String, profile: &Profile) {
     let c = &profile.report.checks;
     out.push_str("<section id=\"checks\"><h2>Assumption checks</h2>\n");
@@ -559,25 +555,17 @@ fn checks(out: &mut String, profile: &Profile) {
         .map(|m| format!("{}: {} reversals", m.channel, m.reversals_beyond_noise))
         .collect::<Vec<_>>()
         .join("; ");
-    let rows = vec![
-        vec![
-            "primary constancy".into(),
-            verdict(&c.primary_constancy_verdict),
-            constancy,
-        ],
-        vec![
-            "additivity".into(),
-            verdict(&c.additivity_verdict),
-            additivity,
-        ],
-        vec![
-            "spatial independence".into(),
-            verdict(&c.spatial_independence_verdict),
+    let rows: [(&str, &Verdict, String); 5] = [
+        ("primary constancy", &c.primary_constancy_verdict, constancy),
+        ("additivity", &c.additivity_verdict, additivity),
+        (
+            "spatial independence",
+            &c.spatial_independence_verdict,
             surround,
-        ],
-        vec![
-            "temporal stability".into(),
-            verdict(&c.temporal_stability_verdict),
+        ),
+        (
+            "temporal stability",
+            &c.temporal_stability_verdict,
             format!(
                 "{} references, drift {:.2} %{}; {}",
                 drift.references,
@@ -585,16 +573,12 @@ fn checks(out: &mut String, profile: &Profile) {
                 if drift.corrected { ", corrected" } else { "" },
                 drift.note
             ),
-        ],
-        vec![
-            "monotonicity".into(),
-            verdict(&c.monotonicity_verdict),
-            monotonicity,
-        ],
+        ),
+        ("monotonicity", &c.monotonicity_verdict, monotonicity),
     ];
     out.push_str("<table><tr><th>assumption</th><th>verdict</th><th>figures</th></tr>\n");
-    for row in rows {
-        let class = if row[1] == Verdict::Fails.to_string() {
+    for (assumption, verdict, figures) in rows {
+        let class = if *verdict == Verdict::Fails {
             " class=\"fails\""
         } else {
             ""
@@ -602,9 +586,9 @@ fn checks(out: &mut String, profile: &Profile) {
         let _ = writeln!(
             out,
             "<tr><td>{}</td><td{class}>{}</td><td style=\"text-align:left\">{}</td></tr>",
-            escape(&row[0]),
-            escape(&row[1]),
-            escape(&row[2])
+            escape(assumption),
+            escape(&verdict.to_string()),
+            escape(&figures)
         );
     }
     out.push_str("</table>\n");

@@ -171,24 +171,26 @@ impl Profile {
     }
 
     pub fn read(path: &Path) -> Result<Self, ProfileError> {
+        let other = |(what, hint)| ProfileError::OtherKind {
+            path: path.display().to_string(),
+            what,
+            hint,
+        };
+        // Binary (an ICC profile) does not read as text: only then is the file's head
+        // read again, to say what it is.
         let text = crate::durable::read_text_limited(path, crate::durable::limits::PROFILE)
-            .map_err(|source| match other_kind(path) {
-                Some((what, hint)) => ProfileError::OtherKind {
-                    path: path.display().to_string(),
-                    what,
-                    hint,
+            .map_err(
+                |source| match file_head(path).as_deref().and_then(other_kind) {
+                    Some(kind) => other(kind),
+                    None => ProfileError::Io {
+                        path: path.display().to_string(),
+                        source,
+                    },
                 },
-                None => ProfileError::Io {
-                    path: path.display().to_string(),
-                    source,
-                },
-            })?;
-        if let Some((what, hint)) = other_kind(path) {
-            return Err(ProfileError::OtherKind {
-                path: path.display().to_string(),
-                what,
-                hint,
-            });
+            )?;
+        let head = &text.as_bytes()[..text.len().min(HEAD_BYTES)];
+        if let Some(kind) = other_kind(head) {
+            return Err(other(kind));
         }
         Self::from_toml(&text, &path.display().to_string())
     }
@@ -221,14 +223,7 @@ impl Profile {
 /// the files people mistake for one: an ICC profile (ICC.1:2022 §7.2: 'acsp' at byte
 /// 36, the version at byte 8, the class at 12, the colour space at 16), an ArgyllCMS
 /// CGATS file, or anything that is not text. `None` for text that may be TOML.
-fn other_kind(path: &Path) -> Option<(String, &'static str)> {
-    use std::io::Read as _;
-    let mut head = Vec::with_capacity(128);
-    std::fs::File::open(path)
-        .ok()?
-        .take(128)
-        .read_to_end(&mut head)
-        .ok()?;
+fn other_kind(head: &[u8]) -> Option<(String, &'static str)> {
     if head.len() >= 40 && &head[36..40] == b"acsp" {
         let word = |at: usize| {
             String::from_utf8_lossy(&head[at..at + 4])
@@ -246,7 +241,7 @@ fn other_kind(path: &Path) -> Option<(String, &'static str)> {
             ": give the .toml profile it was made from (`chromacal export` writes ICC from it)",
         ));
     }
-    let text = String::from_utf8_lossy(&head);
+    let text = String::from_utf8_lossy(head);
     if let Some(kind) = ["CTI3", "CTI1", "CAL", "CGATS"]
         .into_iter()
         .find(|k| text.trim_start().starts_with(k))
@@ -256,13 +251,28 @@ fn other_kind(path: &Path) -> Option<(String, &'static str)> {
             ": to make a profile from measurements, run `chromacal fit FILE -o PROFILE.toml`",
         ));
     }
-    std::str::from_utf8(&head)
+    std::str::from_utf8(head)
         .is_err()
         .then(|| ("not text (UTF-8)".to_string(), ""))
         .filter(|_| {
-            // A multi-byte character cut at byte 128 is not binary.
-            head.len() < 128 || std::str::from_utf8(&head[..120]).is_err()
+            // A multi-byte character cut at the end of the head is not binary.
+            head.len() < HEAD_BYTES || std::str::from_utf8(&head[..HEAD_BYTES - 8]).is_err()
         })
+}
+
+/// Bytes of a file's start that [`other_kind`] looks at.
+const HEAD_BYTES: usize = 128;
+
+/// The first [`HEAD_BYTES`] of the file at `path`.
+fn file_head(path: &Path) -> Option<Vec<u8>> {
+    use std::io::Read as _;
+    let mut head = Vec::with_capacity(HEAD_BYTES);
+    std::fs::File::open(path)
+        .ok()?
+        .take(HEAD_BYTES as u64)
+        .read_to_end(&mut head)
+        .ok()?;
+    Some(head)
 }
 
 /// The first key under `value` holding a float that is not finite.
