@@ -133,6 +133,21 @@ pub fn fit_summary(report: &FitReport) -> String {
             mean(c.corrected_cv),
         );
     }
+    if let Some(c) = &report.code_correction {
+        let mean =
+            |s: Option<ErrorStats>| s.map_or("—".to_string(), |s| format!("{:.3}", s.mean));
+        let _ = writeln!(
+            out,
+            "  correction at the measured codes: {} ({} codes, {} measured twice, noise × {}; replicates predicted {} uncorrected, {} corrected)",
+            if c.kept { "kept" } else { "not kept" },
+            c.codes,
+            c.replicates,
+            c.noise_scale.map_or("—".to_string(), |k| format!("{k:.2}")),
+            mean(c.uncorrected),
+            mean(c.corrected),
+        );
+        let _ = writeln!(out, "  rule: {}", c.rule);
+    }
     for l in &report.laws {
         for n in &l.notes {
             let _ = writeln!(out, "  note ({}): {n}", l.law);

@@ -13,6 +13,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::code_correction::{CodeCorrectionReport, Judged, judge};
 use super::law_correction::{BANDWIDTHS, correct_law, correct_law_widths};
 use super::laws::{FittedParameter, LawFit, LawFitError, fit_law};
 use super::noise::NoiseModel;
@@ -60,7 +61,10 @@ pub struct LawSelection {
     /// Whether the chosen law was corrected at the measured levels
     /// (`law_correction`), and why; `None` where it was not tried.
     pub correction: Option<CorrectionReport>,
-    /// The corrected laws of the three channels, when the correction was kept.
+    /// Whether the curves were corrected at the measured codes (`code_correction`), and
+    /// why; `None` where it was not tried.
+    pub codes: Option<CodeCorrectionReport>,
+    /// The corrected laws of the three channels, when a correction was kept.
     pub corrected: Option<Vec<LawFit>>,
 }
 
@@ -314,13 +318,50 @@ pub fn choose_law(
         ),
     };
     let (correction, corrected) = try_correction(&candidates, chosen, &evidence, tolerance);
+    let (codes, corrected) =
+        try_code_correction(&candidates, chosen, corrected, &evidence, tolerance);
     Some(LawSelection {
         candidates,
         chosen,
         rule,
         correction,
+        codes,
         corrected,
     })
+}
+
+/// The published curves (the chosen law's, or as corrected at the measured levels)
+/// corrected at the measured codes too, when the replicate codes say it pays
+/// (`code_correction`). Not tried for the table, whose knots are the codes already.
+fn try_code_correction(
+    candidates: &[LawCandidate],
+    chosen: LawKind,
+    corrected: Option<Vec<LawFit>>,
+    evidence: &Evidence<'_>,
+    tolerance: f64,
+) -> (Option<CodeCorrectionReport>, Option<Vec<LawFit>>) {
+    if chosen == LawKind::Table {
+        return (None, corrected);
+    }
+    let base: Option<Vec<&LawFit>> = match &corrected {
+        Some(fits) => Some(fits.iter().collect()),
+        None => candidates
+            .iter()
+            .find(|c| c.kind == chosen)
+            .and_then(|c| c.fits.iter().map(|f| f.as_ref().ok()).collect()),
+    };
+    let Some([r, g, b]) = base.and_then(|b| <[&LawFit; 3]>::try_from(b).ok()) else {
+        return (None, corrected);
+    };
+    let (report, fits) = judge(&Judged {
+        ramps: evidence.ramps,
+        fits: [r, g, b],
+        black: evidence.black,
+        white: evidence.white,
+        code_step: evidence.toe,
+        tolerance,
+    });
+    (Some(report), fits.or(corrected))
 }
 
 /// The chosen law corrected at the measured levels (`law_correction`), cross-validated

@@ -25,6 +25,7 @@
 
 pub mod cancel;
 pub mod checks;
+pub mod code_correction;
 pub mod law_correction;
 pub mod law_selection;
 pub mod laws;
@@ -50,6 +51,7 @@ use crate::model::monitor::matrix_condition_number;
 use crate::model::transfer::LawKind;
 use crate::model::{CHANNELS, MonitorModel, SpatialMap};
 use checks::{AssumptionChecks, check_assumptions};
+use code_correction::{CodeCorrection, CodeCorrectionReport, correct_at_codes};
 use law_selection::{CorrectionReport, LawReport, LawSelection, choose_law};
 use noise::{DriftModel, DriftReport, NoiseModel, estimate_drift, estimate_noise};
 use primaries::{
@@ -167,6 +169,10 @@ pub struct FitReport {
     /// profiles made before there was a correction, and where it was not tried).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub law_correction: Option<CorrectionReport>,
+    /// The curves corrected at the measured codes (absent in profiles made before there
+    /// was this correction, and where the chosen law is the table).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub code_correction: Option<CodeCorrectionReport>,
     pub spatial: SpatialReport,
     pub checks: AssumptionChecks,
     /// ΔE00 on patches held out of every fit.
@@ -307,6 +313,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
             terms_rule: choice.rule,
             terms: choice.reports,
             law_correction: selection.correction.clone(),
+            code_correction: selection.codes.clone(),
             spatial,
             checks,
             held_out: evaluation.stats,
@@ -564,6 +571,7 @@ fn refit_curves_for_terms(
         toe,
         law,
         corrected,
+        codes,
     } = refit;
     let Some(kept) = choice.model.clone() else {
         return additive.clone();
@@ -594,6 +602,9 @@ fn refit_curves_for_terms(
         if let Some(c) = corrected.and_then(|h| law_correction::correct_law(&fit, ramp, h)) {
             fit = c;
         }
+        if let Some(c) = codes.and_then(|codes| correct_at_codes(&fit, ramp, codes)) {
+            fit = c;
+        }
         refitted.matrix.set_column(c, &ramp.column(fit.amplitude));
         refitted.laws[c] = fit.law;
     }
@@ -609,6 +620,8 @@ struct CurveRefit {
     law: LawKind,
     /// The law was corrected at the measured levels, with this kernel width.
     corrected: Option<f64>,
+    /// The curves were corrected at the measured codes, so.
+    codes: Option<CodeCorrection>,
 }
 
 impl CurveRefit {
@@ -622,6 +635,15 @@ impl CurveRefit {
                 .as_ref()
                 .filter(|c| c.kept)
                 .map(|c| c.bandwidth),
+            codes: selection
+                .codes
+                .as_ref()
+                .filter(|c| c.kept)
+                .and_then(|c| c.noise_scale)
+                .map(|noise_scale| CodeCorrection {
+                    code_step: toe,
+                    noise_scale,
+                }),
         }
     }
 }

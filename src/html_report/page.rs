@@ -360,6 +360,18 @@ fn laws(out: &mut String, profile: &Profile) {
             escape(&c.rule)
         );
     }
+    if let Some(c) = &r.code_correction {
+        let [uncorrected, _, _] = stats_cells(c.uncorrected.as_ref());
+        let [corrected, _, _] = stats_cells(c.corrected.as_ref());
+        let _ = writeln!(
+            out,
+            "<p>Correction at the measured codes ({} codes, {} measured both as a ramp reading and as a grey): replicates predicted with mean ΔE00 {uncorrected} uncorrected, {corrected} corrected; {}. {}</p>",
+            c.codes,
+            c.replicates,
+            if c.kept { "kept" } else { "not kept" },
+            escape(&c.rule)
+        );
+    }
     out.push_str("</section>\n");
 }
 
