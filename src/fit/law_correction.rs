@@ -50,36 +50,15 @@ pub fn correct_law(fit: &LawFit, ramp: &ChannelRamp, bandwidth: f64) -> Option<L
 
 /// [`correct_law`] for each of `bandwidths`, sharing the residuals and the law's
 /// samples between them (what cross-validation over the widths needs).
-pub fn correct_law_widths(
-    fit: &LawFit,
-    ramp: &ChannelRamp,
-    bandwidths: &[f64],
-) -> Vec<Option<LawFit>> {
-    let none = || bandwidths.iter().map(|_| None).collect();
-    if !ramp.pinned {
-        return none();
-    }
+fn correct_law_widths(fit: &LawFit, ramp: &ChannelRamp, bandwidths: &[f64]) -> Vec<Option<LawFit>> {
+    let Some(residuals) = Residuals::of(fit, ramp) else {
+        return bandwidths.iter().map(|_| None).collect();
+    };
     let law = |v: f64| fit.amplitude * fit.law.excitation(v);
-    // (level, residual, its noise), where the law and the data are clear of black.
-    let residuals: Vec<(f64, f64, f64)> = level_means(ramp)
-        .into_iter()
-        .filter(|l| l.drive > 0.0 && l.excitation > 5.0 * l.sigma && law(l.drive) > 0.0)
-        .map(|l| {
-            let predicted = law(l.drive);
-            (l.drive, l.excitation / predicted - 1.0, l.sigma / predicted)
-        })
-        .collect();
-    if residuals.is_empty() {
-        return none();
-    }
-    let n = residuals.len() as f64;
-    let spread = residuals.iter().map(|r| r.1 * r.1).sum::<f64>() / n;
-    let noise = residuals.iter().map(|r| r.2 * r.2).sum::<f64>() / n;
-    let tau2 = (spread - noise).max(0.0);
     let mut drives: Vec<f64> = (1..=GRID)
         .map(|k| k as f64 / GRID as f64)
         .chain((1..=GRID / 2).map(|k| (k as f64 / (GRID / 2) as f64).powi(2)))
-        .chain(residuals.iter().map(|r| r.0))
+        .chain(residuals.levels.iter().map(|r| r.0))
         .filter(|v| *v > 0.0 && *v <= 1.0)
         .collect();
     drives.sort_by(|a, b| a.total_cmp(b));
@@ -91,18 +70,68 @@ pub fn correct_law_widths(
             let excitation: Vec<f64> = drives
                 .iter()
                 .zip(&uncorrected)
-                .map(|(v, e)| {
-                    (e * (1.0 + pooled_residual(&residuals, tau2, *bandwidth, *v))).max(0.0)
-                })
+                .map(|(v, e)| (e * residuals.factor(*bandwidth, *v)).max(0.0))
                 .collect();
             // Where shrunk residuals of neighbouring levels fall faster than the law
             // rises (only near black), the samples are pooled to stay monotone, as the
             // table law's are.
             let excitation = isotonic_regression(&excitation, &vec![1.0; excitation.len()]);
             let table = Table::new(drives.clone(), excitation).ok()?;
-            Some(corrected_fit(fit, table, residuals.len(), tau2, *bandwidth))
+            Some(corrected_fit(
+                fit,
+                table,
+                residuals.levels.len(),
+                residuals.tau2,
+                *bandwidth,
+            ))
         })
         .collect()
+}
+
+/// A law's relative residuals at a ramp's measured levels, and the spread of the true
+/// ones (the correction before it is written as a table).
+#[derive(Debug, Clone)]
+pub struct Residuals {
+    /// (level, residual r, its noise s), ascending in level, where the law and the
+    /// data are clear of black.
+    levels: Vec<(f64, f64, f64)>,
+    tau2: f64,
+}
+
+impl Residuals {
+    /// The residuals of `fit` on `ramp`; `None` when the ramp is not pinned at full
+    /// drive or no level is bright enough to take a ratio at.
+    pub fn of(fit: &LawFit, ramp: &ChannelRamp) -> Option<Residuals> {
+        if !ramp.pinned {
+            return None;
+        }
+        let law = |v: f64| fit.amplitude * fit.law.excitation(v);
+        let levels: Vec<(f64, f64, f64)> = level_means(ramp)
+            .into_iter()
+            .filter(|l| l.drive > 0.0 && l.excitation > 5.0 * l.sigma && law(l.drive) > 0.0)
+            .map(|l| {
+                let predicted = law(l.drive);
+                (l.drive, l.excitation / predicted - 1.0, l.sigma / predicted)
+            })
+            .collect();
+        if levels.is_empty() {
+            return None;
+        }
+        let n = levels.len() as f64;
+        let spread = levels.iter().map(|r| r.1 * r.1).sum::<f64>() / n;
+        let noise = levels.iter().map(|r| r.2 * r.2).sum::<f64>() / n;
+        Some(Residuals {
+            levels,
+            tau2: (spread - noise).max(0.0),
+        })
+    }
+
+    /// The factor 1 + r̂(v) the law is multiplied by at drive `v`, with kernel width
+    /// `bandwidth` (what the table through the samples interpolates; cross-validation
+    /// scores it directly at the levels it left out).
+    pub fn factor(&self, bandwidth: f64, v: f64) -> f64 {
+        1.0 + pooled_residual(&self.levels, self.tau2, bandwidth, v)
+    }
 }
 
 /// The law fit that a corrected table stands for.

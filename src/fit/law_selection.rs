@@ -14,7 +14,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::code_correction::{CodeCorrectionReport, Judged, judge};
-use super::law_correction::{BANDWIDTHS, correct_law, correct_law_widths};
+use super::law_correction::{BANDWIDTHS, Residuals, correct_law};
 use super::laws::{FittedParameter, LawFit, LawFitError, fit_law};
 use super::noise::NoiseModel;
 use super::primaries::ChannelRamp;
@@ -237,15 +237,17 @@ fn fold_errors(fold: &FoldFit, evidence: &Evidence<'_>) -> FoldErrors {
         .iter()
         .map(|(training, fit)| (training.column(fit.amplitude), fit.law.clone()))
         .collect();
-    fold_errors_with(fold, evidence, &curves)
+    fold_errors_with(fold, evidence, |c, level| {
+        curves[c].0 * curves[c].1.excitation(level)
+    })
 }
 
-/// A fold's left-out ramp readings and greys, predicted by `curves` (each channel's
-/// column and law).
+/// A fold's left-out ramp readings and greys, predicted by `light` (each channel's
+/// light above black at a drive level).
 fn fold_errors_with(
     fold: &FoldFit,
     evidence: &Evidence<'_>,
-    curves: &[(Xyz, TransferLaw)],
+    light: impl Fn(usize, f64) -> Xyz,
 ) -> FoldErrors {
     let Evidence {
         ramps,
@@ -255,7 +257,6 @@ fn fold_errors_with(
         ..
     } = *evidence;
     let held = &fold.held;
-    let light = |c: usize, level: f64| curves[c].0 * curves[c].1.excitation(level);
     let mut ramp_errors = Vec::new();
     for (c, ramp) in ramps.iter().enumerate() {
         for p in ramp.points.iter().filter(|p| held.contains(&p.drive)) {
@@ -390,22 +391,22 @@ fn try_correction(
             continue;
         };
         alone.extend(errors.0.iter().chain(&errors.1));
-        let corrected: Vec<Vec<Option<LawFit>>> = fold
+        // Scored directly at the left-out levels: the law times the correction's
+        // factor there, the value the published table interpolates.
+        let residuals: Vec<Option<Residuals>> = fold
             .channels
             .iter()
-            .map(|(training, fit)| correct_law_widths(fit, training, &BANDWIDTHS))
+            .map(|(training, fit)| Residuals::of(fit, training))
             .collect();
-        for (w, errors) in with.iter_mut().enumerate() {
-            let curves: Vec<(Xyz, TransferLaw)> = fold
-                .channels
-                .iter()
-                .zip(&corrected)
-                .map(|((training, fit), c)| {
-                    let fit = c[w].as_ref().unwrap_or(fit);
-                    (training.column(fit.amplitude), fit.law.clone())
-                })
-                .collect();
-            let (ramp, grey) = fold_errors_with(fold, evidence, &curves);
+        for (bandwidth, errors) in BANDWIDTHS.iter().zip(with.iter_mut()) {
+            let light = |c: usize, level: f64| {
+                let (training, fit) = &fold.channels[c];
+                let factor = residuals[c]
+                    .as_ref()
+                    .map_or(1.0, |r| r.factor(*bandwidth, level));
+                training.column(fit.amplitude) * (fit.law.excitation(level) * factor).max(0.0)
+            };
+            let (ramp, grey) = fold_errors_with(fold, evidence, light);
             errors.extend(ramp.into_iter().chain(grey));
         }
     }
