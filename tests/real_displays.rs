@@ -45,8 +45,12 @@ fn curves_are_corrected_at_codes_measured_twice_that_agree() {
     let (alone, corrected) = (codes.uncorrected.unwrap(), codes.corrected.unwrap());
     assert!(corrected.mean < 0.7 * alone.mean, "{alone:?} {corrected:?}");
     let measured: Vec<f64> = train.measurements.iter().flat_map(|m| m.drive).collect();
-    let at_measured_codes =
-        |m: &&chromacal::measurement::Measurement| m.drive.iter().all(|d| measured.contains(d));
+    // Within half a code step of a drive trained on (a chart's 21.4286 % and 21.429 %).
+    let at_measured_codes = |m: &&chromacal::measurement::Measurement| {
+        m.drive
+            .iter()
+            .all(|d| measured.iter().any(|t| (t - d).abs() < 0.5 / 255.0))
+    };
     let score = |fit: &chromacal::fit::FittedModel, pick: bool| {
         evaluate(
             &fit.model,
@@ -61,7 +65,8 @@ fn curves_are_corrected_at_codes_measured_twice_that_agree() {
     let on_codes = score(&fit, true);
     let off_codes = score(&fit, false);
     eprintln!("Dell mixtures at measured codes {on_codes:?}, elsewhere {off_codes:?}");
-    // Without the correction these were 0.18 on 483 mixtures, and 0.247 overall.
+    // Without the correction these were 0.18 on 483 mixtures at exactly trained drives,
+    // and 0.247 overall.
     assert!(on_codes.n > 400, "{on_codes:?}");
     assert!(on_codes.mean < 0.12, "{on_codes:?}");
     let all = evaluate(

@@ -20,7 +20,7 @@
 //! - r̂ᵢ = rᵢ·τ²/(τ² + sᵢ²) shrinks it by empirical Bayes, τ² = max(0, mean r² −
 //!   mean s²) (Efron & Morris 1975; as `law_correction` does);
 //! - the noise sᵢ is the run's noise model, scaled by what the replicate codes show
-//!   (`replicate_scale`): where a code was measured both as a ramp reading and as a
+//!   (`noise_scale`): where a code was measured both as a ramp reading and as a
 //!   grey, the two estimates' scatter, in units of their stated noise, is χ²/n, and
 //!   √(χ²/n) scales every sᵢ. A run whose noise model was assumed rather than measured
 //!   (too few repeats of its reference) then shrinks by the noise it really had.
@@ -42,7 +42,8 @@ use super::validate::delta_e00_xyz;
 use crate::color::Xyz;
 use crate::model::transfer::{Table, TransferLaw};
 
-/// Fewest replicate codes (summed over the channels) the correction is judged on.
+/// Fewest distinct codes measured twice that the correction is judged on (each is one
+/// item of the paired test, whatever number of channels and readings it has).
 pub const MIN_REPLICATES: usize = 3;
 
 /// Samples of the curve away from the measured codes: every 1/128 and at (k/64)²,
@@ -50,13 +51,16 @@ pub const MIN_REPLICATES: usize = 3;
 /// between codes 1/28 apart from the darkest on (tested).
 const GRID: usize = 128;
 
+/// Weight of the law's samples beside a code when the curve is pooled to stay monotone.
+const SIDE_WEIGHT: f64 = 1e-6;
+
 /// What the correction at the measured codes found.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CodeCorrectionReport {
     pub kept: bool,
     /// Codes measured below full drive, summed over the channels.
     pub codes: usize,
-    /// Codes measured both as a ramp reading and as a grey, summed over the channels.
+    /// Distinct codes measured both as a ramp reading and as a grey.
     pub replicates: usize,
     /// √(χ²/n) of the replicate codes' scatter against the noise model.
     pub noise_scale: Option<f64>,
@@ -145,21 +149,38 @@ fn code_estimates(ramp: &ChannelRamp, code_step: f64) -> Vec<CodeEstimates> {
         .collect()
 }
 
-/// How far the replicate codes scatter against their stated noise: √(χ²/n) over every
-/// code measured both as a ramp reading and as a grey, with n. `None` with fewer than
-/// [`MIN_REPLICATES`].
-pub fn replicate_scale(ramps: &[ChannelRamp; 3], code_step: f64) -> Option<(f64, usize)> {
-    let z2: Vec<f64> = ramps
+/// Every code measured both as a ramp reading and as a grey, each channel's: its drive
+/// and how far its two estimates differ in units of their stated noise, squared (z²).
+fn replicate_pairs(ramps: &[ChannelRamp; 3], code_step: f64) -> Vec<(f64, f64)> {
+    ramps
         .iter()
         .flat_map(|r| code_estimates(r, code_step))
         .filter_map(|c| {
             let (a, b) = (c.ramp?, c.grey?);
-            Some((a.excitation - b.excitation).powi(2) / (a.sigma.powi(2) + b.sigma.powi(2)))
+            let z2 = (a.excitation - b.excitation).powi(2) / (a.sigma.powi(2) + b.sigma.powi(2));
+            z2.is_finite().then_some((c.drive, z2))
         })
-        .filter(|z| z.is_finite())
+        .collect()
+}
+
+/// Distinct drives among `pairs` (a code measured twice in several channels is one).
+fn distinct_codes(pairs: &[(f64, f64)], code_step: f64) -> Vec<f64> {
+    let mut drives: Vec<f64> = pairs.iter().map(|p| p.0).collect();
+    drives.sort_by(|a, b| a.total_cmp(b));
+    drives.dedup_by(|a, b| (*a - *b).abs() < 0.5 * code_step);
+    drives
+}
+
+/// How far the replicate codes scatter against their stated noise: √(χ²/n) over
+/// `pairs`, leaving out those at drive `except` (the code being judged, so that its own
+/// scatter does not set its shrinkage). `None` when no pair is left.
+fn noise_scale(pairs: &[(f64, f64)], except: Option<f64>, code_step: f64) -> Option<f64> {
+    let z2: Vec<f64> = pairs
+        .iter()
+        .filter(|p| except.is_none_or(|v| (p.0 - v).abs() >= 0.5 * code_step))
+        .map(|p| p.1)
         .collect();
-    (z2.len() >= MIN_REPLICATES)
-        .then(|| ((z2.iter().sum::<f64>() / z2.len() as f64).sqrt(), z2.len()))
+    (!z2.is_empty()).then(|| (z2.iter().sum::<f64>() / z2.len() as f64).sqrt())
 }
 
 /// The relative residuals of one channel's codes against a curve: (drive, r, s) with
@@ -234,20 +255,21 @@ pub fn correct_at_codes(
     // (the law's own values, so that the cubic between the samples is back on the law
     // within two steps); the samples away from every code follow the law.
     let near_a_code = |v: f64| residuals.iter().any(|r| (r.0 - v).abs() < 2.0 * code_step);
-    let mut knots: Vec<(f64, f64)> = (1..=GRID)
+    // (drive, excitation, weight in the pooling below).
+    let mut knots: Vec<(f64, f64, f64)> = (1..=GRID)
         .map(|k| k as f64 / GRID as f64)
         .chain((1..=GRID / 2).map(|k| (k as f64 / (GRID / 2) as f64).powi(2)))
         .filter(|v| *v >= 1.0 || !near_a_code(*v))
-        .map(|v| (v, curve(v)))
+        .map(|v| (v, curve(v), 1.0))
         .collect();
     for (level, r, s) in &residuals {
-        knots.push((*level, curve(*level) * (1.0 + shrunk(*r, *s, tau2))));
+        knots.push((*level, curve(*level) * (1.0 + shrunk(*r, *s, tau2)), 1.0));
         for side in [-2.0, -1.0, 1.0, 2.0].map(|k| level + k * code_step) {
             let clear = residuals
                 .iter()
                 .all(|o| o.0 == *level || (o.0 - side).abs() >= code_step);
             if side > 0.0 && side < 1.0 && clear {
-                knots.push((side, curve(side)));
+                knots.push((side, curve(side), SIDE_WEIGHT));
             }
         }
     }
@@ -255,9 +277,12 @@ pub fn correct_at_codes(
     knots.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
     let drive: Vec<f64> = knots.iter().map(|k| k.0).collect();
     let excitation: Vec<f64> = knots.iter().map(|k| k.1.max(0.0)).collect();
-    // A code shrunk below its neighbour's curve near black is pooled with it, so the
-    // curve stays monotone (as the table law's knots are).
-    let excitation = isotonic_regression(&excitation, &vec![1.0; excitation.len()]);
+    let weights: Vec<f64> = knots.iter().map(|k| k.2).collect();
+    // Where a code's value falls below the law a step under it (or rises above the law
+    // a step over it), the curve is pooled to stay monotone (as the table law's knots
+    // are); the law's samples beside a code weigh next to nothing there, so they move
+    // to the code's value rather than the code to theirs.
+    let excitation = isotonic_regression(&excitation, &weights);
     let table = Table::new(drive, excitation).ok()?;
     let mut parameters = fit.parameters.clone();
     parameters.push(FittedParameter {
@@ -306,28 +331,42 @@ pub fn judge(input: &Judged<'_>) -> (CodeCorrectionReport, Option<Vec<LawFit>>) 
     let codes: Vec<Vec<CodeEstimates>> =
         ramps.iter().map(|r| code_estimates(r, code_step)).collect();
     let n_codes = codes.iter().map(Vec::len).sum();
-    let replicates = replicate_scale(ramps, code_step);
+    let pairs = replicate_pairs(ramps, code_step);
+    let replicates = distinct_codes(&pairs, code_step);
     let mut report = CodeCorrectionReport {
         kept: false,
         codes: n_codes,
-        replicates: replicates.map_or(0, |r| r.1),
-        noise_scale: replicates.map(|r| r.0),
+        replicates: replicates.len(),
+        noise_scale: noise_scale(&pairs, None, code_step),
         uncorrected: None,
         corrected: None,
         rule: format!(
-            "each code measured both as a ramp reading and as a grey predicted from the other alone; kept only if correcting at the measured codes lowers that ΔE00 by more than two standard errors (paired) and than noise alone ({tolerance:.3})"
+            "each code measured both as a ramp reading and as a grey predicted from the other alone; kept only if correcting at the measured codes lowers that ΔE00, averaged code by code, by more than two standard errors (paired, over the codes) and than noise alone ({tolerance:.3})"
         ),
     };
-    let Some((noise_scale, _)) = replicates else {
+    let Some(noise_scale) = report
+        .noise_scale
+        .filter(|_| replicates.len() >= MIN_REPLICATES)
+    else {
         report.rule = format!(
             "not tried: fewer than {MIN_REPLICATES} codes were measured both as a ramp reading and as a grey, so whether a code's readings repeat cannot be judged"
         );
         return (report, None);
     };
-    let (uncorrected, corrected) = replicate_errors(input, &codes, noise_scale);
-    report.uncorrected = ErrorStats::of(&uncorrected);
-    report.corrected = ErrorStats::of(&corrected);
-    let better = simplest_within(&[Some(uncorrected), Some(corrected)], tolerance, 2.0);
+    let by_code = replicate_errors(input, &codes, &pairs);
+    let (uncorrected, corrected): (Vec<&Vec<f64>>, Vec<&Vec<f64>>) =
+        by_code.iter().map(|(a, b)| (a, b)).unzip();
+    let flat = |v: &[&Vec<f64>]| -> Vec<f64> { v.iter().flat_map(|c| c.iter().copied()).collect() };
+    report.uncorrected = ErrorStats::of(&flat(&uncorrected));
+    report.corrected = ErrorStats::of(&flat(&corrected));
+    // The readings of one code share their estimates, so the test's items are codes.
+    let code_means =
+        |v: &[&Vec<f64>]| -> Vec<f64> { v.iter().map(|c| super::stats::mean(c)).collect() };
+    let better = simplest_within(
+        &[Some(code_means(&uncorrected)), Some(code_means(&corrected))],
+        tolerance,
+        2.0,
+    );
     if better != Some(1) {
         return (report, None);
     }
@@ -345,13 +384,14 @@ pub fn judge(input: &Judged<'_>) -> (CodeCorrectionReport, Option<Vec<LawFit>>) 
 }
 
 /// ΔE00 of each replicate estimate predicted from the other estimate of its code alone,
-/// by the curves as they are and corrected there (the prior's spread from the channel's
-/// other codes, so nothing predicted is in its own prediction).
+/// by the curves as they are and corrected there, code by code (uncorrected, corrected).
+/// Nothing predicted is in its own prediction: the prior's spread comes from the
+/// channel's other codes, and the noise scale from the other codes' pairs.
 fn replicate_errors(
     input: &Judged<'_>,
     codes: &[Vec<CodeEstimates>],
-    noise_scale: f64,
-) -> (Vec<f64>, Vec<f64>) {
+    pairs: &[(f64, f64)],
+) -> Vec<(Vec<f64>, Vec<f64>)> {
     let Judged {
         ramps,
         fits,
@@ -362,23 +402,29 @@ fn replicate_errors(
     } = *input;
     let curve = |c: usize, v: f64| fits[c].amplitude * fits[c].law.excitation(v);
     let column = |c: usize| ramps[c].column(1.0);
-    let correction_from = |c: usize, k: usize, estimate: Option<Estimate>| {
-        estimate.map_or(0.0, |e| {
-            left_out_correction(&codes[c], k, e, |v| curve(c, v), noise_scale)
-        })
-    };
-    let (mut uncorrected, mut corrected) = (Vec::new(), Vec::new());
-    let mut greys_done: Vec<f64> = Vec::new();
-    for (c, channel) in codes.iter().enumerate() {
-        for (k, code) in channel.iter().enumerate() {
-            if code.ramp.is_none() || code.grey.is_none() {
-                continue;
-            }
-            let v = code.drive;
+    let near = |v: f64| move |p: &&RampPoint| (p.drive - v).abs() < 0.5 * code_step;
+    let mut by_code = Vec::new();
+    for v in distinct_codes(pairs, code_step) {
+        let scale = noise_scale(pairs, Some(v), code_step)
+            .or_else(|| noise_scale(pairs, None, code_step))
+            .unwrap_or(1.0);
+        // Each channel's correction at this code from its grey share alone and from its
+        // ramp reading alone.
+        let from = |c: usize, pick: fn(&CodeEstimates) -> Option<Estimate>| -> f64 {
+            let at = codes[c]
+                .iter()
+                .position(|x| (x.drive - v).abs() < 0.5 * code_step);
+            at.and_then(|k| Some((k, pick(&codes[c][k])?)))
+                .map_or(0.0, |(k, e)| {
+                    left_out_correction(&codes[c], k, e, |u| curve(c, u), scale)
+                })
+        };
+        let (mut uncorrected, mut corrected) = (Vec::new(), Vec::new());
+        let (mut alone, mut with) = (*black, *black);
+        for (c, ramp) in ramps.iter().enumerate() {
             let light = column(c) * curve(c, v);
-            let from_grey = correction_from(c, k, code.grey);
-            let near = |p: &&RampPoint| (p.drive - v).abs() < 0.5 * code_step;
-            for p in ramps[c].points.iter().filter(near) {
+            let from_grey = from(c, |x| x.ramp.and(x.grey));
+            for p in ramp.points.iter().filter(near(v)) {
                 uncorrected.push(delta_e00_xyz(&p.xyz, &(black + light), white));
                 corrected.push(delta_e00_xyz(
                     &p.xyz,
@@ -386,30 +432,21 @@ fn replicate_errors(
                     white,
                 ));
             }
-            if greys_done.iter().any(|g| (g - v).abs() < 0.5 * code_step) {
-                continue;
-            }
-            greys_done.push(v);
-            // The grey of this code, predicted by every channel's curve there, each
-            // corrected from its ramp reading of the code where it has one.
-            let mut alone = *black;
-            let mut with = *black;
-            for (d, other) in codes.iter().enumerate() {
-                let at = other
-                    .iter()
-                    .position(|x| (x.drive - v).abs() < 0.5 * code_step);
-                let light = column(d) * curve(d, v);
-                let from_ramp = at.map_or(0.0, |j| correction_from(d, j, other[j].ramp));
-                alone += light;
-                with += light * (1.0 + from_ramp);
-            }
-            for p in ramps[c].grey_points.iter().filter(near) {
-                uncorrected.push(delta_e00_xyz(&p.xyz, &alone, white));
-                corrected.push(delta_e00_xyz(&p.xyz, &with, white));
-            }
+            alone += light;
+            with += light * (1.0 + from(c, |x| x.grey.and(x.ramp)));
         }
+        // The grey of this code, predicted by every channel's curve there, each
+        // corrected from its ramp reading of the code where it has one.
+        if let Some(first) = ramps
+            .iter()
+            .find_map(|r| r.grey_points.iter().find(near(v)))
+        {
+            uncorrected.push(delta_e00_xyz(&first.xyz, &alone, white));
+            corrected.push(delta_e00_xyz(&first.xyz, &with, white));
+        }
+        by_code.push((uncorrected, corrected));
     }
-    (uncorrected, corrected)
+    by_code
 }
 
 /// The shrunk residual at code `k` of one channel's `codes` from one `estimate` of it,
@@ -611,19 +648,42 @@ mod tests {
     }
 
     #[test]
-    fn codes_half_a_step_apart_are_one_code() {
+    fn codes_closer_than_half_a_step_are_one_code() {
         let truth = |c: usize, v: f64| v.powf(2.2) * (1.0 + wiggle(c, v));
-        let mut ramps = measured(truth, 0.0005, 0.003, 0.0, 4);
-        // A chart's 57.1429 % and 57.143 %.
-        for p in ramps[0].grey_points.iter_mut() {
-            p.drive += 1e-6;
+        for (shift, merged) in [(1e-6, true), (0.4 * STEP, true), (0.6 * STEP, false)] {
+            let mut ramps = measured(truth, 0.0005, 0.003, 0.0, 4);
+            // A chart's 57.1429 % and 57.143 % are one code; 0.6 of a step is another.
+            for p in ramps[0].grey_points.iter_mut() {
+                p.drive += shift;
+            }
+            let codes = code_estimates(&ramps[0], STEP);
+            let both = codes
+                .iter()
+                .filter(|c| c.ramp.is_some() && c.grey.is_some())
+                .count();
+            assert_eq!(both, if merged { 6 } else { 0 }, "{shift}");
+            assert_eq!(codes.len(), if merged { 27 } else { 33 }, "{shift}");
         }
-        let codes = code_estimates(&ramps[0], STEP);
-        let both = codes
-            .iter()
-            .filter(|c| c.ramp.is_some() && c.grey.is_some())
-            .count();
-        assert_eq!(both, 6);
-        assert_eq!(codes.len(), 27 + 6 - 6);
+    }
+
+    #[test]
+    fn a_code_below_the_law_a_step_under_it_keeps_its_value() {
+        // Above half drive one code step raises a power law by about 1 %; a code read
+        // 3 % low must stay 3 % low, the law's samples beside it giving way.
+        let bright = 5.0 / 7.0;
+        let truth = move |c: usize, v: f64| {
+            let dip = if (v - bright).abs() < 1e-9 { 0.97 } else { 1.0 };
+            v.powf(2.2) * (1.0 + wiggle(c, v)) * dip
+        };
+        let ramps = measured(truth, 0.0005, 0.003, 0.0, 5);
+        let law = fit_law(LawKind::Power, &ramps[2], STEP).unwrap();
+        let correction = CodeCorrection {
+            code_step: STEP,
+            noise_scale: 0.2,
+        };
+        let fit = correct_at_codes(&law, &ramps[2], correction).unwrap();
+        let (t, corrected) = (truth(2, bright), fit.law.excitation(bright));
+        assert!((corrected / t - 1.0).abs() < 0.004, "{corrected} {t}");
+        fit.law.monotonicity().unwrap();
     }
 }

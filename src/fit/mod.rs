@@ -594,17 +594,25 @@ fn refit_curves_for_terms(
         noise,
         max_condition,
     );
-    let mut refitted = additive.clone();
-    for (c, ramp) in ramps.iter().enumerate() {
+    let mut fits = Vec::with_capacity(3);
+    for ramp in &ramps {
         let Ok(mut fit) = laws::fit_law(law, ramp, toe) else {
             return kept;
         };
         if let Some(c) = corrected.and_then(|h| law_correction::correct_law(&fit, ramp, h)) {
             fit = c;
         }
-        if let Some(c) = codes.and_then(|codes| correct_at_codes(&fit, ramp, codes)) {
-            fit = c;
-        }
+        fits.push(fit);
+    }
+    // The correction at the codes, as it was kept: on all three channels or none.
+    let at_codes: Option<Vec<laws::LawFit>> = codes.and_then(|codes| {
+        fits.iter()
+            .zip(&ramps)
+            .map(|(fit, ramp)| correct_at_codes(fit, ramp, codes))
+            .collect()
+    });
+    let mut refitted = additive.clone();
+    for (c, (ramp, fit)) in ramps.iter().zip(at_codes.unwrap_or(fits)).enumerate() {
         refitted.matrix.set_column(c, &ramp.column(fit.amplitude));
         refitted.laws[c] = fit.law;
     }
