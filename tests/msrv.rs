@@ -5,6 +5,8 @@
 
 use std::path::Path;
 
+mod common;
+
 fn version(text: &str) -> Vec<u32> {
     text.split('.').map(|p| p.parse().unwrap_or(0)).collect()
 }
@@ -12,23 +14,18 @@ fn version(text: &str) -> Vec<u32> {
 #[test]
 fn the_stated_minimum_rust_version_covers_every_locked_dependency() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let out = std::process::Command::new(env!("CARGO"))
-        .args([
-            "metadata",
-            "--offline",
-            "--locked",
-            "--format-version",
-            "1",
-            "--filter-platform",
-            "x86_64-unknown-linux-gnu",
-        ])
-        .current_dir(root)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = common::succeed(
+        std::process::Command::new(env!("CARGO"))
+            .args([
+                "metadata",
+                "--offline",
+                "--locked",
+                "--format-version",
+                "1",
+                "--filter-platform",
+                "x86_64-unknown-linux-gnu",
+            ])
+            .current_dir(root),
     );
     let metadata: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     // Only the packages the build resolves for this platform.

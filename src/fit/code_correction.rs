@@ -34,6 +34,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::law_correction::{prior_spread, shrunk};
 use super::laws::{FittedParameter, LawFit, isotonic_regression};
 use super::primaries::{ChannelRamp, RampPoint};
 use super::select::simplest_within;
@@ -151,10 +152,10 @@ fn code_estimates(ramp: &ChannelRamp, code_step: f64) -> Vec<CodeEstimates> {
 
 /// Every code measured both as a ramp reading and as a grey, each channel's: its drive
 /// and how far its two estimates differ in units of their stated noise, squared (z²).
-fn replicate_pairs(ramps: &[ChannelRamp; 3], code_step: f64) -> Vec<(f64, f64)> {
-    ramps
+fn replicate_pairs(codes: &[Vec<CodeEstimates>]) -> Vec<(f64, f64)> {
+    codes
         .iter()
-        .flat_map(|r| code_estimates(r, code_step))
+        .flatten()
         .filter_map(|c| {
             let (a, b) = (c.ramp?, c.grey?);
             let z2 = (a.excitation - b.excitation).powi(2) / (a.sigma.powi(2) + b.sigma.powi(2));
@@ -205,26 +206,6 @@ fn residuals(
             })
         })
         .collect()
-}
-
-/// τ² of the empirical Bayes prior: the residuals' spread beyond their noise.
-fn prior_spread(residuals: &[(f64, f64, f64)]) -> f64 {
-    if residuals.is_empty() {
-        return 0.0;
-    }
-    let n = residuals.len() as f64;
-    let spread = residuals.iter().map(|r| r.1 * r.1).sum::<f64>() / n;
-    let noise = residuals.iter().map(|r| r.2 * r.2).sum::<f64>() / n;
-    (spread - noise).max(0.0)
-}
-
-/// A residual shrunk towards zero by its noise against the prior's spread.
-fn shrunk(r: f64, s: f64, tau2: f64) -> f64 {
-    if tau2 > 0.0 {
-        r * tau2 / (tau2 + s * s)
-    } else {
-        0.0
-    }
 }
 
 /// `fit` (a curve fitted to `ramp`) corrected at `ramp`'s measured codes (see the
@@ -331,7 +312,7 @@ pub fn judge(input: &Judged<'_>) -> (CodeCorrectionReport, Option<Vec<LawFit>>) 
     let codes: Vec<Vec<CodeEstimates>> =
         ramps.iter().map(|r| code_estimates(r, code_step)).collect();
     let n_codes = codes.iter().map(Vec::len).sum();
-    let pairs = replicate_pairs(ramps, code_step);
+    let pairs = replicate_pairs(&codes);
     let replicates = distinct_codes(&pairs, code_step);
     let mut report = CodeCorrectionReport {
         kept: false,

@@ -45,15 +45,7 @@ pub const BANDWIDTHS: [f64; 3] = [0.02, 0.05, 0.1];
 /// `None` when the ramp is not pinned at full drive, no level is bright enough to take
 /// a ratio at, or the corrected curve would not be monotone.
 pub fn correct_law(fit: &LawFit, ramp: &ChannelRamp, bandwidth: f64) -> Option<LawFit> {
-    correct_law_widths(fit, ramp, &[bandwidth]).pop().flatten()
-}
-
-/// [`correct_law`] for each of `bandwidths`, sharing the residuals and the law's
-/// samples between them (what cross-validation over the widths needs).
-fn correct_law_widths(fit: &LawFit, ramp: &ChannelRamp, bandwidths: &[f64]) -> Vec<Option<LawFit>> {
-    let Some(residuals) = Residuals::of(fit, ramp) else {
-        return bandwidths.iter().map(|_| None).collect();
-    };
+    let residuals = Residuals::of(fit, ramp)?;
     let law = |v: f64| fit.amplitude * fit.law.excitation(v);
     let mut drives: Vec<f64> = (1..=GRID)
         .map(|k| k as f64 / GRID as f64)
@@ -63,29 +55,22 @@ fn correct_law_widths(fit: &LawFit, ramp: &ChannelRamp, bandwidths: &[f64]) -> V
         .collect();
     drives.sort_by(|a, b| a.total_cmp(b));
     drives.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-    let uncorrected: Vec<f64> = drives.iter().map(|v| law(*v)).collect();
-    bandwidths
+    let excitation: Vec<f64> = drives
         .iter()
-        .map(|bandwidth| {
-            let excitation: Vec<f64> = drives
-                .iter()
-                .zip(&uncorrected)
-                .map(|(v, e)| (e * residuals.factor(*bandwidth, *v)).max(0.0))
-                .collect();
-            // Where shrunk residuals of neighbouring levels fall faster than the law
-            // rises (only near black), the samples are pooled to stay monotone, as the
-            // table law's are.
-            let excitation = isotonic_regression(&excitation, &vec![1.0; excitation.len()]);
-            let table = Table::new(drives.clone(), excitation).ok()?;
-            Some(corrected_fit(
-                fit,
-                table,
-                residuals.levels.len(),
-                residuals.tau2,
-                *bandwidth,
-            ))
-        })
-        .collect()
+        .map(|v| (law(*v) * residuals.factor(bandwidth, *v)).max(0.0))
+        .collect();
+    // Where shrunk residuals of neighbouring levels fall faster than the law rises
+    // (only near black), the samples are pooled to stay monotone, as the table law's
+    // are.
+    let excitation = isotonic_regression(&excitation, &vec![1.0; excitation.len()]);
+    let table = Table::new(drives, excitation).ok()?;
+    Some(corrected_fit(
+        fit,
+        table,
+        residuals.levels.len(),
+        residuals.tau2,
+        bandwidth,
+    ))
 }
 
 /// A law's relative residuals at a ramp's measured levels, and the spread of the true
@@ -117,12 +102,9 @@ impl Residuals {
         if levels.is_empty() {
             return None;
         }
-        let n = levels.len() as f64;
-        let spread = levels.iter().map(|r| r.1 * r.1).sum::<f64>() / n;
-        let noise = levels.iter().map(|r| r.2 * r.2).sum::<f64>() / n;
         Some(Residuals {
+            tau2: prior_spread(&levels),
             levels,
-            tau2: (spread - noise).max(0.0),
         })
     }
 
@@ -131,6 +113,28 @@ impl Residuals {
     /// scores it directly at the levels it left out).
     pub fn factor(&self, bandwidth: f64, v: f64) -> f64 {
         1.0 + pooled_residual(&self.levels, self.tau2, bandwidth, v)
+    }
+}
+
+/// τ² of the empirical Bayes prior (Efron & Morris 1975): the spread of residuals
+/// (level, r, s) beyond their noise, mean r² − mean s², not below 0.
+pub fn prior_spread(residuals: &[(f64, f64, f64)]) -> f64 {
+    if residuals.is_empty() {
+        return 0.0;
+    }
+    let n = residuals.len() as f64;
+    let spread = residuals.iter().map(|r| r.1 * r.1).sum::<f64>() / n;
+    let noise = residuals.iter().map(|r| r.2 * r.2).sum::<f64>() / n;
+    (spread - noise).max(0.0)
+}
+
+/// A residual `r` of noise `s` shrunk towards zero against the prior's spread `tau2`:
+/// r·τ²/(τ² + s²) (ibid. eq. 1.6); zero when τ² is.
+pub fn shrunk(r: f64, s: f64, tau2: f64) -> f64 {
+    if tau2 > 0.0 {
+        r * tau2 / (tau2 + s * s)
+    } else {
+        0.0
     }
 }
 
@@ -175,7 +179,7 @@ fn pooled_residual(residuals: &[(f64, f64, f64)], tau2: f64, bandwidth: f64, v: 
     for (level, r, s) in residuals[first..].iter().take_while(|r| r.0 <= v + reach) {
         let u = ((v - level) / reach).abs();
         let k = (1.0 - u * u * u).powi(3);
-        weighted += k * r * tau2 / (tau2 + s * s);
+        weighted += k * shrunk(*r, *s, tau2);
         weights += k;
     }
     if weights > 0.0 {
@@ -185,7 +189,7 @@ fn pooled_residual(residuals: &[(f64, f64, f64)], tau2: f64, bandwidth: f64, v: 
         let nearest = residuals
             .iter()
             .min_by(|a, b| (a.0 - v).abs().total_cmp(&(b.0 - v).abs()));
-        nearest.map_or(0.0, |(_, r, s)| r * tau2 / (tau2 + s * s))
+        nearest.map_or(0.0, |(_, r, s)| shrunk(*r, *s, tau2))
     }
 }
 
