@@ -50,5 +50,11 @@ command -v transicc >/dev/null || need_package liblcms2-utils
 [ -x /usr/libexec/colord ] || need_package colord
 command -v dbus-daemon >/dev/null || need_package dbus-daemon
 command -v gdbus >/dev/null || need_package libglib2.0-bin
+# The fleet's metrics and events are tested against a real Prometheus (with promtool
+# for the shipped rules) and a real Mosquitto broker, read by its own client.
+command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || need_package mosquitto
+command -v mosquitto_sub >/dev/null || need_package mosquitto-clients
+command -v prometheus >/dev/null || need_package prometheus
+command -v promtool >/dev/null || need_package prometheus
 
 cargo test --locked "$@"

@@ -247,7 +247,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', ignore_case = true)]
     laws: Option<Vec<LawArg>>,
     /// Only these tables (comma-separated): fit-time, budget, sequential, argyll,
-    /// spectral, render.
+    /// spectral, render, fleet.
     #[arg(long, value_delimiter = ',', value_parser = TABLES, ignore_case = true)]
     only: Vec<String>,
     /// The same as --only, as words: `chromacal bench spectral`.
@@ -256,13 +256,14 @@ pub struct BenchArgs {
 }
 
 /// The tables `bench` prints.
-const TABLES: [&str; 6] = [
+const TABLES: [&str; 7] = [
     "fit-time",
     "budget",
     "sequential",
     "argyll",
     "spectral",
     "render",
+    "fleet",
 ];
 
 /// The shared reference data: `../shared/data` from the project chromacal was built
@@ -303,6 +304,9 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
     }
     if wanted("render") {
         super::bench_render::render_table(args.quick)?;
+    }
+    if wanted("fleet") {
+        super::bench_fleet::fleet_table(args.quick)?;
     }
     Ok(())
 }

@@ -11,7 +11,7 @@ use chromacal::calibrate::session::{
     CalibrateOptions, Resume, calibrate as calibrate_session, newest_resumable, unfinished_runs,
 };
 use chromacal::config::{
-    LoadedConfig, Sink, check_config, config_search_paths, load_config_searching,
+    LoadedConfig, Sink, check_config, config_search_paths, device_configs, load_config_searching,
 };
 use chromacal::model::ScreenPosition;
 use chromacal::profile::store::default_state_dir;
@@ -52,6 +52,10 @@ pub struct CalibrateArgs {
     /// Also write the HTML report of the profile (`chromacal report`) to this file.
     #[arg(long, value_name = "FILE")]
     report: Option<PathBuf>,
+    /// The `[[device]]` of the config to calibrate: its sections, and its store in
+    /// <state>/NAME/ (as the daemon keeps it). Needed when the config names devices.
+    #[arg(long, value_name = "NAME")]
+    device: Option<String>,
     #[command(flatten)]
     devices: DeviceArgs,
 }
@@ -60,6 +64,7 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
     let overrides = args.devices.overrides()?;
     calibrate(
         args.config.as_deref(),
+        args.device.as_deref(),
         args.state_dir,
         args.resume.map(|run| match run.as_str() {
             "" => Resume::Newest,
@@ -72,8 +77,50 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
     )
 }
 
+/// The config and state directory of device `name` of `loaded` (`[[device]]`); a
+/// config that names devices needs one named.
+fn pick_device(
+    loaded: LoadedConfig,
+    name: Option<&str>,
+    state_dir: PathBuf,
+) -> Result<(LoadedConfig, PathBuf), Failure> {
+    let devices =
+        device_configs(&loaded).map_err(|e| Failure::from(format!("{}: {e}", loaded.origin)))?;
+    let names = || {
+        devices
+            .iter()
+            .map(|d| d.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let chosen = match name {
+        Some(name) => devices.iter().find(|d| d.name == name).ok_or_else(|| {
+            format!(
+                "{} names no device \"{name}\" (it has {})",
+                loaded.origin,
+                names()
+            )
+        })?,
+        None if loaded.config.device.is_empty() => return Ok((loaded, state_dir)),
+        None => {
+            return Err(Failure::from(format!(
+                "{} names several devices ({}): give --device NAME",
+                loaded.origin,
+                names()
+            )));
+        }
+    };
+    let dir = match chosen.own_folder {
+        true => state_dir.join(&chosen.name),
+        false => state_dir,
+    };
+    Ok((chosen.loaded.clone(), dir))
+}
+
+#[allow(clippy::too_many_arguments)]
 fn calibrate(
     config: Option<&Path>,
+    device: Option<&str>,
     state_dir: Option<PathBuf>,
     resume: Option<Resume>,
     realtime_scale: Option<f64>,
@@ -81,13 +128,17 @@ fn calibrate(
     report_path: Option<&Path>,
     overrides: Overrides,
 ) -> Result<(), Failure> {
-    let loaded = load_config_searching(config, &config_search_paths())?;
+    let (loaded, state_dir) = pick_device(
+        load_config_searching(config, &config_search_paths())?,
+        device,
+        state_dir.unwrap_or_else(default_state_dir),
+    )?;
     // Ctrl-C (or SIGTERM) stops after the reading under way; a second one at once.
     let stop_requested = Arc::new(AtomicBool::new(false));
     let flag = stop_requested.clone();
     let options = CalibrateOptions {
         stop: Some(Arc::new(move || flag.load(Ordering::SeqCst))),
-        state_dir: state_dir.unwrap_or_else(default_state_dir),
+        state_dir,
         resume_settings: resume.is_some() && config.is_some(),
         resume,
         realtime_scale,

@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use bytes::Bytes;
 use chromacal::config::{config_search_paths, load_config_searching};
-use chromacal::daemon::api::StatusReply;
-use chromacal::daemon::client::{Endpoint, Reply, follow_events, request};
+use chromacal::daemon::api::{DevicesReply, StatusReply};
+use chromacal::daemon::client::{Endpoint, Reply, follow_events_at, request};
 use chromacal::daemon::default_socket;
 use chromacal::daemon::events::{Event, JobKind, JobOutcome, JobStatus};
 use chromacal::profile::store::default_state_dir;
@@ -179,9 +179,21 @@ pub struct ApiArgs {
     /// The token file for TCP [default: <state>/api.token].
     #[arg(long, global = true)]
     token_file: Option<PathBuf>,
+    /// The device of a daemon that runs several (`[[device]]`), by name.
+    #[arg(long, global = true, value_name = "NAME")]
+    device: Option<String>,
 }
 
 impl ApiArgs {
+    /// A device's route: `/devices/NAME/…` with `--device`, else the route itself
+    /// (which a daemon of one device answers).
+    fn route(&self, path: &str) -> String {
+        match &self.device {
+            Some(name) => format!("/devices/{}{path}", query_value(name)),
+            None => path.to_string(),
+        }
+    }
+
     fn endpoint(&self) -> Result<Endpoint, String> {
         let state = self.state_dir.clone().unwrap_or_else(default_state_dir);
         match &self.tcp {
@@ -272,65 +284,105 @@ fn describe_outcome(outcome: &JobOutcome) -> String {
 pub fn status(api: &ApiArgs, json: bool) -> Result<(), String> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
-        let reply = get(&endpoint, "/status").await?;
+        // One device's status, or every device's.
+        let (reply, statuses) = match &api.device {
+            Some(_) => {
+                let reply = get(&endpoint, &api.route("/status")).await?;
+                let status: StatusReply = serde_json::from_slice(&reply.body)
+                    .map_err(|e| format!("the daemon's status does not read: {e}"))?;
+                (reply, vec![status])
+            }
+            None => {
+                let reply = get(&endpoint, "/devices").await?;
+                let devices: DevicesReply = serde_json::from_slice(&reply.body)
+                    .map_err(|e| format!("the daemon's list of devices does not read: {e}"))?;
+                let statuses: Vec<StatusReply> =
+                    devices.devices.into_iter().map(|d| d.status).collect();
+                match statuses.as_slice() {
+                    // One device: its status, as `/status` gives it.
+                    [one] => (
+                        Reply {
+                            status: reply.status,
+                            body: serde_json::to_vec(one).map_err(|e| e.to_string())?.into(),
+                        },
+                        statuses,
+                    ),
+                    _ => (reply, statuses),
+                }
+            }
+        };
         if json {
             println!("{}", reply.text());
             return Ok(());
         }
-        let status: StatusReply = serde_json::from_slice(&reply.body)
-            .map_err(|e| format!("the daemon's status does not read: {e}"))?;
+        let Some(first) = statuses.first() else {
+            return Err("the daemon has no devices".into());
+        };
         println!(
-            "chromacal daemon {} (pid {}), up {}, state {}{}",
-            status.version,
-            status.pid,
-            chromacal::report::duration(status.uptime_s),
-            status.state_dir,
-            if status.shutting_down {
+            "chromacal daemon {} (pid {}), up {}{}",
+            first.version,
+            first.pid,
+            chromacal::report::duration(first.uptime_s),
+            if first.shutting_down {
                 ", shutting down"
             } else {
                 ""
             }
         );
-        match &status.job {
-            Some(job) => println!("  job: {}", describe_job(job)),
-            None => println!("  job: none running"),
-        }
-        if let Some((job, outcome)) = &status.last_job {
-            println!("  last job: {} {}", job.id, describe_outcome(outcome));
-        }
-        match &status.current_profile {
-            Some(p) => println!(
-                "  current profile: {} (made {}{}) at {}",
-                p.id,
-                p.created,
-                p.held_out.map_or(String::new(), |h| format!(
-                    ", held-out mean ΔE00 {:.3}",
-                    h.mean
-                )),
-                p.path
-            ),
-            None => println!("  current profile: none yet"),
-        }
-        if let Some(next) = &status.next_verification {
-            println!("  next verification: {next}");
-        }
-        for run in &status.unfinished_runs {
-            println!(
-                "  unfinished run: {} ({} readings{})",
-                run.id,
-                run.readings,
-                if run.resumable() {
-                    String::new()
-                } else {
-                    format!(
-                        "; its fit failed {} times, so it is not resumed",
-                        run.fit_failures
-                    )
-                }
-            );
+        for status in &statuses {
+            print_device_status(status, statuses.len() > 1);
         }
         Ok(())
     })
+}
+
+/// One device's part of `chromacal status`; `named` puts its name first.
+fn print_device_status(status: &StatusReply, named: bool) {
+    let indent = if named {
+        println!("device {}: state {}", status.device, status.state_dir);
+        "    "
+    } else {
+        println!("  state {}", status.state_dir);
+        "  "
+    };
+    match &status.job {
+        Some(job) => println!("{indent}job: {}", describe_job(job)),
+        None => println!("{indent}job: none running"),
+    }
+    if let Some((job, outcome)) = &status.last_job {
+        println!("{indent}last job: {} {}", job.id, describe_outcome(outcome));
+    }
+    match &status.current_profile {
+        Some(p) => println!(
+            "{indent}current profile: {} (made {}{}) at {}",
+            p.id,
+            p.created,
+            p.held_out.map_or(String::new(), |h| format!(
+                ", held-out mean ΔE00 {:.3}",
+                h.mean
+            )),
+            p.path
+        ),
+        None => println!("{indent}current profile: none yet"),
+    }
+    if let Some(next) = &status.next_verification {
+        println!("{indent}next verification: {next}");
+    }
+    for run in &status.unfinished_runs {
+        println!(
+            "{indent}unfinished run: {} ({} readings{})",
+            run.id,
+            run.readings,
+            if run.resumable() {
+                String::new()
+            } else {
+                format!(
+                    "; its fit failed {} times, so it is not resumed",
+                    run.fit_failures
+                )
+            }
+        );
+    }
 }
 
 /// Follow the events of job `id` (or of whatever job runs, if `None`) to its end,
@@ -408,11 +460,12 @@ async fn watch_job(
 }
 
 /// Open the event stream, forwarding parsed events to a channel.
-fn subscribe(endpoint: &Endpoint) -> tokio::sync::mpsc::UnboundedReceiver<Event> {
+fn subscribe(api: &ApiArgs, endpoint: &Endpoint) -> tokio::sync::mpsc::UnboundedReceiver<Event> {
     let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
     let endpoint = endpoint.clone();
+    let path = api.route("/events");
     tokio::spawn(async move {
-        let result = follow_events(&endpoint, |_, data| {
+        let result = follow_events_at(&endpoint, &path, |_, data| {
             match serde_json::from_str::<Event>(data) {
                 Ok(event) => tx.send(event).is_ok(),
                 Err(_) => true, // an event this client does not know
@@ -444,13 +497,13 @@ pub fn job_start(api: &ApiArgs, kind: &str, watch: bool) -> Result<(), String> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
         // Subscribe first, so that no event of the new job is missed.
-        let events = watch.then(|| subscribe(&endpoint));
+        let events = watch.then(|| subscribe(api, &endpoint));
         if events.is_some() {
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
         let reply = post(
             &endpoint,
-            "/jobs",
+            &api.route("/jobs"),
             serde_json::json!({ "kind": kind.name() }),
         )
         .await?;
@@ -469,9 +522,10 @@ pub fn job_start(api: &ApiArgs, kind: &str, watch: bool) -> Result<(), String> {
 pub fn job_watch(api: &ApiArgs) -> Result<(), String> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
-        let events = subscribe(&endpoint);
-        let status: StatusReply = serde_json::from_slice(&get(&endpoint, "/status").await?.body)
-            .map_err(|e| format!("the daemon's status does not read: {e}"))?;
+        let events = subscribe(api, &endpoint);
+        let status: StatusReply =
+            serde_json::from_slice(&get(&endpoint, &api.route("/status")).await?.body)
+                .map_err(|e| format!("the daemon's status does not read: {e}"))?;
         match status.job {
             Some(job) => finish(watch_job(events, Some(job.id)).await?),
             None => {
@@ -494,7 +548,7 @@ pub fn job_watch(api: &ApiArgs) -> Result<(), String> {
 pub fn job_cancel(api: &ApiArgs) -> Result<(), String> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
-        let reply = post(&endpoint, "/jobs/cancel", serde_json::json!({})).await?;
+        let reply = post(&endpoint, &api.route("/jobs/cancel"), serde_json::json!({})).await?;
         let job: JobStatus = serde_json::from_slice(&reply.body)
             .map_err(|e| format!("the daemon's answer does not read: {e}"))?;
         println!("cancelling {} after the reading under way", job.id);
@@ -505,7 +559,7 @@ pub fn job_cancel(api: &ApiArgs) -> Result<(), String> {
 pub fn history(api: &ApiArgs, json: bool) -> Result<(), String> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
-        let reply = get(&endpoint, "/history").await?;
+        let reply = get(&endpoint, &api.route("/history")).await?;
         if json {
             println!("{}", reply.text());
             return Ok(());
@@ -560,7 +614,7 @@ pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), String> {
             Some(id) => serde_json::json!({ "to": id }),
             None => serde_json::json!({}),
         };
-        let reply = post(&endpoint, "/rollback", body).await?;
+        let reply = post(&endpoint, &api.route("/rollback"), body).await?;
         let entry = reply.json()?;
         println!(
             "current profile is now {}",
@@ -592,7 +646,7 @@ pub fn current_profile(
 ) -> Result<(), String> {
     let endpoint = api.endpoint()?;
     let format = format.unwrap_or(if json { "json" } else { "toml" });
-    let mut query = format!("/profile?format={}", query_value(format));
+    let mut query = api.route(&format!("/profile?format={}", query_value(format)));
     for (key, value) in target {
         if let Some(value) = value {
             query += &format!("&{key}={}", query_value(&value));

@@ -18,6 +18,8 @@ pub struct ProfileArgs {
     command: ProfileCommand,
 }
 
+// Parsed once per run: the size of its largest variant costs nothing worth boxing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum ProfileCommand {
     /// Print the model in words and numbers.

@@ -60,6 +60,9 @@ pub struct DaemonConfig {
     pub idle_timeout_s: f64,
     /// Seconds a request (with its body) may take to be answered.
     pub request_timeout_s: f64,
+    /// `GET /metrics` on TCP wants the bearer token too (off: Prometheus scrapes
+    /// without one, as it does unless told otherwise; the figures are not secret).
+    pub metrics_token: bool,
 }
 
 impl Default for DaemonConfig {
@@ -83,6 +86,7 @@ impl Default for DaemonConfig {
             header_timeout_s: 10.0,
             idle_timeout_s: 60.0,
             request_timeout_s: 30.0,
+            metrics_token: false,
         }
     }
 }
@@ -165,6 +169,71 @@ impl ScheduleConfig {
         }
         if !(self.threshold_de00 > 0.0) {
             return Err("schedule.threshold_de00 must be positive".into());
+        }
+        Ok(())
+    }
+}
+
+/// `[mqtt]`: the daemon's state and events on an MQTT broker (`daemon::mqtt`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MqttConfig {
+    /// The broker, `host:port`.
+    pub broker: String,
+    /// The first topic level.
+    pub prefix: String,
+    /// The second topic level (default: this machine's host name).
+    pub host: Option<String>,
+    /// The client id (default: `chromacal-<host>`); one per broker.
+    pub client_id: Option<String>,
+    /// A file with the user name on its first line and the password on its second,
+    /// mode 0600 (relative to the config file).
+    pub credentials_file: Option<PathBuf>,
+    /// TLS to the broker. This build speaks plain MQTT only, for a broker on
+    /// loopback or behind a TLS-terminating bridge: `true` is refused.
+    pub tls: bool,
+    /// Messages queued for the broker; past them, events are dropped and counted.
+    pub queue: usize,
+    /// Seconds between keep-alive pings; the broker sends the last will after 1.5 ×
+    /// this without a word (at once when the connection drops).
+    pub keep_alive_s: f64,
+    /// Publish each reading's progress event too (QoS 0).
+    pub progress: bool,
+}
+
+impl Default for MqttConfig {
+    fn default() -> Self {
+        MqttConfig {
+            broker: "127.0.0.1:1883".into(),
+            prefix: "chromacal".into(),
+            host: None,
+            client_id: None,
+            credentials_file: None,
+            tls: false,
+            queue: 1000,
+            keep_alive_s: 30.0,
+            progress: true,
+        }
+    }
+}
+
+impl MqttConfig {
+    pub fn check(&self) -> Result<(), String> {
+        if self.tls {
+            return Err("mqtt.tls = true: this build speaks plain MQTT only (use a broker on loopback, or a TLS bridge such as mosquitto's)".into());
+        }
+        let port = self.broker.rsplit_once(':').map(|(_, p)| p.parse::<u16>());
+        if !matches!(port, Some(Ok(p)) if p > 0) {
+            return Err(format!(
+                "mqtt.broker = \"{}\" is not host:port",
+                self.broker
+            ));
+        }
+        if self.prefix.is_empty() || self.prefix.contains(['+', '#']) {
+            return Err(format!(
+                "mqtt.prefix = \"{}\" must be a topic without wildcards (+, #)",
+                self.prefix
+            ));
         }
         Ok(())
     }

@@ -6,6 +6,7 @@
 
 pub mod calibration;
 pub mod daemon;
+pub mod devices;
 pub mod ranges;
 
 use std::path::{Path, PathBuf};
@@ -13,7 +14,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 pub use calibration::{Stability, TargetConfig, WarmupConfig};
-pub use daemon::{DaemonConfig, OnStart, ScheduleConfig};
+pub use daemon::{DaemonConfig, MqttConfig, OnStart, ScheduleConfig};
+pub use devices::{DEFAULT_DEVICE, DeviceConfig, device_configs};
 
 use crate::display::resolve::ResolveConfig;
 use crate::display::web::WebConfig;
@@ -253,6 +255,16 @@ pub struct Config {
     /// Calibration curves to a target, measured into place after the fit.
     #[serde(default)]
     pub target: Option<TargetConfig>,
+    /// Publish the daemon's state and events to an MQTT broker.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mqtt: Option<MqttConfig>,
+    /// Instruments shared by several devices, declared once (`devices`).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub instruments: std::collections::BTreeMap<String, InstrumentConfig>,
+    /// Several display–instrument pairs in one daemon, each laid over the top-level
+    /// sections (`devices`); none: the config is one device.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub device: Vec<toml::Table>,
 }
 
 /// A configuration with the text it came from.
@@ -341,6 +353,9 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     ranges::check_ranges(config)?;
     check_between_keys(config)?;
     config.daemon.check()?;
+    if let Some(mqtt) = &config.mqtt {
+        mqtt.check()?;
+    }
     config.publish.check()?;
     config.schedule.check()?;
     config.warmup.check()?;

@@ -96,6 +96,9 @@ pub const RANGES: &[Range] = &[
     r("daemon.header_timeout_s", 0.1, 86_400.0),
     r("daemon.idle_timeout_s", 0.1, 86_400.0),
     r("daemon.request_timeout_s", 0.1, 86_400.0),
+    // [mqtt]
+    r("mqtt.queue", 1.0, 1e6),
+    r("mqtt.keep_alive_s", 1.0, 3600.0),
     // [schedule]
     r("schedule.verify_every_s", 0.01, 1e8),
     r("schedule.verify_patches", 5.0, 1000.0),
@@ -114,7 +117,10 @@ pub const RANGES: &[Range] = &[
 
 /// Keys whose numbers are checked by their own type, not by a range: the virtual
 /// monitor's transfer laws (each law checks its parameters: finite, monotone).
-const CHECKED_ELSEWHERE: &[&str] = &["monitor.laws"];
+///
+/// A `[[device]]` entry and an `[instruments.NAME]` are checked as parts of each
+/// device's own config (`devices::device_configs`), where every key has its place.
+const CHECKED_ELSEWHERE: &[&str] = &["monitor.laws", "device[]", "instruments."];
 
 /// Refuse any number of `config` outside its key's range, or whose key has none.
 pub fn check_ranges(config: &Config) -> Result<(), String> {

@@ -11,6 +11,13 @@
 //! | `GET /profile[?format=toml\|json\|icc4\|icc2\|ti3\|cal\|psychopy&white=…&tone=…&luminance=…]` | the current profile, in any export format |
 //! | `GET /history` | profiles made current, and every verification |
 //! | `POST /rollback` `{"to": ID}` (or `{}`) | make an earlier profile current |
+//! | `GET /devices` | the daemon's devices, each with its job and current profile |
+//! | `GET /metrics` | Prometheus metrics of every device (`metrics.rs`); on TCP without the token unless `daemon.metrics_token` |
+//!
+//! Every route but the last two is a device's: `/devices/NAME/status`, `/devices/NAME/jobs`
+//! and so on. Without `/devices/NAME` they are the only device's, and a daemon with
+//! several refuses them (400) except `GET /events`, which then carries every
+//! device's events (each names its `device`).
 //!
 //! Every refusal is JSON `{"error": "…"}` with a status that says which: 401 (no or
 //! wrong token), 403 (not the socket's owner), 404 (no such endpoint), 405, 409, 413
@@ -24,7 +31,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use axum::Router;
-use axum::extract::{ConnectInfo, DefaultBodyLimit, Query, Request, State};
+use axum::extract::{
+    ConnectInfo, DefaultBodyLimit, FromRequestParts, OriginalUri, Query, Request, State,
+};
+use axum::http::request::Parts;
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
@@ -36,7 +46,7 @@ use tokio_stream::StreamExt;
 use tokio_stream::wrappers::BroadcastStream;
 
 use super::events::{JobKind, JobOutcome, JobStatus};
-use super::{Daemon, JobRefused};
+use super::{Daemon, Device, JobRefused, NoDevice};
 use crate::profile::Profile;
 
 /// Who may use the API.
@@ -138,15 +148,24 @@ pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
         daemon: daemon.clone(),
     });
     let max_body = config.max_body_bytes;
+    // A device's routes, answered at the top for the only device and under
+    // /devices/NAME for any.
+    let device_routes = || {
+        Router::new()
+            .route("/status", get(status))
+            .route("/jobs", post(start_job))
+            .route("/jobs/cancel", post(cancel_job))
+            .route("/events", get(events))
+            .route("/profile", get(profile))
+            .route("/history", get(history))
+            .route("/report", get(report))
+            .route("/rollback", post(rollback))
+    };
     Router::new()
-        .route("/status", get(status))
-        .route("/jobs", post(start_job))
-        .route("/jobs/cancel", post(cancel_job))
-        .route("/events", get(events))
-        .route("/profile", get(profile))
-        .route("/history", get(history))
-        .route("/report", get(report))
-        .route("/rollback", post(rollback))
+        .merge(device_routes())
+        .nest("/devices/{device}", device_routes())
+        .route("/devices", get(devices))
+        .route("/metrics", get(metrics))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(max_body))
@@ -195,6 +214,9 @@ async fn guard(
                 );
             }
         }
+        Peer::Tcp(_)
+            if request.uri().path() == "/metrics"
+                && !state.daemon.loaded.config.daemon.metrics_token => {}
         Peer::Tcp(addr) => {
             let sent = request
                 .headers()
@@ -298,9 +320,38 @@ async fn method_not_allowed(request: Request) -> Response {
     )
 }
 
+/// The device a request is for: `/devices/NAME/…`, or the only one.
+struct Dev(Arc<Device>);
+
+/// The `NAME` of `/devices/NAME/…`, from the path as the client sent it.
+fn device_segment(parts: &Parts) -> Option<String> {
+    let path = parts
+        .extensions
+        .get::<OriginalUri>()
+        .map_or_else(|| parts.uri.path().to_string(), |u| u.0.path().to_string());
+    let rest = path.strip_prefix("/devices/")?;
+    rest.split('/').next().map(String::from)
+}
+
+impl FromRequestParts<Shared> for Dev {
+    type Rejection = Response;
+
+    async fn from_request_parts(parts: &mut Parts, state: &Shared) -> Result<Self, Response> {
+        let name = device_segment(parts);
+        match state.daemon.device(name.as_deref()) {
+            Ok(device) => Ok(Dev(device.clone())),
+            Err(e @ NoDevice::Unknown { .. }) => Err(refusal(StatusCode::NOT_FOUND, e.to_string())),
+            Err(e @ NoDevice::Ambiguous(_)) => Err(refusal(StatusCode::BAD_REQUEST, e.to_string())),
+        }
+    }
+}
+
 /// `GET /status`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct StatusReply {
+    /// The device this status is of.
+    #[serde(default)]
+    pub device: String,
     pub version: String,
     pub pid: u32,
     pub uptime_s: f64,
@@ -326,8 +377,8 @@ pub struct CurrentProfile {
 }
 
 /// The current profile and its text; an error says why it does not read.
-fn read_current(daemon: &Daemon) -> Result<Option<(Profile, String)>, String> {
-    let path = daemon.store().current_path();
+fn read_current(device: &Device) -> Result<Option<(Profile, String)>, String> {
+    let path = device.store().current_path();
     let text = match crate::durable::read_text_limited(&path, crate::durable::limits::PROFILE) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
@@ -338,41 +389,82 @@ fn read_current(daemon: &Daemon) -> Result<Option<(Profile, String)>, String> {
         .map_err(|e| e.to_string())
 }
 
-async fn status(State(state): State<Shared>) -> Response {
-    let daemon = &state.daemon;
+/// A device's status.
+async fn device_status(daemon: &Daemon, device: &Arc<Device>) -> Result<StatusReply, String> {
     // Listing the runs reads their journals: off the async workers.
     let unfinished_runs = {
-        let daemon = daemon.clone();
+        let device = device.clone();
         tokio::task::spawn_blocking(move || {
-            crate::calibrate::session::unfinished_runs(daemon.store())
+            crate::calibrate::session::unfinished_runs(device.store())
         })
         .await
         .unwrap_or_default()
     };
-    let current = match read_current(daemon) {
-        Ok(c) => c.map(|(p, _)| CurrentProfile {
-            id: p.id,
-            created: p.created,
-            held_out: p.report.held_out,
-            path: daemon.store().current_path().display().to_string(),
-        }),
-        Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
-    };
-    axum::Json(StatusReply {
+    let current = read_current(device)?.map(|(p, _)| CurrentProfile {
+        id: p.id,
+        created: p.created,
+        held_out: p.report.held_out,
+        path: device.store().current_path().display().to_string(),
+    });
+    Ok(StatusReply {
+        device: device.name.clone(),
         version: env!("CARGO_PKG_VERSION").into(),
         pid: std::process::id(),
         uptime_s: daemon.uptime_s(),
-        state_dir: daemon.store().root().display().to_string(),
+        state_dir: device.store().root().display().to_string(),
         shutting_down: daemon.is_shutting_down(),
-        job: daemon.job(),
-        last_job: daemon.last_outcome(),
+        job: device.job(),
+        last_job: device.last_outcome(),
         current_profile: current,
-        next_verification: daemon
+        next_verification: device
             .next_verification()
             .map(|t| humantime::format_rfc3339_seconds(t).to_string()),
         unfinished_runs,
     })
-    .into_response()
+}
+
+async fn status(State(state): State<Shared>, Dev(device): Dev) -> Response {
+    match device_status(&state.daemon, &device).await {
+        Ok(reply) => axum::Json(reply).into_response(),
+        Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
+    }
+}
+
+/// `GET /devices`: every device's status, and which instrument it shares.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DevicesReply {
+    pub devices: Vec<DeviceEntry>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DeviceEntry {
+    pub name: String,
+    /// `[instruments.NAME]` it takes turns on with other devices.
+    pub shared_instrument: Option<String>,
+    pub status: StatusReply,
+}
+
+async fn devices(State(state): State<Shared>) -> Response {
+    let mut devices = Vec::new();
+    for device in state.daemon.devices() {
+        match device_status(&state.daemon, device).await {
+            Ok(status) => devices.push(DeviceEntry {
+                name: device.name.clone(),
+                shared_instrument: device.shared_instrument.as_ref().map(|(n, _)| n.clone()),
+                status,
+            }),
+            Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
+        }
+    }
+    axum::Json(DevicesReply { devices }).into_response()
+}
+
+/// `GET /metrics`.
+async fn metrics(State(state): State<Shared>) -> Response {
+    match state.daemon.bus.metrics.render() {
+        Ok(text) => ([(header::CONTENT_TYPE, super::metrics::CONTENT_TYPE)], text).into_response(),
+        Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -381,7 +473,7 @@ struct StartJob {
     kind: String,
 }
 
-async fn start_job(State(state): State<Shared>, body: axum::body::Bytes) -> Response {
+async fn start_job(Dev(device): Dev, body: axum::body::Bytes) -> Response {
     let request: StartJob = match serde_json::from_slice(&body) {
         Ok(r) => r,
         Err(e) => {
@@ -397,7 +489,7 @@ async fn start_job(State(state): State<Shared>, body: axum::body::Bytes) -> Resp
         Ok(k) => k,
         Err(e) => return refusal(StatusCode::BAD_REQUEST, e),
     };
-    match state.daemon.start_job(kind, "api", None) {
+    match device.start_job(kind, "api", None) {
         Ok(job) => (StatusCode::ACCEPTED, axum::Json(job)).into_response(),
         Err(e @ JobRefused::Busy { .. }) => refusal(StatusCode::CONFLICT, e.to_string()),
         Err(e @ JobRefused::ShuttingDown) => {
@@ -406,8 +498,8 @@ async fn start_job(State(state): State<Shared>, body: axum::body::Bytes) -> Resp
     }
 }
 
-async fn cancel_job(State(state): State<Shared>) -> Response {
-    match state.daemon.cancel_job() {
+async fn cancel_job(Dev(device): Dev) -> Response {
+    match device.cancel_job() {
         Some(job) => (StatusCode::ACCEPTED, axum::Json(job)).into_response(),
         None => refusal(StatusCode::NOT_FOUND, "no job is running"),
     }
@@ -428,7 +520,18 @@ fn keep_alive_interval(idle_timeout_s: f64) -> std::time::Duration {
     std::time::Duration::from_secs_f64((idle_timeout_s / 3.0).min(15.0))
 }
 
-async fn events(State(state): State<Shared>) -> Response {
+/// `GET /events`: every device's events; `GET /devices/NAME/events`: that device's.
+async fn events(State(state): State<Shared>, uri: OriginalUri) -> Response {
+    let only = match uri.0.path().strip_prefix("/devices/") {
+        Some(rest) => {
+            let name = rest.split('/').next().unwrap_or_default();
+            match state.daemon.device(Some(name)) {
+                Ok(device) => Some(device.name.clone()),
+                Err(e) => return refusal(StatusCode::NOT_FOUND, e.to_string()),
+            }
+        }
+        None => None,
+    };
     let max = state.daemon.loaded.config.daemon.max_event_streams;
     if state.streams.fetch_add(1, Ordering::SeqCst) >= max {
         state.streams.fetch_sub(1, Ordering::SeqCst);
@@ -438,19 +541,24 @@ async fn events(State(state): State<Shared>) -> Response {
         );
     }
     let slot = StreamSlot(state.clone());
-    let stream = BroadcastStream::new(state.daemon.events.subscribe()).map(move |item| {
-        let _held = &slot;
-        Ok::<_, std::convert::Infallible>(match item {
-            Ok(event) => SseEvent::default()
-                .event(event.name())
-                .data(serde_json::to_string(&event).unwrap_or_default()),
-            Err(tokio_stream::wrappers::errors::BroadcastStreamRecvError::Lagged(n)) => {
-                SseEvent::default()
-                    .event("lagged")
-                    .data(json!({ "missed": n }).to_string())
-            }
+    let stream = BroadcastStream::new(state.daemon.bus.events.subscribe())
+        .filter(move |item| match (item, &only) {
+            (Ok(event), Some(name)) => event.device == *name,
+            _ => true,
         })
-    });
+        .map(move |item| {
+            let _held = &slot;
+            Ok::<_, std::convert::Infallible>(match item {
+                Ok(event) => SseEvent::default()
+                    .event(event.event.name())
+                    .data(event.to_json().to_string()),
+                Err(tokio_stream::wrappers::errors::BroadcastStreamRecvError::Lagged(n)) => {
+                    SseEvent::default()
+                        .event("lagged")
+                        .data(json!({ "missed": n }).to_string())
+                }
+            })
+        });
     Sse::new(stream)
         // Often enough that a quiet stream is never taken for an idle connection.
         .keep_alive(KeepAlive::new().interval(keep_alive_interval(
@@ -472,7 +580,7 @@ struct ProfileQuery {
 /// `GET /profile[?format=…&white=…&tone=…&luminance=…]`: the current profile in any
 /// export format. What the format cannot carry is listed in `x-chromacal-not-carried`.
 async fn profile(
-    State(state): State<Shared>,
+    Dev(device): Dev,
     query: Result<Query<ProfileQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Response {
     use crate::export::{ExportOptions, Format, export, parse_target};
@@ -486,7 +594,7 @@ async fn profile(
             );
         }
     };
-    let (profile, text) = match read_current(&state.daemon) {
+    let (profile, text) = match read_current(&device) {
         Ok(Some(c)) => c,
         Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
         Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
@@ -552,14 +660,13 @@ async fn profile(
 
 /// `GET /report`: the current profile's HTML report, with the readings of its run
 /// and the store's history of profiles and verifications.
-async fn report(State(state): State<Shared>) -> Response {
+async fn report(Dev(device): Dev) -> Response {
     use crate::html_report::{HistoryView, ReportInput, readings_of, report_html};
-    let profile = match read_current(&state.daemon) {
+    let profile = match read_current(&device) {
         Ok(Some((profile, _))) => profile,
         Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
         Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
     };
-    let daemon = state.daemon.clone();
     // Reading the journal and drawing the figures take tens of milliseconds: off the
     // async workers, as a fit is.
     let page = tokio::task::spawn_blocking(move || {
@@ -571,7 +678,7 @@ async fn report(State(state): State<Shared>) -> Response {
             profile: &profile,
             readings: readings.as_ref(),
             readings_note,
-            history: Some(HistoryView::from_store(daemon.store())),
+            history: Some(HistoryView::from_store(device.store())),
         })
     })
     .await;
@@ -584,8 +691,8 @@ async fn report(State(state): State<Shared>) -> Response {
     }
 }
 
-async fn history(State(state): State<Shared>) -> Response {
-    let store = state.daemon.store();
+async fn history(Dev(device): Dev) -> Response {
+    let store = device.store();
     match (store.history(), store.verifications()) {
         (Ok(history), Ok(verifications)) => axum::Json(json!({
             "current": history.current,
@@ -603,7 +710,7 @@ struct Rollback {
     to: Option<String>,
 }
 
-async fn rollback(State(state): State<Shared>, body: axum::body::Bytes) -> Response {
+async fn rollback(Dev(device): Dev, body: axum::body::Bytes) -> Response {
     let request: Rollback = if body.iter().all(|b| b.is_ascii_whitespace()) {
         Rollback::default()
     } else {
@@ -617,10 +724,10 @@ async fn rollback(State(state): State<Shared>, body: axum::body::Bytes) -> Respo
             }
         }
     };
-    match state.daemon.store().rollback(request.to.as_deref()) {
+    match device.store().rollback(request.to.as_deref()) {
         Ok(entry) => {
-            tracing::info!(profile = %entry.id, "rolled back");
-            state.daemon.emit(super::events::Event::RolledBack {
+            tracing::info!(device = %device.name, profile = %entry.id, "rolled back");
+            device.emit(super::events::Event::RolledBack {
                 entry: entry.clone(),
             });
             axum::Json(entry).into_response()

@@ -153,6 +153,15 @@ pub async fn request(
 /// false or the stream ends. A refusal is returned as the reply.
 pub async fn follow_events(
     endpoint: &Endpoint,
+    on_event: impl FnMut(&str, &str) -> bool,
+) -> Result<Option<Reply>, ClientError> {
+    follow_events_at(endpoint, "/events", on_event).await
+}
+
+/// The same on another path (`/devices/NAME/events`: one device's).
+pub async fn follow_events_at(
+    endpoint: &Endpoint,
+    path: &str,
     mut on_event: impl FnMut(&str, &str) -> bool,
 ) -> Result<Option<Reply>, ClientError> {
     let http_error = |message: String| ClientError::Http {
@@ -161,7 +170,7 @@ pub async fn follow_events(
     };
     let mut sender = connect(endpoint).await?;
     let response = sender
-        .send_request(build(endpoint, "GET", "/events", None)?)
+        .send_request(build(endpoint, "GET", path, None)?)
         .await
         .map_err(|e| http_error(e.to_string()))?;
     let status = response.status().as_u16();

@@ -1,5 +1,5 @@
-//! What the daemon tells its subscribers (`GET /events`), and the job status that
-//! `GET /status` shows.
+//! What the daemon tells its subscribers (`GET /events`, MQTT), and the job status
+//! that `GET /status` shows. On the wire each event also names its `device`.
 
 use serde::{Deserialize, Serialize};
 
@@ -118,6 +118,12 @@ pub enum Event {
     RolledBack {
         entry: HistoryEntry,
     },
+    /// A job failed because the display or the instrument did (`fault`: `open`,
+    /// `warmup`, `instrument`, `display`); they are opened again for the next job.
+    DeviceLost {
+        fault: String,
+        message: String,
+    },
     ShuttingDown,
 }
 
@@ -132,6 +138,7 @@ impl Event {
             Event::Published { .. } => "published",
             Event::Verification { .. } => "verification",
             Event::RolledBack { .. } => "rolled_back",
+            Event::DeviceLost { .. } => "device_lost",
             Event::ShuttingDown => "shutting_down",
         }
     }

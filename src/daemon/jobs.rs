@@ -1,4 +1,4 @@
-//! What the daemon's jobs do, on the devices it holds: calibrate (or resume a
+//! What the daemon's jobs do, on a device's display and instrument: calibrate (or resume a
 //! calibration), verify the current profile, measure the uniformity grid again; the
 //! warm-up wait before each; and the scheduler that starts verifications.
 
@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant, SystemTime};
 
-use super::Daemon;
+use super::Device;
 use super::events::{Event, JobKind, JobOutcome, LastReading};
 use crate::calibrate::devices::{Devices, open_devices};
 use crate::calibrate::run::{Progress, RunError, RunHooks, RunOptions, run_plan};
@@ -30,6 +30,7 @@ use crate::model::{MonitorModel, ScreenPosition};
 use crate::plan::{Plan, make_uniformity_plan, make_verification_plan};
 use crate::profile::store::VerificationRecord;
 use crate::profile::{Profile, Provenance, SCHEMA_VERSION};
+use crate::time::TimeSource;
 
 /// A job id: the kind and a run id.
 pub fn new_job_id(kind: JobKind) -> String {
@@ -39,8 +40,9 @@ pub fn new_job_id(kind: JobKind) -> String {
 /// Why a job failed; the message is what the API reports.
 struct JobFailure {
     message: String,
-    /// The devices should be opened again before the next job.
-    devices_suspect: bool,
+    /// What of the devices failed (`open`, `warmup`, `instrument`, `display`): they
+    /// are opened again before the next job, and the fault is counted and told.
+    fault: Option<&'static str>,
     /// Stopped on request rather than failed.
     stopped: bool,
 }
@@ -54,13 +56,18 @@ impl From<CalibrateError> for JobFailure {
                 ..
             } | CalibrateError::Fit(FitError::Stopped)
         );
-        let devices_suspect = matches!(
-            &e,
+        let fault = match &e {
             CalibrateError::Run {
-                source: RunError::Display(_) | RunError::Instrument { .. },
+                source: RunError::Display(_),
                 ..
-            } | CalibrateError::Devices(_)
-        );
+            } => Some("display"),
+            CalibrateError::Run {
+                source: RunError::Instrument { .. },
+                ..
+            } => Some("instrument"),
+            CalibrateError::Devices(_) => Some("open"),
+            _ => None,
+        };
         let message = match &e {
             // The journal's whereabouts and `--resume` are for the command line; the
             // daemon resumes by itself.
@@ -69,7 +76,7 @@ impl From<CalibrateError> for JobFailure {
         };
         JobFailure {
             message,
-            devices_suspect,
+            fault,
             stopped,
         }
     }
@@ -79,7 +86,7 @@ impl From<String> for JobFailure {
     fn from(message: String) -> Self {
         JobFailure {
             message,
-            devices_suspect: false,
+            fault: None,
             stopped: false,
         }
     }
@@ -96,40 +103,55 @@ struct JobSuccess {
 
 /// Run one job to its end and say how it ended.
 pub(crate) async fn run_job(
-    daemon: &Arc<Daemon>,
+    device: &Arc<Device>,
     kind: JobKind,
     id: &str,
     resume: Option<PathBuf>,
     cancel: &Arc<AtomicBool>,
 ) -> JobOutcome {
-    let mut guard = daemon.devices.lock().await;
-    let result = match ensure_devices(daemon, &mut guard).await {
+    // A shared instrument is one device's at a time: wait for its turn.
+    let _turn = match &device.shared_instrument {
+        Some((name, turn)) => {
+            device.update_job(|j| j.phase = format!("waiting for the instrument {name}"));
+            Some(turn.lock().await)
+        }
+        None => None,
+    };
+    let mut guard = device.hardware.lock().await;
+    let result = match ensure_devices(device, &mut guard).await {
         Err(message) => Err(JobFailure {
             message,
-            devices_suspect: true,
+            fault: Some("open"),
             stopped: false,
         }),
         Ok(devices) => {
-            age_while_idle(daemon, devices);
+            age_while_idle(device, devices);
             let stop: StopCheck = {
-                let daemon = daemon.clone();
+                let device = device.clone();
                 let cancel = cancel.clone();
-                Arc::new(move || cancel.load(Ordering::SeqCst) || daemon.is_shutting_down())
+                Arc::new(move || cancel.load(Ordering::SeqCst) || device.is_shutting_down())
             };
-            match warm_up(daemon, id, devices, &stop).await {
+            match warm_up(device, id, devices, &stop).await {
                 Err(message) => Err(JobFailure {
                     message,
-                    devices_suspect: true,
+                    fault: Some("warmup"),
                     stopped: false,
                 }),
                 Ok(()) => match kind {
-                    JobKind::Calibrate => calibrate(daemon, id, devices, resume, &stop).await,
-                    JobKind::Verify => verify(daemon, id, devices, &stop).await,
-                    JobKind::Uniformity => uniformity(daemon, id, devices, &stop).await,
+                    JobKind::Calibrate => calibrate(device, id, devices, resume, &stop).await,
+                    JobKind::Verify => verify(device, id, devices, &stop).await,
+                    JobKind::Uniformity => uniformity(device, id, devices, &stop).await,
                 },
             }
         }
     };
+    // A shared instrument is left for the next device that takes its turn (which
+    // opens it again, as a meter moved by hand is connected again).
+    if device.shared_instrument.is_some()
+        && let Some(hardware) = guard.take()
+    {
+        hardware.instrument.close();
+    }
     match result {
         Ok(success) => JobOutcome {
             result: "ok".into(),
@@ -139,10 +161,14 @@ pub(crate) async fn run_job(
             escalated: success.escalated,
         },
         Err(failure) => {
-            if failure.devices_suspect
-                && let Some(devices) = guard.take()
-            {
-                devices.instrument.close();
+            if let Some(fault) = failure.fault {
+                if let Some(devices) = guard.take() {
+                    devices.instrument.close();
+                }
+                device.emit(Event::DeviceLost {
+                    fault: fault.to_string(),
+                    message: failure.message.clone(),
+                });
             }
             let cancelled = cancel.load(Ordering::SeqCst);
             let result = match (failure.stopped, cancelled) {
@@ -170,14 +196,14 @@ pub(crate) async fn run_job(
 
 /// The held devices, opened now if they are not open.
 async fn ensure_devices<'a>(
-    daemon: &Daemon,
+    device: &Device,
     slot: &'a mut Option<Devices>,
 ) -> Result<&'a mut Devices, String> {
     if slot.is_none() {
-        let config = &daemon.loaded.config;
+        let config = &device.loaded.config;
         let devices = open_devices(
             config,
-            &daemon.loaded.base_dir,
+            &device.loaded.base_dir,
             Some(config.daemon.simulated_time_scale),
         )
         .await
@@ -190,28 +216,28 @@ async fn ensure_devices<'a>(
 }
 
 /// Let the simulated monitor's clock catch up with the time no job ran.
-fn age_while_idle(daemon: &Daemon, devices: &Devices) {
-    let config = &daemon.loaded.config.daemon;
+fn age_while_idle(device: &Device, devices: &Devices) {
+    let config = &device.loaded.config.daemon;
     if !config.simulated_idle_ages {
         return;
     }
-    if let (Some(clock), Ok(idle)) = (&devices.virtual_clock, daemon.idle_since.lock()) {
+    if let (Some(clock), Ok(idle)) = (&devices.virtual_clock, device.idle_since.lock()) {
         clock.advance(idle.elapsed().as_secs_f64() / config.simulated_time_scale);
     }
 }
 
 /// Wait for warm-up if the config asks for it.
 async fn warm_up(
-    daemon: &Arc<Daemon>,
+    device: &Arc<Device>,
     id: &str,
     devices: &mut Devices,
     stop: &StopCheck,
 ) -> Result<(), String> {
-    let config = &daemon.loaded.config;
+    let config = &device.loaded.config;
     if !config.warmup.enabled {
         return Ok(());
     }
-    daemon.update_job(|j| j.phase = "warming up".into());
+    device.update_job(|j| j.phase = "warming up".into());
     let clock = devices.clock.clone();
     let virtual_clock = devices.virtual_clock.clone();
     let now = move || clock.now();
@@ -226,7 +252,7 @@ async fn warm_up(
     };
     let job_id = id.to_string();
     let mut on_step = |step: &crate::calibrate::warmup::WarmupStep| {
-        daemon.emit(Event::Warmup {
+        device.emit(Event::Warmup {
             job_id: job_id.clone(),
             step: *step,
         });
@@ -251,8 +277,8 @@ async fn warm_up(
 }
 
 /// The current profile, if there is one that reads.
-fn current_profile(daemon: &Daemon) -> Option<Profile> {
-    let path = daemon.store.current_path();
+pub(crate) fn current_profile(device: &Device) -> Option<Profile> {
+    let path = device.store.current_path();
     if !path.exists() {
         return None;
     }
@@ -268,13 +294,25 @@ fn current_profile(daemon: &Daemon) -> Option<Profile> {
 /// A progress handler that updates the job status (with an ETA from this job's pace
 /// and the ΔE00 against the current profile) and tells subscribers.
 fn progress_handler<'a>(
-    daemon: &'a Arc<Daemon>,
+    device: &'a Arc<Device>,
     current: Option<&'a MonitorModel>,
+    clock: Arc<dyn TimeSource>,
 ) -> impl FnMut(&Progress) + Send + 'a {
     let started = Instant::now();
     let mut measured_here = 0usize;
     move |p: &Progress| {
         measured_here += 1;
+        // Full white at the centre: the white luminance, and its drift on the device's
+        // own clock (simulated seconds for a simulated monitor).
+        let white = (p.status == ReadingStatus::Ok
+            && p.drive.iter().all(|d| *d >= 0.999)
+            && p.position == ScreenPosition::CENTRE)
+            .then(|| p.luminance.or(p.xyz.map(|x| x.y)))
+            .flatten();
+        device
+            .bus
+            .metrics
+            .reading(&device.name, p.status, white, clock.now());
         let per_patch = started.elapsed().as_secs_f64() / measured_here as f64;
         let delta_e00 = match (current, p.xyz) {
             (Some(model), Some(xyz)) if p.status == ReadingStatus::Ok => {
@@ -293,46 +331,50 @@ fn progress_handler<'a>(
             }),
             delta_e00,
         };
-        if let Some(job) = daemon.update_job(|j| {
+        if let Some(job) = device.update_job(|j| {
             j.phase = "measuring".into();
             j.done = p.done;
             j.total = p.total;
             j.eta_s = Some(per_patch * p.total.saturating_sub(p.done) as f64);
             j.last = Some(last);
         }) {
-            daemon.emit(Event::Progress { job });
+            device.emit(Event::Progress { job });
         }
     }
 }
 
 async fn calibrate(
-    daemon: &Arc<Daemon>,
+    device: &Arc<Device>,
     _id: &str,
     devices: &mut Devices,
     resume: Option<PathBuf>,
     stop: &StopCheck,
 ) -> Result<JobSuccess, JobFailure> {
-    let store = &daemon.store;
+    let store = &device.store;
     let run = match &resume {
         Some(dir) => reopen_run(dir)?,
         None => start_run(
             store,
-            &daemon.loaded.config,
-            &daemon.loaded.base_dir,
+            &device.loaded.config,
+            &device.loaded.base_dir,
             devices.display.name(),
             devices.instrument.info(),
         )?,
     };
     let already = run.journal.entries().len();
     let run_dir = run.journal.path().parent().map(PathBuf::from);
-    let current = current_profile(daemon);
-    let mut progress = progress_handler(daemon, current.as_ref().map(|p| &p.model));
+    let current = current_profile(device);
+    let mut progress = progress_handler(
+        device,
+        current.as_ref().map(|p| &p.model),
+        devices.clock.clone(),
+    );
     let mut hooks = RunHooks {
         progress: &mut progress,
         prompt: None,
         stop: Some(stop.clone()),
     };
-    daemon.update_job(|j| {
+    device.update_job(|j| {
         j.phase = "measuring".into();
         j.done = already;
     });
@@ -340,7 +382,7 @@ async fn calibrate(
         Ok(outcome) => {
             let published = outcome.rejection.is_none();
             if published {
-                daemon.emit(Event::Published {
+                device.emit(Event::Published {
                     profile_id: outcome.run_id.clone(),
                     how: "calibration".into(),
                     held_out: outcome.fitted.report.held_out,
@@ -365,7 +407,7 @@ async fn calibrate(
             let failure = JobFailure::from(e);
             // A cancelled run is given up; one stopped by shutdown resumes at start.
             if failure.stopped
-                && !daemon.is_shutting_down()
+                && !device.is_shutting_down()
                 && let Some(dir) = &run_dir
             {
                 let _ = discard_run(dir);
@@ -377,7 +419,7 @@ async fn calibrate(
 
 /// Measure `plan` into a fresh journal under `<state>/<folder>/<id>/`.
 async fn measure_plan(
-    daemon: &Arc<Daemon>,
+    device: &Arc<Device>,
     id: &str,
     folder: &str,
     plan: Plan,
@@ -385,28 +427,28 @@ async fn measure_plan(
     current: &MonitorModel,
     stop: &StopCheck,
 ) -> Result<Journal, JobFailure> {
-    let config = &daemon.loaded.config;
+    let config = &device.loaded.config;
     let header = JournalHeader {
         format: JOURNAL_FORMAT.into(),
         version: JOURNAL_VERSION,
         run_id: id.to_string(),
         started: now_rfc3339(),
-        config_digest: daemon.loaded.digest(),
-        config: daemon.loaded.text.clone(),
-        config_dir: daemon.loaded.base_dir.clone(),
+        config_digest: device.loaded.digest(),
+        config: device.loaded.text.clone(),
+        config_dir: device.loaded.base_dir.clone(),
         display: devices.display.name(),
         instrument: devices.instrument.info(),
         units: Units::Absolute,
         plan,
     };
-    let path = daemon
+    let path = device
         .store
         .root()
         .join(folder)
         .join(id)
         .join("journal.jsonl");
     let mut journal = Journal::create(&path, header).map_err(|e| e.to_string())?;
-    let mut progress = progress_handler(daemon, Some(current));
+    let mut progress = progress_handler(device, Some(current), devices.clock.clone());
     let mut hooks = RunHooks {
         progress: &mut progress,
         prompt: None,
@@ -435,18 +477,18 @@ async fn measure_plan(
 }
 
 async fn verify(
-    daemon: &Arc<Daemon>,
+    device: &Arc<Device>,
     id: &str,
     devices: &mut Devices,
     stop: &StopCheck,
 ) -> Result<JobSuccess, JobFailure> {
-    let config = &daemon.loaded.config;
-    let profile = current_profile(daemon)
+    let config = &device.loaded.config;
+    let profile = current_profile(device)
         .ok_or_else(|| "there is no current profile to verify: calibrate first".to_string())?;
     let plan = make_verification_plan(&config.plan, config.schedule.verify_patches)
         .map_err(|e| e.to_string())?;
     let journal = measure_plan(
-        daemon,
+        device,
         id,
         "verifications",
         plan,
@@ -472,11 +514,11 @@ async fn verify(
         threshold,
         escalated: past && config.schedule.escalate,
     };
-    daemon
+    device
         .store
         .append_verification(&record)
         .map_err(|e| e.to_string())?;
-    daemon.emit(Event::Verification {
+    device.emit(Event::Verification {
         record: record.clone(),
     });
     let mean = record.stats.map_or(f64::NAN, |s| s.mean);
@@ -504,18 +546,18 @@ async fn verify(
 /// between the references around them), so the map carries no change of the whole
 /// screen since the calibration.
 async fn uniformity(
-    daemon: &Arc<Daemon>,
+    device: &Arc<Device>,
     id: &str,
     devices: &mut Devices,
     stop: &StopCheck,
 ) -> Result<JobSuccess, JobFailure> {
-    let config = &daemon.loaded.config;
-    let profile = current_profile(daemon).ok_or_else(|| {
+    let config = &device.loaded.config;
+    let profile = current_profile(device).ok_or_else(|| {
         "there is no current profile to give a spatial map: calibrate first".to_string()
     })?;
     let plan = make_uniformity_plan(&config.plan).map_err(|e| e.to_string())?;
     let journal = measure_plan(
-        daemon,
+        device,
         id,
         "uniformity",
         plan,
@@ -524,7 +566,7 @@ async fn uniformity(
         stop,
     )
     .await?;
-    daemon.update_job(|j| j.phase = "fitting".into());
+    device.update_job(|j| j.phase = "fitting".into());
     let model = &profile.model;
     let predicted_white = model.forward([1.0; 3], ScreenPosition::CENTRE);
     // Ratio of measured to predicted centre white, at each reference's time.
@@ -587,7 +629,7 @@ async fn uniformity(
         .map_err(|e| format!("the spatial fit failed: {e}"))?
         .ok_or(JobFailure {
             message: "stopped while fitting the spatial map".into(),
-            devices_suspect: false,
+            fault: None,
             stopped: true,
         })?
     };
@@ -614,7 +656,7 @@ async fn uniformity(
     let passes = rejection.is_none();
     let store_error = |e: std::io::Error| format!("profile store: {e}");
     if passes {
-        daemon
+        device
             .store
             .publish(
                 &new_id,
@@ -623,13 +665,13 @@ async fn uniformity(
                 "uniformity",
             )
             .map_err(store_error)?;
-        daemon.emit(Event::Published {
+        device.emit(Event::Published {
             profile_id: new_id.clone(),
             how: "uniformity".into(),
             held_out: profile.report.held_out,
         });
     } else {
-        daemon.store.keep(&new_id, &text).map_err(store_error)?;
+        device.store.keep(&new_id, &text).map_err(store_error)?;
     }
     let cv = chosen.map_or("no score".to_string(), |s| {
         format!("leave-one-position-out mean ΔE00 {:.3}", s.mean)
@@ -649,20 +691,20 @@ async fn uniformity(
 
 /// Start a verification every `schedule.verify_every_s`, skipping a turn while a job
 /// runs.
-pub(crate) async fn scheduler(daemon: Arc<Daemon>) {
-    let Some(every) = daemon.loaded.config.schedule.verify_every_s else {
+pub(crate) async fn scheduler(device: Arc<Device>) {
+    let Some(every) = device.loaded.config.schedule.verify_every_s else {
         return;
     };
     let every = Duration::from_secs_f64(every);
     loop {
-        if let Ok(mut next) = daemon.next_verification.lock() {
+        if let Ok(mut next) = device.next_verification.lock() {
             *next = Some(SystemTime::now() + every);
         }
         tokio::time::sleep(every).await;
-        if daemon.is_shutting_down() {
+        if device.is_shutting_down() {
             return;
         }
-        match daemon.start_job(JobKind::Verify, "schedule", None) {
+        match device.start_job(JobKind::Verify, "schedule", None) {
             Ok(_) => {}
             Err(e) => tracing::info!(reason = %e, "scheduled verification skipped"),
         }

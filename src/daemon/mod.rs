@@ -16,6 +16,8 @@ pub mod api;
 pub mod client;
 pub mod events;
 pub mod jobs;
+pub mod metrics;
+pub mod mqtt;
 pub mod notify;
 pub mod serve;
 
@@ -28,8 +30,7 @@ use tokio::sync::broadcast;
 
 use crate::calibrate::devices::Devices;
 use crate::calibrate::session::{discard_run, newest_resumable, unfinished_runs};
-use crate::config::LoadedConfig;
-use crate::config::OnStart;
+use crate::config::{DeviceConfig, LoadedConfig, OnStart, device_configs};
 use crate::profile::store::ProfileStore;
 use events::{Event, JobKind, JobStatus};
 
@@ -67,54 +68,115 @@ struct RunningJob {
     cancel: Arc<AtomicBool>,
 }
 
-/// The daemon's state, shared by the API, the scheduler and the job.
-pub struct Daemon {
+/// An event and the device it is of, as the bus carries it.
+#[derive(Debug, Clone)]
+pub struct DeviceEvent {
+    pub device: String,
+    pub event: Event,
+}
+
+impl DeviceEvent {
+    /// The event as JSON, with its device: what `GET /events` and MQTT send.
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut value = serde_json::to_value(&self.event).unwrap_or_default();
+        if let serde_json::Value::Object(map) = &mut value {
+            map.insert("device".into(), self.device.clone().into());
+        }
+        value
+    }
+}
+
+/// What every device of the daemon shares: where events go (subscribers, metrics,
+/// MQTT) and whether the daemon is stopping.
+pub struct Bus {
+    pub(crate) events: broadcast::Sender<DeviceEvent>,
+    shutting_down: AtomicBool,
+    pub(crate) metrics: Arc<metrics::Metrics>,
+    mqtt: Option<Arc<mqtt::Mqtt>>,
+}
+
+impl Bus {
+    pub fn new(metrics: Arc<metrics::Metrics>, mqtt: Option<Arc<mqtt::Mqtt>>) -> Arc<Bus> {
+        let (events, _) = broadcast::channel(1024);
+        Arc::new(Bus {
+            events,
+            shutting_down: AtomicBool::new(false),
+            metrics,
+            mqtt,
+        })
+    }
+
+    /// Tell the metrics, MQTT and the subscribers (in that order: a subscriber that
+    /// hears of a job's end finds the metrics counting it).
+    fn publish(&self, device: &str, event: Event) {
+        tracing::debug!(device, event = event.name(), "event");
+        self.metrics.observe(device, &event);
+        if let Some(mqtt) = &self.mqtt {
+            mqtt.observe(device, &event);
+        }
+        let _ = self.events.send(DeviceEvent {
+            device: device.to_string(),
+            event,
+        });
+    }
+}
+
+/// One display–instrument pair of the daemon, with its own config, store, schedule
+/// and job slot (`[[device]]`; a config without them is one device).
+pub struct Device {
+    pub name: String,
     pub(crate) loaded: LoadedConfig,
     pub(crate) store: ProfileStore,
-    /// Opened at the first job, kept between jobs, reopened after a device failure.
-    pub(crate) devices: tokio::sync::Mutex<Option<Devices>>,
+    /// Opened at the first job, kept between jobs, reopened after a device failure
+    /// (and after every job when the instrument is shared).
+    pub(crate) hardware: tokio::sync::Mutex<Option<Devices>>,
+    /// A shared instrument's name and its turn: one job at a time on it.
+    pub(crate) shared_instrument: Option<(String, Arc<tokio::sync::Mutex<()>>)>,
     job: Mutex<Option<RunningJob>>,
     last_outcome: Mutex<Option<(JobStatus, events::JobOutcome)>>,
-    pub(crate) events: broadcast::Sender<Event>,
-    shutting_down: AtomicBool,
+    pub(crate) bus: Arc<Bus>,
     /// Told when the running job ends.
     job_done: tokio::sync::Notify,
-    started: Instant,
     /// When the last job ended (or the daemon started).
     pub(crate) idle_since: Mutex<Instant>,
     next_verification: Mutex<Option<std::time::SystemTime>>,
-    /// The state directory's lock: it lives as long as the daemon does, including any
-    /// job task still holding it after `run` returns.
+    /// The store's lock: it lives as long as the device does, including any job task
+    /// still holding it after `run` returns.
     _store_lock: crate::profile::store::StoreLock,
 }
 
 /// Why a job was not started.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum JobRefused {
-    #[error("a {kind} job ({id}) is running; one job runs at a time")]
-    Busy { kind: &'static str, id: String },
+    #[error("a {kind} job ({id}) is running on {device}; one job runs at a time on a device")]
+    Busy {
+        device: String,
+        kind: &'static str,
+        id: String,
+    },
     #[error("the daemon is shutting down")]
     ShuttingDown,
 }
 
-impl Daemon {
-    /// A daemon on `store`, holding its lock (`ProfileStore::lock`) while it lives.
+impl Device {
+    /// A device on `store`, holding its lock (`ProfileStore::lock`) while it lives.
     pub fn new(
-        loaded: LoadedConfig,
+        config: DeviceConfig,
         store: ProfileStore,
         store_lock: crate::profile::store::StoreLock,
+        instrument_turn: Option<Arc<tokio::sync::Mutex<()>>>,
+        bus: Arc<Bus>,
     ) -> Arc<Self> {
-        let (events, _) = broadcast::channel(256);
-        Arc::new(Daemon {
-            loaded,
+        Arc::new(Device {
+            shared_instrument: config.shared_instrument.zip(instrument_turn),
+            name: config.name,
+            loaded: config.loaded,
             store,
-            devices: tokio::sync::Mutex::new(None),
+            hardware: tokio::sync::Mutex::new(None),
             job: Mutex::new(None),
             last_outcome: Mutex::new(None),
-            events,
-            shutting_down: AtomicBool::new(false),
+            bus,
             job_done: tokio::sync::Notify::new(),
-            started: Instant::now(),
             idle_since: Mutex::new(Instant::now()),
             next_verification: Mutex::new(None),
             _store_lock: store_lock,
@@ -126,12 +188,11 @@ impl Daemon {
     }
 
     pub(crate) fn emit(&self, event: Event) {
-        tracing::debug!(event = event.name(), "event");
-        let _ = self.events.send(event);
+        self.bus.publish(&self.name, event);
     }
 
     pub fn is_shutting_down(&self) -> bool {
-        self.shutting_down.load(Ordering::SeqCst)
+        self.bus.shutting_down.load(Ordering::SeqCst)
     }
 
     /// The running job's status.
@@ -153,12 +214,55 @@ impl Daemon {
         self.last_outcome.lock().ok().and_then(|o| o.clone())
     }
 
-    pub fn uptime_s(&self) -> f64 {
-        self.started.elapsed().as_secs_f64()
-    }
-
     pub fn next_verification(&self) -> Option<std::time::SystemTime> {
         self.next_verification.lock().ok().and_then(|n| *n)
+    }
+
+    /// Give the metrics and MQTT what the store holds: the current profile and the
+    /// last verification.
+    fn restore_figures(&self) {
+        let profile = jobs::current_profile(self);
+        // The last calibration published (the current profile may be a new spatial
+        // map of it, or one rolled back to).
+        let calibrated = self.store.history().ok().and_then(|h| {
+            let entry = h.entries.iter().rev().find(|e| e.how == "calibration")?;
+            humantime::parse_rfc3339_weak(&entry.at).ok()
+        });
+        let verification = self
+            .store
+            .verifications()
+            .ok()
+            .and_then(|v| v.last().cloned());
+        let held_out = profile.as_ref().and_then(|p| p.report.held_out);
+        self.bus.metrics.restore(
+            &self.name,
+            held_out,
+            calibrated,
+            verification
+                .as_ref()
+                .and_then(|v| Some((humantime::parse_rfc3339_weak(&v.at).ok()?, v.stats))),
+            self.loaded.config.schedule.threshold_de00,
+        );
+        if let Some(mqtt) = &self.bus.mqtt {
+            mqtt.restore(
+                &self.name,
+                serde_json::json!({
+                    "device": self.name,
+                    "job": null,
+                    "current_profile": profile.as_ref().map(|p| serde_json::json!({
+                        "id": p.id, "held_out": held_out, "at": p.created,
+                    })),
+                    "last_verification": verification.as_ref().map(|v| serde_json::json!({
+                        "at": v.at,
+                        "profile_id": v.profile_id,
+                        "stats": v.stats,
+                        "threshold": v.threshold,
+                        "passed": v.stats.is_some_and(|s| s.mean <= v.threshold),
+                        "escalated": v.escalated,
+                    })),
+                }),
+            );
+        }
     }
 
     /// Start a job unless one runs. `resume` names an unfinished calibration run.
@@ -174,6 +278,7 @@ impl Daemon {
         let mut slot = self.job.lock().map_err(|_| JobRefused::ShuttingDown)?;
         if let Some(running) = slot.as_ref() {
             return Err(JobRefused::Busy {
+                device: self.name.clone(),
                 kind: running.status.kind.name(),
                 id: running.status.id.clone(),
             });
@@ -195,39 +300,40 @@ impl Daemon {
             cancel: cancel.clone(),
         });
         drop(slot);
-        tracing::info!(job = %status.id, kind = kind.name(), origin, "job started");
+        tracing::info!(device = %self.name, job = %status.id, kind = kind.name(), origin, "job started");
         self.emit(Event::JobStarted {
             job: status.clone(),
         });
-        let daemon = self.clone();
+        let device = self.clone();
         let id = status.id.clone();
         tokio::spawn(async move {
-            let outcome = jobs::run_job(&daemon, kind, &id, resume, &cancel).await;
-            if let Ok(mut idle) = daemon.idle_since.lock() {
+            let outcome = jobs::run_job(&device, kind, &id, resume, &cancel).await;
+            if let Ok(mut idle) = device.idle_since.lock() {
                 *idle = Instant::now();
             }
-            let finished = daemon.job.lock().ok().and_then(|mut s| s.take());
+            let finished = device.job.lock().ok().and_then(|mut s| s.take());
             let status = finished.map(|r| r.status);
             if let Some(status) = &status {
                 tracing::info!(
+                    device = %device.name,
                     job = %status.id,
                     result = %outcome.result,
                     message = %outcome.message,
                     "job finished"
                 );
-                if let Ok(mut last) = daemon.last_outcome.lock() {
+                if let Ok(mut last) = device.last_outcome.lock() {
                     *last = Some((status.clone(), outcome.clone()));
                 }
-                daemon.emit(Event::JobFinished {
+                device.emit(Event::JobFinished {
                     job: status.clone(),
                     outcome: outcome.clone(),
                 });
             }
-            daemon.job_done.notify_waiters();
+            device.job_done.notify_waiters();
             if outcome.escalated
-                && let Err(e) = daemon.start_job(JobKind::Calibrate, "escalation", None)
+                && let Err(e) = device.start_job(JobKind::Calibrate, "escalation", None)
             {
-                tracing::warn!(error = %e, "the verification asked for a recalibration that could not start");
+                tracing::warn!(device = %device.name, error = %e, "the verification asked for a recalibration that could not start");
             }
         });
         Ok(status)
@@ -241,9 +347,8 @@ impl Daemon {
         Some(running.status.clone())
     }
 
-    /// Wait until no job runs, at most `timeout`. True if none runs.
-    pub async fn wait_idle(&self, timeout: Duration) -> bool {
-        let deadline = tokio::time::Instant::now() + timeout;
+    /// Wait until no job runs, at most until `deadline`. True if none runs.
+    pub async fn wait_idle(&self, deadline: tokio::time::Instant) -> bool {
         loop {
             let notified = self.job_done.notified();
             if self.job().is_none() {
@@ -254,11 +359,89 @@ impl Daemon {
             }
         }
     }
+}
 
-    /// Stop taking jobs and ask the running one to stop after its reading.
+/// The daemon: its devices and what they share.
+pub struct Daemon {
+    /// The whole config (its `[daemon]` section is the daemon's).
+    pub(crate) loaded: LoadedConfig,
+    devices: Vec<Arc<Device>>,
+    pub(crate) bus: Arc<Bus>,
+    started: Instant,
+    state_dir: PathBuf,
+}
+
+/// Why a request named no device.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NoDevice {
+    #[error("no device is named \"{name}\" (this daemon has {known})")]
+    Unknown { name: String, known: String },
+    #[error(
+        "this daemon has several devices ({0}): name one, as /devices/NAME/… (`--device NAME`)"
+    )]
+    Ambiguous(String),
+}
+
+impl Daemon {
+    pub fn devices(&self) -> &[Arc<Device>] {
+        &self.devices
+    }
+
+    fn names(&self) -> String {
+        self.devices
+            .iter()
+            .map(|d| d.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// The device named, or with `None` the only one.
+    pub fn device(&self, name: Option<&str>) -> Result<&Arc<Device>, NoDevice> {
+        match name {
+            Some(name) => {
+                self.devices
+                    .iter()
+                    .find(|d| d.name == name)
+                    .ok_or_else(|| NoDevice::Unknown {
+                        name: name.to_string(),
+                        known: self.names(),
+                    })
+            }
+            None => match self.devices.as_slice() {
+                [only] => Ok(only),
+                _ => Err(NoDevice::Ambiguous(self.names())),
+            },
+        }
+    }
+
+    pub fn state_dir(&self) -> &Path {
+        &self.state_dir
+    }
+
+    pub fn is_shutting_down(&self) -> bool {
+        self.bus.shutting_down.load(Ordering::SeqCst)
+    }
+
+    pub fn uptime_s(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+
+    /// Stop taking jobs and ask the running ones to stop after their reading.
     pub fn begin_shutdown(&self) {
-        self.shutting_down.store(true, Ordering::SeqCst);
-        self.emit(Event::ShuttingDown);
+        self.bus.shutting_down.store(true, Ordering::SeqCst);
+        for device in &self.devices {
+            device.emit(Event::ShuttingDown);
+        }
+    }
+
+    /// Wait until no job runs on any device, at most `timeout`. True if none runs.
+    pub async fn wait_idle(&self, timeout: Duration) -> bool {
+        let deadline = tokio::time::Instant::now() + timeout;
+        let mut all = true;
+        for device in &self.devices {
+            all &= device.wait_idle(deadline).await;
+        }
+        all
     }
 }
 
@@ -360,6 +543,72 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
     Ok(token)
 }
 
+/// Open every device's store (its own folder with `[[device]]`, else the state
+/// directory itself), holding each one's lock.
+fn open_devices_of(
+    configs: Vec<DeviceConfig>,
+    keep_profiles: usize,
+    state_dir: &Path,
+    bus: &Arc<Bus>,
+) -> Result<Vec<Arc<Device>>, DaemonError> {
+    let mut turns: std::collections::BTreeMap<String, Arc<tokio::sync::Mutex<()>>> =
+        Default::default();
+    let mut devices = Vec::new();
+    for config in configs {
+        let root = match config.own_folder {
+            true => state_dir.join(&config.name),
+            false => state_dir.to_path_buf(),
+        };
+        std::fs::create_dir_all(&root).map_err(|source| DaemonError::Io {
+            path: root.clone(),
+            source,
+        })?;
+        let store = ProfileStore::new(&root).keeping(keep_profiles);
+        // Held while the daemon (and any job task) lives: no `calibrate` or second
+        // daemon writes this store meanwhile.
+        let lock = store.lock("chromacal daemon")?;
+        let turn = config
+            .shared_instrument
+            .as_ref()
+            .map(|name| turns.entry(name.clone()).or_default().clone());
+        let device = Device::new(config, store, lock, turn, bus.clone());
+        device.restore_figures();
+        devices.push(device);
+    }
+    Ok(devices)
+}
+
+/// Resume (or discard) the calibration a stop cut short on `device`.
+fn resume_unfinished(device: &Arc<Device>) {
+    let unfinished = unfinished_runs(&device.store);
+    let resumed = newest_resumable(&unfinished).map(|run| run.dir.clone());
+    let name = &device.name;
+    for run in &unfinished {
+        if !run.resumable() {
+            tracing::warn!(device = %name, run = %run.id, failures = run.fit_failures, "not resuming a run whose fit failed twice (it is kept; `chromacal calibrate --resume RUN` names it)");
+        } else if Some(&run.dir) != resumed.as_ref() {
+            tracing::warn!(device = %name, run = %run.id, readings = run.readings, "an older unfinished run is not resumed (`chromacal calibrate --resume RUN` names it)");
+        }
+    }
+    let Some(dir) = resumed else {
+        return;
+    };
+    match device.loaded.config.daemon.on_start {
+        OnStart::Resume => {
+            tracing::info!(device = %name, run = %dir.display(), "resuming the calibration a stop cut short");
+            if let Err(e) = device.start_job(JobKind::Calibrate, "resume", Some(dir)) {
+                tracing::warn!(device = %name, error = %e, "cannot resume");
+            }
+        }
+        OnStart::Discard => {
+            tracing::warn!(device = %name, run = %dir.display(), "discarding the calibration a stop cut short (daemon.on_start = \"discard\")");
+            if let Err(e) = discard_run(&dir) {
+                tracing::warn!(device = %name, error = %e, "cannot mark the run discarded");
+            }
+        }
+    }
+}
+
 /// Run the daemon until SIGTERM or SIGINT.
 pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(), DaemonError> {
     if let Some(socket) = &options.socket {
@@ -374,11 +623,25 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
         path: options.state_dir.clone(),
         source,
     })?;
-    let store = ProfileStore::new(&options.state_dir).keeping(config.keep_profiles);
-    // Held while the daemon (and any job task) lives: no `calibrate` or second daemon
-    // writes this store meanwhile.
-    let store_lock = store.lock("chromacal daemon")?;
-    let daemon = Daemon::new(loaded, store, store_lock);
+    let configs = device_configs(&loaded).map_err(DaemonError::Config)?;
+    let names: Vec<String> = configs.iter().map(|d| d.name.clone()).collect();
+    let metrics = Arc::new(metrics::Metrics::new(names.iter().map(String::as_str)));
+    let mqtt = match &loaded.config.mqtt {
+        Some(mqtt) => Some(
+            mqtt::Mqtt::start(mqtt, &loaded.base_dir, &names, metrics.clone())
+                .map_err(|e| DaemonError::Config(e.to_string()))?,
+        ),
+        None => None,
+    };
+    let bus = Bus::new(metrics, mqtt.clone());
+    let devices = open_devices_of(configs, config.keep_profiles, &options.state_dir, &bus)?;
+    let daemon = Arc::new(Daemon {
+        loaded,
+        devices,
+        bus,
+        started: Instant::now(),
+        state_dir: options.state_dir.clone(),
+    });
 
     // The TCP listener is bound and its token written before the unix socket exists:
     // a client that finds the socket may go straight to TCP.
@@ -435,36 +698,14 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
             serve::ConnectionLimits::tcp(&config),
         ));
     }
-    tracing::info!(socket = %socket_path.display(), state = %options.state_dir.display(), "chromacal daemon ready");
+    tracing::info!(socket = %socket_path.display(), state = %options.state_dir.display(), devices = %daemon.names(), "chromacal daemon ready");
 
-    // A calibration a stop cut short: the newest that can be resumed. The others are
-    // said, and listed in /status.
-    let unfinished = unfinished_runs(&daemon.store);
-    let resumed = newest_resumable(&unfinished).map(|run| run.dir.clone());
-    for run in &unfinished {
-        if !run.resumable() {
-            tracing::warn!(run = %run.id, failures = run.fit_failures, "not resuming a run whose fit failed twice (it is kept; `chromacal calibrate --resume RUN` names it)");
-        } else if Some(&run.dir) != resumed.as_ref() {
-            tracing::warn!(run = %run.id, readings = run.readings, "an older unfinished run is not resumed (`chromacal calibrate --resume RUN` names it)");
-        }
+    // Calibrations a stop cut short: on each device the newest that can be resumed.
+    // The others are said, and listed in its status.
+    for device in daemon.devices() {
+        resume_unfinished(device);
+        tokio::spawn(jobs::scheduler(device.clone()));
     }
-    if let Some(dir) = resumed {
-        match config.on_start {
-            OnStart::Resume => {
-                tracing::info!(run = %dir.display(), "resuming the calibration a stop cut short");
-                if let Err(e) = daemon.start_job(JobKind::Calibrate, "resume", Some(dir)) {
-                    tracing::warn!(error = %e, "cannot resume");
-                }
-            }
-            OnStart::Discard => {
-                tracing::warn!(run = %dir.display(), "discarding the calibration a stop cut short (daemon.on_start = \"discard\")");
-                if let Err(e) = discard_run(&dir) {
-                    tracing::warn!(error = %e, "cannot mark the run discarded");
-                }
-            }
-        }
-    }
-    tokio::spawn(jobs::scheduler(daemon.clone()));
     if let Some(interval) = notify::watchdog_interval() {
         tokio::spawn(async move {
             loop {
@@ -476,7 +717,7 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     notify::notify("READY=1\nSTATUS=waiting for jobs");
 
     wait_for_stop_signal().await;
-    tracing::info!("stopping: finishing the reading under way");
+    tracing::info!("stopping: finishing the readings under way");
     notify::notify("STOPPING=1\nSTATUS=stopping");
     daemon.begin_shutdown();
     let stopped = daemon
@@ -485,16 +726,21 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     if !stopped {
         tracing::warn!(
             timeout_s = config.stop_timeout_s,
-            "the job did not stop in time; exiting (its journal holds every reading taken)"
+            "a job did not stop in time; exiting (its journal holds every reading taken)"
         );
     }
-    // Leave the screen black and the instrument out of remote mode.
-    if let Ok(mut devices) = daemon.devices.try_lock()
-        && let Some(devices) = devices.as_mut()
-    {
-        use crate::display::PatchDisplay;
-        let _ = tokio::time::timeout(Duration::from_secs(2), devices.display.blank()).await;
-        devices.instrument.close();
+    // Leave the screens black and the instruments out of remote mode.
+    for device in daemon.devices() {
+        if let Ok(mut hardware) = device.hardware.try_lock()
+            && let Some(hardware) = hardware.as_mut()
+        {
+            use crate::display::PatchDisplay;
+            let _ = tokio::time::timeout(Duration::from_secs(2), hardware.display.blank()).await;
+            hardware.instrument.close();
+        }
+    }
+    if let Some(mqtt) = &mqtt {
+        mqtt.stop(Duration::from_secs(2)).await;
     }
     let _ = std::fs::remove_file(&socket_path);
     tracing::info!("stopped");

@@ -11,6 +11,9 @@
 use std::sync::Mutex;
 use std::time::Duration;
 
+/// Real waits shorter than this are not slept (`VirtualClock::wait`).
+const MIN_SLEEP_S: f64 = 1e-5;
+
 /// Seconds of simulated time, shared by the simulated display and instrument.
 #[derive(Debug, Default)]
 pub struct VirtualClock {
@@ -60,7 +63,14 @@ impl VirtualClock {
             return;
         }
         if let Some(scale) = self.realtime_scale {
-            tokio::time::sleep(Duration::from_secs_f64(seconds * scale)).await;
+            let real = seconds * scale;
+            // Tokio's timer counts whole milliseconds: a wait far below one would
+            // last a millisecond, so it only lets the other tasks run.
+            if real < MIN_SLEEP_S {
+                tokio::task::yield_now().await;
+            } else {
+                tokio::time::sleep(Duration::from_secs_f64(real)).await;
+            }
         }
         *self
             .seconds

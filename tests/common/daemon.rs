@@ -196,3 +196,91 @@ pub async fn wait_idle(endpoint: &Endpoint, timeout: Duration) {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
+
+/// Subscribe to the events at `path` (`/events`: every device's) as JSON, each with
+/// its `device`.
+pub fn subscribe_json(
+    endpoint: &Endpoint,
+    path: &str,
+) -> tokio::sync::mpsc::UnboundedReceiver<serde_json::Value> {
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    let endpoint = endpoint.clone();
+    let path = path.to_string();
+    tokio::spawn(async move {
+        let _ = chromacal::daemon::client::follow_events_at(&endpoint, &path, |_, data| {
+            let event: serde_json::Value = serde_json::from_str(data).unwrap();
+            tx.send(event).is_ok()
+        })
+        .await;
+    });
+    rx
+}
+
+/// JSON events until `stop` says so (the last one included), within `timeout`.
+pub async fn json_events_until(
+    events: &mut tokio::sync::mpsc::UnboundedReceiver<serde_json::Value>,
+    timeout: Duration,
+    mut stop: impl FnMut(&[serde_json::Value]) -> bool,
+) -> Vec<serde_json::Value> {
+    let mut seen = Vec::new();
+    let deadline = tokio::time::Instant::now() + timeout;
+    loop {
+        let event = tokio::time::timeout_at(deadline, events.recv())
+            .await
+            .unwrap_or_else(|_| panic!("timed out; events so far: {seen:#?}"))
+            .expect("the event stream ended");
+        seen.push(event);
+        if stop(&seen) {
+            return seen;
+        }
+    }
+}
+
+/// The number of `job_finished` events in `seen` per device named.
+pub fn finished_on(seen: &[serde_json::Value], device: &str) -> usize {
+    seen.iter()
+        .filter(|e| e["event"] == "job_finished" && e["device"] == device)
+        .count()
+}
+
+/// A loopback port nothing listens on now.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A program the test script installs (`scripts/test.sh`), by name on the PATH or in
+/// /usr/sbin (where Debian puts mosquitto).
+pub fn installed(program: &str) -> PathBuf {
+    let found = std::env::var_os("PATH")
+        .into_iter()
+        .flat_map(|p| std::env::split_paths(&p).collect::<Vec<_>>())
+        .chain([PathBuf::from("/usr/sbin"), PathBuf::from("/usr/bin")])
+        .map(|dir| dir.join(program))
+        .find(|p| p.is_file());
+    found.unwrap_or_else(|| {
+        panic!("{program} is not installed: scripts/test.sh installs it (Debian's package)")
+    })
+}
+
+/// A child process killed when dropped.
+pub struct Server(pub Child);
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Wait until something accepts connections on `port`.
+pub fn wait_for_port(port: u16, what: &str) {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(Instant::now() < deadline, "{what} did not listen on {port}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}

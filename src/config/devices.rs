@@ -1,0 +1,347 @@
+//! `[[device]]` and `[instruments.NAME]`: one daemon for several display–instrument
+//! pairs.
+//!
+//! A config without `[[device]]` is one device, named `default`, whose store is the
+//! state directory itself (as before there were several). With `[[device]]` entries,
+//! each is the top-level config with the entry's sections laid over it, and keeps its
+//! store in `<state>/<name>/`:
+//!
+//! * `monitor` and `instrument` replace the top-level section whole: a device's
+//!   monitor is another monitor, its instrument another instrument, and half of one
+//!   merged with half of another describes neither.
+//! * `display`, `plan`, `fit`, `publish`, `schedule`, `warmup` and `target` are merged
+//!   key by key, so a device can change one key (say `schedule.verify_every_s`) and
+//!   keep the rest.
+//! * `[daemon]`, `[mqtt]` and `[metrics]` are the daemon's, not a device's.
+//!
+//! An instrument moved by hand between displays is declared once, as
+//! `[instruments.NAME]`, and named by each device that uses it (`instrument =
+//! "NAME"`): the daemon runs one job at a time on it. Two devices that name the same
+//! serial port without declaring it so are an error, since they would open it at once.
+
+use std::collections::BTreeMap;
+
+use super::{Config, LoadedConfig, parse_config};
+
+/// The name of the one device of a config without `[[device]]`.
+pub const DEFAULT_DEVICE: &str = "default";
+
+/// Sections a `[[device]]` entry may give, and whether they replace the top-level
+/// section (true) or are merged into it key by key.
+const DEVICE_SECTIONS: [(&str, bool); 9] = [
+    ("monitor", true),
+    ("instrument", true),
+    ("display", false),
+    ("plan", false),
+    ("fit", false),
+    ("publish", false),
+    ("schedule", false),
+    ("warmup", false),
+    ("target", false),
+];
+
+/// One device of the daemon: its name, its own effective config, and the shared
+/// instrument it uses, if any.
+#[derive(Debug, Clone)]
+pub struct DeviceConfig {
+    pub name: String,
+    /// The top-level config with the device's sections laid over it; its `text` is
+    /// that whole config, so a device's journals carry what it ran with.
+    pub loaded: LoadedConfig,
+    /// `[instruments.NAME]` it names: jobs of devices sharing one run one at a time.
+    pub shared_instrument: Option<String>,
+    /// Its store is a folder of the state directory named after it (false only for
+    /// the one device of a config without `[[device]]`).
+    pub own_folder: bool,
+}
+
+/// A device or instrument name: it becomes a folder, a URL segment, an MQTT topic
+/// level and a Prometheus label, so letters, digits, `-` and `_` only.
+pub fn check_name(what: &str, name: &str) -> Result<(), String> {
+    let fine = !name.is_empty()
+        && name.len() <= 64
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    if fine {
+        Ok(())
+    } else {
+        Err(format!(
+            "{what} name \"{name}\" must be 1 to 64 letters, digits, '-' or '_' (it names a folder, a URL and an MQTT topic)"
+        ))
+    }
+}
+
+/// Lay `over` onto `base` key by key (tables merged, anything else replaced).
+fn merge_tables(base: &mut toml::Table, over: &toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_tables(b, o),
+            _ => {
+                base.insert(key.clone(), value.clone());
+            }
+        }
+    }
+}
+
+/// The devices `loaded` describes, each with its effective config.
+pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String> {
+    let config = &loaded.config;
+    if config.device.is_empty() {
+        if !config.instruments.is_empty() {
+            return Err(
+                "[instruments.*] are shared by [[device]] entries, and there are none".into(),
+            );
+        }
+        return Ok(vec![DeviceConfig {
+            name: DEFAULT_DEVICE.into(),
+            loaded: loaded.clone(),
+            shared_instrument: None,
+            own_folder: false,
+        }]);
+    }
+    for name in config.instruments.keys() {
+        check_name("instruments.*", name)?;
+    }
+    // The top level, every default filled in, without the lists of devices.
+    let mut top = config.clone();
+    top.device.clear();
+    top.instruments.clear();
+    let top = toml::Table::try_from(&top).map_err(|e| format!("the config: {e}"))?;
+    let mut devices: Vec<DeviceConfig> = Vec::new();
+    let mut ports: BTreeMap<String, String> = BTreeMap::new();
+    let mut used: BTreeMap<&str, usize> = BTreeMap::new();
+    for (index, entry) in config.device.iter().enumerate() {
+        let at = format!("[[device]] number {}", index + 1);
+        let name = match entry.get("name") {
+            Some(toml::Value::String(name)) => name.clone(),
+            Some(_) => return Err(format!("{at}: name must be a string")),
+            None => return Err(format!("{at}: give it a name")),
+        };
+        check_name(&at, &name)?;
+        let at = format!("device \"{name}\"");
+        if devices.iter().any(|d| d.name == name) {
+            return Err(format!("{at} is named twice"));
+        }
+        let mut merged = top.clone();
+        let mut shared_instrument = None;
+        for (key, value) in entry {
+            if key == "name" {
+                continue;
+            }
+            let Some(&(_, replaces)) = DEVICE_SECTIONS.iter().find(|(k, _)| k == key) else {
+                return Err(format!(
+                    "{at}: '{key}' is not a device's section (a device takes {}; [daemon], [mqtt] and [metrics] are the whole daemon's)",
+                    DEVICE_SECTIONS.map(|(k, _)| k).join(", ")
+                ));
+            };
+            let value = match (key.as_str(), value) {
+                ("instrument", toml::Value::String(shared)) => {
+                    let Some(instrument) = config.instruments.get(shared) else {
+                        return Err(format!(
+                            "{at}: instrument = \"{shared}\" names no [instruments.{shared}] (declared: {})",
+                            config
+                                .instruments
+                                .keys()
+                                .cloned()
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ));
+                    };
+                    *used.entry(shared.as_str()).or_default() += 1;
+                    shared_instrument = Some(shared.clone());
+                    toml::Value::Table(
+                        toml::Table::try_from(instrument).map_err(|e| format!("{at}: {e}"))?,
+                    )
+                }
+                (_, toml::Value::Table(_)) => value.clone(),
+                _ => {
+                    return Err(format!(
+                        "{at}: '{key}' must be a table ([device.{key}]){}",
+                        if key == "instrument" {
+                            " or the name of an [instruments.NAME]"
+                        } else {
+                            ""
+                        }
+                    ));
+                }
+            };
+            match (replaces, value, merged.get_mut(key)) {
+                (false, toml::Value::Table(over), Some(toml::Value::Table(base))) => {
+                    merge_tables(base, &over)
+                }
+                (_, value, _) => {
+                    merged.insert(key.clone(), value);
+                }
+            }
+        }
+        let text = toml::to_string(&merged).map_err(|e| format!("{at}: {e}"))?;
+        let origin = format!("{} ({at})", loaded.origin);
+        let device: Config = parse_config(&text, &origin).map_err(|e| e.to_string())?;
+        if shared_instrument.is_none()
+            && let Some((_, port)) = device.instrument.serial()?
+            && let Some(other) = ports.insert(port.clone(), name.clone())
+        {
+            return Err(format!(
+                "devices \"{other}\" and \"{name}\" both open {port}: declare the instrument once as [instruments.NAME] and name it in both (their jobs then take turns)"
+            ));
+        }
+        devices.push(DeviceConfig {
+            name,
+            loaded: LoadedConfig {
+                config: device,
+                text,
+                origin,
+                base_dir: loaded.base_dir.clone(),
+            },
+            shared_instrument,
+            own_folder: true,
+        });
+    }
+    if let Some(unused) = config
+        .instruments
+        .keys()
+        .find(|k| !used.contains_key(k.as_str()))
+    {
+        return Err(format!(
+            "[instruments.{unused}] is named by no device: name it with instrument = \"{unused}\" in a [[device]], or remove it"
+        ));
+    }
+    Ok(devices)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn loaded(text: &str) -> Result<LoadedConfig, String> {
+        Ok(LoadedConfig {
+            config: parse_config(text, "test.toml").map_err(|e| e.to_string())?,
+            text: text.into(),
+            origin: "test.toml".into(),
+            base_dir: ".".into(),
+        })
+    }
+
+    fn devices(text: &str) -> Result<Vec<DeviceConfig>, String> {
+        device_configs(&loaded(text)?)
+    }
+
+    #[test]
+    fn a_config_without_devices_is_one_device_in_the_state_directory_itself() {
+        let d = devices("[schedule]\nverify_every_s = 60.0\n").unwrap();
+        assert_eq!(d.len(), 1);
+        assert_eq!(d[0].name, DEFAULT_DEVICE);
+        assert!(!d[0].own_folder);
+        assert_eq!(d[0].loaded.config.schedule.verify_every_s, Some(60.0));
+    }
+
+    #[test]
+    fn a_device_merges_its_sections_key_by_key_and_replaces_monitor_and_instrument() {
+        let text = r#"
+[monitor]
+preset = "lcd"
+[display]
+settle_s = 0.7
+[schedule]
+verify_every_s = 600.0
+threshold_de00 = 1.5
+[[device]]
+name = "left"
+[device.schedule]
+verify_every_s = 60.0
+[[device]]
+name = "right"
+[device.monitor]
+preset = "crt"
+[device.instrument.simulated]
+relative_noise = 0.002
+"#;
+        let d = devices(text).unwrap();
+        assert_eq!(d.len(), 2);
+        let (left, right) = (&d[0].loaded.config, &d[1].loaded.config);
+        // Merged: the one key changed, the other kept.
+        assert_eq!(left.schedule.verify_every_s, Some(60.0));
+        assert_eq!(left.schedule.threshold_de00, 1.5);
+        assert_eq!(right.schedule.verify_every_s, Some(600.0));
+        assert_eq!(left.display.settle_s, 0.7);
+        // Replaced whole.
+        assert_eq!(left.monitor.preset.as_deref(), Some("lcd"));
+        assert_eq!(right.monitor.preset.as_deref(), Some("crt"));
+        assert!(right.instrument.simulated.is_some());
+        // Each device's text reads back as its own config.
+        let again = parse_config(&d[1].loaded.text, "again").unwrap();
+        assert_eq!(&again, right);
+        assert!(
+            d.iter()
+                .all(|d| d.own_folder && d.shared_instrument.is_none())
+        );
+    }
+
+    #[test]
+    fn a_shared_instrument_is_declared_once_and_named_by_each_device() {
+        let text = r#"
+[instruments.meter.simulated]
+relative_noise = 0.003
+[[device]]
+name = "a"
+instrument = "meter"
+[[device]]
+name = "b"
+instrument = "meter"
+[[device]]
+name = "c"
+"#;
+        let d = devices(text).unwrap();
+        assert_eq!(d[0].shared_instrument.as_deref(), Some("meter"));
+        assert_eq!(d[1].shared_instrument.as_deref(), Some("meter"));
+        assert_eq!(d[2].shared_instrument, None);
+        assert_eq!(
+            d[0].loaded
+                .config
+                .instrument
+                .simulated
+                .as_ref()
+                .unwrap()
+                .relative_noise,
+            0.003
+        );
+    }
+
+    #[test]
+    fn device_mistakes_are_named() {
+        let cases = [
+            ("[[device]]\n", "give it a name"),
+            ("[[device]]\nname = \"a b\"\n", "letters, digits"),
+            (
+                "[[device]]\nname = \"a\"\n[[device]]\nname = \"a\"\n",
+                "named twice",
+            ),
+            (
+                "[[device]]\nname = \"a\"\n[device.daemon]\nstop_timeout_s = 1.0\n",
+                "whole daemon's",
+            ),
+            (
+                "[[device]]\nname = \"a\"\ninstrument = \"nope\"\n",
+                "names no [instruments.nope]",
+            ),
+            (
+                "[instruments.spare.simulated]\n[[device]]\nname = \"a\"\n",
+                "named by no device",
+            ),
+            ("[instruments.meter.simulated]\n", "there are none"),
+            (
+                "[[device]]\nname = \"a\"\n[device.schedule]\nthreshold_de00 = -1.0\n",
+                "device \"a\"",
+            ),
+            (
+                "[[device]]\nname = \"a\"\n[device.display]\nsink = \"web\"\n[device.instrument]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n[[device]]\nname = \"b\"\n[device.display]\nsink = \"web\"\n[device.instrument]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n",
+                "both open /dev/ttyUSB0",
+            ),
+        ];
+        for (text, expected) in cases {
+            let error = devices(text).expect_err(text);
+            assert!(error.contains(expected), "{text}: {error}");
+        }
+    }
+}

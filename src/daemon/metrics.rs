@@ -1,0 +1,528 @@
+//! `GET /metrics`: what the daemon knows of each device, in the Prometheus (OpenMetrics)
+//! text format, written by the `prometheus-client` crate.
+//!
+//! Every figure is labelled with its `device`. They are kept up to date from the
+//! daemon's own events (`observe`) and readings (`reading`), so a scrape costs no
+//! file reads; the ages ("seconds since") are worked out at the scrape. A figure
+//! the daemon does not know yet (no verification so far, say) has no series, rather
+//! than a made-up value: `config/prometheus/alerts.yml` says how its rules treat that.
+
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+use std::sync::atomic::AtomicU64;
+use std::time::SystemTime;
+
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::registry::Registry;
+
+use super::events::Event;
+use crate::fit::stats::ErrorStats;
+use crate::instrument::ReadingStatus;
+
+/// The content type of the answer (OpenMetrics text, which Prometheus reads).
+pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
+
+/// White readings kept per device for the drift.
+const DRIFT_POINTS: usize = 64;
+/// Only whites within this many seconds (of the device's clock) of the newest count.
+const DRIFT_WINDOW_S: f64 = 24.0 * 3600.0;
+/// The whites must span at least this many seconds before a drift is given.
+const DRIFT_MIN_SPAN_S: f64 = 60.0;
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct DeviceLabel {
+    device: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct StatLabels {
+    device: String,
+    /// `mean` or `max`.
+    stat: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct JobLabels {
+    device: String,
+    kind: String,
+    /// `ok`, `failed`, `cancelled`, `interrupted`.
+    outcome: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct KindLabels {
+    device: String,
+    kind: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct EventLabels {
+    device: String,
+    event: String,
+}
+
+type FloatGauge = Gauge<f64, AtomicU64>;
+
+/// When things last happened to a device, and its recent whites.
+#[derive(Debug, Default)]
+struct DeviceTimes {
+    calibrated: Option<SystemTime>,
+    verified: Option<SystemTime>,
+    /// (device clock seconds, cd/m²), oldest first.
+    whites: Vec<(f64, f64)>,
+}
+
+/// The daemon's metrics.
+pub struct Metrics {
+    registry: Registry,
+    up: Family<DeviceLabel, Gauge>,
+    verification: Family<StatLabels, FloatGauge>,
+    threshold: Family<DeviceLabel, FloatGauge>,
+    held_out: Family<StatLabels, FloatGauge>,
+    white: Family<DeviceLabel, FloatGauge>,
+    drift: Family<DeviceLabel, FloatGauge>,
+    since_calibration: Family<DeviceLabel, FloatGauge>,
+    since_verification: Family<DeviceLabel, FloatGauge>,
+    jobs: Family<JobLabels, Counter>,
+    job_running: Family<DeviceLabel, Gauge>,
+    progress: Family<DeviceLabel, FloatGauge>,
+    readings: Family<KindLabels, Counter>,
+    faults: Family<KindLabels, Counter>,
+    events: Family<EventLabels, Counter>,
+    mqtt_published: Counter,
+    mqtt_dropped: Counter,
+    times: Mutex<BTreeMap<String, DeviceTimes>>,
+}
+
+/// A `stat` label set.
+fn stat(device: &str, stat: &str) -> StatLabels {
+    StatLabels {
+        device: device.into(),
+        stat: stat.into(),
+    }
+}
+
+fn label(device: &str) -> DeviceLabel {
+    DeviceLabel {
+        device: device.into(),
+    }
+}
+
+/// Least-squares slope of `points` (y per unit of x); `None` under three points or
+/// when they span less than `min_span`.
+fn slope(points: &[(f64, f64)], min_span: f64) -> Option<f64> {
+    if points.len() < 3 {
+        return None;
+    }
+    let n = points.len() as f64;
+    let mean_x = points.iter().map(|p| p.0).sum::<f64>() / n;
+    let mean_y = points.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxx: f64 = points.iter().map(|p| (p.0 - mean_x).powi(2)).sum();
+    let sxy: f64 = points.iter().map(|p| (p.0 - mean_x) * (p.1 - mean_y)).sum();
+    let span = points.last()?.0 - points.first()?.0;
+    (span >= min_span && sxx > 0.0).then(|| sxy / sxx)
+}
+
+impl Metrics {
+    /// Metrics for the devices named.
+    pub fn new<'a>(devices: impl IntoIterator<Item = &'a str>) -> Metrics {
+        let mut registry = Registry::with_prefix("chromacal");
+        let metrics = Metrics {
+            up: Family::default(),
+            verification: Family::default(),
+            threshold: Family::default(),
+            held_out: Family::default(),
+            white: Family::default(),
+            drift: Family::default(),
+            since_calibration: Family::default(),
+            since_verification: Family::default(),
+            jobs: Family::default(),
+            job_running: Family::default(),
+            progress: Family::default(),
+            readings: Family::default(),
+            faults: Family::default(),
+            events: Family::default(),
+            mqtt_published: Counter::default(),
+            mqtt_dropped: Counter::default(),
+            times: Mutex::default(),
+            registry: Registry::default(),
+        };
+        let r = &mut registry;
+        r.register(
+            "device_up",
+            "A device this daemon holds (1)",
+            metrics.up.clone(),
+        );
+        r.register(
+            "verification_delta_e00",
+            "The last verification's ΔE00 between readings and the current profile (stat: mean, max)",
+            metrics.verification.clone(),
+        );
+        r.register(
+            "verification_threshold_delta_e00",
+            "The mean ΔE00 past which a verification fails (schedule.threshold_de00)",
+            metrics.threshold.clone(),
+        );
+        r.register(
+            "held_out_delta_e00",
+            "The current profile's ΔE00 on patches held out of its fit (stat: mean, max)",
+            metrics.held_out.clone(),
+        );
+        r.register(
+            "white_luminance_cd_m2",
+            "The last full-white reading at the centre, cd/m²",
+            metrics.white.clone(),
+        );
+        r.register(
+            "white_luminance_drift_cd_m2_per_hour",
+            "Least-squares slope of the recent full-white readings (up to 64 within 24 h of the device's clock), cd/m² per hour",
+            metrics.drift.clone(),
+        );
+        r.register(
+            "seconds_since_calibration",
+            "Seconds since the current calibration was published (none: never calibrated)",
+            metrics.since_calibration.clone(),
+        );
+        r.register(
+            "seconds_since_verification",
+            "Seconds since the last verification ended (none: never verified)",
+            metrics.since_verification.clone(),
+        );
+        r.register(
+            "jobs",
+            "Jobs ended, by kind and outcome",
+            metrics.jobs.clone(),
+        );
+        r.register(
+            "job_running",
+            "A job runs on the device (1) or none (0)",
+            metrics.job_running.clone(),
+        );
+        r.register(
+            "job_progress_ratio",
+            "Readings of the running job taken over those it plans (0 when none runs)",
+            metrics.progress.clone(),
+        );
+        r.register(
+            "readings",
+            "Readings taken, by status (ok, below_range, overload)",
+            metrics.readings.clone(),
+        );
+        r.register(
+            "instrument_faults",
+            "Jobs the devices failed, by kind of fault (open, instrument, display)",
+            metrics.faults.clone(),
+        );
+        r.register(
+            "events",
+            "Events the daemon emitted",
+            metrics.events.clone(),
+        );
+        r.register(
+            "mqtt_events_published",
+            "Events handed to the MQTT client",
+            metrics.mqtt_published.clone(),
+        );
+        r.register(
+            "mqtt_events_dropped",
+            "Events dropped because the MQTT queue was full (the broker down or slow)",
+            metrics.mqtt_dropped.clone(),
+        );
+        let metrics = Metrics {
+            registry,
+            ..metrics
+        };
+        for device in devices {
+            metrics.up.get_or_create(&label(device)).set(1);
+            metrics.job_running.get_or_create(&label(device)).set(0);
+            metrics.progress.get_or_create(&label(device)).set(0.0);
+        }
+        metrics
+    }
+
+    fn with_times(&self, device: &str, f: impl FnOnce(&mut DeviceTimes)) {
+        if let Ok(mut times) = self.times.lock() {
+            f(times.entry(device.to_string()).or_default());
+        }
+    }
+
+    /// What the store held at start: the current profile's held-out error and when
+    /// it was made, the last verification, the threshold.
+    pub fn restore(
+        &self,
+        device: &str,
+        held_out: Option<ErrorStats>,
+        calibrated: Option<SystemTime>,
+        verification: Option<(SystemTime, Option<ErrorStats>)>,
+        threshold: f64,
+    ) {
+        self.threshold.get_or_create(&label(device)).set(threshold);
+        self.set_held_out(device, held_out);
+        if let Some((at, stats)) = verification {
+            self.set_verification(device, stats);
+            self.with_times(device, |t| t.verified = Some(at));
+        }
+        self.with_times(device, |t| t.calibrated = calibrated);
+    }
+
+    fn set_held_out(&self, device: &str, held_out: Option<ErrorStats>) {
+        if let Some(h) = held_out {
+            self.held_out
+                .get_or_create(&stat(device, "mean"))
+                .set(h.mean);
+            self.held_out.get_or_create(&stat(device, "max")).set(h.max);
+        }
+    }
+
+    fn set_verification(&self, device: &str, stats: Option<ErrorStats>) {
+        if let Some(s) = stats {
+            self.verification
+                .get_or_create(&stat(device, "mean"))
+                .set(s.mean);
+            self.verification
+                .get_or_create(&stat(device, "max"))
+                .set(s.max);
+        }
+    }
+
+    /// Count an event of `device` and update what it tells.
+    pub fn observe(&self, device: &str, event: &Event) {
+        self.events
+            .get_or_create(&EventLabels {
+                device: device.into(),
+                event: event.name().into(),
+            })
+            .inc();
+        match event {
+            Event::JobStarted { .. } => {
+                self.job_running.get_or_create(&label(device)).set(1);
+                self.progress.get_or_create(&label(device)).set(0.0);
+            }
+            Event::Progress { job } if job.total > 0 => {
+                self.progress
+                    .get_or_create(&label(device))
+                    .set(job.done as f64 / job.total as f64);
+            }
+            Event::JobFinished { job, outcome } => {
+                self.jobs
+                    .get_or_create(&JobLabels {
+                        device: device.into(),
+                        kind: job.kind.name().into(),
+                        outcome: outcome.result.clone(),
+                    })
+                    .inc();
+                self.job_running.get_or_create(&label(device)).set(0);
+                self.progress.get_or_create(&label(device)).set(0.0);
+            }
+            Event::Published { how, held_out, .. } => {
+                self.set_held_out(device, *held_out);
+                if how == "calibration" {
+                    self.with_times(device, |t| t.calibrated = Some(SystemTime::now()));
+                }
+            }
+            Event::RolledBack { entry } => self.set_held_out(device, entry.held_out),
+            Event::Verification { record } => {
+                self.set_verification(device, record.stats);
+                self.threshold
+                    .get_or_create(&label(device))
+                    .set(record.threshold);
+                self.with_times(device, |t| t.verified = Some(SystemTime::now()));
+            }
+            Event::DeviceLost { fault, .. } => {
+                self.faults
+                    .get_or_create(&KindLabels {
+                        device: device.into(),
+                        kind: fault.clone(),
+                    })
+                    .inc();
+            }
+            _ => {}
+        }
+    }
+
+    /// Count a reading; a full white at the centre also updates the white luminance
+    /// and its drift (`time_s` is the device's clock).
+    pub fn reading(&self, device: &str, status: ReadingStatus, white: Option<f64>, time_s: f64) {
+        let status = match status {
+            ReadingStatus::Ok => "ok",
+            ReadingStatus::BelowRange => "below_range",
+            ReadingStatus::Overload => "overload",
+        };
+        self.readings
+            .get_or_create(&KindLabels {
+                device: device.into(),
+                kind: status.into(),
+            })
+            .inc();
+        let Some(y) = white.filter(|y| y.is_finite() && *y > 0.0) else {
+            return;
+        };
+        self.white.get_or_create(&label(device)).set(y);
+        let mut drift = None;
+        self.with_times(device, |t| {
+            // A clock that went back (devices opened again) starts a new series.
+            if t.whites.last().is_some_and(|last| time_s < last.0) {
+                t.whites.clear();
+            }
+            t.whites.push((time_s, y));
+            t.whites.retain(|p| p.0 >= time_s - DRIFT_WINDOW_S);
+            let excess = t.whites.len().saturating_sub(DRIFT_POINTS);
+            t.whites.drain(..excess);
+            drift = slope(&t.whites, DRIFT_MIN_SPAN_S);
+        });
+        if let Some(per_s) = drift {
+            self.drift.get_or_create(&label(device)).set(per_s * 3600.0);
+        }
+    }
+
+    /// Count an event handed to MQTT, or one dropped.
+    pub fn mqtt(&self, published: bool) {
+        if published {
+            self.mqtt_published.inc();
+        } else {
+            self.mqtt_dropped.inc();
+        }
+    }
+
+    /// Events dropped for MQTT so far.
+    pub fn mqtt_dropped(&self) -> u64 {
+        self.mqtt_dropped.get()
+    }
+
+    /// The text a scrape gets.
+    pub fn render(&self) -> Result<String, std::fmt::Error> {
+        let now = SystemTime::now();
+        let age = |t: SystemTime| now.duration_since(t).map_or(0.0, |d| d.as_secs_f64());
+        if let Ok(times) = self.times.lock() {
+            for (device, t) in times.iter() {
+                if let Some(at) = t.calibrated {
+                    self.since_calibration
+                        .get_or_create(&label(device))
+                        .set(age(at));
+                }
+                if let Some(at) = t.verified {
+                    self.since_verification
+                        .get_or_create(&label(device))
+                        .set(age(at));
+                }
+            }
+        }
+        let mut text = String::new();
+        prometheus_client::encoding::text::encode(&mut text, &self.registry)?;
+        Ok(text)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daemon::events::{JobKind, JobOutcome, JobStatus};
+
+    fn job(kind: JobKind) -> JobStatus {
+        JobStatus {
+            id: "x".into(),
+            kind,
+            origin: "api".into(),
+            started: String::new(),
+            phase: "measuring".into(),
+            done: 3,
+            total: 12,
+            eta_s: None,
+            last: None,
+        }
+    }
+
+    fn line<'a>(text: &'a str, start: &str) -> Option<&'a str> {
+        text.lines().find(|l| l.starts_with(start))
+    }
+
+    #[test]
+    fn events_and_readings_become_labelled_series() {
+        let metrics = Metrics::new(["a", "b"]);
+        metrics.observe(
+            "a",
+            &Event::JobStarted {
+                job: job(JobKind::Calibrate),
+            },
+        );
+        metrics.observe(
+            "a",
+            &Event::Progress {
+                job: job(JobKind::Calibrate),
+            },
+        );
+        let text = metrics.render().unwrap();
+        assert!(
+            line(&text, "chromacal_job_progress_ratio{device=\"a\"} 0.25").is_some(),
+            "{text}"
+        );
+        assert!(line(&text, "chromacal_job_running{device=\"b\"} 0").is_some());
+        metrics.observe(
+            "a",
+            &Event::JobFinished {
+                job: job(JobKind::Calibrate),
+                outcome: JobOutcome {
+                    result: "failed".into(),
+                    message: String::new(),
+                    profile_id: None,
+                    published: false,
+                    escalated: false,
+                },
+            },
+        );
+        // White readings one simulated minute apart, falling 0.5 cd/m² a minute.
+        for i in 0..5 {
+            metrics.reading(
+                "b",
+                ReadingStatus::Ok,
+                Some(100.0 - 0.5 * i as f64),
+                60.0 * i as f64,
+            );
+        }
+        metrics.reading("b", ReadingStatus::Overload, None, 300.0);
+        let text = metrics.render().unwrap();
+        assert!(
+            line(
+                &text,
+                "chromacal_jobs_total{device=\"a\",kind=\"calibrate\",outcome=\"failed\"} 1"
+            )
+            .is_some(),
+            "{text}"
+        );
+        let drift = line(
+            &text,
+            "chromacal_white_luminance_drift_cd_m2_per_hour{device=\"b\"}",
+        )
+        .and_then(|l| l.rsplit(' ').next())
+        .and_then(|v| v.parse::<f64>().ok())
+        .unwrap();
+        assert!((drift + 30.0).abs() < 1e-9, "{drift}");
+        assert!(line(&text, "chromacal_white_luminance_cd_m2{device=\"b\"} 98").is_some());
+        assert!(
+            line(
+                &text,
+                "chromacal_readings_total{device=\"b\",kind=\"overload\"} 1"
+            )
+            .is_some()
+        );
+        // Nothing is said of what is not known yet.
+        assert!(line(&text, "chromacal_seconds_since_calibration").is_none());
+        assert!(line(&text, "chromacal_verification_delta_e00{").is_none());
+        assert!(text.trim_end().ends_with("# EOF"));
+    }
+
+    #[test]
+    fn a_drift_needs_three_whites_a_minute_apart_and_a_clock_that_went_back_restarts_it() {
+        assert_eq!(slope(&[(0.0, 1.0), (100.0, 2.0)], 60.0), None);
+        assert_eq!(slope(&[(0.0, 1.0), (10.0, 2.0), (20.0, 3.0)], 60.0), None);
+        let metrics = Metrics::new(["a"]);
+        for (t, y) in [(0.0, 100.0), (60.0, 101.0), (120.0, 102.0), (5.0, 50.0)] {
+            metrics.reading("a", ReadingStatus::Ok, Some(y), t);
+        }
+        let times = metrics.times.lock().unwrap();
+        assert_eq!(times["a"].whites, vec![(5.0, 50.0)]);
+    }
+}

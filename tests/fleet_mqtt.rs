@@ -1,0 +1,277 @@
+//! The daemon's events and state on a real Mosquitto broker, read by Mosquitto's own
+//! client: a calibration's events, a failed verification, the retained state a new
+//! subscriber gets, the last will after a kill -9; and a broker that is down, which
+//! holds no job up and whose dropped events are counted.
+
+mod common;
+
+use std::io::BufRead;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use common::daemon::{Server, free_port, get, installed, post, start_daemon, wait_idle};
+
+/// A broker on a loopback port, without persistence. A port another test's broker
+/// took between `free_port` and the bind makes this broker exit: another port is
+/// tried, so that no test talks to another's broker.
+fn broker(dir: &Path) -> (Server, u16) {
+    for attempt in 0..5 {
+        let port = free_port();
+        let config = dir.join(format!("mosquitto-{attempt}.conf"));
+        std::fs::write(
+            &config,
+            format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"),
+        )
+        .unwrap();
+        let mut server = Server(
+            Command::new(installed("mosquitto"))
+                .arg("-c")
+                .arg(&config)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap(),
+        );
+        let deadline = Instant::now() + Duration::from_secs(20);
+        loop {
+            if let Ok(Some(_)) = server.0.try_wait() {
+                break; // it could not bind: another port
+            }
+            if std::net::TcpStream::connect(("127.0.0.1", port)).is_ok() {
+                // Ours, if it still runs once the port answers.
+                std::thread::sleep(Duration::from_millis(50));
+                if matches!(server.0.try_wait(), Ok(None)) {
+                    return (server, port);
+                }
+                break;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "mosquitto did not listen on {port}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    panic!("mosquitto could not bind a free port in 5 tries");
+}
+
+/// `mosquitto_sub` on `topic`: (topic, JSON payload) as they arrive.
+struct Subscriber {
+    _child: Server,
+    lines: mpsc::Receiver<(String, serde_json::Value)>,
+}
+
+fn subscribe(port: u16, topic: &str) -> Subscriber {
+    let mut child = Command::new(installed("mosquitto_sub"))
+        .args([
+            "-h",
+            "127.0.0.1",
+            "-p",
+            &port.to_string(),
+            "-v",
+            "-t",
+            topic,
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+        {
+            let Some((topic, payload)) = line.split_once(' ') else {
+                continue;
+            };
+            let payload = serde_json::from_str(payload)
+                .unwrap_or_else(|e| panic!("not JSON on {topic} ({e}): {payload}"));
+            if tx.send((topic.to_string(), payload)).is_err() {
+                return;
+            }
+        }
+    });
+    Subscriber {
+        _child: Server(child),
+        lines: rx,
+    }
+}
+
+impl Subscriber {
+    /// Messages until one on `topic` that `accept` takes (returned last).
+    fn until(
+        &self,
+        topic: &str,
+        timeout: Duration,
+        accept: impl Fn(&serde_json::Value) -> bool,
+    ) -> Vec<(String, serde_json::Value)> {
+        let deadline = Instant::now() + timeout;
+        let mut seen = Vec::new();
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let Ok((t, payload)) = self.lines.recv_timeout(left) else {
+                panic!("nothing on {topic} within {timeout:?}; seen: {seen:#?}");
+            };
+            let done = t == topic && accept(&payload);
+            seen.push((t, payload));
+            if done {
+                return seen;
+            }
+        }
+    }
+}
+
+const PREFIX: &str = "lab/testhost/default";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_calibration_and_a_failed_verification_reach_the_broker_with_state_and_last_will() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_broker, port) = broker(dir.path());
+    let live = subscribe(port, "lab/#");
+    // A threshold no verification meets: the verification fails, and only says so.
+    let config = format!(
+        "[daemon]\nsimulated_time_scale = 0.002\nsimulated_idle_ages = false\n[schedule]\nthreshold_de00 = 0.001\nescalate = false\n[mqtt]\nbroker = \"127.0.0.1:{port}\"\nprefix = \"lab\"\nhost = \"testhost\"\n"
+    );
+    let mut daemon = start_daemon(dir.path(), &config);
+    let api = daemon.endpoint();
+    live.until("lab/testhost/status", Duration::from_secs(20), |p| {
+        p["online"] == true && p["devices"][0] == "default"
+    });
+
+    let reply = post(&api, "/jobs", r#"{"kind": "calibrate"}"#).await;
+    assert_eq!(reply.status, 202, "{}", reply.text());
+    let id = reply.json().unwrap()["id"].as_str().unwrap().to_string();
+    let seen = live.until(
+        &format!("{PREFIX}/event/job_finished"),
+        Duration::from_secs(240),
+        |p| p["job"]["id"] == id.as_str(),
+    );
+    let topics: Vec<&str> = seen.iter().map(|(t, _)| t.as_str()).collect();
+    let at = |topic: &str| {
+        topics
+            .iter()
+            .position(|t| *t == topic)
+            .unwrap_or_else(|| panic!("no {topic} in {topics:?}"))
+    };
+    let started = at(&format!("{PREFIX}/event/job_started"));
+    let published = at(&format!("{PREFIX}/event/published"));
+    let finished = at(&format!("{PREFIX}/event/job_finished"));
+    assert!(started < published && published < finished);
+    let progress = topics
+        .iter()
+        .filter(|t| **t == format!("{PREFIX}/event/progress"))
+        .count();
+    assert!(progress > 20, "{progress} progress events");
+    let (_, profile) = &seen[published];
+    assert_eq!(profile["device"], "default");
+    assert_eq!(profile["host"], "testhost");
+    let profile_id = profile["profile_id"].as_str().unwrap().to_string();
+    let held_out = profile["held_out"]["mean"].as_f64().unwrap();
+    let status = get(&api, "/status").await.json().unwrap();
+    assert_eq!(status["current_profile"]["id"], profile_id.as_str());
+    assert_eq!(
+        status["current_profile"]["held_out"]["mean"].as_f64(),
+        Some(held_out)
+    );
+
+    // The verification fails its threshold; the broker hears it, and the state says so.
+    wait_idle(&api, Duration::from_secs(10)).await;
+    let reply = post(&api, "/jobs", r#"{"kind": "verify"}"#).await;
+    assert_eq!(reply.status, 202, "{}", reply.text());
+    let seen = live.until(
+        &format!("{PREFIX}/event/verification"),
+        Duration::from_secs(120),
+        |_| true,
+    );
+    let (_, verification) = seen.last().unwrap();
+    let mean = verification["record"]["stats"]["mean"].as_f64().unwrap();
+    assert!(mean > 0.001, "{verification}");
+    assert_eq!(verification["record"]["profile_id"], profile_id.as_str());
+    live.until(&format!("{PREFIX}/state"), Duration::from_secs(30), |p| {
+        p["last_verification"]["passed"] == false
+    });
+    wait_idle(&api, Duration::from_secs(30)).await;
+
+    // A client that connects now gets the retained status and state at once (in
+    // whatever order the broker keeps them).
+    let late = subscribe(port, "lab/#");
+    let mut retained = std::collections::BTreeMap::new();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while retained.len() < 2 {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let (topic, payload) = late
+            .lines
+            .recv_timeout(left)
+            .unwrap_or_else(|_| panic!("retained so far: {retained:#?}"));
+        retained.insert(topic, payload);
+    }
+    let state = &retained[&format!("{PREFIX}/state")];
+    assert_eq!(
+        state["current_profile"]["id"],
+        profile_id.as_str(),
+        "{state}"
+    );
+    assert_eq!(state["last_verification"]["passed"], false, "{state}");
+    assert_eq!(state["last_job"]["kind"], "verify", "{state}");
+    assert!(state["job"].is_null(), "{state}");
+    assert_eq!(retained["lab/testhost/status"]["online"], true);
+
+    // Killed without a word: the broker gives out the last will, retained.
+    daemon.kill();
+    live.until("lab/testhost/status", Duration::from_secs(30), |p| {
+        p["online"] == false && p["reason"] == "lost"
+    });
+    let after = subscribe(port, "lab/testhost/status");
+    after.until("lab/testhost/status", Duration::from_secs(10), |p| {
+        p["online"] == false
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_the_broker_down_a_calibration_completes_and_the_dropped_events_are_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    // A stopped broker: nothing listens on its port. The port is below the ephemeral
+    // range, so no other test's broker (on a port the system handed out) takes it.
+    let port = (20_000 + (std::process::id() % 9_000) as u16..30_000)
+        .find(|p| std::net::TcpStream::connect(("127.0.0.1", *p)).is_err())
+        .unwrap();
+    let config = format!(
+        "[daemon]\nsimulated_time_scale = 0.002\nsimulated_idle_ages = false\n[mqtt]\nbroker = \"127.0.0.1:{port}\"\nqueue = 8\n"
+    );
+    let daemon = start_daemon(dir.path(), &config);
+    let api = daemon.endpoint();
+    let mut events = common::daemon::subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let id = common::daemon::start_job(&api, "calibrate").await;
+    let (seen, outcome) =
+        common::daemon::events_of_job(&mut events, &id, Duration::from_secs(240)).await;
+    assert_eq!(outcome.result, "ok", "{outcome:?}");
+    assert!(outcome.published, "{outcome:?}");
+    let metrics = get(&api, "/metrics").await.text();
+    let count = |name: &str| -> f64 {
+        metrics
+            .lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.rsplit(' ').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no {name} in {metrics}"))
+    };
+    let dropped = count("chromacal_mqtt_events_dropped_total");
+    let queued = count("chromacal_mqtt_events_published_total");
+    // Every event was either queued (up to the queue's 8) or dropped and counted.
+    assert!(queued <= 10.0, "{queued}");
+    assert!(
+        dropped >= seen.len() as f64 - queued,
+        "{dropped} of {}",
+        seen.len()
+    );
+    assert!(
+        daemon.log_text().contains("MQTT queue full"),
+        "{}",
+        daemon.log_text()
+    );
+}

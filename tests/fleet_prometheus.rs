@@ -1,0 +1,233 @@
+//! `GET /metrics` read by a real Prometheus scraping two daemons with three devices
+//! between them, and the shipped scrape config and alert rules checked by promtool.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::daemon::{
+    Server, finished_on, free_port, get, installed, json_events_until, post, start_daemon,
+    subscribe_json, wait_for_port,
+};
+
+fn promtool(args: &[&str], dir: &Path) -> std::process::Output {
+    let out = Command::new(installed("promtool"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "promtool {args:?}: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+#[test]
+fn the_shipped_scrape_config_and_alert_rules_pass_promtool() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/prometheus");
+    let out = promtool(&["check", "config", "prometheus.yml"], &dir);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("4 rules found"), "{text}");
+    // The rule tests: the drift alert fires on a drifting device only after 30
+    // minutes, and not on its steady neighbour; the others likewise.
+    let out = promtool(&["test", "rules", "alerts_test.yml"], &dir);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("SUCCESS"));
+    // A rule test that cannot fail proves nothing: with the drift threshold of the
+    // rules raised past the test's drift, the same test fails.
+    let scratch = tempfile::tempdir().unwrap();
+    let rules = std::fs::read_to_string(dir.join("alerts.yml")).unwrap();
+    assert!(rules.contains("> 0.01"));
+    std::fs::write(
+        scratch.path().join("alerts.yml"),
+        rules.replace("> 0.01", "> 0.05"),
+    )
+    .unwrap();
+    std::fs::copy(
+        dir.join("alerts_test.yml"),
+        scratch.path().join("alerts_test.yml"),
+    )
+    .unwrap();
+    let failed = Command::new(installed("promtool"))
+        .args(["test", "rules", "alerts_test.yml"])
+        .current_dir(scratch.path())
+        .output()
+        .unwrap();
+    assert!(!failed.status.success());
+    let said = format!(
+        "{}{}",
+        String::from_utf8_lossy(&failed.stdout),
+        String::from_utf8_lossy(&failed.stderr)
+    );
+    assert!(said.contains("ChromacalWhiteLuminanceDrifting"), "{said}");
+}
+
+/// Prometheus's answer to `query` (the `data.result` array).
+fn query(port: u16, query: &str) -> Vec<serde_json::Value> {
+    let url = format!("http://127.0.0.1:{port}/api/v1/query");
+    let reply: serde_json::Value = ureq::get(&url)
+        .query("query", query)
+        .call()
+        .unwrap()
+        .body_mut()
+        .read_json()
+        .unwrap();
+    assert_eq!(reply["status"], "success", "{reply}");
+    reply["data"]["result"].as_array().unwrap().clone()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn prometheus_scrapes_two_daemons_with_three_devices() {
+    let dir = tempfile::tempdir().unwrap();
+    let fast = "[daemon]\nsimulated_time_scale = 0.002\nsimulated_idle_ages = false\n";
+    // Daemon A: two devices; daemon B: one (no [[device]]).
+    let (port_a, port_b) = (free_port(), free_port());
+    let a_dir = dir.path().join("a");
+    let b_dir = dir.path().join("b");
+    std::fs::create_dir_all(&a_dir).unwrap();
+    std::fs::create_dir_all(&b_dir).unwrap();
+    let a = start_daemon(
+        &a_dir,
+        &format!(
+            "{fast}tcp = \"127.0.0.1:{port_a}\"\n[[device]]\nname = \"left\"\n[[device]]\nname = \"right\"\n[device.monitor]\npreset = \"lcd\"\n"
+        ),
+    );
+    let b = start_daemon(&b_dir, &format!("{fast}tcp = \"127.0.0.1:{port_b}\"\n"));
+
+    // Prometheus, scraping both every second.
+    let prometheus_port = free_port();
+    let config = dir.path().join("prometheus.yml");
+    std::fs::write(
+        &config,
+        format!(
+            "global:\n  scrape_interval: 1s\n  evaluation_interval: 1s\nscrape_configs:\n  - job_name: chromacal\n    static_configs:\n      - targets: ['127.0.0.1:{port_a}', '127.0.0.1:{port_b}']\n"
+        ),
+    )
+    .unwrap();
+    let log = std::fs::File::create(dir.path().join("prometheus.log")).unwrap();
+    let _prometheus = Server(
+        Command::new(installed("prometheus"))
+            .arg(format!("--config.file={}", config.display()))
+            .arg(format!(
+                "--storage.tsdb.path={}",
+                dir.path().join("tsdb").display()
+            ))
+            .arg(format!("--web.listen-address=127.0.0.1:{prometheus_port}"))
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap(),
+    );
+    wait_for_port(prometheus_port, "prometheus");
+
+    // A calibration on each of the three devices.
+    let (api_a, api_b) = (a.endpoint(), b.endpoint());
+    let mut events_a = subscribe_json(&api_a, "/events");
+    let mut events_b = subscribe_json(&api_b, "/events");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    for (api, path) in [
+        (&api_a, "/devices/left/jobs"),
+        (&api_a, "/devices/right/jobs"),
+        (&api_b, "/jobs"),
+    ] {
+        let reply = post(api, path, r#"{"kind": "calibrate"}"#).await;
+        assert_eq!(reply.status, 202, "{}", reply.text());
+    }
+    json_events_until(&mut events_a, Duration::from_secs(240), |seen| {
+        finished_on(seen, "left") == 1 && finished_on(seen, "right") == 1
+    })
+    .await;
+    json_events_until(&mut events_b, Duration::from_secs(240), |seen| {
+        finished_on(seen, "default") == 1
+    })
+    .await;
+
+    // What each daemon says of its profiles.
+    let mut expected = Vec::new();
+    for (api, port, path, device) in [
+        (&api_a, port_a, "/devices/left/status", "left"),
+        (&api_a, port_a, "/devices/right/status", "right"),
+        (&api_b, port_b, "/status", "default"),
+    ] {
+        let status = get(api, path).await.json().unwrap();
+        let mean = status["current_profile"]["held_out"]["mean"]
+            .as_f64()
+            .unwrap();
+        expected.push((format!("127.0.0.1:{port}"), device.to_string(), mean));
+    }
+
+    // Prometheus has scraped them all: the held-out error of each device's profile,
+    // its calibration counted, its readings and white luminance.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let held_out = loop {
+        let result = query(
+            prometheus_port,
+            r#"chromacal_held_out_delta_e00{stat="mean"}"#,
+        );
+        let jobs = query(
+            prometheus_port,
+            r#"chromacal_jobs_total{kind="calibrate",outcome="ok"}"#,
+        );
+        if result.len() == 3 && jobs.len() == 3 {
+            break result;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "prometheus has {} series: {result:?}\n{}",
+            result.len(),
+            std::fs::read_to_string(dir.path().join("prometheus.log")).unwrap_or_default()
+        );
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    };
+    for (instance, device, mean) in &expected {
+        let series = held_out
+            .iter()
+            .find(|s| {
+                s["metric"]["instance"] == instance.as_str()
+                    && s["metric"]["device"] == device.as_str()
+            })
+            .unwrap_or_else(|| panic!("no series of {device} at {instance}: {held_out:?}"));
+        let value: f64 = series["value"][1].as_str().unwrap().parse().unwrap();
+        assert!(
+            (value - mean).abs() <= 1e-9 * mean.abs().max(1.0),
+            "{device}: {value} against {mean}"
+        );
+    }
+    let up = query(prometheus_port, "sum(chromacal_device_up)");
+    assert_eq!(up[0]["value"][1], "3");
+    let whites = query(prometheus_port, "chromacal_white_luminance_cd_m2 > 10");
+    assert_eq!(whites.len(), 3, "{whites:?}");
+    let readings = query(
+        prometheus_port,
+        r#"sum by (instance) (chromacal_readings_total{kind="ok"})"#,
+    );
+    assert_eq!(readings.len(), 2, "{readings:?}");
+    let since = query(prometheus_port, "chromacal_seconds_since_calibration < 600");
+    assert_eq!(since.len(), 3, "{since:?}");
+    // Nothing was verified yet, so nothing is said of it.
+    assert!(query(prometheus_port, "chromacal_verification_delta_e00").is_empty());
+
+    // /metrics needs no token on TCP, but the rest of the API does.
+    let metrics = ureq::get(&format!("http://127.0.0.1:{port_a}/metrics"))
+        .call()
+        .unwrap()
+        .body_mut()
+        .read_to_string()
+        .unwrap();
+    assert!(
+        metrics
+            .contains("chromacal_jobs_total{device=\"left\",kind=\"calibrate\",outcome=\"ok\"} 1"),
+        "{metrics}"
+    );
+    let refused = ureq::get(&format!("http://127.0.0.1:{port_a}/devices"))
+        .config()
+        .http_status_as_error(false)
+        .build()
+        .call()
+        .unwrap();
+    assert_eq!(refused.status(), 401);
+}
