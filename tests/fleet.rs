@@ -28,6 +28,16 @@ fn first(seen: &[serde_json::Value], device: &str, name: &str) -> usize {
         .unwrap_or_else(|| panic!("no {name} of {device} in {seen:#?}"))
 }
 
+/// Where in `seen` the first reading of `device` is (a progress event with a reading;
+/// a job waiting for a shared instrument also sends one, without).
+fn first_reading(seen: &[serde_json::Value], device: &str) -> usize {
+    seen.iter()
+        .position(|e| {
+            e["event"] == "progress" && e["device"] == device && !e["job"]["last"].is_null()
+        })
+        .unwrap_or_else(|| panic!("no reading of {device} in {seen:#?}"))
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn one_daemon_runs_two_simulated_devices_and_an_emulated_serial_one_at_once() {
     let dir = tempfile::tempdir().unwrap();
@@ -104,7 +114,7 @@ screen = "{}"
         .min()
         .unwrap();
     for device in ["crt", "lcd", "bench"] {
-        assert!(first(&seen, device, "progress") < first_end, "{device}");
+        assert!(first_reading(&seen, device) < first_end, "{device}");
     }
     for (device, id) in ["crt", "lcd", "bench"].iter().zip(&ids) {
         let end = &seen[first(&seen, device, "job_finished")];
@@ -162,7 +172,17 @@ screen = "{}"
     assert_eq!(profiles.len(), 3, "three profiles of three monitors");
     // The state directory itself holds no store: only the devices' folders.
     assert!(!dir.path().join("state").join("current.toml").exists());
-    // The LCD's threshold is its own.
+    // The LCD's threshold is its own, and so is its monitor.
+    let metrics = get(&api, "/metrics").await.text();
+    for (device, threshold) in [("crt", 1.0), ("lcd", 2.5), ("bench", 1.0)] {
+        let line = format!(
+            "chromacal_verification_threshold_delta_e00{{device=\"{device}\"}} {threshold:?}"
+        );
+        assert!(
+            metrics.lines().any(|l| l == line),
+            "{line} not in\n{metrics}"
+        );
+    }
     let lcd =
         chromacal::profile::Profile::read(&dir.path().join("state/lcd/current.toml")).unwrap();
     let crt =
@@ -254,7 +274,7 @@ preset = "lcd"
     );
     // The right one read nothing until the left one had ended.
     let left_end = first(&seen, "left", "job_finished");
-    assert!(first(&seen, "right", "progress") > left_end);
+    assert!(first_reading(&seen, "right") > left_end);
     for device in ["left", "right"] {
         let end = &seen[first(&seen, device, "job_finished")];
         assert_eq!(end["outcome"]["published"], true, "{end}");
@@ -462,7 +482,7 @@ fn calibrate_takes_a_device_of_a_fleet_config_into_its_folder() {
         "{said}"
     );
     let unknown = run(Some("oled"));
-    assert!(String::from_utf8_lossy(&unknown.stderr).contains("no device \"oled\""));
+    assert!(String::from_utf8_lossy(&unknown.stderr).contains("\"oled\""));
     let out = run(Some("lcd"));
     assert!(
         out.status.success(),
@@ -478,4 +498,123 @@ fn calibrate_takes_a_device_of_a_fleet_config_into_its_folder() {
     let display = profile.provenance.display.unwrap_or_default();
     assert!(display.contains("lcd"), "{display}");
     assert!(!state.join("current.toml").exists());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_serial_instrument_shared_by_two_displays_is_let_go_and_opened_again() {
+    let dir = tempfile::tempdir().unwrap();
+    // One emulated PR-670 on a real pty, shared by two devices (both showing on the
+    // emulator's screen, as a meter carried from one display to the next).
+    let emulator = emulate(&["--instrument", "pr670", "--time-scale", "0.002"]);
+    let config = format!(
+        r#"[daemon]
+simulated_idle_ages = false
+[instruments.meter]
+driver = "pr670"
+port = "{}"
+[instruments.meter.options]
+timing_scale = 0.002
+[display]
+screen = "{}"
+[[device]]
+name = "first"
+instrument = "meter"
+[[device]]
+name = "second"
+instrument = "meter"
+"#,
+        emulator.device, emulator.screen
+    );
+    let daemon = start_daemon(dir.path(), &config);
+    let api = daemon.endpoint();
+    let mut events = subscribe_json(&api, "/events");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    // Twice each, in turns: every job after the first opens the port afresh, which the
+    // pty refuses while another holds it.
+    for round in 1..=2 {
+        start_on(&api, "first", "calibrate").await;
+        start_on(&api, "second", "calibrate").await;
+        let seen = json_events_until(&mut events, Duration::from_secs(240), |seen| {
+            finished_on(seen, "first") == 1 && finished_on(seen, "second") == 1
+        })
+        .await;
+        for device in ["first", "second"] {
+            let end = &seen[first(&seen, device, "job_finished")];
+            assert_eq!(end["outcome"]["published"], true, "round {round}: {end}");
+        }
+        assert!(
+            !seen.iter().any(|e| e["event"] == "device_lost"),
+            "{seen:#?}"
+        );
+        let (a, b) = (
+            first(&seen, "first", "job_finished"),
+            first(&seen, "second", "job_finished"),
+        );
+        let later = if a < b { "second" } else { "first" };
+        assert!(first_reading(&seen, later) > a.min(b), "round {round}");
+    }
+    let history = get(&api, "/devices/second/history").await.json().unwrap();
+    assert_eq!(history["profiles"].as_array().unwrap().len(), 2);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_waiting_for_a_shared_instrument_can_be_cancelled() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = r#"[daemon]
+simulated_time_scale = 0.01
+simulated_idle_ages = false
+[instruments.meter.simulated]
+[[device]]
+name = "busy"
+instrument = "meter"
+[[device]]
+name = "queued"
+instrument = "meter"
+"#;
+    let daemon = start_daemon(dir.path(), config);
+    let api = daemon.endpoint();
+    let mut events = subscribe_json(&api, "/events");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    start_on(&api, "busy", "calibrate").await;
+    json_events_until(&mut events, Duration::from_secs(60), |seen| {
+        seen.iter()
+            .any(|e| e["event"] == "progress" && e["device"] == "busy")
+    })
+    .await;
+    start_on(&api, "queued", "calibrate").await;
+    // It says it waits, on the event stream as in its status.
+    json_events_until(&mut events, Duration::from_secs(10), |seen| {
+        seen.iter().any(|e| {
+            e["device"] == "queued" && e["job"]["phase"] == "waiting for the instrument meter"
+        })
+    })
+    .await;
+    let cancelled = post(&api, "/devices/queued/jobs/cancel", "").await;
+    assert_eq!(cancelled.status, 202, "{}", cancelled.text());
+    let seen = json_events_until(&mut events, Duration::from_secs(10), |seen| {
+        finished_on(seen, "queued") == 1
+    })
+    .await;
+    let end = &seen[first(&seen, "queued", "job_finished")];
+    assert_eq!(end["outcome"]["result"], "cancelled", "{end}");
+    // Ended while the other still measures, and without reading anything.
+    assert_eq!(finished_on(&seen, "busy"), 0);
+    assert!(
+        !seen
+            .iter()
+            .any(|e| e["device"] == "queued" && !e["job"]["last"].is_null())
+    );
+    let status = get(&api, "/devices/busy/status").await.json().unwrap();
+    assert!(status["job"].is_object(), "{status}");
+    assert!(
+        !dir.path().join("state/queued/runs").exists()
+            || std::fs::read_dir(dir.path().join("state/queued/runs"))
+                .unwrap()
+                .next()
+                .is_none(),
+        "a cancelled job that never had the instrument started no run"
+    );
+    // The device takes its next job at once.
+    let again = post(&api, "/devices/queued/jobs", r#"{"kind": "verify"}"#).await;
+    assert_eq!(again.status, 202, "{}", again.text());
 }

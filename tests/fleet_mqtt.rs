@@ -11,29 +11,36 @@ use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use common::daemon::{Server, free_port, get, installed, post, start_daemon, wait_idle};
+use common::daemon::{
+    Server, free_port, get, installed, post, start_daemon, wait_for_port, wait_idle,
+};
 
-/// A broker on a loopback port, without persistence. A port another test's broker
-/// took between `free_port` and the bind makes this broker exit: another port is
-/// tried, so that no test talks to another's broker.
+/// Mosquitto on loopback `port`, without persistence (its config in `dir`).
+fn mosquitto_on(dir: &Path, port: u16) -> Server {
+    let config = dir.join(format!("mosquitto-{port}.conf"));
+    std::fs::write(
+        &config,
+        format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"),
+    )
+    .unwrap();
+    Server(
+        Command::new(installed("mosquitto"))
+            .arg("-c")
+            .arg(&config)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// A broker on a free loopback port. A port another test's broker took between
+/// `free_port` and the bind makes this broker exit: another port is tried, so that
+/// no test talks to another's broker.
 fn broker(dir: &Path) -> (Server, u16) {
-    for attempt in 0..5 {
+    for _ in 0..5 {
         let port = free_port();
-        let config = dir.join(format!("mosquitto-{attempt}.conf"));
-        std::fs::write(
-            &config,
-            format!("listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"),
-        )
-        .unwrap();
-        let mut server = Server(
-            Command::new(installed("mosquitto"))
-                .arg("-c")
-                .arg(&config)
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()
-                .unwrap(),
-        );
+        let mut server = mosquitto_on(dir, port);
         let deadline = Instant::now() + Duration::from_secs(20);
         loop {
             if let Ok(Some(_)) = server.0.try_wait() {
@@ -274,4 +281,21 @@ async fn with_the_broker_down_a_calibration_completes_and_the_dropped_events_are
         "{}",
         daemon.log_text()
     );
+
+    // The broker comes back on its port: the daemon connects again by itself and
+    // publishes its retained status and the device's newest state.
+    let _back = mosquitto_on(dir.path(), port);
+    wait_for_port(port, "mosquitto");
+    let profile = get(&api, "/status").await.json().unwrap()["current_profile"]["id"].clone();
+    assert!(profile.is_string());
+    let late = subscribe(port, "chromacal/#");
+    let topic = |end: &str| {
+        format!(
+            "chromacal/{}/default/{end}",
+            chromacal::daemon::mqtt::host_name()
+        )
+    };
+    late.until(&topic("state"), Duration::from_secs(30), |p| {
+        p["current_profile"]["id"] == profile && p["last_job"]["result"] == "ok"
+    });
 }

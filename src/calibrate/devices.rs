@@ -120,6 +120,9 @@ pub enum RunInstrument {
         instrument: AsyncSerialInstrument,
         correction: Option<Matrix3<f64>>,
     },
+    /// A serial instrument let go of (`release_instrument`): its port is free for
+    /// another display's job, and it measures nothing until opened again.
+    Released(InstrumentInfo),
 }
 
 impl Instrument for RunInstrument {
@@ -127,6 +130,7 @@ impl Instrument for RunInstrument {
         match self {
             RunInstrument::Simulated(i) => i.info(),
             RunInstrument::Serial { instrument, .. } => instrument.info(),
+            RunInstrument::Released(info) => info.clone(),
         }
     }
 
@@ -143,6 +147,10 @@ impl Instrument for RunInstrument {
                 }
                 Ok(reading)
             }
+            RunInstrument::Released(info) => Err(InstrumentError::Disconnected(format!(
+                "the {} was handed to another display",
+                info.name
+            ))),
         }
     }
 }
@@ -186,20 +194,7 @@ pub async fn open_devices(
             virtual_clock: Some(rig.clock),
         });
     };
-    let correction = match config.instrument.correction {
-        Some(rows) if kind.capability() == Capability::Spectral => {
-            let _ = rows;
-            return Err(DevicesError::Config(format!(
-                "instrument.correction is for colorimeters; the {kind} is a spectroradiometer"
-            )));
-        }
-        Some(rows) => Some(Matrix3::from_fn(|r, c| rows[r][c])),
-        None => None,
-    };
-    let options = config.instrument.options;
-    let instrument = tokio::task::spawn_blocking(move || kind.open(&port, options))
-        .await
-        .map_err(|e| DevicesError::Config(format!("the driver's thread failed: {e}")))??;
+    let instrument = open_serial_instrument(config, kind, &port).await?;
     let settle_s = config.display.settle_s;
     let display = match (config.display.sink(), &config.display.screen) {
         (Sink::Resolve, _) => RunDisplay::Resolve(
@@ -225,11 +220,59 @@ pub async fn open_devices(
     };
     Ok(Devices {
         display,
-        instrument: RunInstrument::Serial {
-            instrument: AsyncSerialInstrument::new(instrument),
-            correction,
-        },
+        instrument,
         clock: Arc::new(WallClock),
         virtual_clock: None,
     })
+}
+
+/// Open the serial instrument `config` names (a `kind` on `port`), with its
+/// correction matrix.
+async fn open_serial_instrument(
+    config: &Config,
+    kind: DeviceKind,
+    port: &str,
+) -> Result<RunInstrument, DevicesError> {
+    let correction = match config.instrument.correction {
+        Some(rows) if kind.capability() == Capability::Spectral => {
+            let _ = rows;
+            return Err(DevicesError::Config(format!(
+                "instrument.correction is for colorimeters; the {kind} is a spectroradiometer"
+            )));
+        }
+        Some(rows) => Some(Matrix3::from_fn(|r, c| rows[r][c])),
+        None => None,
+    };
+    let options = config.instrument.options;
+    let port = port.to_string();
+    let instrument = tokio::task::spawn_blocking(move || kind.open(&port, options))
+        .await
+        .map_err(|e| DevicesError::Config(format!("the driver's thread failed: {e}")))??;
+    Ok(RunInstrument::Serial {
+        instrument: AsyncSerialInstrument::new(instrument),
+        correction,
+    })
+}
+
+/// Open again the serial instrument of `devices` after `release_instrument` (an
+/// instrument shared by several displays: the daemon hands it from one to the next).
+/// A simulated instrument is part of its rig and stays as it is.
+pub async fn reopen_instrument(devices: &mut Devices, config: &Config) -> Result<(), DevicesError> {
+    if let (RunInstrument::Released(_), Some((kind, port))) = (
+        &devices.instrument,
+        config.instrument.serial().map_err(DevicesError::Config)?,
+    ) {
+        devices.instrument = open_serial_instrument(config, kind, &port).await?;
+    }
+    Ok(())
+}
+
+/// Close a serial instrument and let go of its port, keeping the display: another
+/// display's job may open it next. `reopen_instrument` takes it back.
+pub fn release_instrument(devices: &mut Devices) {
+    if let RunInstrument::Serial { instrument, .. } = &devices.instrument {
+        instrument.close();
+        let info = instrument.info();
+        devices.instrument = RunInstrument::Released(info);
+    }
 }

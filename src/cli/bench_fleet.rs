@@ -256,8 +256,8 @@ pub fn fleet_table(quick: bool) -> Result<(), String> {
             format!("{:.0}", run.events as f64 / run.seconds),
             format!("{:.2}", median * 1e3),
             format!("{:.2}", worst * 1e3),
-            run.mqtt.map_or("-".into(), |(sent, dropped)| {
-                format!("{sent:.0} / {dropped:.0}")
+            run.mqtt.map_or("-".into(), |(queued, dropped)| {
+                format!("{queued:.0} / {dropped:.0}")
             }),
         ]);
     }
@@ -271,7 +271,7 @@ pub fn fleet_table(quick: bool) -> Result<(), String> {
                 "events/s",
                 "ms/patch median",
                 "ms/patch worst",
-                "MQTT sent / dropped",
+                "MQTT queued / dropped",
             ],
             &rows
         )

@@ -10,6 +10,7 @@ use chromacal::calibrate::run::Progress;
 use chromacal::calibrate::session::{
     CalibrateOptions, Resume, calibrate as calibrate_session, newest_resumable, unfinished_runs,
 };
+use chromacal::config::devices::find_device;
 use chromacal::config::{
     LoadedConfig, Sink, check_config, config_search_paths, device_configs, load_config_searching,
 };
@@ -84,37 +85,14 @@ fn pick_device(
     name: Option<&str>,
     state_dir: PathBuf,
 ) -> Result<(LoadedConfig, PathBuf), Failure> {
+    if name.is_none() && loaded.config.device.is_empty() {
+        return Ok((loaded, state_dir));
+    }
     let devices =
         device_configs(&loaded).map_err(|e| Failure::from(format!("{}: {e}", loaded.origin)))?;
-    let names = || {
-        devices
-            .iter()
-            .map(|d| d.name.as_str())
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let chosen = match name {
-        Some(name) => devices.iter().find(|d| d.name == name).ok_or_else(|| {
-            format!(
-                "{} names no device \"{name}\" (it has {})",
-                loaded.origin,
-                names()
-            )
-        })?,
-        None if loaded.config.device.is_empty() => return Ok((loaded, state_dir)),
-        None => {
-            return Err(Failure::from(format!(
-                "{} names several devices ({}): give --device NAME",
-                loaded.origin,
-                names()
-            )));
-        }
-    };
-    let dir = match chosen.own_folder {
-        true => state_dir.join(&chosen.name),
-        false => state_dir,
-    };
-    Ok((chosen.loaded.clone(), dir))
+    let chosen = find_device(&devices, name, |d| d.name.as_str())
+        .map_err(|e| Failure::from(format!("{}: {e}", loaded.origin)))?;
+    Ok((chosen.loaded.clone(), chosen.store_dir(&state_dir)))
 }
 
 #[allow(clippy::too_many_arguments)]

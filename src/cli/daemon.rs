@@ -16,12 +16,14 @@ use clap::Subcommand;
 
 use super::shared::Failure;
 
-/// Run as a service: hold the instrument and the display, run one job at a time,
+/// Run as a service: hold the instruments and displays, run one job at a time on each,
 /// verify on a schedule and recalibrate when the screen moved, and answer the
 /// control API (HTTP on a unix socket, mode 0600; optionally loopback TCP with a
 /// token): GET /status, POST /jobs {"kind": …}, POST /jobs/cancel, GET /events
 /// (server-sent events), GET /profile[?format=toml|json|icc4|icc2|ti3|cal|psychopy],
-/// GET /history, GET /report (HTML), POST /rollback.
+/// GET /history, GET /report (HTML), POST /rollback; with several devices
+/// ([[device]] in the config) each under /devices/NAME/…; GET /devices, GET /metrics
+/// (Prometheus).
 /// Stops on SIGTERM after the reading under way; an interrupted calibration
 /// resumes at the next start.
 #[derive(clap::Args)]

@@ -12,12 +12,13 @@
 //! * `display`, `plan`, `fit`, `publish`, `schedule`, `warmup` and `target` are merged
 //!   key by key, so a device can change one key (say `schedule.verify_every_s`) and
 //!   keep the rest.
-//! * `[daemon]`, `[mqtt]` and `[metrics]` are the daemon's, not a device's.
+//! * `[daemon]` and `[mqtt]` are the daemon's, not a device's.
 //!
 //! An instrument moved by hand between displays is declared once, as
 //! `[instruments.NAME]`, and named by each device that uses it (`instrument =
-//! "NAME"`): the daemon runs one job at a time on it. Two devices that name the same
-//! serial port without declaring it so are an error, since they would open it at once.
+//! "NAME"`): the daemon runs one job at a time on it. Two devices that open the same
+//! serial port other than through one such declaration are an error, since they would
+//! open it at once.
 
 use std::collections::BTreeMap;
 
@@ -53,6 +54,50 @@ pub struct DeviceConfig {
     /// Its store is a folder of the state directory named after it (false only for
     /// the one device of a config without `[[device]]`).
     pub own_folder: bool,
+}
+
+impl DeviceConfig {
+    /// Its store: `<state>/<name>/`, or the state directory itself for the one
+    /// device of a config without `[[device]]`.
+    pub fn store_dir(&self, state_dir: &std::path::Path) -> std::path::PathBuf {
+        match self.own_folder {
+            true => state_dir.join(&self.name),
+            false => state_dir.to_path_buf(),
+        }
+    }
+}
+
+/// Why no device was found by a name.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NoDevice {
+    #[error("no device is named \"{name}\" (there are {known})")]
+    Unknown { name: String, known: String },
+    #[error(
+        "there are several devices ({0}): name one (`--device NAME`, or /devices/NAME/… in the API)"
+    )]
+    Ambiguous(String),
+}
+
+/// The device `name` of `devices`, or without a name the only one.
+pub fn find_device<'a, T>(
+    devices: &'a [T],
+    name: Option<&str>,
+    name_of: impl Fn(&T) -> &str,
+) -> Result<&'a T, NoDevice> {
+    let known = || devices.iter().map(&name_of).collect::<Vec<_>>().join(", ");
+    match (name, devices) {
+        (Some(name), _) => {
+            devices
+                .iter()
+                .find(|d| name_of(d) == name)
+                .ok_or_else(|| NoDevice::Unknown {
+                    name: name.to_string(),
+                    known: known(),
+                })
+        }
+        (None, [only]) => Ok(only),
+        (None, _) => Err(NoDevice::Ambiguous(known())),
+    }
 }
 
 /// A device or instrument name: it becomes a folder, a URL segment, an MQTT topic
@@ -109,7 +154,7 @@ pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String
     top.instruments.clear();
     let top = toml::Table::try_from(&top).map_err(|e| format!("the config: {e}"))?;
     let mut devices: Vec<DeviceConfig> = Vec::new();
-    let mut ports: BTreeMap<String, String> = BTreeMap::new();
+    let mut ports: BTreeMap<String, (String, Option<String>)> = BTreeMap::new();
     let mut used: BTreeMap<&str, usize> = BTreeMap::new();
     for (index, entry) in config.device.iter().enumerate() {
         let at = format!("[[device]] number {}", index + 1);
@@ -131,7 +176,7 @@ pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String
             }
             let Some(&(_, replaces)) = DEVICE_SECTIONS.iter().find(|(k, _)| k == key) else {
                 return Err(format!(
-                    "{at}: '{key}' is not a device's section (a device takes {}; [daemon], [mqtt] and [metrics] are the whole daemon's)",
+                    "{at}: '{key}' is not a device's section (a device takes {}; [daemon] and [mqtt] are the whole daemon's)",
                     DEVICE_SECTIONS.map(|(k, _)| k).join(", ")
                 ));
             };
@@ -178,9 +223,12 @@ pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String
         let text = toml::to_string(&merged).map_err(|e| format!("{at}: {e}"))?;
         let origin = format!("{} ({at})", loaded.origin);
         let device: Config = parse_config(&text, &origin).map_err(|e| e.to_string())?;
-        if shared_instrument.is_none()
-            && let Some((_, port)) = device.instrument.serial()?
-            && let Some(other) = ports.insert(port.clone(), name.clone())
+        // One port, one instrument: devices may name it only through one shared
+        // [instruments.NAME].
+        if let Some((_, port)) = device.instrument.serial()?
+            && let Some((other, other_shared)) =
+                ports.insert(port.clone(), (name.clone(), shared_instrument.clone()))
+            && (shared_instrument.is_none() || other_shared != shared_instrument)
         {
             return Err(format!(
                 "devices \"{other}\" and \"{name}\" both open {port}: declare the instrument once as [instruments.NAME] and name it in both (their jobs then take turns)"
@@ -336,6 +384,15 @@ name = "c"
             ),
             (
                 "[[device]]\nname = \"a\"\n[device.display]\nsink = \"web\"\n[device.instrument]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n[[device]]\nname = \"b\"\n[device.display]\nsink = \"web\"\n[device.instrument]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n",
+                "both open /dev/ttyUSB0",
+            ),
+            // Two declarations of one port, and a shared one beside a device's own.
+            (
+                "[display]\nsink = \"web\"\n[instruments.x]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n[instruments.y]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n[[device]]\nname = \"a\"\ninstrument = \"x\"\n[[device]]\nname = \"b\"\ninstrument = \"y\"\n",
+                "both open /dev/ttyUSB0",
+            ),
+            (
+                "[display]\nsink = \"web\"\n[instruments.x]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n[[device]]\nname = \"a\"\ninstrument = \"x\"\n[[device]]\nname = \"b\"\n[device.instrument]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n",
                 "both open /dev/ttyUSB0",
             ),
         ];

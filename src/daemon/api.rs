@@ -46,7 +46,8 @@ use tokio_stream::StreamExt;
 use tokio_stream::wrappers::BroadcastStream;
 
 use super::events::{JobKind, JobOutcome, JobStatus};
-use super::{Daemon, Device, JobRefused, NoDevice};
+use super::{Daemon, Device, JobRefused};
+use crate::config::devices::NoDevice;
 use crate::profile::Profile;
 
 /// Who may use the API.

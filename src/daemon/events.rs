@@ -143,3 +143,12 @@ impl Event {
         }
     }
 }
+
+/// An event as JSON with the `device` it is of: what `GET /events` and MQTT send.
+pub fn event_json(device: &str, event: &Event) -> serde_json::Value {
+    let mut value = serde_json::to_value(event).unwrap_or_default();
+    if let serde_json::Value::Object(map) = &mut value {
+        map.insert("device".into(), device.into());
+    }
+    value
+}

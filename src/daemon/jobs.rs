@@ -9,7 +9,7 @@ use std::time::{Duration, Instant, SystemTime};
 
 use super::Device;
 use super::events::{Event, JobKind, JobOutcome, LastReading};
-use crate::calibrate::devices::{Devices, open_devices};
+use crate::calibrate::devices::{Devices, open_devices, release_instrument, reopen_instrument};
 use crate::calibrate::run::{Progress, RunError, RunHooks, RunOptions, run_plan};
 use crate::calibrate::session::{
     CalibrateError, discard_run, finish_run, new_run_id, now_rfc3339, reopen_run, start_run,
@@ -109,12 +109,24 @@ pub(crate) async fn run_job(
     resume: Option<PathBuf>,
     cancel: &Arc<AtomicBool>,
 ) -> JobOutcome {
-    // A shared instrument is one device's at a time: wait for its turn.
-    let _turn = match &device.shared_instrument {
-        Some((name, turn)) => {
-            device.update_job(|j| j.phase = format!("waiting for the instrument {name}"));
-            Some(turn.lock().await)
-        }
+    let stop: StopCheck = {
+        let device = device.clone();
+        let cancel = cancel.clone();
+        Arc::new(move || cancel.load(Ordering::SeqCst) || device.is_shutting_down())
+    };
+    // A shared instrument is one device's at a time: wait for its turn (or a stop).
+    let turn = match &device.shared_instrument {
+        Some((name, turn)) => match wait_for_turn(device, name, turn, &stop).await {
+            Some(guard) => Some(guard),
+            None => {
+                return stopped_outcome(
+                    device,
+                    kind,
+                    cancel,
+                    "stopped while waiting for the instrument",
+                );
+            }
+        },
         None => None,
     };
     let mut guard = device.hardware.lock().await;
@@ -126,11 +138,6 @@ pub(crate) async fn run_job(
         }),
         Ok(devices) => {
             age_while_idle(device, devices);
-            let stop: StopCheck = {
-                let device = device.clone();
-                let cancel = cancel.clone();
-                Arc::new(move || cancel.load(Ordering::SeqCst) || device.is_shutting_down())
-            };
             match warm_up(device, id, devices, &stop).await {
                 Err(message) => Err(JobFailure {
                     message,
@@ -145,13 +152,15 @@ pub(crate) async fn run_job(
             }
         }
     };
-    // A shared instrument is left for the next device that takes its turn (which
-    // opens it again, as a meter moved by hand is connected again).
-    if device.shared_instrument.is_some()
-        && let Some(hardware) = guard.take()
+    // A shared instrument lets go of its port for the next device that takes its
+    // turn (which opens it again, as a meter moved by hand is plugged in again); the
+    // display stays.
+    if turn.is_some()
+        && let Some(hardware) = guard.as_mut()
     {
-        hardware.instrument.close();
+        release_instrument(hardware);
     }
+    drop(turn);
     match result {
         Ok(success) => JobOutcome {
             result: "ok".into(),
@@ -170,25 +179,69 @@ pub(crate) async fn run_job(
                     message: failure.message.clone(),
                 });
             }
-            let cancelled = cancel.load(Ordering::SeqCst);
-            let result = match (failure.stopped, cancelled) {
-                (true, true) => "cancelled",
-                (true, false) => "interrupted",
-                (false, _) => "failed",
-            };
-            let message = match result {
-                "interrupted" if kind == JobKind::Calibrate => format!(
-                    "{}; the calibration resumes when the daemon starts again",
-                    failure.message
-                ),
-                _ => failure.message,
-            };
-            JobOutcome {
-                result: result.into(),
-                message,
-                profile_id: None,
-                published: false,
-                escalated: false,
+            match failure.stopped {
+                true => stopped_outcome(device, kind, cancel, &failure.message),
+                false => JobOutcome {
+                    result: "failed".into(),
+                    message: failure.message,
+                    profile_id: None,
+                    published: false,
+                    escalated: false,
+                },
+            }
+        }
+    }
+}
+
+/// How a job stopped on request ended: `cancelled` (given up) or, stopped by the
+/// daemon's shutdown, `interrupted` (a calibration then resumes at the next start).
+fn stopped_outcome(device: &Device, kind: JobKind, cancel: &AtomicBool, why: &str) -> JobOutcome {
+    let cancelled = cancel.load(Ordering::SeqCst) || !device.is_shutting_down();
+    let message = match (cancelled, kind) {
+        (false, JobKind::Calibrate) => {
+            format!("{why}; the calibration resumes when the daemon starts again")
+        }
+        _ => why.to_string(),
+    };
+    JobOutcome {
+        result: if cancelled {
+            "cancelled"
+        } else {
+            "interrupted"
+        }
+        .into(),
+        message,
+        profile_id: None,
+        published: false,
+        escalated: false,
+    }
+}
+
+/// Wait for the turn on a shared instrument; `None` if the job is stopped first. A
+/// job that waits says so in its phase, and tells the subscribers.
+async fn wait_for_turn<'a>(
+    device: &Device,
+    name: &str,
+    turn: &'a tokio::sync::Mutex<()>,
+    stop: &StopCheck,
+) -> Option<tokio::sync::MutexGuard<'a, ()>> {
+    if let Ok(guard) = turn.try_lock() {
+        return Some(guard);
+    }
+    if let Some(job) = device.update_job(|j| j.phase = format!("waiting for the instrument {name}"))
+    {
+        device.emit(Event::Progress { job });
+    }
+    // The same lock future throughout, so the job keeps its place in the queue.
+    let lock = turn.lock();
+    tokio::pin!(lock);
+    loop {
+        tokio::select! {
+            guard = &mut lock => return (!stop()).then_some(guard),
+            _ = tokio::time::sleep(Duration::from_millis(100)) => {
+                if stop() {
+                    return None;
+                }
             }
         }
     }
@@ -199,6 +252,12 @@ async fn ensure_devices<'a>(
     device: &Device,
     slot: &'a mut Option<Devices>,
 ) -> Result<&'a mut Devices, String> {
+    if let Some(devices) = slot.as_mut() {
+        // An instrument shared with other displays was let go of after the last job.
+        reopen_instrument(devices, &device.loaded.config)
+            .await
+            .map_err(|e| format!("cannot open the instrument: {e}"))?;
+    }
     if slot.is_none() {
         let config = &device.loaded.config;
         let devices = open_devices(
@@ -208,7 +267,7 @@ async fn ensure_devices<'a>(
         )
         .await
         .map_err(|e| format!("cannot open the devices: {e}"))?;
-        tracing::info!(display = %devices.display.name(), instrument = %devices.instrument.info().name, "devices open");
+        tracing::info!(device = %device.name, display = %devices.display.name(), instrument = %devices.instrument.info().name, "devices open");
         *slot = Some(devices);
     }
     slot.as_mut()
@@ -269,6 +328,7 @@ async fn warm_up(
     )
     .await?;
     tracing::info!(
+        device = %device.name,
         readings = outcome.steps.len(),
         settled = outcome.settled,
         "warm-up done"
@@ -285,7 +345,7 @@ pub(crate) fn current_profile(device: &Device) -> Option<Profile> {
     match Profile::read(&path) {
         Ok(p) => Some(p),
         Err(e) => {
-            tracing::warn!(error = %e, "the current profile does not read");
+            tracing::warn!(device = %device.name, error = %e, "the current profile does not read");
             None
         }
     }
@@ -305,7 +365,7 @@ fn progress_handler<'a>(
         // Full white at the centre: the white luminance, and its drift on the device's
         // own clock (simulated seconds for a simulated monitor).
         let white = (p.status == ReadingStatus::Ok
-            && p.drive.iter().all(|d| *d >= 0.999)
+            && p.drive.iter().all(|d| *d >= 1.0 - 1e-9)
             && p.position == ScreenPosition::CENTRE)
             .then(|| p.luminance.or(p.xyz.map(|x| x.y)))
             .flatten();
@@ -706,7 +766,9 @@ pub(crate) async fn scheduler(device: Arc<Device>) {
         }
         match device.start_job(JobKind::Verify, "schedule", None) {
             Ok(_) => {}
-            Err(e) => tracing::info!(reason = %e, "scheduled verification skipped"),
+            Err(e) => {
+                tracing::info!(device = %device.name, reason = %e, "scheduled verification skipped")
+            }
         }
     }
 }

@@ -126,6 +126,23 @@ fn slope(points: &[(f64, f64)], min_span: f64) -> Option<f64> {
     (span >= min_span && sxx > 0.0).then(|| sxy / sxx)
 }
 
+/// A device's mean and max in `family`; none known, no series.
+fn set_stats(family: &Family<StatLabels, FloatGauge>, device: &str, stats: Option<ErrorStats>) {
+    for (name, value) in [
+        ("mean", stats.map(|s| s.mean)),
+        ("max", stats.map(|s| s.max)),
+    ] {
+        match value {
+            Some(v) => {
+                family.get_or_create(&stat(device, name)).set(v);
+            }
+            None => {
+                family.remove(&stat(device, name));
+            }
+        }
+    }
+}
+
 impl Metrics {
     /// Metrics for the devices named.
     pub fn new<'a>(devices: impl IntoIterator<Item = &'a str>) -> Metrics {
@@ -213,7 +230,7 @@ impl Metrics {
         );
         r.register(
             "instrument_faults",
-            "Jobs the devices failed, by kind of fault (open, instrument, display)",
+            "Jobs the devices failed, by kind of fault (open, warmup, instrument, display)",
             metrics.faults.clone(),
         );
         r.register(
@@ -223,12 +240,12 @@ impl Metrics {
         );
         r.register(
             "mqtt_events_published",
-            "Events handed to the MQTT client",
+            "Messages (events, states, status) handed to the MQTT client's queue",
             metrics.mqtt_published.clone(),
         );
         r.register(
             "mqtt_events_dropped",
-            "Events dropped because the MQTT queue was full (the broker down or slow)",
+            "Messages dropped because the MQTT queue was full (the broker down or slow)",
             metrics.mqtt_dropped.clone(),
         );
         let metrics = Metrics {
@@ -269,23 +286,11 @@ impl Metrics {
     }
 
     fn set_held_out(&self, device: &str, held_out: Option<ErrorStats>) {
-        if let Some(h) = held_out {
-            self.held_out
-                .get_or_create(&stat(device, "mean"))
-                .set(h.mean);
-            self.held_out.get_or_create(&stat(device, "max")).set(h.max);
-        }
+        set_stats(&self.held_out, device, held_out);
     }
 
     fn set_verification(&self, device: &str, stats: Option<ErrorStats>) {
-        if let Some(s) = stats {
-            self.verification
-                .get_or_create(&stat(device, "mean"))
-                .set(s.mean);
-            self.verification
-                .get_or_create(&stat(device, "max"))
-                .set(s.max);
-        }
+        set_stats(&self.verification, device, stats);
     }
 
     /// Count an event of `device` and update what it tells.
@@ -317,13 +322,18 @@ impl Metrics {
                 self.job_running.get_or_create(&label(device)).set(0);
                 self.progress.get_or_create(&label(device)).set(0.0);
             }
+            // A new current profile: the last verification was of another one.
             Event::Published { how, held_out, .. } => {
                 self.set_held_out(device, *held_out);
+                self.set_verification(device, None);
                 if how == "calibration" {
                     self.with_times(device, |t| t.calibrated = Some(SystemTime::now()));
                 }
             }
-            Event::RolledBack { entry } => self.set_held_out(device, entry.held_out),
+            Event::RolledBack { entry } => {
+                self.set_held_out(device, entry.held_out);
+                self.set_verification(device, None);
+            }
             Event::Verification { record } => {
                 self.set_verification(device, record.stats);
                 self.threshold
@@ -373,8 +383,14 @@ impl Metrics {
             t.whites.drain(..excess);
             drift = slope(&t.whites, DRIFT_MIN_SPAN_S);
         });
-        if let Some(per_s) = drift {
-            self.drift.get_or_create(&label(device)).set(per_s * 3600.0);
+        match drift {
+            Some(per_s) => {
+                self.drift.get_or_create(&label(device)).set(per_s * 3600.0);
+            }
+            // Too few whites since the series began again: no drift to tell.
+            None => {
+                self.drift.remove(&label(device));
+            }
         }
     }
 
@@ -512,6 +528,53 @@ mod tests {
         assert!(line(&text, "chromacal_seconds_since_calibration").is_none());
         assert!(line(&text, "chromacal_verification_delta_e00{").is_none());
         assert!(text.trim_end().ends_with("# EOF"));
+        // A verification is of the current profile: a new one makes it old news.
+        let stats = ErrorStats::of(&[0.5, 1.5]);
+        metrics.observe(
+            "a",
+            &Event::Verification {
+                record: crate::profile::store::VerificationRecord {
+                    at: String::new(),
+                    profile_id: "p".into(),
+                    stats,
+                    delta_e00: vec![0.5, 1.5],
+                    threshold: 1.0,
+                    escalated: false,
+                },
+            },
+        );
+        let text = metrics.render().unwrap();
+        assert!(
+            line(
+                &text,
+                "chromacal_verification_delta_e00{device=\"a\",stat=\"max\"} 1.5"
+            )
+            .is_some(),
+            "{text}"
+        );
+        assert!(line(&text, "chromacal_seconds_since_verification{device=\"a\"}").is_some());
+        metrics.observe(
+            "a",
+            &Event::Published {
+                profile_id: "q".into(),
+                how: "calibration".into(),
+                held_out: stats,
+            },
+        );
+        let text = metrics.render().unwrap();
+        assert!(
+            line(&text, "chromacal_verification_delta_e00{").is_none(),
+            "{text}"
+        );
+        assert!(
+            line(
+                &text,
+                "chromacal_held_out_delta_e00{device=\"a\",stat=\"mean\"} 1"
+            )
+            .is_some(),
+            "{text}"
+        );
+        assert!(line(&text, "chromacal_seconds_since_calibration{device=\"a\"}").is_some());
     }
 
     #[test]
@@ -519,9 +582,24 @@ mod tests {
         assert_eq!(slope(&[(0.0, 1.0), (100.0, 2.0)], 60.0), None);
         assert_eq!(slope(&[(0.0, 1.0), (10.0, 2.0), (20.0, 3.0)], 60.0), None);
         let metrics = Metrics::new(["a"]);
-        for (t, y) in [(0.0, 100.0), (60.0, 101.0), (120.0, 102.0), (5.0, 50.0)] {
+        for (t, y) in [(0.0, 100.0), (60.0, 101.0), (120.0, 102.0)] {
             metrics.reading("a", ReadingStatus::Ok, Some(y), t);
         }
+        let text = metrics.render().unwrap();
+        assert!(
+            line(
+                &text,
+                "chromacal_white_luminance_drift_cd_m2_per_hour{device=\"a\"} 60"
+            )
+            .is_some(),
+            "{text}"
+        );
+        metrics.reading("a", ReadingStatus::Ok, Some(50.0), 5.0);
+        let text = metrics.render().unwrap();
+        assert!(
+            line(&text, "chromacal_white_luminance_drift_cd_m2_per_hour").is_none(),
+            "{text}"
+        );
         let times = metrics.times.lock().unwrap();
         assert_eq!(times["a"].whites, vec![(5.0, 50.0)]);
     }

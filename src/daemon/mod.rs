@@ -30,6 +30,7 @@ use tokio::sync::broadcast;
 
 use crate::calibrate::devices::Devices;
 use crate::calibrate::session::{discard_run, newest_resumable, unfinished_runs};
+use crate::config::devices::{NoDevice, find_device};
 use crate::config::{DeviceConfig, LoadedConfig, OnStart, device_configs};
 use crate::profile::store::ProfileStore;
 use events::{Event, JobKind, JobStatus};
@@ -78,11 +79,7 @@ pub struct DeviceEvent {
 impl DeviceEvent {
     /// The event as JSON, with its device: what `GET /events` and MQTT send.
     pub fn to_json(&self) -> serde_json::Value {
-        let mut value = serde_json::to_value(&self.event).unwrap_or_default();
-        if let serde_json::Value::Object(map) = &mut value {
-            map.insert("device".into(), self.device.clone().into());
-        }
-        value
+        events::event_json(&self.device, &self.event)
     }
 }
 
@@ -92,17 +89,21 @@ pub struct Bus {
     pub(crate) events: broadcast::Sender<DeviceEvent>,
     shutting_down: AtomicBool,
     pub(crate) metrics: Arc<metrics::Metrics>,
-    mqtt: Option<Arc<mqtt::Mqtt>>,
+    /// Set once the devices' stores are locked and the socket bound: a daemon that
+    /// cannot start never says it is online.
+    mqtt: std::sync::OnceLock<Arc<mqtt::Mqtt>>,
 }
 
 impl Bus {
-    pub fn new(metrics: Arc<metrics::Metrics>, mqtt: Option<Arc<mqtt::Mqtt>>) -> Arc<Bus> {
-        let (events, _) = broadcast::channel(1024);
+    /// A bus for `devices` devices: subscribers may fall behind by 256 events a
+    /// device (and at least 1024) before they are told they missed some.
+    pub fn new(metrics: Arc<metrics::Metrics>, devices: usize) -> Arc<Bus> {
+        let (events, _) = broadcast::channel((256 * devices).max(1024));
         Arc::new(Bus {
             events,
             shutting_down: AtomicBool::new(false),
             metrics,
-            mqtt,
+            mqtt: std::sync::OnceLock::new(),
         })
     }
 
@@ -111,7 +112,7 @@ impl Bus {
     fn publish(&self, device: &str, event: Event) {
         tracing::debug!(device, event = event.name(), "event");
         self.metrics.observe(device, &event);
-        if let Some(mqtt) = &self.mqtt {
+        if let Some(mqtt) = self.mqtt.get() {
             mqtt.observe(device, &event);
         }
         let _ = self.events.send(DeviceEvent {
@@ -218,8 +219,8 @@ impl Device {
         self.next_verification.lock().ok().and_then(|n| *n)
     }
 
-    /// Give the metrics and MQTT what the store holds: the current profile and the
-    /// last verification.
+    /// Give the metrics and MQTT what the store holds: the current profile, the last
+    /// calibration, and the last verification if it is of the current profile.
     fn restore_figures(&self) {
         let profile = jobs::current_profile(self);
         // The last calibration published (the current profile may be a new spatial
@@ -232,7 +233,8 @@ impl Device {
             .store
             .verifications()
             .ok()
-            .and_then(|v| v.last().cloned());
+            .and_then(|v| v.last().cloned())
+            .filter(|v| profile.as_ref().is_some_and(|p| p.id == v.profile_id));
         let held_out = profile.as_ref().and_then(|p| p.report.held_out);
         self.bus.metrics.restore(
             &self.name,
@@ -243,24 +245,13 @@ impl Device {
                 .and_then(|v| Some((humantime::parse_rfc3339_weak(&v.at).ok()?, v.stats))),
             self.loaded.config.schedule.threshold_de00,
         );
-        if let Some(mqtt) = &self.bus.mqtt {
+        if let Some(mqtt) = self.bus.mqtt.get() {
             mqtt.restore(
                 &self.name,
-                serde_json::json!({
-                    "device": self.name,
-                    "job": null,
-                    "current_profile": profile.as_ref().map(|p| serde_json::json!({
-                        "id": p.id, "held_out": held_out, "at": p.created,
-                    })),
-                    "last_verification": verification.as_ref().map(|v| serde_json::json!({
-                        "at": v.at,
-                        "profile_id": v.profile_id,
-                        "stats": v.stats,
-                        "threshold": v.threshold,
-                        "passed": v.stats.is_some_and(|s| s.mean <= v.threshold),
-                        "escalated": v.escalated,
-                    })),
-                }),
+                profile
+                    .as_ref()
+                    .map(|p| (p.id.as_str(), held_out, p.created.as_str())),
+                verification.as_ref(),
             );
         }
     }
@@ -371,17 +362,6 @@ pub struct Daemon {
     state_dir: PathBuf,
 }
 
-/// Why a request named no device.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum NoDevice {
-    #[error("no device is named \"{name}\" (this daemon has {known})")]
-    Unknown { name: String, known: String },
-    #[error(
-        "this daemon has several devices ({0}): name one, as /devices/NAME/… (`--device NAME`)"
-    )]
-    Ambiguous(String),
-}
-
 impl Daemon {
     pub fn devices(&self) -> &[Arc<Device>] {
         &self.devices
@@ -397,21 +377,7 @@ impl Daemon {
 
     /// The device named, or with `None` the only one.
     pub fn device(&self, name: Option<&str>) -> Result<&Arc<Device>, NoDevice> {
-        match name {
-            Some(name) => {
-                self.devices
-                    .iter()
-                    .find(|d| d.name == name)
-                    .ok_or_else(|| NoDevice::Unknown {
-                        name: name.to_string(),
-                        known: self.names(),
-                    })
-            }
-            None => match self.devices.as_slice() {
-                [only] => Ok(only),
-                _ => Err(NoDevice::Ambiguous(self.names())),
-            },
-        }
+        find_device(&self.devices, name, |d| d.name.as_str())
     }
 
     pub fn state_dir(&self) -> &Path {
@@ -555,10 +521,7 @@ fn open_devices_of(
         Default::default();
     let mut devices = Vec::new();
     for config in configs {
-        let root = match config.own_folder {
-            true => state_dir.join(&config.name),
-            false => state_dir.to_path_buf(),
-        };
+        let root = config.store_dir(state_dir);
         std::fs::create_dir_all(&root).map_err(|source| DaemonError::Io {
             path: root.clone(),
             source,
@@ -571,9 +534,7 @@ fn open_devices_of(
             .shared_instrument
             .as_ref()
             .map(|name| turns.entry(name.clone()).or_default().clone());
-        let device = Device::new(config, store, lock, turn, bus.clone());
-        device.restore_figures();
-        devices.push(device);
+        devices.push(Device::new(config, store, lock, turn, bus.clone()));
     }
     Ok(devices)
 }
@@ -585,9 +546,9 @@ fn resume_unfinished(device: &Arc<Device>) {
     let name = &device.name;
     for run in &unfinished {
         if !run.resumable() {
-            tracing::warn!(device = %name, run = %run.id, failures = run.fit_failures, "not resuming a run whose fit failed twice (it is kept; `chromacal calibrate --resume RUN` names it)");
+            tracing::warn!(device = %name, run = %run.id, failures = run.fit_failures, "not resuming a run whose fit failed twice (it is kept; `chromacal calibrate --resume RUN --device NAME` names it)");
         } else if Some(&run.dir) != resumed.as_ref() {
-            tracing::warn!(device = %name, run = %run.id, readings = run.readings, "an older unfinished run is not resumed (`chromacal calibrate --resume RUN` names it)");
+            tracing::warn!(device = %name, run = %run.id, readings = run.readings, "an older unfinished run is not resumed (`chromacal calibrate --resume RUN --device NAME` names it)");
         }
     }
     let Some(dir) = resumed else {
@@ -626,14 +587,7 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     let configs = device_configs(&loaded).map_err(DaemonError::Config)?;
     let names: Vec<String> = configs.iter().map(|d| d.name.clone()).collect();
     let metrics = Arc::new(metrics::Metrics::new(names.iter().map(String::as_str)));
-    let mqtt = match &loaded.config.mqtt {
-        Some(mqtt) => Some(
-            mqtt::Mqtt::start(mqtt, &loaded.base_dir, &names, metrics.clone())
-                .map_err(|e| DaemonError::Config(e.to_string()))?,
-        ),
-        None => None,
-    };
-    let bus = Bus::new(metrics, mqtt.clone());
+    let bus = Bus::new(metrics.clone(), names.len());
     let devices = open_devices_of(configs, config.keep_profiles, &options.state_dir, &bus)?;
     let daemon = Arc::new(Daemon {
         loaded,
@@ -678,6 +632,21 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
             })?
             .uid()
     };
+    // MQTT once nothing else can stop the start: the stores are locked and the
+    // socket is bound.
+    let mqtt = match &daemon.loaded.config.mqtt {
+        Some(mqtt) => Some(
+            mqtt::Mqtt::start(mqtt, &daemon.loaded.base_dir, &names, metrics)
+                .map_err(|e| DaemonError::Config(e.to_string()))?,
+        ),
+        None => None,
+    };
+    if let Some(mqtt) = &mqtt {
+        let _ = daemon.bus.mqtt.set(mqtt.clone());
+    }
+    for device in daemon.devices() {
+        device.restore_figures();
+    }
     let app = api::router(daemon.clone(), api::Access { owner, token });
     serve::raise_descriptor_limit();
     tokio::spawn(serve::serve(

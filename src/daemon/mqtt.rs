@@ -27,6 +27,11 @@ use super::events::Event;
 use super::metrics::Metrics;
 use super::serve::LogThrottle;
 use crate::config::MqttConfig;
+use crate::fit::stats::ErrorStats;
+use crate::profile::store::VerificationRecord;
+
+/// The largest packet sent or taken, bytes.
+const MAX_PACKET: usize = 1 << 20;
 
 /// Why MQTT could not be set up.
 #[derive(Debug, thiserror::Error)]
@@ -127,6 +132,9 @@ impl Mqtt {
             .unwrap_or_else(|| format!("chromacal-{host}"));
         let mut options = MqttOptions::new(client_id, address, port);
         options.set_keep_alive(Duration::from_secs_f64(config.keep_alive_s));
+        // A verification's event carries each patch's ΔE00: past rumqttc's default of
+        // 10 KiB with a few hundred patches.
+        options.set_max_packet_size(MAX_PACKET, MAX_PACKET);
         options.set_clean_session(true);
         let status_topic = format!("{root}/status");
         options.set_last_will(LastWill::new(
@@ -158,10 +166,21 @@ impl Mqtt {
                     match eventloop.poll().await {
                         Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
                             tracing::info!(%broker, "MQTT connected");
+                            // The newest of each retained topic, waiting for room in
+                            // the queue (which this loop empties) rather than dropped.
                             let topics = retained.lock().map(|r| r.clone()).unwrap_or_default();
-                            for (topic, payload) in topics {
-                                let _ = client.try_publish(topic, QoS::AtLeastOnce, true, payload);
-                            }
+                            let client = client.clone();
+                            tokio::spawn(async move {
+                                for (topic, payload) in topics {
+                                    if client
+                                        .publish(topic, QoS::AtLeastOnce, true, payload)
+                                        .await
+                                        .is_err()
+                                    {
+                                        return;
+                                    }
+                                }
+                            });
                         }
                         Ok(rumqttc::Event::Outgoing(rumqttc::Outgoing::Disconnect)) => return,
                         Ok(_) => {}
@@ -207,18 +226,29 @@ impl Mqtt {
         }
     }
 
-    /// A device's state at start: its current profile and last verification.
-    pub fn restore(&self, device: &str, state: Value) {
+    /// A device's state at start: its current profile (id, held-out error, when
+    /// made) and its last verification.
+    pub fn restore(
+        &self,
+        device: &str,
+        profile: Option<(&str, Option<ErrorStats>, &str)>,
+        verification: Option<&VerificationRecord>,
+    ) {
+        let state = json!({
+            "device": device,
+            "job": null,
+            "last_job": null,
+            "current_profile": profile.map(|(id, held_out, at)| profile_state(id, "store", held_out, at)),
+            "last_verification": verification.map(verification_state),
+            "updated": now(),
+        });
         if let Ok(mut states) = self.states.lock() {
+            self.send_state(device, &state);
             states.insert(device.to_string(), state);
         }
-        self.publish_state(device);
     }
 
-    fn publish_state(&self, device: &str) {
-        let Some(state) = self.states.lock().ok().and_then(|s| s.get(device).cloned()) else {
-            return;
-        };
+    fn send_state(&self, device: &str, state: &Value) {
         self.send(
             format!("{}/{}/state", self.root, topic_level(device)),
             QoS::AtLeastOnce,
@@ -232,10 +262,9 @@ impl Mqtt {
         if matches!(event, Event::Progress { .. }) && !self.progress {
             return;
         }
-        let now = humantime::format_rfc3339_millis(std::time::SystemTime::now()).to_string();
-        let mut payload = serde_json::to_value(event).unwrap_or(Value::Null);
+        let now = now();
+        let mut payload = super::events::event_json(device, event);
         if let Value::Object(map) = &mut payload {
-            map.insert("device".into(), device.into());
             map.insert("host".into(), self.host.clone().into());
             map.insert("at".into(), now.clone().into());
         }
@@ -254,17 +283,16 @@ impl Mqtt {
             false,
             payload.to_string(),
         );
-        let changed = {
-            let Ok(mut states) = self.states.lock() else {
-                return;
-            };
-            let state = states
-                .entry(device.to_string())
-                .or_insert_with(|| json!({"device": device}));
-            update_state(state, event, &now)
+        // Changed and sent under one lock, so that two events of one device cannot
+        // leave the older state retained.
+        let Ok(mut states) = self.states.lock() else {
+            return;
         };
-        if changed {
-            self.publish_state(device);
+        let state = states
+            .entry(device.to_string())
+            .or_insert_with(|| json!({"device": device}));
+        if update_state(state, event, &now) {
+            self.send_state(device, state);
         }
     }
 
@@ -288,58 +316,80 @@ impl Mqtt {
     }
 }
 
+/// The current profile as a device's state gives it: `how` it became current
+/// (`calibration`, `uniformity`, `rollback`; `store` for what the store held at
+/// start) and `at` when.
+fn profile_state(id: &str, how: &str, held_out: Option<ErrorStats>, at: &str) -> Value {
+    json!({"id": id, "how": how, "held_out": held_out, "at": at})
+}
+
+/// A verification as a device's state gives it.
+fn verification_state(record: &VerificationRecord) -> Value {
+    json!({
+        "at": record.at,
+        "profile_id": record.profile_id,
+        "stats": record.stats,
+        "threshold": record.threshold,
+        "passed": record.stats.is_some_and(|s| s.mean <= record.threshold),
+        "escalated": record.escalated,
+    })
+}
+
+fn now() -> String {
+    humantime::format_rfc3339_millis(std::time::SystemTime::now()).to_string()
+}
+
 /// Update a device's state with `event`; true if it changed what the state says
 /// (progress changes only the job's counts, which are not republished each reading).
 fn update_state(state: &mut Value, event: &Event, now: &str) -> bool {
     let Value::Object(map) = state else {
         return false;
     };
-    let mut set = |key: &str, value: Value| {
-        map.insert(key.into(), value);
-        true
-    };
-    let changed = match event {
-        Event::JobStarted { job } => set("job", json!(job)),
+    let changes: Vec<(&str, Value)> = match event {
+        Event::JobStarted { job } => vec![("job", json!(job))],
         Event::JobFinished { job, outcome } => {
-            set("job", Value::Null);
-            set(
-                "last_job",
-                json!({"id": job.id, "kind": job.kind, "result": outcome.result, "message": outcome.message}),
-            )
+            let last_job = json!({"id": job.id, "kind": job.kind, "result": outcome.result, "message": outcome.message});
+            let mut changes = vec![("job", Value::Null), ("last_job", last_job)];
+            // A job that went well says the devices are back.
+            if outcome.result == "ok" {
+                changes.push(("device_lost", Value::Null));
+            }
+            changes
         }
+        // A new current profile: the last verification was of another.
         Event::Published {
             profile_id,
             how,
             held_out,
-        } => set(
-            "current_profile",
-            json!({"id": profile_id, "how": how, "held_out": held_out, "at": now}),
-        ),
-        Event::RolledBack { entry } => set(
-            "current_profile",
-            json!({"id": entry.id, "how": entry.how, "held_out": entry.held_out, "at": entry.at}),
-        ),
-        Event::Verification { record } => set(
-            "last_verification",
-            json!({
-                "at": record.at,
-                "profile_id": record.profile_id,
-                "stats": record.stats,
-                "threshold": record.threshold,
-                "passed": record.stats.is_some_and(|s| s.mean <= record.threshold),
-                "escalated": record.escalated,
-            }),
-        ),
-        Event::DeviceLost { message, fault } => set(
+        } => vec![
+            (
+                "current_profile",
+                profile_state(profile_id, how, *held_out, now),
+            ),
+            ("last_verification", Value::Null),
+        ],
+        Event::RolledBack { entry } => vec![
+            (
+                "current_profile",
+                profile_state(&entry.id, &entry.how, entry.held_out, &entry.at),
+            ),
+            ("last_verification", Value::Null),
+        ],
+        Event::Verification { record } => vec![("last_verification", verification_state(record))],
+        Event::DeviceLost { message, fault } => vec![(
             "device_lost",
             json!({"at": now, "fault": fault, "message": message}),
-        ),
-        _ => false,
+        )],
+        _ => Vec::new(),
     };
-    if changed {
-        map.insert("updated".into(), now.into());
+    if changes.is_empty() {
+        return false;
     }
-    changed
+    for (key, value) in changes {
+        map.insert(key.into(), value);
+    }
+    map.insert("updated".into(), now.into());
+    true
 }
 
 #[cfg(test)]
@@ -350,6 +400,67 @@ mod tests {
     fn topic_levels_lose_the_characters_mqtt_gives_a_meaning_to() {
         assert_eq!(topic_level("lab/left+#"), "lab_left__");
         assert_eq!(topic_level("desk-2_a"), "desk-2_a");
+    }
+
+    #[test]
+    fn a_new_profile_forgets_the_old_verification_and_a_good_job_the_lost_device() {
+        let mut state = json!({"device": "a"});
+        let record = VerificationRecord {
+            at: "t".into(),
+            profile_id: "p".into(),
+            stats: ErrorStats::of(&[2.0]),
+            delta_e00: vec![2.0],
+            threshold: 1.0,
+            escalated: false,
+        };
+        assert!(update_state(
+            &mut state,
+            &Event::Verification { record },
+            "t1"
+        ));
+        assert_eq!(state["last_verification"]["passed"], false);
+        let lost = Event::DeviceLost {
+            fault: "instrument".into(),
+            message: "timeout".into(),
+        };
+        assert!(update_state(&mut state, &lost, "t2"));
+        assert_eq!(state["device_lost"]["fault"], "instrument");
+        let published = Event::Published {
+            profile_id: "q".into(),
+            how: "calibration".into(),
+            held_out: None,
+        };
+        assert!(update_state(&mut state, &published, "t3"));
+        assert!(state["last_verification"].is_null());
+        assert_eq!(state["current_profile"]["id"], "q");
+        let job = crate::daemon::events::JobStatus {
+            id: "j".into(),
+            kind: crate::daemon::events::JobKind::Calibrate,
+            origin: "api".into(),
+            started: String::new(),
+            phase: String::new(),
+            done: 0,
+            total: 0,
+            eta_s: None,
+            last: None,
+        };
+        let finished = |result: &str| Event::JobFinished {
+            job: job.clone(),
+            outcome: crate::daemon::events::JobOutcome {
+                result: result.into(),
+                message: String::new(),
+                profile_id: None,
+                published: false,
+                escalated: false,
+            },
+        };
+        assert!(update_state(&mut state, &finished("failed"), "t4"));
+        assert_eq!(state["device_lost"]["fault"], "instrument");
+        assert!(update_state(&mut state, &finished("ok"), "t5"));
+        assert!(state["device_lost"].is_null());
+        assert_eq!(state["updated"], "t5");
+        // Progress changes nothing that is republished.
+        assert!(!update_state(&mut state, &Event::Progress { job }, "t6"));
     }
 
     #[test]
