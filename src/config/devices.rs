@@ -155,6 +155,7 @@ pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String
     let top = toml::Table::try_from(&top).map_err(|e| format!("the config: {e}"))?;
     let mut devices: Vec<DeviceConfig> = Vec::new();
     let mut ports: BTreeMap<String, (String, Option<String>)> = BTreeMap::new();
+    let mut listeners: BTreeMap<String, String> = BTreeMap::new();
     let mut used: BTreeMap<&str, usize> = BTreeMap::new();
     for (index, entry) in config.device.iter().enumerate() {
         let at = format!("[[device]] number {}", index + 1);
@@ -232,6 +233,21 @@ pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String
         {
             return Err(format!(
                 "devices \"{other}\" and \"{name}\" both open {port}: declare the instrument once as [instruments.NAME] and name it in both (their jobs then take turns)"
+            ));
+        }
+        // A patch page or a Resolve server listens on its address for one display.
+        let listen = match device.display.sink() {
+            super::Sink::Web => Some(("display.web.address", &device.display.web.address)),
+            super::Sink::Resolve => {
+                Some(("display.resolve.address", &device.display.resolve.address))
+            }
+            _ => None,
+        };
+        if let Some((key, address)) = listen
+            && let Some(other) = listeners.insert(address.clone(), name.clone())
+        {
+            return Err(format!(
+                "devices \"{other}\" and \"{name}\" both listen on {address}: give each display its own {key}"
             ));
         }
         devices.push(DeviceConfig {
@@ -354,6 +370,29 @@ name = "c"
                 .relative_noise,
             0.003
         );
+        // A serial port shared the declared way is no conflict (each page on its own
+        // address).
+        let serial = "[display]\nsink = \"web\"\n[instruments.x]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n[[device]]\nname = \"a\"\ninstrument = \"x\"\n[[device]]\nname = \"b\"\ninstrument = \"x\"\n[device.display.web]\naddress = \"127.0.0.1:8081\"\n";
+        assert_eq!(devices(serial).unwrap().len(), 2);
+    }
+
+    #[test]
+    fn a_device_is_found_by_name_or_as_the_only_one() {
+        let names = ["a", "b"];
+        assert_eq!(find_device(&names, Some("b"), |n| n), Ok(&"b"));
+        assert!(
+            matches!(find_device(&names, None, |n| n), Err(NoDevice::Ambiguous(k)) if k == "a, b")
+        );
+        assert!(matches!(
+            find_device(&names, Some("c"), |n| n),
+            Err(NoDevice::Unknown { .. })
+        ));
+        assert_eq!(find_device(&names[..1], None, |n| n), Ok(&"a"));
+        let dir = std::path::Path::new("/state");
+        let d = devices("[[device]]\nname = \"x\"\n").unwrap();
+        assert_eq!(d[0].store_dir(dir), dir.join("x"));
+        let d = devices("").unwrap();
+        assert_eq!(d[0].store_dir(dir), dir);
     }
 
     #[test]
@@ -385,6 +424,11 @@ name = "c"
             (
                 "[[device]]\nname = \"a\"\n[device.display]\nsink = \"web\"\n[device.instrument]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n[[device]]\nname = \"b\"\n[device.display]\nsink = \"web\"\n[device.instrument]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n",
                 "both open /dev/ttyUSB0",
+            ),
+            // Two patch pages on one address.
+            (
+                "[display]\nsink = \"web\"\n[instruments.x]\ndriver = \"pr670\"\nport = \"/dev/ttyUSB0\"\n[[device]]\nname = \"a\"\ninstrument = \"x\"\n[[device]]\nname = \"b\"\ninstrument = \"x\"\n",
+                "both listen on 127.0.0.1:8080",
             ),
             // Two declarations of one port, and a shared one beside a device's own.
             (

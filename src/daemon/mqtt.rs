@@ -464,6 +464,41 @@ mod tests {
     }
 
     #[test]
+    fn mqtt_settings_that_cannot_work_are_refused_with_the_key() {
+        let ok = MqttConfig::default();
+        assert!(ok.check().is_ok());
+        for (config, said) in [
+            (
+                MqttConfig {
+                    tls: true,
+                    ..ok.clone()
+                },
+                "plain MQTT",
+            ),
+            (
+                MqttConfig {
+                    broker: "localhost".into(),
+                    ..ok.clone()
+                },
+                "mqtt.broker",
+            ),
+            (
+                MqttConfig {
+                    prefix: "lab/#".into(),
+                    ..ok.clone()
+                },
+                "mqtt.prefix",
+            ),
+        ] {
+            let error = config.check().unwrap_err();
+            assert!(error.contains(said), "{error}");
+        }
+        // The numbers' ranges are the config's (`config/ranges.rs`).
+        let error = crate::config::parse_config("[mqtt]\nqueue = 0\n", "t").unwrap_err();
+        assert!(error.to_string().contains("mqtt.queue"), "{error}");
+    }
+
+    #[test]
     fn credentials_others_can_read_are_refused() {
         use std::os::unix::fs::PermissionsExt;
         let dir = tempfile::tempdir().unwrap();
