@@ -324,14 +324,18 @@ async fn method_not_allowed(request: Request) -> Response {
 /// The device a request is for: `/devices/NAME/…`, or the only one.
 struct Dev(Arc<Device>);
 
+/// The `NAME` of a path `/devices/NAME/…`.
+fn device_in_path(path: &str) -> Option<&str> {
+    path.strip_prefix("/devices/")?.split('/').next()
+}
+
 /// The `NAME` of `/devices/NAME/…`, from the path as the client sent it.
 fn device_segment(parts: &Parts) -> Option<String> {
     let path = parts
         .extensions
         .get::<OriginalUri>()
-        .map_or_else(|| parts.uri.path().to_string(), |u| u.0.path().to_string());
-    let rest = path.strip_prefix("/devices/")?;
-    rest.split('/').next().map(String::from)
+        .map_or_else(|| parts.uri.path(), |u| u.0.path());
+    device_in_path(path).map(String::from)
 }
 
 impl FromRequestParts<Shared> for Dev {
@@ -523,14 +527,11 @@ fn keep_alive_interval(idle_timeout_s: f64) -> std::time::Duration {
 
 /// `GET /events`: every device's events; `GET /devices/NAME/events`: that device's.
 async fn events(State(state): State<Shared>, uri: OriginalUri) -> Response {
-    let only = match uri.0.path().strip_prefix("/devices/") {
-        Some(rest) => {
-            let name = rest.split('/').next().unwrap_or_default();
-            match state.daemon.device(Some(name)) {
-                Ok(device) => Some(device.name.clone()),
-                Err(e) => return refusal(StatusCode::NOT_FOUND, e.to_string()),
-            }
-        }
+    let only = match device_in_path(uri.0.path()) {
+        Some(name) => match state.daemon.device(Some(name)) {
+            Ok(device) => Some(device.name.clone()),
+            Err(e) => return refusal(StatusCode::NOT_FOUND, e.to_string()),
+        },
         None => None,
     };
     let max = state.daemon.loaded.config.daemon.max_event_streams;

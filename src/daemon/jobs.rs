@@ -119,12 +119,7 @@ pub(crate) async fn run_job(
         Some((name, turn)) => match wait_for_turn(device, name, turn, &stop).await {
             Some(guard) => Some(guard),
             None => {
-                return stopped_outcome(
-                    device,
-                    kind,
-                    cancel,
-                    "stopped while waiting for the instrument",
-                );
+                return stopped_outcome(kind, cancel, "stopped while waiting for the instrument");
             }
         },
         None => None,
@@ -180,7 +175,7 @@ pub(crate) async fn run_job(
                 });
             }
             match failure.stopped {
-                true => stopped_outcome(device, kind, cancel, &failure.message),
+                true => stopped_outcome(kind, cancel, &failure.message),
                 false => JobOutcome {
                     result: "failed".into(),
                     message: failure.message,
@@ -195,8 +190,8 @@ pub(crate) async fn run_job(
 
 /// How a job stopped on request ended: `cancelled` (given up) or, stopped by the
 /// daemon's shutdown, `interrupted` (a calibration then resumes at the next start).
-fn stopped_outcome(device: &Device, kind: JobKind, cancel: &AtomicBool, why: &str) -> JobOutcome {
-    let cancelled = cancel.load(Ordering::SeqCst) || !device.is_shutting_down();
+fn stopped_outcome(kind: JobKind, cancel: &AtomicBool, why: &str) -> JobOutcome {
+    let cancelled = cancel.load(Ordering::SeqCst);
     let message = match (cancelled, kind) {
         (false, JobKind::Calibrate) => {
             format!("{why}; the calibration resumes when the daemon starts again")

@@ -359,7 +359,6 @@ pub struct Daemon {
     devices: Vec<Arc<Device>>,
     pub(crate) bus: Arc<Bus>,
     started: Instant,
-    state_dir: PathBuf,
 }
 
 impl Daemon {
@@ -378,10 +377,6 @@ impl Daemon {
     /// The device named, or with `None` the only one.
     pub fn device(&self, name: Option<&str>) -> Result<&Arc<Device>, NoDevice> {
         find_device(&self.devices, name, |d| d.name.as_str())
-    }
-
-    pub fn state_dir(&self) -> &Path {
-        &self.state_dir
     }
 
     pub fn is_shutting_down(&self) -> bool {
@@ -594,7 +589,6 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
         devices,
         bus,
         started: Instant::now(),
-        state_dir: options.state_dir.clone(),
     });
 
     // The TCP listener is bound and its token written before the unix socket exists:
