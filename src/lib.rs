@@ -6,7 +6,7 @@
 //! [`fit`] (model, selection, checks) → [`profile`] (native TOML, store).
 //!
 //! The modules stand in layers, each importing only from those below it (lowest
-//! first): `durable`, `linalg` → `color`, `numeric_csv`, `time` → `model` → `screen` → `sim` →
+//! first): `durable`, `linalg` → `color`, `numeric_csv`, `time` → `model` → `screen` → `edid`, `x11` → `sim` →
 //! `instrument` → `display` → `measurement` → `plan` → `journal`, `cgats` →
 //! `measurement_file`, `argyll` → `fit` → `profile` → `export` → `config` →
 //! `calibrate` → `daemon`, `report`, `comparison`. `tests/layers.rs` holds the list
@@ -26,6 +26,7 @@ pub mod crf;
 pub mod daemon;
 pub mod display;
 pub mod durable;
+pub mod edid;
 pub mod export;
 pub mod fit;
 pub mod html_report;
@@ -42,3 +43,4 @@ pub mod report;
 pub mod screen;
 pub mod sim;
 pub mod time;
+pub mod x11;

@@ -8,8 +8,8 @@ use clap::{CommandFactory, Parser, Subcommand};
 mod cli;
 
 use cli::{
-    bench, calibrate, check, completions, config, daemon, emulate, export, fit, instruments,
-    measure, profile, render, report, spectrum,
+    bench, calibrate, check, completions, config, daemon, displays, emulate, export, fit,
+    instruments, lut, measure, profile, render, report, spectrum,
 };
 
 #[derive(Parser)]
@@ -44,6 +44,8 @@ enum Command {
     Emulate(emulate::EmulateArgs),
     Measure(measure::MeasureArgs),
     Instruments(instruments::InstrumentsArgs),
+    Displays(displays::DisplaysArgs),
+    Lut(lut::LutArgs),
     Export(export::ExportArgs),
     Profile(profile::ProfileArgs),
     Daemon(daemon::DaemonArgs),
@@ -75,6 +77,8 @@ fn main() -> ExitCode {
         Command::Emulate(args) => emulate::run(args),
         Command::Measure(args) => measure::run(args),
         Command::Instruments(args) => instruments::run(args),
+        Command::Displays(args) => displays::run(args),
+        Command::Lut(args) => lut::run(args),
         Command::Export(args) => export::run(args),
         Command::Profile(args) => profile::run(args),
         Command::Daemon(args) => daemon::run(args),

@@ -384,13 +384,35 @@ pub fn calibration_summary(c: &crate::profile::StoredCalibration) -> String {
         duration(c.instrument_s)
     );
     out += &format!(
-        "  measured white ΔE00 {:.3}, tone within {:.2} % at {} levels above black (predicted from the model alone: {:.3}, {:.2} %)\n",
+        "  measured {}: white ΔE00 {:.3}, tone within {:.2} % at {} levels above black (predicted from the model alone: {:.3}, {:.2} %)\n",
+        if c.through_lut {
+            "through the curves loaded in the video LUT"
+        } else {
+            "through the curves applied to the codes"
+        },
         c.measured_white_de00,
         100.0 * c.measured_tone_error,
         c.levels.len(),
         c.curves.predicted_white_de00,
         100.0 * c.curves.predicted_tone_error
     );
+    if let Some(white) = c.levels.iter().find(|l| l.input >= 1.0) {
+        let [x, y, z] = white.measured_xyz;
+        let t = c.curves.white;
+        let sum = x + y + z;
+        let target_sum = t[0] + t[1] + t[2];
+        if sum > 0.0 && target_sum > 0.0 {
+            out += &format!(
+                "  white measured x {:.4} y {:.4}, Y {:.2} (target x {:.4} y {:.4}, Y {:.2})\n",
+                x / sum,
+                y / sum,
+                y,
+                t[0] / target_sum,
+                t[1] / target_sum,
+                t[1]
+            );
+        }
+    }
     let rows: Vec<Vec<String>> = c
         .levels
         .iter()
@@ -515,6 +537,40 @@ pub fn check_summary(evaluation: &Evaluation, worst: usize) -> String {
         ],
         &rows,
     ));
+    out
+}
+
+/// `chromacal lut show`: an output's video LUT in words.
+pub fn describe_lut(status: &crate::calibrate::video_lut::LutStatus) -> String {
+    let mut out = format!(
+        "video LUT of {} on X display {}: {} entries, {}\n",
+        status.output,
+        status.x_display,
+        status.size,
+        if status.identity {
+            "straight (output = input)"
+        } else {
+            "curves loaded"
+        }
+    );
+    match status.from_profile_steps {
+        Some(steps) if steps <= 1.0 => out += "  it holds the current profile's curves\n",
+        Some(steps) => {
+            out += &format!(
+                "  it differs from the current profile's curves by up to {steps:.0} of 65535\n"
+            )
+        }
+        None => {}
+    }
+    if let Some(loader) = &status.desktop_loader {
+        out += &format!(
+            "  {loader} loads curves into this LUT itself: chromacal's daemon leaves it alone\n"
+        );
+    }
+    out += "  input     R        G        B\n";
+    for [v, r, g, b] in &status.samples {
+        out += &format!("  {v:.4}  {r:.5}  {g:.5}  {b:.5}\n");
+    }
     out
 }
 

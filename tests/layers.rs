@@ -19,6 +19,8 @@ const LAYERS: &[&[&str]] = &[
     &["model"],
     // What a screen shows: codes, patch windows, content.
     &["screen"],
+    // The X server of a real screen: outputs and their EDID, gamma ramps, pixels.
+    &["edid", "x11"],
     // The virtual monitor and its clock.
     &["sim"],
     // Instruments: drivers, protocols, emulators.

@@ -13,11 +13,13 @@ use crate::display::emulator_link::EmulatorScreen;
 use crate::display::resolve::ResolveDisplay;
 use crate::display::simulated::SimulatedDisplay;
 use crate::display::web::WebDisplay;
+use crate::display::window::{PatchWindow, WindowTarget};
 use crate::display::{DisplayError, PatchDisplay};
 use crate::instrument::devices::DeviceKind;
 use crate::instrument::driver::AsyncSerialInstrument;
 use crate::instrument::simulated::SimulatedInstrument;
 use crate::instrument::{Capability, Instrument, InstrumentError, InstrumentInfo, Reading};
+use crate::model::target::CalibrationCurves;
 use crate::screen::Patch;
 use crate::sim::clock::VirtualClock;
 use crate::sim::monitor::SimError;
@@ -46,6 +48,10 @@ pub struct Overrides {
     /// Where the Resolve server or the web page listens.
     pub listen: Option<String>,
     pub prompt_positions: bool,
+    /// The window sink's output (`--display window:OUTPUT`).
+    pub output: Option<crate::x11::OutputSelector>,
+    /// The window sink's X display (`--x-display`).
+    pub x_display: Option<String>,
 }
 
 impl Overrides {
@@ -73,6 +79,12 @@ impl Overrides {
         if self.prompt_positions {
             config.display.prompt_positions = true;
         }
+        if let Some(output) = &self.output {
+            config.display.output = Some(output.clone());
+        }
+        if let Some(x_display) = &self.x_display {
+            config.display.x_display = Some(x_display.clone());
+        }
     }
 }
 
@@ -82,6 +94,17 @@ pub enum RunDisplay {
     Emulator(EmulatorScreen),
     Resolve(ResolveDisplay),
     Web(WebDisplay),
+    Window(PatchWindow),
+}
+
+impl RunDisplay {
+    /// The native window, when the run has one (it holds a video LUT).
+    pub fn window(&mut self) -> Option<&mut PatchWindow> {
+        match self {
+            RunDisplay::Window(w) => Some(w),
+            _ => None,
+        }
+    }
 }
 
 impl PatchDisplay for RunDisplay {
@@ -91,6 +114,7 @@ impl PatchDisplay for RunDisplay {
             RunDisplay::Emulator(d) => d.name(),
             RunDisplay::Resolve(d) => d.name(),
             RunDisplay::Web(d) => d.name(),
+            RunDisplay::Window(d) => d.name(),
         }
     }
 
@@ -100,6 +124,7 @@ impl PatchDisplay for RunDisplay {
             RunDisplay::Emulator(d) => d.show(patch).await,
             RunDisplay::Resolve(d) => d.show(patch).await,
             RunDisplay::Web(d) => d.show(patch).await,
+            RunDisplay::Window(d) => d.show(patch).await,
         }
     }
 
@@ -109,6 +134,14 @@ impl PatchDisplay for RunDisplay {
             RunDisplay::Emulator(d) => d.blank().await,
             RunDisplay::Resolve(d) => d.blank().await,
             RunDisplay::Web(d) => d.blank().await,
+            RunDisplay::Window(d) => d.blank().await,
+        }
+    }
+
+    fn load_curves(&mut self, curves: Option<&CalibrationCurves>) -> Result<bool, DisplayError> {
+        match self {
+            RunDisplay::Window(d) => d.load_curves(curves),
+            _ => Ok(false),
         }
     }
 }
@@ -203,6 +236,13 @@ pub async fn open_devices(
         (Sink::Web, _) => {
             RunDisplay::Web(WebDisplay::bind(config.display.web.clone(), settle_s).await?)
         }
+        (Sink::Window, _) => RunDisplay::Window(PatchWindow::open(
+            &WindowTarget {
+                x_display: config.display.x_display.clone(),
+                output: config.display.output.clone().unwrap_or_default(),
+            },
+            settle_s,
+        )?),
         (Sink::Emulator, Some(screen)) => RunDisplay::Emulator(EmulatorScreen::connect(
             &if screen.is_absolute() {
                 screen.clone()

@@ -1,9 +1,11 @@
 //! A calibration run: the plan, the measuring loop, the journal.
 
 pub mod devices;
+pub mod displays;
 pub mod refine;
 pub mod rig;
 pub mod run;
 pub mod sequential;
 pub mod session;
+pub mod video_lut;
 pub mod warmup;

@@ -36,16 +36,29 @@ pub enum RefineError {
     NoXyz { input: f64 },
 }
 
+/// How the curves reach the screen while they are measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Through {
+    /// Applied to the codes sent, at this bit depth (a display without a video LUT).
+    Codes(u32),
+    /// Loaded in the display's video LUT: the grey codes are sent as they are, at the
+    /// plan's bit depth.
+    Lut(u32),
+}
+
 /// Show the grey of input `x` through `curves` and read it.
 async fn read_level<D: PatchDisplay, I: Instrument>(
     curves: &CalibrationCurves,
     x: f64,
-    bit_depth: u32,
+    through: Through,
     geometry: Geometry,
     display: &mut D,
     instrument: &mut I,
 ) -> Result<(Xyz, f64), RefineError> {
-    let codes = Codes::from_drive(curves.apply([x; 3]), bit_depth);
+    let (codes, bit_depth) = match through {
+        Through::Codes(bits) => (Codes::from_drive(curves.apply([x; 3]), bits), bits),
+        Through::Lut(bits) => (Codes::from_drive([x; 3], bits), bits),
+    };
     let patch = Patch {
         codes,
         background: Codes::from_drive([0.0; 3], bit_depth),
@@ -69,7 +82,7 @@ async fn read_level<D: PatchDisplay, I: Instrument>(
 
 /// Piecewise-linear interpolation through `(x, y)` points sorted by x, constant
 /// beyond the ends.
-fn through(points: &[(f64, f64)], x: f64) -> f64 {
+fn interpolate_gain(points: &[(f64, f64)], x: f64) -> f64 {
     match points {
         [] => 1.0,
         [only] => only.1,
@@ -99,10 +112,23 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
 ) -> Result<StoredCalibration, RefineError> {
     let target = config.target()?;
     let mut curves = calibration_curves(model, &target)?;
-    let bit_depth = config.bit_depth.unwrap_or(plan_bit_depth);
     let geometry = Geometry::centred(patch_size);
+    // Through a video LUT the grey is a code the plan's depth can send, and the target
+    // is that code's, not the ideal level's.
+    let lut = display.load_curves(Some(&curves)).map_err(RunError::from)?;
+    let through = if lut {
+        Through::Lut(plan_bit_depth)
+    } else {
+        Through::Codes(config.bit_depth.unwrap_or(plan_bit_depth))
+    };
     let inputs: Vec<f64> = (1..config.levels)
-        .map(|k| k as f64 / (config.levels - 1) as f64)
+        .map(|k| {
+            let x = k as f64 / (config.levels - 1) as f64;
+            match through {
+                Through::Lut(bits) => Codes::from_drive([x; 3], bits).drive()[0],
+                Through::Codes(_) => x,
+            }
+        })
         .collect();
     let black = model.black;
     let white = Xyz::new(curves.white[0], curves.white[1], curves.white[2]);
@@ -114,7 +140,7 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         let mut gains: Vec<(f64, f64)> = Vec::new();
         for &x in &inputs {
             let (measured, seconds) =
-                read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
+                read_level(&curves, x, through, geometry, display, instrument).await?;
             readings += 1;
             instrument_s += seconds;
             let above = measured.y - black.y;
@@ -129,11 +155,12 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
             let mut floor: f64 = 0.0;
             for (i, drive) in curve.iter_mut().enumerate().skip(1) {
                 let x = i as f64 / (n - 1) as f64;
-                let e = law.excitation(*drive) * through(&gains, x);
+                let e = law.excitation(*drive) * interpolate_gain(&gains, x);
                 *drive = law.drive(e.clamp(0.0, top)).max(floor);
                 floor = *drive;
             }
         }
+        display.load_curves(Some(&curves)).map_err(RunError::from)?;
     }
     // The check, through the final curves; white three times, for its chromaticity.
     let mut levels = Vec::new();
@@ -143,7 +170,7 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         let mut measured = Xyz::zeros();
         for _ in 0..reads {
             let (xyz, seconds) =
-                read_level(&curves, x, bit_depth, geometry, display, instrument).await?;
+                read_level(&curves, x, through, geometry, display, instrument).await?;
             readings += 1;
             instrument_s += seconds;
             measured += xyz / reads as f64;
@@ -164,6 +191,7 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         .map(|l| (l.measured_luminance / l.target_luminance - 1.0).abs())
         .fold(0.0, f64::max);
     Ok(StoredCalibration {
+        through_lut: lut,
         measured_white_de00: white_error(&measured_white, &white),
         curves,
         passes: config.refine_passes,
@@ -181,10 +209,10 @@ mod tests {
     #[test]
     fn gains_are_interpolated_and_held_beyond_the_ends() {
         let points = [(0.25, 1.1), (0.5, 0.9), (1.0, 1.0)];
-        assert_eq!(through(&points, 0.0), 1.1);
-        assert!((through(&points, 0.375) - 1.0).abs() < 1e-12);
-        assert_eq!(through(&points, 1.0), 1.0);
-        assert_eq!(through(&[], 0.3), 1.0);
+        assert_eq!(interpolate_gain(&points, 0.0), 1.1);
+        assert!((interpolate_gain(&points, 0.375) - 1.0).abs() < 1e-12);
+        assert_eq!(interpolate_gain(&points, 1.0), 1.0);
+        assert_eq!(interpolate_gain(&[], 0.3), 1.0);
     }
 
     #[test]

@@ -65,6 +65,8 @@ pub enum CalibrateError {
     StoreState(#[from] crate::profile::store::StoreError),
     #[error(transparent)]
     Devices(#[from] DevicesError),
+    #[error("video LUT: {0}")]
+    Lut(#[from] crate::display::lut::LutError),
     #[error("cannot write the config: {0}")]
     Serialize(String),
     #[error(
@@ -131,6 +133,8 @@ pub struct CalibrationOutcome {
     pub display: String,
     /// Why `[target]`'s calibration curves could not be made (the profile is fine).
     pub calibration_error: Option<String>,
+    /// What the run left in the display's video LUT (the native window only).
+    pub lut: Option<String>,
 }
 
 pub(crate) fn now_rfc3339() -> String {
@@ -615,6 +619,7 @@ pub async fn finish_run(
         instrument_seconds,
         display: display_name,
         calibration_error,
+        lut: None,
     })
 }
 
@@ -630,6 +635,8 @@ pub async fn calibrate<'a>(
     let store = ProfileStore::new(&options.state_dir);
     // Held for the whole run: one writer per state directory.
     let _store_lock = store.lock("chromacal calibrate")?;
+    // A run killed before it put the video LUT back left the ramp it saved.
+    crate::display::lut::restore_pending_logged(store.root());
     // A resumed run goes on with the config it started with (and the overrides).
     let (run, mut devices) = if let Some(resume) = &options.resume {
         let dir = match resume {
@@ -671,8 +678,24 @@ pub async fn calibrate<'a>(
         prompt,
         stop: options.stop.clone(),
     };
-    let outcome = finish_run(run, &mut devices, &store, &mut hooks).await;
+    // Characterised through a straight LUT; the user's ramp kept until the end.
+    if let Err(e) = crate::calibrate::video_lut::hold(store.root(), &mut devices) {
+        let _ = crate::calibrate::video_lut::release(store.root(), &mut devices, None);
+        devices.instrument.close();
+        return Err(e.into());
+    }
+    let mut outcome = finish_run(run, &mut devices, &store, &mut hooks).await;
     devices.instrument.close();
+    match crate::calibrate::video_lut::release(store.root(), &mut devices, outcome.as_ref().ok()) {
+        Ok(what) => {
+            if let Ok(o) = &mut outcome {
+                o.lut = what;
+            }
+        }
+        Err(e) => {
+            tracing::error!(error = %e, "the video LUT could not be set at the end of the run")
+        }
+    }
     outcome
 }
 

@@ -224,6 +224,9 @@ fn calibrate(
         if let Some(why) = &outcome.calibration_error {
             out += &format!("\ncalibration curves: none ({why})\n");
         }
+        if let Some(lut) = &outcome.lut {
+            out += &format!("video LUT: {lut}\n");
+        }
         out += &format!("\njournal: {}\n", outcome.journal_path.display());
         match &outcome.rejection {
             None => {
@@ -265,6 +268,16 @@ fn announce_display(loaded: &LoadedConfig, options: &CalibrateOptions) {
         Sink::Resolve => eprintln!(
             "chromacal: waiting for a Resolve pattern generator to connect to {}",
             config.display.resolve.address
+        ),
+        Sink::Window => eprintln!(
+            "chromacal: patches full-screen on {} of X display {}; aim the instrument at the screen's centre",
+            config.display.output.clone().unwrap_or_default().describe(),
+            config
+                .display
+                .x_display
+                .clone()
+                .or_else(|| std::env::var("DISPLAY").ok())
+                .unwrap_or_default()
         ),
         Sink::Simulated | Sink::Emulator => {}
     }

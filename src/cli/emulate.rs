@@ -18,7 +18,24 @@ use chromacal::instrument::minolta;
 use chromacal::sim::clock::VirtualClock;
 use chromacal::sim::monitor::VirtualMonitor;
 
+use chromacal::x11::OutputSelector;
+use chromacal::x11::capture::watch_output;
+
 use super::shared::Failure;
+
+/// `X,Y` in [0, 1].
+fn parse_aim(text: &str) -> Result<(f64, f64), String> {
+    let bad = || format!("--aim wants X,Y as fractions of the output, e.g. 0.5,0.5, not '{text}'");
+    let (x, y) = text.split_once(',').ok_or_else(bad)?;
+    let (x, y): (f64, f64) = (
+        x.trim().parse().map_err(|_| bad())?,
+        y.trim().parse().map_err(|_| bad())?,
+    );
+    if !((0.0..=1.0).contains(&x) && (0.0..=1.0).contains(&y)) {
+        return Err(bad());
+    }
+    Ok((x, y))
+}
 
 /// Emulate a serial instrument on a pseudo-terminal: prints the device path to open
 /// and the screen socket to show patches on, then answers as the instrument would,
@@ -62,6 +79,22 @@ pub struct EmulateArgs {
     /// The generator reads video levels (16–235) rather than full range.
     #[arg(long, requires = "resolve")]
     pub video_levels: bool,
+    /// Look at this X display's screen instead: before each reading the virtual monitor
+    /// shows the pixels under the aim point, through the output's CRTC gamma ramp as a
+    /// video card sends them (e.g. :1, an Xvfb showing `--display window`).
+    #[arg(long, value_name = "DISPLAY")]
+    pub x_display: Option<String>,
+    /// The output looked at, by RandR name [default: the primary].
+    #[arg(long, requires = "x_display")]
+    pub output: Option<String>,
+    /// Where the instrument is aimed, as fractions of the output's width and height.
+    #[arg(
+        long,
+        value_name = "X,Y",
+        default_value = "0.5,0.5",
+        requires = "x_display"
+    )]
+    pub aim: String,
 }
 
 pub fn run(args: EmulateArgs) -> Result<(), Failure> {
@@ -89,7 +122,17 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
         .simulated
         .clone()
         .unwrap_or_default();
-    let meter = Meter::new(monitor.clone(), simulated, faults.device(), faults.seed);
+    let mut meter = Meter::new(monitor.clone(), simulated, faults.device(), faults.seed);
+    if let Some(display) = &args.x_display {
+        let aim = parse_aim(&args.aim)?;
+        let selector = args
+            .output
+            .as_deref()
+            .map(OutputSelector::parse)
+            .unwrap_or_default();
+        let mut watch = watch_output(Some(display), &selector, aim).map_err(|e| e.to_string())?;
+        meter = meter.with_screen_source(Box::new(move || watch().map_err(|e| e.to_string())));
+    }
     let device: Box<dyn chromacal::instrument::emulator::DeviceModel> = match kind {
         DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a if args.not_remote => {
             let model = match kind {

@@ -78,10 +78,15 @@ pub struct DeviceArgs {
     /// Multiplies the instrument protocol's timeouts (for emulators run faster than real time).
     #[arg(long)]
     timing_scale: Option<f64>,
-    /// Where patches go: resolve (a pattern generator connects to chromacal), web (a
-    /// browser opens chromacal's patch page), emulator or simulated.
+    /// Where patches go: window[:OUTPUT] (chromacal's full-screen window on an X11
+    /// output, the primary by default; see `chromacal displays`), resolve (a pattern
+    /// generator connects to chromacal), web (a browser opens chromacal's patch page),
+    /// emulator or simulated.
     #[arg(long, value_name = "SINK")]
     display: Option<String>,
+    /// The X display of the window sink, e.g. :0 [default: $DISPLAY].
+    #[arg(long, value_name = "DISPLAY")]
+    x_display: Option<String>,
     /// Address the Resolve server or the web page listens on, e.g. 127.0.0.1:20002.
     #[arg(long, value_name = "ADDR")]
     listen: Option<String>,
@@ -100,11 +105,20 @@ impl DeviceArgs {
             screen: self.screen.clone(),
             timing_scale: self.timing_scale,
             sink: match &self.display {
-                Some(text) => Some(Sink::parse(text).map_err(Failure::from)?),
+                Some(text) => Some(
+                    Sink::parse(text.split_once(':').map_or(text.as_str(), |(s, _)| s))
+                        .map_err(Failure::from)?,
+                ),
                 None => None,
             },
             listen: self.listen.clone(),
             prompt_positions: self.prompt_positions,
+            output: self
+                .display
+                .as_deref()
+                .and_then(|t| t.split_once(':'))
+                .map(|(_, output)| chromacal::x11::OutputSelector::parse(output)),
+            x_display: self.x_display.clone(),
         })
     }
 }

@@ -93,6 +93,9 @@ pub enum Sink {
     Resolve,
     /// A browser showing chromacal's patch page (`[display.web]`).
     Web,
+    /// chromacal's own full-screen window on an X11 output (`x_display`, `output`),
+    /// whose video LUT the run holds.
+    Window,
 }
 
 impl Sink {
@@ -102,6 +105,7 @@ impl Sink {
             Sink::Emulator => "emulator",
             Sink::Resolve => "resolve",
             Sink::Web => "web",
+            Sink::Window => "window",
         }
     }
 
@@ -111,8 +115,9 @@ impl Sink {
             "emulator" => Ok(Sink::Emulator),
             "resolve" => Ok(Sink::Resolve),
             "web" => Ok(Sink::Web),
+            "window" => Ok(Sink::Window),
             _ => Err(format!(
-                "unknown display '{text}': simulated, emulator, resolve or web"
+                "unknown display '{text}': window[:OUTPUT], resolve, web, emulator or simulated"
             )),
         }
     }
@@ -138,6 +143,16 @@ pub struct DisplayConfig {
     pub prompt_positions: bool,
     pub resolve: ResolveConfig,
     pub web: WebConfig,
+    /// The X display of the window sink (`:0`); unset: `$DISPLAY`.
+    pub x_display: Option<String>,
+    /// The window's output: a RandR name (`output = "DP-1"`) or the monitor's EDID
+    /// serial (`output = { edid_serial = "…" }`); unset: the primary output.
+    pub output: Option<crate::x11::OutputSelector>,
+    /// Put the current profile's curves back into the video LUT whenever something else
+    /// overwrote them (the daemon checks every `lut_check_s`).
+    pub keep_lut: bool,
+    /// Seconds between the daemon's read-backs of the video LUT.
+    pub lut_check_s: f64,
 }
 
 impl Default for DisplayConfig {
@@ -150,6 +165,10 @@ impl Default for DisplayConfig {
             prompt_positions: false,
             resolve: ResolveConfig::default(),
             web: WebConfig::default(),
+            x_display: None,
+            output: None,
+            keep_lut: false,
+            lut_check_s: 30.0,
         }
     }
 }
@@ -389,9 +408,9 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     match (sink, serial.is_some()) {
         (Sink::Simulated, true) => {
             return Err(
-                "a serial instrument needs a display it can measure: set display.sink to resolve or web (or give an emulator's screen)".into());
+                "a serial instrument needs a display it can measure: set display.sink to window, resolve or web (or give an emulator's screen)".into());
         }
-        (Sink::Resolve | Sink::Web | Sink::Emulator, false) => {
+        (Sink::Resolve | Sink::Web | Sink::Emulator | Sink::Window, false) => {
             return Err(format!(
                 "display.sink = \"{}\" needs a serial instrument (instrument.driver and port): the simulated instrument can only measure the in-process virtual monitor",
                 sink.name()

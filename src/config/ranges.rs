@@ -61,6 +61,7 @@ pub const RANGES: &[Range] = &[
     r("instrument.correction[][]", -1000.0, 1000.0),
     // [display]
     r("display.settle_s", 0.0, 600.0),
+    r("display.lut_check_s", 1.0, 86_400.0),
     r("display.stability.tolerance", 0.0, 1.0),
     r("display.stability.floor", 0.0, 10_000.0),
     r("display.stability.max_reads", 2.0, 100.0),

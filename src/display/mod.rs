@@ -4,12 +4,15 @@
 //! measures straight after it returns.
 
 pub mod emulator_link;
+pub mod lut;
 pub mod resolve;
 pub mod simulated;
 pub mod web;
+pub mod window;
 
 use std::future::Future;
 
+use crate::model::target::CalibrationCurves;
 use crate::screen::Patch;
 
 /// Why a display could not show a patch.
@@ -31,4 +34,11 @@ pub trait PatchDisplay {
 
     /// Blank the screen (black), as when a run stops.
     fn blank(&mut self) -> impl Future<Output = Result<(), DisplayError>> + Send;
+
+    /// Load calibration curves (identity for `None`) into the video LUT behind the
+    /// patches, for a display that has one it may set (the native window's CRTC
+    /// gamma). `Ok(false)`: it has none, and curves must go into the codes instead.
+    fn load_curves(&mut self, _curves: Option<&CalibrationCurves>) -> Result<bool, DisplayError> {
+        Ok(false)
+    }
 }

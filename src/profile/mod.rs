@@ -320,6 +320,10 @@ pub struct StoredCalibration {
     /// Readings taken, and the instrument time they took, s.
     pub readings: usize,
     pub instrument_s: f64,
+    /// The check was measured through the curves loaded in the display's video LUT
+    /// (the native window), not through codes the curves were applied to.
+    #[serde(default)]
+    pub through_lut: bool,
 }
 
 #[cfg(test)]

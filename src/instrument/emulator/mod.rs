@@ -60,6 +60,9 @@ pub trait DeviceModel: Send {
     }
 }
 
+/// What the screen shows now, for an emulator that looks at a real one.
+pub type ScreenSource = Box<dyn FnMut() -> Result<crate::screen::ScreenContent, String> + Send>;
+
 /// Device faults: how often a measurement reports each of these instead of its value.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -98,6 +101,10 @@ impl Measured {
 /// virtual monitor, and the seeded device faults.
 pub struct Meter {
     instrument: SimulatedInstrument,
+    monitor: Arc<Mutex<VirtualMonitor>>,
+    /// Where the monitor's screen comes from before each reading, when it is not set
+    /// from outside (an X output read back: `chromacal emulate --x-display`).
+    screen_source: Option<ScreenSource>,
     faults: DeviceFaults,
     rng: ChaCha8Rng,
     faults_on: Arc<std::sync::atomic::AtomicBool>,
@@ -111,11 +118,19 @@ impl Meter {
         seed: u64,
     ) -> Self {
         Meter {
-            instrument: SimulatedInstrument::new(monitor, spec),
+            instrument: SimulatedInstrument::new(monitor.clone(), spec),
+            monitor,
+            screen_source: None,
             faults,
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_FA17),
             faults_on: Arc::new(std::sync::atomic::AtomicBool::new(true)),
         }
+    }
+
+    /// Read the screen from `source` before every reading.
+    pub fn with_screen_source(mut self, source: ScreenSource) -> Self {
+        self.screen_source = Some(source);
+        self
     }
 
     /// A switch for the device faults (on at first), kept by tests that want a clean
@@ -141,6 +156,17 @@ impl Meter {
 
     /// Measure what the screen shows, `synced` to its refresh or not.
     pub fn measure(&mut self, synced: bool) -> Measured {
+        if let Some(source) = &mut self.screen_source {
+            match source() {
+                Ok(content) => {
+                    if let Ok(mut m) = self.monitor.lock() {
+                        m.show(content);
+                    }
+                }
+                // The screen keeps what it last showed; say why it was not read.
+                Err(e) => tracing::warn!(error = %e, "the emulator could not read its screen"),
+            }
+        }
         let reading = match self.instrument.measure_now() {
             Ok(r) => r,
             Err(_) => {

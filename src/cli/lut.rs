@@ -1,0 +1,158 @@
+//! `chromacal lut`: the video LUT of an X11 output (its CRTC gamma ramp): load a
+//! profile's calibration curves into it, show it, reset it, save it as a `.cal`.
+
+use std::path::PathBuf;
+
+use clap::Subcommand;
+
+use chromacal::calibrate::video_lut::{desktop_lut_loader, lut_status};
+use chromacal::display::lut::restore_pending_logged;
+use chromacal::export::cal::curves_cal_text;
+use chromacal::export::parse_target;
+use chromacal::model::target::calibration_curves;
+use chromacal::profile::Profile;
+use chromacal::profile::store::{ProfileStore, default_state_dir};
+use chromacal::x11::{GammaRamp, OutputSelector, XDisplay};
+
+use super::shared::Failure;
+
+/// The video LUT (CRTC gamma ramp) of an X11 output.
+#[derive(clap::Args)]
+pub struct LutArgs {
+    #[command(subcommand)]
+    command: LutCommand,
+    /// The X display [default: $DISPLAY].
+    #[arg(long, global = true, value_name = "DISPLAY")]
+    x_display: Option<String>,
+    /// The output, by RandR name (see `chromacal displays`) [default: the primary].
+    #[arg(long, global = true)]
+    output: Option<String>,
+    /// State directory (for --current, and to put back a ramp an interrupted
+    /// calibration saved).
+    #[arg(long, global = true)]
+    state_dir: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum LutCommand {
+    /// Load a profile's calibration curves (interpolated to the ramp's size).
+    Load {
+        /// A chromacal profile (TOML) with calibration curves.
+        #[arg(required_unless_present = "current")]
+        profile: Option<PathBuf>,
+        /// The state directory's current profile instead.
+        #[arg(long, conflicts_with = "profile")]
+        current: bool,
+        /// Curves computed now from the profile's model for this white (native, D65,
+        /// 6500K, x,y) instead of the curves it carries.
+        #[arg(long)]
+        white: Option<String>,
+        /// Tone curve for computed curves: gamma:G, srgb, bt1886 or lstar.
+        #[arg(long)]
+        tone: Option<String>,
+        /// White luminance for computed curves, cd/m², or max.
+        #[arg(long)]
+        luminance: Option<String>,
+    },
+    /// Show the ramp: size, straight or not, samples, and whether a desktop program
+    /// loads curves itself.
+    Show {
+        /// JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Load the straight ramp (output = input).
+    Reset,
+    /// Write the ramp as an ArgyllCMS `.cal` file (256 rows).
+    Save {
+        /// The file to write.
+        file: PathBuf,
+    },
+}
+
+pub fn run(args: LutArgs) -> Result<(), Failure> {
+    let state_dir = args.state_dir.clone().unwrap_or_else(default_state_dir);
+    // A calibration killed while it held the LUT left the user's ramp behind; put it
+    // back first, unless a calibration holds the directory now.
+    let store = ProfileStore::new(&state_dir);
+    if let Ok(_lock) = store.lock("chromacal lut") {
+        restore_pending_logged(&state_dir);
+    }
+    let x = XDisplay::open(args.x_display.as_deref())?;
+    let selector = args
+        .output
+        .as_deref()
+        .map(OutputSelector::parse)
+        .unwrap_or_default();
+    let output = x.output(&selector)?;
+    match args.command {
+        LutCommand::Load {
+            profile,
+            current,
+            white,
+            tone,
+            luminance,
+        } => {
+            let path = match (profile, current) {
+                (Some(p), _) => p,
+                (None, _) => store.current_path(),
+            };
+            let profile = Profile::read(&path)?;
+            let curves = match parse_target(white.as_deref(), tone.as_deref(), luminance.as_deref())? {
+                Some(target) => calibration_curves(&profile.model, &target)?,
+                None => profile.calibration.map(|c| c.curves).ok_or_else(|| {
+                    format!(
+                        "{} carries no calibration curves: calibrate with a [target], or give --white/--tone to compute them from its model",
+                        path.display()
+                    )
+                })?,
+            };
+            x.set_gamma(&output, &GammaRamp::from_curves(&curves, output.gamma_size))?;
+            if let Some(loader) = desktop_lut_loader() {
+                eprintln!(
+                    "chromacal: note: {loader} also loads curves into the video LUT and may replace these"
+                );
+            }
+            println!(
+                "loaded the curves of {} ({}) into the video LUT of {} ({} entries)",
+                path.display(),
+                curves.target.describe(),
+                output.name,
+                output.gamma_size
+            );
+        }
+        LutCommand::Show { json } => {
+            let current = Profile::read(&store.current_path())
+                .ok()
+                .and_then(|p| p.calibration.map(|c| c.curves));
+            let status = lut_status(&x, &output, current.as_ref())?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&status)?);
+            } else {
+                print!("{}", chromacal::report::describe_lut(&status));
+            }
+        }
+        LutCommand::Reset => {
+            x.set_gamma(&output, &GammaRamp::identity(output.gamma_size))?;
+            println!("the video LUT of {} is straight", output.name);
+        }
+        LutCommand::Save { file } => {
+            let ramp = x.gamma(&output)?;
+            let created =
+                humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
+            let text = curves_cal_text(
+                |v| [ramp.output(0, v), ramp.output(1, v), ramp.output(2, v)],
+                &format!("video LUT of {} on {}", output.name, x.name()),
+                &created,
+            );
+            std::fs::write(&file, text).map_err(|e| format!("{}: {e}", file.display()))?;
+            println!(
+                "wrote the video LUT of {} ({} entries) to {}",
+                output.name,
+                ramp.len(),
+                file.display()
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,333 @@
+//! A native patch window: a borderless full-screen X11 window on one RandR output,
+//! with a child window as the patch. Both are filled by the X server from their
+//! background pixels, so the codes reach the framebuffer exactly (no colour
+//! management, no dithering, no compositing hint ignored: `_NET_WM_BYPASS_COMPOSITOR`
+//! is set) and the server repaints them itself after anything covered them.
+//!
+//! A patch counts as shown once the server has handled the requests that drew it (a
+//! round trip) and one frame of the output's mode has passed (scan-out), then the
+//! display's settle time (the panel's response). The cursor is hidden on the window;
+//! the screen saver is suspended (MIT-SCREEN-SAVER 1.1) and DPMS switched off for the
+//! run, and both are given back when the window closes.
+//!
+//! The window also holds the output's video LUT (its CRTC gamma ramp) for the run:
+//! see [`crate::display::lut`].
+
+use std::sync::Arc;
+
+use x11rb::connection::Connection;
+use x11rb::protocol::dpms::ConnectionExt as _;
+use x11rb::protocol::screensaver::ConnectionExt as _;
+use x11rb::protocol::xproto::{
+    AtomEnum, ChangeWindowAttributesAux, ConfigureWindowAux, ConnectionExt as _, CreateWindowAux,
+    EventMask, PropMode, WindowClass,
+};
+use x11rb::wrapper::ConnectionExt as _;
+
+use super::{DisplayError, PatchDisplay};
+use crate::model::target::CalibrationCurves;
+use crate::screen::{Codes, Patch};
+use crate::x11::capture::PixelFormat;
+use crate::x11::{GammaRamp, OutputInfo, OutputSelector, X11Error, XDisplay};
+
+/// Where the window goes: an X display and one of its outputs.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct WindowTarget {
+    /// `:0`, or `$DISPLAY` when unset.
+    pub x_display: Option<String>,
+    pub output: OutputSelector,
+}
+
+/// The patch window.
+pub struct PatchWindow {
+    x: Arc<XDisplay>,
+    output: OutputInfo,
+    format: PixelFormat,
+    window: u32,
+    patch: u32,
+    settle_s: f64,
+    /// DPMS was on before the run (switched back on at close).
+    dpms_was_on: bool,
+    closed: bool,
+}
+
+impl From<X11Error> for DisplayError {
+    fn from(e: X11Error) -> Self {
+        DisplayError::Lost(e.to_string())
+    }
+}
+
+impl PatchWindow {
+    /// Open the window full-screen on the output `target` names, black.
+    pub fn open(target: &WindowTarget, settle_s: f64) -> Result<Self, DisplayError> {
+        let x = Arc::new(XDisplay::open(target.x_display.as_deref())?);
+        let output = x.output(&target.output)?;
+        output.lit_crtc()?;
+        let format = x.pixel_format()?;
+        let (window, patch, dpms_was_on) = create_windows(&x, &output)?;
+        let mut w = PatchWindow {
+            x,
+            output,
+            format,
+            window,
+            patch,
+            settle_s,
+            dpms_was_on,
+            closed: false,
+        };
+        w.draw(&Patch {
+            codes: Codes::from_drive([0.0; 3], 8),
+            background: Codes::from_drive([0.0; 3], 8),
+            geometry: crate::screen::Geometry::centred(0.0),
+        })?;
+        Ok(w)
+    }
+
+    /// The output the window is on.
+    pub fn output(&self) -> &OutputInfo {
+        &self.output
+    }
+
+    pub fn x_display(&self) -> &Arc<XDisplay> {
+        &self.x
+    }
+
+    /// Bits per channel the window paints (the root visual's).
+    pub fn channel_bits(&self) -> u32 {
+        self.format.channel_bits()
+    }
+
+    /// The codes at the window's depth for codes at `codes.bit_depth`.
+    fn window_codes(&self, codes: &Codes) -> Result<[u32; 3], DisplayError> {
+        let bits = self.channel_bits();
+        if codes.bit_depth > bits {
+            return Err(DisplayError::Unsupported(format!(
+                "the window on {} paints {bits} bits per channel, not {}: set plan.bit_depth = {bits}",
+                self.output.name, codes.bit_depth
+            )));
+        }
+        let (from, to) = (Codes::max(codes.bit_depth), Codes::max(bits));
+        Ok(codes.rgb.map(|c| {
+            // Exact for equal depths; a shorter code is spread over the longer range.
+            ((u64::from(c.min(from)) * u64::from(to) + u64::from(from) / 2) / u64::from(from))
+                as u32
+        }))
+    }
+
+    /// Send the requests that put `patch` up, and wait until the server has done them.
+    fn draw(&mut self, patch: &Patch) -> Result<(), DisplayError> {
+        let lost = |e: &dyn std::fmt::Display| DisplayError::Lost(format!("{}: {e}", self.name()));
+        let patch_pixel = self.format.pixel(self.window_codes(&patch.codes)?);
+        let background_pixel = self.format.pixel(self.window_codes(&patch.background)?);
+        let (w, h) = (f64::from(self.output.width), f64::from(self.output.height));
+        let g = patch.geometry;
+        let px = (g.x * w).round() as i32;
+        let py = (g.y * h).round() as i32;
+        let pw = ((g.width * w).round() as u32).max(1);
+        let ph = ((g.height * h).round() as u32).max(1);
+        let conn = &self.x.conn;
+        conn.change_window_attributes(
+            self.window,
+            &ChangeWindowAttributesAux::new().background_pixel(background_pixel),
+        )
+        .map_err(|e| lost(&e))?;
+        conn.change_window_attributes(
+            self.patch,
+            &ChangeWindowAttributesAux::new().background_pixel(patch_pixel),
+        )
+        .map_err(|e| lost(&e))?;
+        conn.configure_window(
+            self.patch,
+            &ConfigureWindowAux::new().x(px).y(py).width(pw).height(ph),
+        )
+        .map_err(|e| lost(&e))?;
+        // Changing a background repaints nothing by itself: clear both to it.
+        conn.clear_area(false, self.window, 0, 0, 0, 0)
+            .map_err(|e| lost(&e))?;
+        conn.clear_area(false, self.patch, 0, 0, 0, 0)
+            .map_err(|e| lost(&e))?;
+        // Keep the screen saver from starting between patches.
+        let _ = conn.force_screen_saver(x11rb::protocol::xproto::ScreenSaver::RESET);
+        self.x.sync()?;
+        Ok(())
+    }
+
+    /// The output's gamma ramp now.
+    pub fn gamma(&self) -> Result<GammaRamp, X11Error> {
+        self.x.gamma(&self.output)
+    }
+
+    /// Load `ramp` into the output's CRTC.
+    pub fn set_gamma(&self, ramp: &GammaRamp) -> Result<(), X11Error> {
+        self.x.set_gamma(&self.output, ramp)
+    }
+
+    /// Unmap and destroy the window, give back the screen saver and DPMS.
+    pub fn close(&mut self) {
+        if self.closed {
+            return;
+        }
+        self.closed = true;
+        let conn = &self.x.conn;
+        let _ = conn.destroy_window(self.window);
+        let _ = conn.screensaver_suspend(0);
+        if self.dpms_was_on {
+            let _ = conn.dpms_enable();
+        }
+        let _ = self.x.sync();
+    }
+}
+
+impl Drop for PatchWindow {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+/// Create the full-screen window and its patch child, map them, hide the cursor, and
+/// hold off the screen saver and DPMS. Returns the two window ids and whether DPMS
+/// was on.
+fn create_windows(x: &XDisplay, output: &OutputInfo) -> Result<(u32, u32, bool), DisplayError> {
+    let lost = |e: &dyn std::fmt::Display| DisplayError::Lost(format!("{}: {e}", x.name()));
+    let conn = &x.conn;
+    let screen = &conn.setup().roots[x.screen];
+    let to_i16 = |v: i32| i16::try_from(v).map_err(|e| lost(&e));
+    let to_u16 = |v: u32| u16::try_from(v.max(1)).map_err(|e| lost(&e));
+    // An invisible cursor: one pixel, masked out.
+    let pixmap = conn.generate_id().map_err(|e| lost(&e))?;
+    conn.create_pixmap(1, pixmap, screen.root, 1, 1)
+        .map_err(|e| lost(&e))?;
+    let cursor = conn.generate_id().map_err(|e| lost(&e))?;
+    conn.create_cursor(cursor, pixmap, pixmap, 0, 0, 0, 0, 0, 0, 0, 0)
+        .map_err(|e| lost(&e))?;
+    let window = conn.generate_id().map_err(|e| lost(&e))?;
+    conn.create_window(
+        screen.root_depth,
+        window,
+        screen.root,
+        to_i16(output.x)?,
+        to_i16(output.y)?,
+        to_u16(output.width)?,
+        to_u16(output.height)?,
+        0,
+        WindowClass::INPUT_OUTPUT,
+        screen.root_visual,
+        &CreateWindowAux::new()
+            .background_pixel(screen.black_pixel)
+            // Full-screen without a window manager's frame or placement.
+            .override_redirect(1)
+            .cursor(cursor)
+            .event_mask(EventMask::EXPOSURE),
+    )
+    .map_err(|e| lost(&e))?;
+    let patch = conn.generate_id().map_err(|e| lost(&e))?;
+    conn.create_window(
+        screen.root_depth,
+        patch,
+        window,
+        0,
+        0,
+        1,
+        1,
+        0,
+        WindowClass::INPUT_OUTPUT,
+        screen.root_visual,
+        &CreateWindowAux::new()
+            .background_pixel(screen.black_pixel)
+            .cursor(cursor),
+    )
+    .map_err(|e| lost(&e))?;
+    let atom = |name: &[u8]| -> Result<u32, DisplayError> {
+        Ok(conn
+            .intern_atom(false, name)
+            .map_err(|e| lost(&e))?
+            .reply()
+            .map_err(|e| lost(&e))?
+            .atom)
+    };
+    let title = b"chromacal patches";
+    conn.change_property8(
+        PropMode::REPLACE,
+        window,
+        AtomEnum::WM_NAME,
+        AtomEnum::STRING,
+        title,
+    )
+    .map_err(|e| lost(&e))?;
+    // Ask a compositor to leave the window's pixels alone (EWMH 1.5).
+    conn.change_property32(
+        PropMode::REPLACE,
+        window,
+        atom(b"_NET_WM_BYPASS_COMPOSITOR")?,
+        AtomEnum::CARDINAL,
+        &[1],
+    )
+    .map_err(|e| lost(&e))?;
+    conn.map_window(patch).map_err(|e| lost(&e))?;
+    conn.map_window(window).map_err(|e| lost(&e))?;
+    conn.free_pixmap(pixmap).map_err(|e| lost(&e))?;
+    // The screen saver and DPMS, where the server has them.
+    let has = |name: &[u8]| {
+        conn.query_extension(name)
+            .ok()
+            .and_then(|c| c.reply().ok())
+            .is_some_and(|r| r.present)
+    };
+    if has(b"MIT-SCREEN-SAVER") {
+        conn.screensaver_suspend(1).map_err(|e| lost(&e))?;
+    } else {
+        tracing::warn!(
+            display = x.name(),
+            "no MIT-SCREEN-SAVER extension: the screen saver is not held off"
+        );
+    }
+    let mut dpms_was_on = false;
+    if has(b"DPMS")
+        && let Ok(info) = conn.dpms_info().map_err(|e| lost(&e))?.reply()
+        && info.state
+    {
+        dpms_was_on = true;
+        conn.dpms_disable().map_err(|e| lost(&e))?;
+    }
+    x.sync()?;
+    Ok((window, patch, dpms_was_on))
+}
+
+impl PatchDisplay for PatchWindow {
+    fn name(&self) -> String {
+        format!(
+            "window on {} of X display {} ({} bits)",
+            self.output.name,
+            self.x.name(),
+            self.channel_bits()
+        )
+    }
+
+    async fn show(&mut self, patch: &Patch) -> Result<(), DisplayError> {
+        self.draw(patch)?;
+        // Scan-out of one frame, then the panel's response.
+        tokio::time::sleep(std::time::Duration::from_secs_f64(
+            self.output.frame_s() + self.settle_s,
+        ))
+        .await;
+        Ok(())
+    }
+
+    async fn blank(&mut self) -> Result<(), DisplayError> {
+        self.draw(&Patch {
+            codes: Codes::from_drive([0.0; 3], 8),
+            background: Codes::from_drive([0.0; 3], 8),
+            geometry: crate::screen::Geometry::centred(0.0),
+        })
+    }
+
+    fn load_curves(&mut self, curves: Option<&CalibrationCurves>) -> Result<bool, DisplayError> {
+        let size = self.output.gamma_size;
+        let ramp = match curves {
+            Some(c) => GammaRamp::from_curves(c, size),
+            None => GammaRamp::identity(size),
+        };
+        self.set_gamma(&ramp)?;
+        Ok(true)
+    }
+}
