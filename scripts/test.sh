@@ -46,6 +46,14 @@ command -v iccdump >/dev/null || need_package argyll
 command -v transicc >/dev/null || need_package liblcms2-utils
 /usr/bin/python3 -c "import json_tricks, numpy" 2>/dev/null ||
     need_package "python3-json-tricks python3-numpy"
+# The patch window, the video LUT and the emulator that looks at the screen are
+# tested against a real X server: Xorg with the dummy driver (Xvfb's CRTC gamma ramp
+# does not read back what was set), with xrandr to change it from outside and
+# ArgyllCMS's dispwin to read the LUT back; EDID parsing against edid-decode.
+[ -x /usr/lib/xorg/Xorg ] || command -v Xorg >/dev/null || need_package xserver-xorg-core
+[ -e /usr/lib/xorg/modules/drivers/dummy_drv.so ] || need_package xserver-xorg-video-dummy
+command -v xrandr >/dev/null || need_package x11-xserver-utils
+command -v edid-decode >/dev/null || need_package edid-decode
 # Registration with colord is tested against a real colord on a private system bus.
 [ -x /usr/libexec/colord ] || need_package colord
 command -v dbus-daemon >/dev/null || need_package dbus-daemon

@@ -5,7 +5,7 @@
 //! Only the 128-byte base block is read: it holds everything chromacal uses; the
 //! extension blocks that may follow (CTA-861, DisplayID) are counted, not parsed.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The fixed first eight bytes of every EDID (§3.3).
 const HEADER: [u8; 8] = [0x00, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0x00];
@@ -22,7 +22,7 @@ pub enum EdidError {
 }
 
 /// A parsed EDID base block.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Edid {
     /// Three-letter PNP manufacturer ID (`DEL`, `APP`, `SAM`).
     pub manufacturer: String,

@@ -435,6 +435,38 @@ pub fn calibration_summary(c: &crate::profile::StoredCalibration) -> String {
     out
 }
 
+/// The monitor's EDID identity and its stated chromaticities beside the measured ones,
+/// with a warning when they are grossly apart.
+pub fn edid_summary(profile: &Profile) -> String {
+    let (Some(edid), Some(comparison)) = (&profile.provenance.edid, profile.edid_comparison())
+    else {
+        return String::new();
+    };
+    let mut out = format!("monitor (EDID): {}\n", edid.describe());
+    let rows: Vec<Vec<String>> = comparison
+        .rows
+        .iter()
+        .map(|(name, e, m, d)| {
+            vec![
+                name.to_string(),
+                format!("{:.4}, {:.4}", e[0], e[1]),
+                format!("{:.4}, {:.4}", m[0], m[1]),
+                format!("{d:.4}"),
+            ]
+        })
+        .collect();
+    out += &table(&["", "EDID xy", "measured xy", "apart"], &rows);
+    if comparison.mismatch() {
+        out += &format!(
+            "  WARNING: the EDID's chromaticities are up to {:.3} from the measured ones (more than {}): is this the display you meant?\n",
+            comparison.worst,
+            crate::profile::EDID_MISMATCH_XY
+        );
+    }
+    out.push('\n');
+    out
+}
+
 pub fn describe_profile(profile: &Profile) -> String {
     let mut out = String::new();
     let _ = writeln!(
@@ -451,6 +483,7 @@ pub fn describe_profile(profile: &Profile) -> String {
         let _ = writeln!(out, "instrument: {} ({:?})", i.name, i.capability);
     }
     let _ = writeln!(out, "made by {}\n", p.program);
+    out.push_str(&edid_summary(profile));
     out.push_str(&describe_model(&profile.model, &profile.units.to_string()));
     let _ = writeln!(out, "\nprimaries with standard errors:");
     for pr in &profile.report.primaries {

@@ -24,19 +24,8 @@ impl Drop for Services {
     }
 }
 
-const BUS_CONFIG: &str = r#"<!DOCTYPE busconfig PUBLIC "-//freedesktop//DTD D-Bus Bus Configuration 1.0//EN"
- "http://www.freedesktop.org/standards/dbus/1.0/busconfig.dtd">
-<busconfig><type>system</type>
-  <listen>unix:path=SOCKET</listen><auth>EXTERNAL</auth>
-  <policy context="default"><allow user="*"/><allow own="*"/><allow send_type="method_call"/>
-   <allow send_type="signal"/><allow send_requested_reply="true" send_type="method_return"/>
-   <allow send_requested_reply="true" send_type="error"/><allow receive_type="method_call"/>
-   <allow receive_type="method_return"/><allow receive_type="error"/><allow receive_type="signal"/></policy>
-</busconfig>
-"#;
-
 /// A system bus and colord on it; returns the bus address.
-fn start_colord(dir: &Path) -> (Services, String) {
+fn start_colord(dir: &Path) -> (Services, common::bus::SystemBus, String) {
     for (tool, package) in [
         ("dbus-daemon", "dbus-daemon"),
         ("/usr/libexec/colord", "colord"),
@@ -52,27 +41,10 @@ fn start_colord(dir: &Path) -> (Services, String) {
         "0",
         "colord runs as root (polkit lets root through); run the tests as root"
     );
-    let socket = dir.join("system_bus_socket");
-    let config = dir.join("bus.conf");
-    std::fs::write(
-        &config,
-        BUS_CONFIG.replace("SOCKET", socket.to_str().unwrap()),
-    )
-    .unwrap();
-    let bus = Command::new("dbus-daemon")
-        .arg(format!("--config-file={}", config.display()))
-        .args(["--nofork", "--print-address=1"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut services = Services(vec![bus]);
+    let bus = common::bus::SystemBus::start(dir);
+    let address = bus.address.clone();
     let deadline = Instant::now() + Duration::from_secs(10);
-    while !socket.exists() {
-        assert!(Instant::now() < deadline, "dbus-daemon made no socket");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let address = format!("unix:path={}", socket.display());
+    let mut services = Services(vec![]);
     let colord = Command::new("unshare")
         .args([
             "-m",
@@ -102,7 +74,7 @@ fn start_colord(dir: &Path) -> (Services, String) {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-    (services, address)
+    (services, bus, address)
 }
 
 #[test]
@@ -139,7 +111,7 @@ fn an_exported_profile_becomes_the_default_of_a_display_in_colord() {
     );
     assert!(icc.exists());
 
-    let (_services, address) = start_colord(dir.path());
+    let (_services, _bus, address) = start_colord(dir.path());
     let out = export(&address);
     assert!(
         out.status.success(),

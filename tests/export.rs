@@ -639,8 +639,8 @@ fn measured_refinement_corrects_what_the_fitted_law_gets_wrong() {
         .as_ref()
         .expect("the calibration made curves");
     assert_eq!(stored.passes, 2);
-    // 8 levels in each of 2 passes, then the check (white read 3 times).
-    assert_eq!(stored.readings, 2 * 8 + 8 + 2);
+    // 8 levels in each of 2 passes and the check, the white read 3 times in each.
+    assert_eq!(stored.readings, 3 * (8 + 2));
     assert!(stored.measured_tone_error < 0.015, "{stored:?}");
 
     // The profile's own curves: exported without a target.

@@ -36,6 +36,7 @@ fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
             config_digest: None,
             program: "test".into(),
             settings_at_resume: None,
+            edid: None,
         },
         report: fit.report.clone(),
         calibration: None,

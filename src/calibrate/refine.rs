@@ -4,12 +4,15 @@
 //! does. So, as ArgyllCMS's dispcal iterates, the grey ramp is shown through the
 //! curves and measured at a few levels; the luminance missing at each level,
 //! Y_target / Y_measured, is interpolated over the input and applied to all three
-//! channels' excitations alike. The correction is of luminance only: the grey's
-//! chromaticity is the model's, which rests on many readings, while one reading's
-//! chromaticity carries the instrument's noise (0.2 % per band moves the white by
-//! about 0.5 ΔE00) and would be written into the curves. A last pass measures the
-//! result (white read three times), so the figures reported are measured, not
-//! predicted.
+//! channels' excitations alike. The greys below white keep the model's chromaticity,
+//! which rests on many readings, while one reading's chromaticity carries the
+//! instrument's noise (0.2 % per band moves the white by about 0.5 ΔE00) and would be
+//! written into the curves. The white alone is read three times in each pass and its
+//! chromaticity corrected too, by per-channel factors applied at every level: a
+//! model 0.1 % off at full drive misses the white by 0.4 ΔE00, four times a good
+//! instrument's repeatability, and a white that misses the target is what a user
+//! checks first. A last pass measures the result (white read three times), so the
+//! figures reported are measured, not predicted.
 
 use super::run::RunError;
 use crate::color::Xyz;
@@ -101,6 +104,37 @@ fn interpolate_gain(points: &[(f64, f64)], x: f64) -> f64 {
     }
 }
 
+/// Readings of the white averaged in each pass and in the check.
+const WHITE_READS: usize = 3;
+
+/// Per-channel factors on the excitations that move the white measured through the
+/// curves onto the target's chromaticity without changing its luminance: the
+/// excitations each white needs, through the model's primary matrix (which only has
+/// to point the way: the next pass measures again), over what was obtained,
+/// normalised so that Y stays. Limited to ±20 % a pass; `None` when the matrix or the
+/// reading gives no answer.
+fn white_balance(model: &MonitorModel, measured: &Xyz, target: &Xyz) -> Option<[f64; 3]> {
+    let inverse = model.matrix.try_inverse()?;
+    let obtained = inverse * (measured - model.black);
+    let needed = inverse * (target - model.black);
+    if obtained
+        .iter()
+        .chain(needed.iter())
+        .any(|v| !(v.is_finite() && *v > 0.0))
+    {
+        return None;
+    }
+    let factors = [0, 1, 2].map(|c| needed[c] / obtained[c]);
+    let luminance = |f: [f64; 3]| {
+        (0..3)
+            .map(|c| model.matrix[(1, c)] * obtained[c] * f[c])
+            .sum::<f64>()
+    };
+    let keep = luminance([1.0; 3]) / luminance(factors);
+    keep.is_finite()
+        .then(|| factors.map(|f| (f * keep).clamp(0.8, 1.2)))
+}
+
 /// The model's curves for `config`, measured into place on `display` and `instrument`.
 pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
     model: &MonitorModel,
@@ -131,31 +165,64 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         })
         .collect();
     let black = model.black;
-    let white = Xyz::new(curves.white[0], curves.white[1], curves.white[2]);
-    let want = |x: f64| target_luminance(target.tone, x, black.y, white.y);
+    // The target white; lowered when balancing its chromaticity asks a channel for
+    // more than full drive.
+    let mut white = Xyz::new(curves.white[0], curves.white[1], curves.white[2]);
+    let want = |x: f64, white: &Xyz| target_luminance(target.tone, x, black.y, white.y);
     let (mut readings, mut instrument_s) = (0, 0.0);
     for _ in 0..config.refine_passes {
         // The gain of the light above black at each level: what it should have been
         // over what it was.
         let mut gains: Vec<(f64, f64)> = Vec::new();
+        let mut balance = [1.0; 3];
         for &x in &inputs {
-            let (measured, seconds) =
-                read_level(&curves, x, through, geometry, display, instrument).await?;
-            readings += 1;
-            instrument_s += seconds;
+            // The white three times: its chromaticity is corrected too.
+            let reads = if x == 1.0 { WHITE_READS } else { 1 };
+            let mut measured = Xyz::zeros();
+            for _ in 0..reads {
+                let (xyz, seconds) =
+                    read_level(&curves, x, through, geometry, display, instrument).await?;
+                readings += 1;
+                instrument_s += seconds;
+                measured += xyz / reads as f64;
+            }
             let above = measured.y - black.y;
             if above > 0.0 {
-                gains.push((x, ((want(x) - black.y) / above).clamp(0.5, 2.0)));
+                gains.push((x, ((want(x, &white) - black.y) / above).clamp(0.5, 2.0)));
+            }
+            if x == 1.0 {
+                balance = white_balance(model, &measured, &white).unwrap_or([1.0; 3]);
             }
         }
-        for (curve, law) in curves.curves.iter_mut().zip(&model.laws) {
+        // A channel that would need more than full drive at the white: all three give
+        // up the same share, so the white keeps its chromaticity and loses luminance.
+        let over = curves
+            .curves
+            .iter()
+            .zip(&model.laws)
+            .zip(balance)
+            .map(|((curve, law), b)| {
+                let last = curve.last().copied().unwrap_or(1.0);
+                law.excitation(last) * interpolate_gain(&gains, 1.0) * b
+                    / law.full_drive_excitation()
+            })
+            .fold(1.0, f64::max);
+        let balance = balance.map(|b| b / over.max(1.0));
+        if over > 1.0 {
+            // The luminance above black goes down by the same share, and so does the
+            // tone curve that ends at it.
+            white = black + (white - black) / over;
+            curves.white = [white.x, white.y, white.z];
+            curves.luminance_limited |= target.luminance.is_some();
+        }
+        for ((curve, law), b) in curves.curves.iter_mut().zip(&model.laws).zip(balance) {
             let top = law.full_drive_excitation();
             let n = curve.len();
             // Kept non-decreasing, as a lookup table must be.
             let mut floor: f64 = 0.0;
             for (i, drive) in curve.iter_mut().enumerate().skip(1) {
                 let x = i as f64 / (n - 1) as f64;
-                let e = law.excitation(*drive) * interpolate_gain(&gains, x);
+                let e = law.excitation(*drive) * interpolate_gain(&gains, x) * b;
                 *drive = law.drive(e.clamp(0.0, top)).max(floor);
                 floor = *drive;
             }
@@ -166,7 +233,7 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
     let mut levels = Vec::new();
     let mut measured_white = white;
     for &x in &inputs {
-        let reads = if x == 1.0 { 3 } else { 1 };
+        let reads = if x == 1.0 { WHITE_READS } else { 1 };
         let mut measured = Xyz::zeros();
         for _ in 0..reads {
             let (xyz, seconds) =
@@ -177,7 +244,7 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         }
         levels.push(LevelCheck {
             input: x,
-            target_luminance: target_luminance(target.tone, x, black.y, white.y),
+            target_luminance: want(x, &white),
             measured_luminance: measured.y,
             measured_xyz: [measured.x, measured.y, measured.z],
         });

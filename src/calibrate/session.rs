@@ -568,6 +568,11 @@ pub async fn finish_run(
             config_digest: Some(header.config_digest.clone()),
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
             settings_at_resume: run.settings_at_resume.clone(),
+            edid: devices
+                .display
+                .window()
+                .and_then(|w| w.output().edid.as_deref())
+                .and_then(|bytes| crate::edid::Edid::parse(bytes).ok()),
         },
         report: fitted.report.clone(),
         calibration,

@@ -217,6 +217,7 @@ fn calibrate(
             report::duration(outcome.instrument_seconds),
             report::duration(outcome.fit_seconds)
         );
+        out += &report::edid_summary(&outcome.profile);
         out += &report::fit_summary(&outcome.fitted.report);
         if let Some(c) = &outcome.profile.calibration {
             out += &report::calibration_summary(c);

@@ -105,6 +105,7 @@ fn fit(
             config_digest: None,
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
             settings_at_resume: None,
+            edid: None,
         },
         report: fitted.report.clone(),
         calibration: None,

@@ -124,6 +124,21 @@ pub enum Event {
         fault: String,
         message: String,
     },
+    /// The keeper loaded the current profile's curves into a window device's video
+    /// LUT (`reason`: start, a job ended, published, rolled back, the X screen changed,
+    /// resume from suspend, the LUT was overwritten).
+    LutLoaded {
+        output: String,
+        profile_id: String,
+        reason: String,
+    },
+    /// Something else wrote the video LUT: it was `steps` (of 65535) away from the
+    /// curves loaded; `reloading` with `display.keep_lut`.
+    LutOverwritten {
+        output: String,
+        steps: f64,
+        reloading: bool,
+    },
     ShuttingDown,
 }
 
@@ -139,6 +154,8 @@ impl Event {
             Event::Verification { .. } => "verification",
             Event::RolledBack { .. } => "rolled_back",
             Event::DeviceLost { .. } => "device_lost",
+            Event::LutLoaded { .. } => "lut_loaded",
+            Event::LutOverwritten { .. } => "lut_overwritten",
             Event::ShuttingDown => "shutting_down",
         }
     }

@@ -133,6 +133,14 @@ pub(crate) async fn run_job(
         }),
         Ok(devices) => {
             age_while_idle(device, devices);
+            // A window's patches are measured through the straight ramp; the LUT
+            // keeper loads the current curves again when the job ends.
+            if let Some(window) = devices.display.window()
+                && let Err(e) =
+                    window.set_gamma(&crate::x11::GammaRamp::identity(window.output().gamma_size))
+            {
+                tracing::warn!(device = %device.name, error = %e, "cannot straighten the video LUT for the job");
+            }
             match warm_up(device, id, devices, &stop).await {
                 Err(message) => Err(JobFailure {
                     message,
@@ -156,6 +164,10 @@ pub(crate) async fn run_job(
         release_instrument(hardware);
     }
     drop(turn);
+    // The window leaves the screen to the user between jobs.
+    if let Some(window) = guard.as_mut().and_then(|h| h.display.window()) {
+        window.hide();
+    }
     match result {
         Ok(success) => JobOutcome {
             result: "ok".into(),

@@ -92,6 +92,8 @@ pub struct Metrics {
     readings: Family<KindLabels, Counter>,
     faults: Family<KindLabels, Counter>,
     events: Family<EventLabels, Counter>,
+    lut_loaded: Family<DeviceLabel, Gauge>,
+    lut_overwritten: Family<DeviceLabel, Counter>,
     mqtt_published: Counter,
     mqtt_dropped: Counter,
     times: Mutex<BTreeMap<String, DeviceTimes>>,
@@ -162,6 +164,8 @@ impl Metrics {
             readings: Family::default(),
             faults: Family::default(),
             events: Family::default(),
+            lut_loaded: Family::default(),
+            lut_overwritten: Family::default(),
             mqtt_published: Counter::default(),
             mqtt_dropped: Counter::default(),
             times: Mutex::default(),
@@ -239,6 +243,16 @@ impl Metrics {
             metrics.events.clone(),
         );
         r.register(
+            "lut_loaded",
+            "The current profile's curves are in the window device's video LUT as the daemon loaded them (1), or not (0: never loaded, a job holds it, or overwritten)",
+            metrics.lut_loaded.clone(),
+        );
+        r.register(
+            "lut_overwritten",
+            "Times the daemon found its curves in the video LUT overwritten by something else",
+            metrics.lut_overwritten.clone(),
+        );
+        r.register(
             "mqtt_events_published",
             "Messages (events, states, status) handed to the MQTT client's queue",
             metrics.mqtt_published.clone(),
@@ -302,10 +316,6 @@ impl Metrics {
             })
             .inc();
         match event {
-            Event::JobStarted { .. } => {
-                self.job_running.get_or_create(&label(device)).set(1);
-                self.progress.get_or_create(&label(device)).set(0.0);
-            }
             Event::Progress { job } if job.total > 0 => {
                 self.progress
                     .get_or_create(&label(device))
@@ -340,6 +350,20 @@ impl Metrics {
                     .get_or_create(&label(device))
                     .set(record.threshold);
                 self.with_times(device, |t| t.verified = Some(SystemTime::now()));
+            }
+            Event::LutLoaded { .. } => {
+                self.lut_loaded.get_or_create(&label(device)).set(1);
+            }
+            Event::LutOverwritten { .. } => {
+                self.lut_loaded.get_or_create(&label(device)).set(0);
+                self.lut_overwritten.get_or_create(&label(device)).inc();
+            }
+            Event::JobStarted { .. } => {
+                self.job_running.get_or_create(&label(device)).set(1);
+                self.progress.get_or_create(&label(device)).set(0.0);
+                if let Some(loaded) = self.lut_loaded.get(&label(device)) {
+                    loaded.set(0);
+                }
             }
             Event::DeviceLost { fault, .. } => {
                 self.faults

@@ -16,6 +16,7 @@ pub mod api;
 pub mod client;
 pub mod events;
 pub mod jobs;
+pub mod lut;
 pub mod metrics;
 pub mod mqtt;
 pub mod notify;
@@ -525,6 +526,8 @@ fn open_devices_of(
         // Held while the daemon (and any job task) lives: no `calibrate` or second
         // daemon writes this store meanwhile.
         let lock = store.lock("chromacal daemon")?;
+        // A calibration killed while it held a window's LUT left the user's ramp.
+        crate::display::lut::restore_pending_logged(store.root());
         let turn = config
             .shared_instrument
             .as_ref()
@@ -641,6 +644,17 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     for device in daemon.devices() {
         device.restore_figures();
     }
+    // Each window device's curves kept in its video LUT.
+    let resumed: Vec<Arc<AtomicBool>> = daemon
+        .devices()
+        .iter()
+        .map(|device| {
+            let flag = Arc::new(AtomicBool::new(false));
+            lut::start(device, flag.clone());
+            flag
+        })
+        .collect();
+    tokio::spawn(lut::watch_resume(resumed));
     let app = api::router(daemon.clone(), api::Access { owner, token });
     serve::raise_descriptor_limit();
     tokio::spawn(serve::serve(

@@ -49,6 +49,8 @@ pub struct PatchWindow {
     /// DPMS was on before the run (switched back on at close).
     dpms_was_on: bool,
     closed: bool,
+    /// Unmapped between a daemon's jobs; mapped again at the next patch.
+    hidden: bool,
 }
 
 impl From<X11Error> for DisplayError {
@@ -74,6 +76,7 @@ impl PatchWindow {
             settle_s,
             dpms_was_on,
             closed: false,
+            hidden: false,
         };
         w.draw(&Patch {
             codes: Codes::from_drive([0.0; 3], 8),
@@ -116,6 +119,13 @@ impl PatchWindow {
 
     /// Send the requests that put `patch` up, and wait until the server has done them.
     fn draw(&mut self, patch: &Patch) -> Result<(), DisplayError> {
+        if self.hidden {
+            self.x
+                .conn
+                .map_window(self.window)
+                .map_err(|e| DisplayError::Lost(e.to_string()))?;
+            self.hidden = false;
+        }
         let lost = |e: &dyn std::fmt::Display| DisplayError::Lost(format!("{}: {e}", self.name()));
         let patch_pixel = self.format.pixel(self.window_codes(&patch.codes)?);
         let background_pixel = self.format.pixel(self.window_codes(&patch.background)?);
@@ -160,6 +170,15 @@ impl PatchWindow {
     /// Load `ramp` into the output's CRTC.
     pub fn set_gamma(&self, ramp: &GammaRamp) -> Result<(), X11Error> {
         self.x.set_gamma(&self.output, ramp)
+    }
+
+    /// Take the window off the screen until the next patch (a daemon between jobs).
+    pub fn hide(&mut self) {
+        if !self.hidden && !self.closed {
+            let _ = self.x.conn.unmap_window(self.window);
+            let _ = self.x.sync();
+            self.hidden = true;
+        }
     }
 
     /// Unmap and destroy the window, give back the screen saver and DPMS.

@@ -423,6 +423,35 @@ fn primaries(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
         "<p>Condition number of the primary matrix: {:.2}.</p>",
         profile.report.condition_number
     );
+    if let (Some(edid), Some(comparison)) = (&profile.provenance.edid, profile.edid_comparison()) {
+        let _ = writeln!(
+            out,
+            "<h3 id=\"edid\">What the monitor's EDID states</h3>\n<p>{}</p>",
+            escape(&edid.describe())
+        );
+        let rows: Vec<Vec<String>> = comparison
+            .rows
+            .iter()
+            .map(|(name, e, m, d)| {
+                vec![
+                    name.to_string(),
+                    format!("{:.4}, {:.4}", e[0], e[1]),
+                    format!("{:.4}, {:.4}", m[0], m[1]),
+                    format!("{d:.4}"),
+                ]
+            })
+            .collect();
+        table(out, &["", "EDID xy", "measured xy", "apart"], &rows);
+        if comparison.mismatch() {
+            note(
+                out,
+                &format!(
+                    "The EDID's chromaticities are up to {:.3} from the measured ones: is this the display you meant?",
+                    comparison.worst
+                ),
+            );
+        }
+    }
     out.push_str("</section>\n");
     Ok(())
 }

@@ -68,6 +68,11 @@ pub struct Provenance {
     /// (where from, and its digest): the readings were taken with the journal's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settings_at_resume: Option<String>,
+    /// The EDID of the monitor measured, when the run showed its patches in the
+    /// native window on an output that has one: its identity, and the primaries and
+    /// white its maker states, set beside the measured ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edid: Option<crate::edid::Edid>,
 }
 
 /// A monitor profile.
@@ -126,7 +131,54 @@ pub fn toml_error_position(text: &str, error: &toml::de::Error) -> (usize, usize
     (line, column, error.message().to_string())
 }
 
+/// How far the primaries and white an EDID states may lie from the measured ones (xy)
+/// before the profile asks whether this is the display meant. Makers' EDID figures
+/// are typical values, often a few thousandths off and for wide-gamut panels
+/// sometimes a couple of hundredths; a different display is usually further.
+pub const EDID_MISMATCH_XY: f64 = 0.03;
+
+/// The EDID's chromaticities beside the measured ones.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EdidComparison {
+    /// Name, EDID xy, measured xy, distance in xy: red, green, blue, white.
+    pub rows: Vec<(&'static str, [f64; 2], [f64; 2], f64)>,
+    /// The largest distance.
+    pub worst: f64,
+}
+
+impl EdidComparison {
+    /// The EDID is grossly unlike what was measured.
+    pub fn mismatch(&self) -> bool {
+        self.worst > EDID_MISMATCH_XY
+    }
+}
+
 impl Profile {
+    /// The EDID's primaries and white beside the fitted ones, when the profile carries
+    /// an EDID.
+    pub fn edid_comparison(&self) -> Option<EdidComparison> {
+        let edid = self.provenance.edid.as_ref()?;
+        let xy = |xyz: crate::color::Xyz| {
+            let sum = xyz.x + xyz.y + xyz.z;
+            (sum > 0.0).then(|| [xyz.x / sum, xyz.y / sum])
+        };
+        let columns = [0, 1, 2].map(|c| self.model.matrix.column(c).into_owned());
+        let measured = [
+            xy(columns[0])?,
+            xy(columns[1])?,
+            xy(columns[2])?,
+            xy(self.model.white())?,
+        ];
+        let stated = [edid.red, edid.green, edid.blue, edid.white];
+        let rows: Vec<_> = ["red", "green", "blue", "white"]
+            .into_iter()
+            .zip(stated.into_iter().zip(measured))
+            .map(|(name, (e, m))| (name, e, m, (e[0] - m[0]).hypot(e[1] - m[1])))
+            .collect();
+        let worst = rows.iter().map(|r| r.3).fold(0.0, f64::max);
+        Some(EdidComparison { rows, worst })
+    }
+
     pub fn from_toml(text: &str, path: &str) -> Result<Self, ProfileError> {
         // Look at the version first so an old or new file gets a clear message.
         #[derive(Deserialize)]

@@ -486,6 +486,7 @@ mod tests {
                 config_digest: None,
                 program: "test".into(),
                 settings_at_resume: None,
+                edid: None,
             },
             report: fitted.report.clone(),
             calibration: None,

@@ -2,7 +2,9 @@
 //! `../shared/data`, which tests use but the project does not carry.
 #![allow(dead_code)]
 
+pub mod bus;
 pub mod daemon;
+pub mod xserver;
 
 use std::path::PathBuf;
 

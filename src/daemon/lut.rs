@@ -1,0 +1,296 @@
+//! The daemon keeps each window device's calibration in its video LUT: the current
+//! profile's curves are loaded at start, after every job (a job measures through the
+//! straight ramp), after a publish or a rollback, after a RandR change of the X
+//! screen (a monitor plugged in, a mode changed) and after the machine resumes from
+//! suspend (logind's `PrepareForSleep(false)`). Every `display.lut_check_s` the LUT is
+//! read back; a ramp something else wrote (a game, a night-light tool) is reported as
+//! `lut_overwritten` and, with `display.keep_lut`, replaced.
+//!
+//! Where a desktop loads curves itself from colord (GNOME's gsd-color, xiccd), the
+//! keeper says so once and leaves the LUT alone.
+//!
+//! One thread a device: X calls are blocking, short, and this keeps them off the
+//! runtime. It talks to the rest of the daemon through the event bus only.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use tokio::sync::broadcast::error::TryRecvError;
+use x11rb::connection::Connection;
+use x11rb::protocol::Event as XEvent;
+use x11rb::protocol::randr::{ConnectionExt as _, NotifyMask};
+
+use super::events::Event;
+use super::jobs::current_profile;
+use super::{Device, DeviceEvent};
+use crate::calibrate::video_lut::desktop_lut_loader;
+use crate::config::Sink;
+use crate::x11::{GammaRamp, OutputInfo, OutputSelector, X11Error, XDisplay};
+
+/// How often the keeper looks at its inputs.
+const TICK: Duration = Duration::from_millis(100);
+
+/// Start the keeper of `device`'s LUT, if its patches go to the native window.
+pub(crate) fn start(device: &Arc<Device>, resumed: Arc<AtomicBool>) {
+    if device.loaded.config.display.sink() != Sink::Window {
+        return;
+    }
+    let device = device.clone();
+    let events = device.bus.events.subscribe();
+    let spawned = std::thread::Builder::new()
+        .name(format!("lut-{}", device.name))
+        .spawn(move || Keeper::new(device, resumed).run(events));
+    if let Err(e) = spawned {
+        tracing::error!(error = %e, "cannot start the video LUT keeper");
+    }
+}
+
+/// The X connection the keeper watches RandR events on, and its output.
+struct Watch {
+    x: XDisplay,
+    output: OutputInfo,
+}
+
+impl Watch {
+    fn open(x_display: Option<&str>, selector: &OutputSelector) -> Result<Self, X11Error> {
+        let x = XDisplay::open(x_display)?;
+        let output = x.output(selector)?;
+        x.conn
+            .randr_select_input(
+                x.root,
+                NotifyMask::SCREEN_CHANGE | NotifyMask::CRTC_CHANGE | NotifyMask::OUTPUT_CHANGE,
+            )
+            .map_err(|e| x.protocol(e))?;
+        x.sync()?;
+        Ok(Watch { x, output })
+    }
+
+    /// Whether a RandR event came since the last call; an error when the
+    /// connection is gone.
+    fn randr_changed(&self) -> Result<bool, X11Error> {
+        let mut changed = false;
+        while let Some(event) = self
+            .x
+            .conn
+            .poll_for_event()
+            .map_err(|e| self.x.protocol(e))?
+        {
+            if matches!(
+                event,
+                XEvent::RandrScreenChangeNotify(_) | XEvent::RandrNotify(_)
+            ) {
+                changed = true;
+            }
+        }
+        Ok(changed)
+    }
+}
+
+struct Keeper {
+    device: Arc<Device>,
+    resumed: Arc<AtomicBool>,
+    selector: OutputSelector,
+    /// What the keeper last loaded (none: nothing to keep, or a job holds the LUT).
+    expected: Option<GammaRamp>,
+    /// A load is due, and why.
+    due: Option<&'static str>,
+    next_check: Instant,
+    warned: Option<String>,
+}
+
+impl Keeper {
+    fn new(device: Arc<Device>, resumed: Arc<AtomicBool>) -> Self {
+        let selector = device
+            .loaded
+            .config
+            .display
+            .output
+            .clone()
+            .unwrap_or_default();
+        Keeper {
+            device,
+            resumed,
+            selector,
+            expected: None,
+            due: Some("start"),
+            next_check: Instant::now(),
+            warned: None,
+        }
+    }
+
+    fn check_every(&self) -> Duration {
+        Duration::from_secs_f64(self.device.loaded.config.display.lut_check_s.max(1.0))
+    }
+
+    /// Warn once for each different reason.
+    fn warn_once(&mut self, message: String) {
+        if self.warned.as_deref() != Some(message.as_str()) {
+            tracing::warn!(device = %self.device.name, "{message}");
+            self.warned = Some(message);
+        }
+    }
+
+    fn run(mut self, mut events: tokio::sync::broadcast::Receiver<DeviceEvent>) {
+        let x_display = self.device.loaded.config.display.x_display.clone();
+        let mut watch: Option<Watch> = None;
+        while !self.device.is_shutting_down() {
+            loop {
+                match events.try_recv() {
+                    Ok(e) if e.device == self.device.name => self.on_event(&e.event),
+                    Ok(_) | Err(TryRecvError::Lagged(_)) => {}
+                    Err(TryRecvError::Empty) => break,
+                    Err(TryRecvError::Closed) => return,
+                }
+            }
+            if self.resumed.swap(false, Ordering::SeqCst) {
+                self.due = Some("resume from suspend");
+            }
+            if watch.is_none() {
+                match Watch::open(x_display.as_deref(), &self.selector) {
+                    Ok(w) => {
+                        watch = Some(w);
+                        self.warned = None;
+                    }
+                    Err(e) => {
+                        self.warn_once(format!("cannot reach the video LUT: {e}"));
+                        std::thread::sleep(Duration::from_secs(1));
+                        continue;
+                    }
+                }
+            }
+            if let Some(w) = &mut watch {
+                match w.randr_changed() {
+                    Ok(true) => {
+                        // A hotplug or a mode change: the output may have a new CRTC.
+                        match w.x.output(&self.selector) {
+                            Ok(output) => w.output = output,
+                            Err(e) => self.warn_once(e.to_string()),
+                        }
+                        self.due = Some("the X screen changed (RandR)");
+                    }
+                    Ok(false) => {}
+                    Err(e) => {
+                        self.warn_once(format!("lost the X display: {e}"));
+                        watch = None;
+                        continue;
+                    }
+                }
+            }
+            // A job sets the LUT itself (straight, then the curves it measures).
+            if self.device.job().is_none()
+                && let Some(w) = &watch
+            {
+                let result = match self.due.take() {
+                    Some(reason) => self.load(w, reason),
+                    None if Instant::now() >= self.next_check => self.check(w),
+                    None => Ok(()),
+                };
+                if let Err(e) = result {
+                    self.warn_once(format!("video LUT of {}: {e}", w.output.name));
+                    watch = None;
+                }
+            }
+            std::thread::sleep(TICK);
+        }
+    }
+
+    fn on_event(&mut self, event: &Event) {
+        match event {
+            Event::JobStarted { .. } => self.expected = None,
+            Event::JobFinished { .. } => self.due = Some("a job ended"),
+            Event::Published { .. } => self.due = Some("a profile was published"),
+            Event::RolledBack { .. } => self.due = Some("rolled back"),
+            _ => {}
+        }
+    }
+
+    /// Load the current profile's curves (the straight ramp for a profile without
+    /// any: it was measured through one); nothing without a current profile.
+    fn load(&mut self, w: &Watch, reason: &'static str) -> Result<(), X11Error> {
+        self.next_check = Instant::now() + self.check_every();
+        let Some(profile) = current_profile(&self.device) else {
+            self.expected = None;
+            return Ok(());
+        };
+        if let Some(loader) = desktop_lut_loader() {
+            self.warn_once(format!(
+                "{loader} loads the video LUT of {}: chromacal leaves it alone (export the profile to colord instead: `chromacal export --register-colord`)",
+                w.output.name
+            ));
+            self.expected = None;
+            return Ok(());
+        }
+        let size = w.output.gamma_size;
+        let ramp = match &profile.calibration {
+            Some(c) => GammaRamp::from_curves(&c.curves, size),
+            None => GammaRamp::identity(size),
+        };
+        w.x.set_gamma(&w.output, &ramp)?;
+        tracing::info!(device = %self.device.name, output = %w.output.name, profile = %profile.id, reason, "video LUT loaded");
+        self.expected = Some(ramp);
+        self.device.emit(Event::LutLoaded {
+            output: w.output.name.clone(),
+            profile_id: profile.id,
+            reason: reason.to_string(),
+        });
+        Ok(())
+    }
+
+    /// Read the LUT back; report (and with `keep_lut` replace) a foreign ramp.
+    fn check(&mut self, w: &Watch) -> Result<(), X11Error> {
+        self.next_check = Instant::now() + self.check_every();
+        let Some(expected) = &self.expected else {
+            return Ok(());
+        };
+        let actual = w.x.gamma(&w.output)?;
+        let steps = actual.max_difference(expected);
+        if steps <= 1.0 {
+            return Ok(());
+        }
+        let keep = self.device.loaded.config.display.keep_lut;
+        tracing::warn!(device = %self.device.name, output = %w.output.name, steps, reloading = keep, "something else overwrote the video LUT");
+        self.device.emit(Event::LutOverwritten {
+            output: w.output.name.clone(),
+            steps,
+            reloading: keep,
+        });
+        if keep {
+            self.due = Some("the LUT was overwritten");
+        } else {
+            // Said once; watched again after the next load.
+            self.expected = None;
+        }
+        Ok(())
+    }
+}
+
+/// Set every flag of `resumed` whenever logind says the machine woke (`PrepareForSleep(false)` on
+/// the system bus). Without a system bus this does nothing.
+pub(crate) async fn watch_resume(resumed: Vec<Arc<AtomicBool>>) {
+    use tokio_stream::StreamExt;
+    let Ok(connection) = zbus::Connection::system().await else {
+        tracing::debug!("no system bus: resume from suspend is not watched");
+        return;
+    };
+    let rule = zbus::MatchRule::builder()
+        .msg_type(zbus::message::Type::Signal)
+        .interface("org.freedesktop.login1.Manager")
+        .and_then(|r| r.member("PrepareForSleep"))
+        .map(|r| r.build());
+    let Ok(rule) = rule else {
+        return;
+    };
+    let Ok(mut stream) = zbus::MessageStream::for_match_rule(rule, &connection, None).await else {
+        tracing::debug!("cannot watch logind's PrepareForSleep");
+        return;
+    };
+    while let Some(Ok(message)) = stream.next().await {
+        if let Ok(false) = message.body().deserialize::<bool>() {
+            tracing::info!("the machine resumed from suspend");
+            for flag in &resumed {
+                flag.store(true, Ordering::SeqCst);
+            }
+        }
+    }
+}

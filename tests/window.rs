@@ -1,0 +1,637 @@
+//! The screen in front of the user, end to end, against a real X server (Xorg with the
+//! dummy driver, `common::xserver`): chromacal's patch window puts exact codes on the
+//! screen and waits for the server; the video LUT is loaded, read back by ArgyllCMS
+//! `dispwin`, reset, and put back after kill -9; and a whole calibration runs with real
+//! bytes at every step — window → X server → emulator looking at the X screen through
+//! the CRTC gamma → pty → chromacal → fit → LUT → verification measured through it.
+
+use std::io::{Read, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use chromacal::display::PatchDisplay;
+use chromacal::display::window::{PatchWindow, WindowTarget};
+use chromacal::model::ScreenPosition;
+use chromacal::profile::Profile;
+use chromacal::screen::{Codes, Geometry, Patch};
+use chromacal::x11::{GammaRamp, OutputSelector, XDisplay};
+use rand::{Rng, SeedableRng};
+
+mod common;
+use common::xserver::XServer;
+use common::{chromacal, emulate, succeed};
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .build()
+        .unwrap()
+}
+
+fn window_on(x: &XServer) -> PatchWindow {
+    PatchWindow::open(
+        &WindowTarget {
+            x_display: Some(x.display.clone()),
+            output: OutputSelector::Primary,
+        },
+        0.0,
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_window_shows_the_codes_asked_for() {
+    let x = XServer::start();
+    let mut window = window_on(&x);
+    assert_eq!(window.channel_bits(), 8);
+    let reader = XDisplay::open(Some(&x.display)).unwrap();
+    let output = reader.output(&OutputSelector::Primary).unwrap();
+    assert_eq!(output.name, "DUMMY0");
+    let rt = runtime();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(25);
+    for i in 0..50 {
+        let codes = [0; 3].map(|_| rng.random_range(0..=255u32));
+        let mut background = [0; 3].map(|_| rng.random_range(0..=255u32));
+        if background == codes {
+            background[0] ^= 1;
+        }
+        let centre = ScreenPosition::new(rng.random_range(0.3..0.7), rng.random_range(0.3..0.7));
+        let geometry = Geometry::around(centre, rng.random_range(0.1..0.4));
+        let patch = Patch {
+            codes: Codes {
+                rgb: codes,
+                bit_depth: 8,
+            },
+            background: Codes {
+                rgb: background,
+                bit_depth: 8,
+            },
+            geometry,
+        };
+        rt.block_on(window.show(&patch)).unwrap();
+        let sample = reader.sample(&output, (centre.x, centre.y)).unwrap();
+        assert_eq!(sample.patch, codes, "patch {i}");
+        assert_eq!(sample.background, background, "patch {i}");
+        let expected = [
+            geometry.x * 1024.0,
+            geometry.y * 768.0,
+            geometry.width * 1024.0,
+            geometry.height * 768.0,
+        ];
+        for (got, want) in sample.rect.iter().zip(expected) {
+            assert!(
+                (*got as f64 - want).abs() <= 1.0,
+                "patch {i}: {:?} vs {expected:?}",
+                sample.rect
+            );
+        }
+    }
+    // Ten-bit codes cannot be shown on an 8-bit visual: said, not rounded.
+    let err = rt
+        .block_on(window.show(&Patch {
+            codes: Codes {
+                rgb: [1023, 0, 0],
+                bit_depth: 10,
+            },
+            background: Codes {
+                rgb: [0; 3],
+                bit_depth: 10,
+            },
+            geometry: Geometry::centred(0.2),
+        }))
+        .unwrap_err();
+    assert!(err.to_string().contains("plan.bit_depth = 8"), "{err}");
+}
+
+/// A proxy in front of the X server's socket that can hold back what the server
+/// sends, so that a test sees whether a client waits for the server's reply.
+struct HoldingProxy {
+    display: String,
+    hold: Arc<AtomicBool>,
+    path: PathBuf,
+}
+
+impl HoldingProxy {
+    fn start(server_display: &str) -> HoldingProxy {
+        let number: u32 = server_display.trim_start_matches(':').parse().unwrap();
+        let (path, listener, display) = (number + 500..number + 600)
+            .find_map(|n| {
+                let path = PathBuf::from(format!("/tmp/.X11-unix/X{n}"));
+                if path.exists() || Path::new(&format!("/tmp/.X{n}-lock")).exists() {
+                    return None;
+                }
+                UnixListener::bind(&path)
+                    .ok()
+                    .map(|l| (path, l, format!(":{n}")))
+            })
+            .unwrap();
+        let hold = Arc::new(AtomicBool::new(false));
+        let upstream = format!("/tmp/.X11-unix/X{number}");
+        let gate = hold.clone();
+        std::thread::spawn(move || {
+            for client in listener.incoming().flatten() {
+                let Ok(server) = UnixStream::connect(&upstream) else {
+                    return;
+                };
+                let (mut c_in, mut s_out) =
+                    (client.try_clone().unwrap(), server.try_clone().unwrap());
+                std::thread::spawn(move || {
+                    let _ = std::io::copy(&mut c_in, &mut s_out);
+                });
+                let (mut s_in, mut c_out) = (server, client);
+                let gate = gate.clone();
+                std::thread::spawn(move || {
+                    let mut buffer = [0u8; 65536];
+                    while let Ok(n) = s_in.read(&mut buffer) {
+                        if n == 0 {
+                            return;
+                        }
+                        while gate.load(Ordering::SeqCst) {
+                            std::thread::sleep(Duration::from_millis(5));
+                        }
+                        if c_out.write_all(&buffer[..n]).is_err() {
+                            return;
+                        }
+                    }
+                });
+            }
+        });
+        HoldingProxy {
+            display,
+            hold,
+            path,
+        }
+    }
+}
+
+impl Drop for HoldingProxy {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+#[test]
+fn a_patch_is_shown_only_once_the_server_has_answered() {
+    let x = XServer::start();
+    let proxy = HoldingProxy::start(&x.display);
+    let mut window = PatchWindow::open(
+        &WindowTarget {
+            x_display: Some(proxy.display.clone()),
+            output: OutputSelector::Primary,
+        },
+        0.0,
+    )
+    .unwrap();
+    let reader = XDisplay::open(Some(&x.display)).unwrap();
+    let output = reader.output(&OutputSelector::Primary).unwrap();
+    let done = Arc::new(AtomicBool::new(false));
+    proxy.hold.store(true, Ordering::SeqCst);
+    let shown = {
+        let done = done.clone();
+        std::thread::spawn(move || {
+            let patch = Patch {
+                codes: Codes {
+                    rgb: [200, 100, 50],
+                    bit_depth: 8,
+                },
+                background: Codes {
+                    rgb: [0; 3],
+                    bit_depth: 8,
+                },
+                geometry: Geometry::centred(0.3),
+            };
+            runtime().block_on(window.show(&patch)).unwrap();
+            done.store(true, Ordering::SeqCst);
+            window
+        })
+    };
+    // The server has drawn the patch (its requests went through) ...
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while reader.sample(&output, (0.5, 0.5)).unwrap().patch != [200, 100, 50] {
+        assert!(Instant::now() < deadline, "the server never drew the patch");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // ... but its answer to the round trip is held back: the patch is not shown yet.
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        !done.load(Ordering::SeqCst),
+        "show returned before the X server's reply came"
+    );
+    proxy.hold.store(false, Ordering::SeqCst);
+    let _window = shown.join().unwrap();
+    assert!(done.load(Ordering::SeqCst));
+}
+
+/// The rows of a `.cal` file: input, R, G, B.
+fn cal_rows(path: &Path) -> Vec<[f64; 4]> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .skip_while(|l| l.trim() != "BEGIN_DATA")
+        .skip(1)
+        .take_while(|l| l.trim() != "END_DATA")
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+            [v[0], v[1], v[2], v[3]]
+        })
+        .collect()
+}
+
+/// A profile with calibration curves, from a quick simulated calibration.
+fn profile_with_curves(dir: &Path) -> PathBuf {
+    let config = dir.join("curves.toml");
+    std::fs::write(
+        &config,
+        "[monitor]\npreset = \"lcd\"\n[target]\nwhite = \"D65\"\ntone = \"gamma:2.4\"\n",
+    )
+    .unwrap();
+    let state = dir.join("curves-state");
+    succeed(
+        chromacal()
+            .args(["calibrate", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state),
+    );
+    state.join("current.toml")
+}
+
+#[test]
+fn loaded_curves_read_back_in_argyll_dispwin_and_reset_straightens_them() {
+    let x = XServer::start();
+    let dir = tempfile::tempdir().unwrap();
+    let profile_path = profile_with_curves(dir.path());
+    let profile = Profile::read(&profile_path).unwrap();
+    let curves = profile.calibration.unwrap().curves;
+    let state = dir.path().join("state");
+    let out = succeed(
+        chromacal()
+            .args(["lut", "load", "--x-display", &x.display, "--state-dir"])
+            .arg(&state)
+            .arg(&profile_path),
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("DUMMY0"));
+    let back = dir.path().join("back.cal");
+    x.run("dispwin", &["-d1", "-s", back.to_str().unwrap()]);
+    let rows = cal_rows(&back);
+    assert_eq!(rows.len(), 256);
+    let step = 1.0 / 65535.0;
+    for [input, r, g, b] in &rows {
+        let want = curves.apply([*input; 3]);
+        for (got, want) in [r, g, b].into_iter().zip(want) {
+            assert!(
+                (got - want).abs() <= step,
+                "at {input}: dispwin read {got}, the profile's curve is {want}"
+            );
+        }
+    }
+    // Not the straight ramp: the test would pass on nothing otherwise.
+    assert!(rows.iter().any(|r| (r[1] - r[0]).abs() > 0.01));
+    // `lut save` writes what dispwin reads.
+    let saved = dir.path().join("saved.cal");
+    succeed(
+        chromacal()
+            .args(["lut", "save", "--x-display", &x.display, "--state-dir"])
+            .arg(&state)
+            .arg(&saved),
+    );
+    for (ours, theirs) in cal_rows(&saved).iter().zip(&rows) {
+        for c in 0..4 {
+            assert!(
+                (ours[c] - theirs[c]).abs() <= 1e-6,
+                "{ours:?} vs {theirs:?}"
+            );
+        }
+    }
+    let show = succeed(
+        chromacal()
+            .args([
+                "lut",
+                "show",
+                "--json",
+                "--x-display",
+                &x.display,
+                "--state-dir",
+            ])
+            .arg(&state),
+    );
+    let status: serde_json::Value = serde_json::from_slice(&show.stdout).unwrap();
+    assert_eq!(status["identity"], false);
+    succeed(
+        chromacal()
+            .args(["lut", "reset", "--x-display", &x.display, "--state-dir"])
+            .arg(&state),
+    );
+    x.run("dispwin", &["-d1", "-s", back.to_str().unwrap()]);
+    for [input, r, g, b] in cal_rows(&back) {
+        for v in [r, g, b] {
+            assert!((v - input).abs() <= step, "reset left {v} at {input}");
+        }
+    }
+}
+
+/// Journal lines of the newest run under `state`.
+fn journal_lines(state: &Path) -> usize {
+    let Ok(runs) = std::fs::read_dir(state.join("runs")) else {
+        return 0;
+    };
+    runs.flatten()
+        .filter_map(|r| std::fs::read_to_string(r.path().join("journal.jsonl")).ok())
+        .map(|t| t.lines().count())
+        .max()
+        .unwrap_or(0)
+}
+
+/// The config of the window calibrations: the CRT at 10 bits behind an 8-bit
+/// framebuffer (the LUT's output reaches the panel at 10), no uniformity grid (the
+/// emulated instrument is aimed at the centre and stays there), and a target whose
+/// curves are measured into place at 10 grey levels.
+const WINDOW_CONFIG: &str = "[monitor]\npreset = \"crt\"\nbit_depth = 10\n[plan]\nuniformity_grid = 0\n[display]\nsettle_s = 0.0\n[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nlevels = 10\n";
+
+#[test]
+fn kill_9_during_a_calibration_then_any_start_restores_the_lut() {
+    let x = XServer::start();
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    std::fs::write(&config, WINDOW_CONFIG).unwrap();
+    // The user's own ramp, bent so that it cannot be mistaken for another.
+    let xd = XDisplay::open(Some(&x.display)).unwrap();
+    let output = xd.output(&OutputSelector::Primary).unwrap();
+    let users = GammaRamp::from_fn(output.gamma_size, |c, v| v.powf(0.8 + 0.1 * c as f64));
+    xd.set_gamma(&output, &users).unwrap();
+    let emulator = emulate(&[
+        "--instrument",
+        "pr670",
+        "--time-scale",
+        "0.05",
+        "--x-display",
+        &x.display,
+        "--config",
+        config.to_str().unwrap(),
+    ]);
+    let state = dir.path().join("state");
+    let mut run = chromacal()
+        .args([
+            "calibrate",
+            "--display",
+            "window",
+            "--x-display",
+            &x.display,
+        ])
+        .arg("--config")
+        .arg(&config)
+        .arg("--instrument")
+        .arg(format!("pr670:{}", emulator.device))
+        .args(["--timing-scale", "0.05", "--state-dir"])
+        .arg(&state)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while journal_lines(&state) < 4 {
+        assert!(
+            Instant::now() < deadline,
+            "the calibration took no readings"
+        );
+        assert!(
+            run.try_wait().unwrap().is_none(),
+            "the calibration ended early"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Characterising through the straight ramp, the user's kept in the state directory.
+    assert!(xd.gamma(&output).unwrap().is_identity());
+    assert!(state.join("lut-saved.json").exists());
+    run.kill().unwrap();
+    run.wait().unwrap();
+    assert!(
+        xd.gamma(&output).unwrap().is_identity(),
+        "nothing should have put the LUT back yet"
+    );
+    // Any chromacal that takes the state directory puts it back.
+    succeed(
+        chromacal()
+            .args(["lut", "show", "--x-display", &x.display, "--state-dir"])
+            .arg(&state),
+    );
+    let now = xd.gamma(&output).unwrap();
+    assert!(
+        now.max_difference(&users) <= 1.0,
+        "the user's ramp was not put back"
+    );
+    assert!(!state.join("lut-saved.json").exists());
+}
+
+/// Calibrate with `args` besides the config and state directory; the profile.
+fn calibrate(config: &Path, state: &Path, args: &[&str]) -> (Profile, String) {
+    let out = succeed(
+        chromacal()
+            .arg("calibrate")
+            .arg("--config")
+            .arg(config)
+            .arg("--state-dir")
+            .arg(state)
+            .args(args),
+    );
+    (
+        Profile::read(&state.join("current.toml")).unwrap(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+    )
+}
+
+/// `chromacal measure` readings of what the screen shows now.
+fn measure(device: &str, count: usize) -> Vec<[f64; 3]> {
+    let out = succeed(chromacal().args([
+        "measure",
+        "--instrument",
+        &format!("pr670:{device}"),
+        "--timing-scale",
+        "0.002",
+        "--count",
+        &count.to_string(),
+        "--json",
+    ]));
+    let readings: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+    readings
+        .iter()
+        .map(|r| {
+            let xyz = &r["xyz"];
+            [0, 1, 2].map(|i| xyz[i].as_f64().unwrap())
+        })
+        .collect()
+}
+
+fn de00(a: [f64; 3], b: [f64; 3], white: [f64; 3]) -> f64 {
+    use chromacal::color::Xyz;
+    use chromacal::color::difference::delta_e_2000;
+    use chromacal::color::spaces::xyz_to_lab;
+    let white = Xyz::new(white[0], white[1], white[2]);
+    let lab = |v: [f64; 3]| xyz_to_lab(&Xyz::new(v[0], v[1], v[2]), &white);
+    delta_e_2000(&lab(a), &lab(b))
+}
+
+#[test]
+fn a_calibration_in_the_window_matches_the_emulator_screen_and_verifies_through_the_lut() {
+    let x = XServer::start();
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    std::fs::write(&config, WINDOW_CONFIG).unwrap();
+    let config_arg = config.to_str().unwrap();
+
+    // The same monitor over the emulator's screen socket.
+    let socket_emulator = emulate(&[
+        "--instrument",
+        "pr670",
+        "--time-scale",
+        "0.002",
+        "--config",
+        config_arg,
+    ]);
+    let (reference, _) = calibrate(
+        &config,
+        &dir.path().join("socket"),
+        &[
+            "--instrument",
+            &format!("pr670:{}", socket_emulator.device),
+            "--screen",
+            &socket_emulator.screen,
+            "--timing-scale",
+            "0.002",
+        ],
+    );
+
+    // Through the window, an X server and an emulator looking at it.
+    let emulator = emulate(&[
+        "--instrument",
+        "pr670",
+        "--time-scale",
+        "0.002",
+        "--config",
+        config_arg,
+        "--x-display",
+        &x.display,
+    ]);
+    let state = dir.path().join("window");
+    let (profile, summary) = calibrate(
+        &config,
+        &state,
+        &[
+            "--display",
+            "window",
+            "--x-display",
+            &x.display,
+            "--instrument",
+            &format!("pr670:{}", emulator.device),
+            "--timing-scale",
+            "0.002",
+        ],
+    );
+    eprintln!("{summary}");
+    assert!(
+        profile
+            .provenance
+            .display
+            .as_deref()
+            .unwrap()
+            .contains("window on DUMMY0")
+    );
+    common::assert_same_model("window", &profile, &reference);
+    let (held, reference_held) = (
+        profile.report.held_out.unwrap(),
+        reference.report.held_out.unwrap(),
+    );
+    eprintln!("held-out through the window {held:?}, through the socket {reference_held:?}");
+    assert!(
+        (held.mean - reference_held.mean).abs() < 0.1 && held.mean < 0.3,
+        "{held:?} vs {reference_held:?}"
+    );
+
+    // The check was measured through the curves in the video LUT.
+    let calibration = profile.calibration.as_ref().unwrap();
+    assert!(calibration.through_lut);
+    assert!(
+        summary.contains("through the curves loaded in the video LUT"),
+        "{summary}"
+    );
+    assert_eq!(
+        calibration.levels.len(),
+        9,
+        "10 grey levels, black included"
+    );
+    assert!(
+        calibration.measured_tone_error < 0.01,
+        "tone off by {:.2} %",
+        100.0 * calibration.measured_tone_error
+    );
+    let status = succeed(
+        chromacal()
+            .args([
+                "lut",
+                "show",
+                "--json",
+                "--x-display",
+                &x.display,
+                "--state-dir",
+            ])
+            .arg(&state),
+    );
+    let status: serde_json::Value = serde_json::from_slice(&status.stdout).unwrap();
+    assert!(
+        status["from_profile_steps"].as_f64().unwrap() <= 1.0,
+        "{status}"
+    );
+
+    // The white hits the target within the instrument's repeatability: the white
+    // read again through the LUT, eight times, scatters about as far as it lies
+    // from the target.
+    let mut window = window_on(&x);
+    let white_patch = Patch {
+        codes: Codes {
+            rgb: [255; 3],
+            bit_depth: 8,
+        },
+        background: Codes {
+            rgb: [0; 3],
+            bit_depth: 8,
+        },
+        geometry: Geometry::centred(0.2),
+    };
+    runtime().block_on(window.show(&white_patch)).unwrap();
+    let whites = measure(&emulator.device, 8);
+    assert_eq!(whites.len(), 8);
+    let mean = [0, 1, 2].map(|c| whites.iter().map(|w| w[c]).sum::<f64>() / 8.0);
+    let target = calibration.curves.white;
+    let spread = (whites
+        .iter()
+        .map(|w| de00(*w, mean, target).powi(2))
+        .sum::<f64>()
+        / 7.0)
+        .sqrt();
+    let off = de00(mean, target, target);
+    eprintln!(
+        "white through the LUT: {off:.3} ΔE00 from the target (check: {:.3}); one reading's repeatability {spread:.3}",
+        calibration.measured_white_de00
+    );
+    assert!(
+        off <= 3.0 * spread && calibration.measured_white_de00 <= 3.0 * spread,
+        "white {off:.3} (check {:.3}) ΔE00 from the target, repeatability {spread:.3}",
+        calibration.measured_white_de00
+    );
+    // The emulator sees the LUT: with it straightened, the same code reads the
+    // monitor's native white, well away from D65.
+    succeed(
+        chromacal()
+            .args(["lut", "reset", "--x-display", &x.display, "--state-dir"])
+            .arg(&state),
+    );
+    let native = measure(&emulator.device, 2);
+    let native_off = de00(native[0], target, target);
+    assert!(
+        native_off > off + 1.0,
+        "native white {native_off:.3}, calibrated {off:.3}"
+    );
+    drop(window);
+}
