@@ -6,7 +6,7 @@
 //! [`fit`] (model, selection, checks) → [`profile`] (native TOML, store).
 //!
 //! The modules stand in layers, each importing only from those below it (lowest
-//! first): `durable`, `linalg` → `color`, `numeric_csv`, `time` → `model` → `screen` → `edid`, `x11` → `sim` →
+//! first): `durable`, `linalg` → `color`, `numeric_csv`, `time` → `model` → `screen`, `edid` → `x11` → `sim` →
 //! `instrument` → `display` → `measurement` → `plan` → `journal`, `cgats` →
 //! `measurement_file`, `argyll` → `fit` → `profile` → `export` → `config` →
 //! `calibrate` → `daemon`, `report`, `comparison`. `tests/layers.rs` holds the list

@@ -18,9 +18,10 @@ const LAYERS: &[&[&str]] = &[
     // The monitor model: transfer laws, spatial map, targets.
     &["model"],
     // What a screen shows: codes, patch windows, content.
-    &["screen"],
-    // The X server of a real screen: outputs and their EDID, gamma ramps, pixels.
-    &["edid", "x11"],
+    // What a screen shows, and what a monitor says of itself (its EDID).
+    &["screen", "edid"],
+    // The X server of a real screen: outputs, gamma ramps, pixels.
+    &["x11"],
     // The virtual monitor and its clock.
     &["sim"],
     // Instruments: drivers, protocols, emulators.

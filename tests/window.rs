@@ -351,7 +351,7 @@ fn journal_lines(state: &Path) -> usize {
 const WINDOW_CONFIG: &str = "[monitor]\npreset = \"crt\"\nbit_depth = 10\n[plan]\nuniformity_grid = 0\n[display]\nsettle_s = 0.0\n[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nlevels = 10\n";
 
 #[test]
-fn kill_9_during_a_calibration_then_any_start_restores_the_lut() {
+fn ctrl_c_puts_the_lut_back_and_after_kill_9_any_start_does() {
     let x = XServer::start();
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("config.toml");
@@ -503,7 +503,15 @@ fn a_calibration_in_the_window_matches_the_emulator_screen_and_verifies_through_
         ],
     );
 
-    // Through the window, an X server and an emulator looking at it.
+    // Through the window, an X server and an emulator looking at it; the output
+    // carries a wide-gamut monitor's EDID, which the CRT is not.
+    let xd = XDisplay::open(Some(&x.display)).unwrap();
+    let output = xd.output(&OutputSelector::Primary).unwrap();
+    xd.set_edid(
+        output.id,
+        &std::fs::read(common::fixture("edid/wide_gamut_1440p.bin")).unwrap(),
+    )
+    .unwrap();
     let emulator = emulate(&[
         "--instrument",
         "pr670",
@@ -634,4 +642,91 @@ fn a_calibration_in_the_window_matches_the_emulator_screen_and_verifies_through_
         "native white {native_off:.3}, calibrated {off:.3}"
     );
     drop(window);
+}
+
+#[test]
+fn displays_name_the_outputs_their_monitors_and_the_device_on_each() {
+    let x = XServer::start();
+    let xd = XDisplay::open(Some(&x.display)).unwrap();
+    let output = xd.output(&OutputSelector::Primary).unwrap();
+    xd.set_edid(
+        output.id,
+        &std::fs::read(common::fixture("edid/srgb_office_1080p.bin")).unwrap(),
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    // The device finds its monitor by the serial in its EDID, whatever the connector.
+    std::fs::write(
+        &config,
+        "[instrument]\ndriver = \"pr670\"\nport = \"/dev/null\"\n[display]\nsink = \"window\"\noutput = { edid_serial = \"7MT0186J1T3L\" }\n",
+    )
+    .unwrap();
+    let args = |json: bool| {
+        let mut c = chromacal();
+        c.args(["displays", "--x-display", &x.display, "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(dir.path().join("state"));
+        if json {
+            c.arg("--json");
+        }
+        c
+    };
+    let text = String::from_utf8_lossy(&succeed(&mut args(false)).stdout).into_owned();
+    assert!(
+        text.contains("DUMMY0 (primary)  1024×768+0+0 at 60.00 Hz"),
+        "{text}"
+    );
+    assert!(
+        text.contains("monitor: DEL DELL U2415 (serial 7MT0186J1T3L, week 12 of 2016)"),
+        "{text}"
+    );
+    assert!(text.contains("device default: no profile yet"), "{text}");
+    assert!(text.contains("DUMMY1  disconnected"), "{text}");
+    let json: serde_json::Value = serde_json::from_slice(&succeed(&mut args(true)).stdout).unwrap();
+    let outputs = json.as_array().unwrap();
+    assert_eq!(outputs[0]["name"], "DUMMY0");
+    assert_eq!(outputs[0]["gamma_size"], 256);
+    assert_eq!(outputs[0]["edid"]["manufacturer"], "DEL");
+    assert_eq!(outputs[0]["devices"][0]["name"], "default");
+    assert!(outputs[1]["edid"].is_null() && outputs[1]["devices"].as_array().unwrap().is_empty());
+    // The LUT commands take the serial too; an unknown one names what there is.
+    let show = succeed(chromacal().args([
+        "lut",
+        "show",
+        "--x-display",
+        &x.display,
+        "--output",
+        "edid_serial=7MT0186J1T3L",
+        "--state-dir",
+        dir.path().join("state").to_str().unwrap(),
+    ]));
+    assert!(String::from_utf8_lossy(&show.stdout).contains("video LUT of DUMMY0"));
+    let unknown = chromacal()
+        .args([
+            "lut",
+            "show",
+            "--x-display",
+            &x.display,
+            "--output",
+            "HDMI-9",
+            "--state-dir",
+        ])
+        .arg(dir.path().join("state"))
+        .output()
+        .unwrap();
+    assert!(!unknown.status.success());
+    let err = String::from_utf8_lossy(&unknown.stderr);
+    assert!(
+        err.contains("no output named 'HDMI-9'") && err.contains("DUMMY0"),
+        "{err}"
+    );
+    // No X server at all: a clear error, not a panic.
+    let none = chromacal()
+        .args(["displays", "--x-display", ":4999"])
+        .output()
+        .unwrap();
+    assert_eq!(none.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&none.stderr).contains("cannot open the X display ':4999'"));
 }
