@@ -703,6 +703,23 @@ fn displays_name_the_outputs_their_monitors_and_the_device_on_each() {
         dir.path().join("state").to_str().unwrap(),
     ]));
     assert!(String::from_utf8_lossy(&show.stdout).contains("video LUT of DUMMY0"));
+    // A desktop that loads curves itself (GNOME's colour plugin) is named, so that the
+    // user does not fight it.
+    let fake = dir.path().join("gsd-color");
+    std::fs::copy("/bin/sleep", &fake).unwrap();
+    let mut loader = std::process::Command::new(&fake).arg("60").spawn().unwrap();
+    let show = chromacal()
+        .args(["lut", "show", "--x-display", &x.display, "--state-dir"])
+        .arg(dir.path().join("state"))
+        .output()
+        .unwrap();
+    let _ = loader.kill();
+    let _ = loader.wait();
+    assert!(
+        String::from_utf8_lossy(&show.stdout).contains("GNOME's colour plugin (gsd-color"),
+        "{}",
+        String::from_utf8_lossy(&show.stdout)
+    );
     let unknown = chromacal()
         .args([
             "lut",
