@@ -122,10 +122,31 @@ tone = "gamma:2.2"
     );
     assert_eq!(metric(&metrics, "chromacal_lut_loaded"), Some(1.0));
 
-    // A mode change is a RandR event: the curves are loaded again.
+    // A mode change is a RandR event: the curves are loaded again, and the next job's
+    // window covers the output at its new size (the instrument, aimed at the
+    // centre, reads the patch there: the verification passes).
     x.run("xrandr", &["--output", "DUMMY0", "--mode", "800x600"]);
     events_until(&mut events, Duration::from_secs(20), |e| {
         loaded_for(e, "RandR")
+    })
+    .await;
+    assert!(holds_curves(&x, &profile) <= 1.0);
+    start_job(&api, "verify").await;
+    let seen = events_until(&mut events, Duration::from_secs(120), |e| {
+        matches!(e, Event::Verification { .. })
+    })
+    .await;
+    let Some(Event::Verification { record }) = seen.last() else {
+        unreachable!()
+    };
+    let stats = record.stats.unwrap();
+    assert!(
+        stats.mean < 0.5,
+        "verification after the mode change: {stats:?}"
+    );
+    // The job measured through the straight ramp; the curves are back after it.
+    events_until(&mut events, Duration::from_secs(20), |e| {
+        loaded_for(e, "a job ended")
     })
     .await;
     assert!(holds_curves(&x, &profile) <= 1.0);
@@ -180,7 +201,17 @@ tone = "gamma:2.2"
         &[("DBUS_SYSTEM_BUS_ADDRESS", bus.address.as_str())],
     );
     let mut events = subscribe(&daemon.endpoint());
-    tokio::time::sleep(Duration::from_millis(1500)).await;
+    // Its start: the straight ramp left by the last step gets the curves.
+    x.run("xrandr", &["--output", "DUMMY0", "--gamma", "1:1:1"]);
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    while holds_curves(&x, &profile) > 1.0 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            daemon.log_text()
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
     x.run("xrandr", &["--output", "DUMMY0", "--gamma", "0.8:0.8:0.8"]);
     let seen = events_until(&mut events, Duration::from_secs(20), |e| {
         matches!(e, Event::LutOverwritten { .. })

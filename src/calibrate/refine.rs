@@ -111,7 +111,7 @@ const WHITE_READS: usize = 3;
 /// curves onto the target's chromaticity without changing its luminance: the
 /// excitations each white needs, through the model's primary matrix (which only has
 /// to point the way: the next pass measures again), over what was obtained,
-/// normalised so that Y stays. Limited to ±20 % a pass; `None` when the matrix or the
+/// each limited to ±20 % a pass, then normalised so that Y stays; `None` when the matrix or the
 /// reading gives no answer.
 fn white_balance(model: &MonitorModel, measured: &Xyz, target: &Xyz) -> Option<[f64; 3]> {
     let inverse = model.matrix.try_inverse()?;
@@ -165,9 +165,11 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         })
         .collect();
     let black = model.black;
-    // The target white; lowered when balancing its chromaticity asks a channel for
-    // more than full drive.
-    let mut white = Xyz::new(curves.white[0], curves.white[1], curves.white[2]);
+    // The white asked for, and the one aimed at: lower when balancing the white's
+    // chromaticity asks a channel for more than full drive (worked out again from
+    // the one asked for in every pass, so that one low reading does not stay).
+    let asked = Xyz::new(curves.white[0], curves.white[1], curves.white[2]);
+    let mut white = asked;
     let want = |x: f64, white: &Xyz| target_luminance(target.tone, x, black.y, white.y);
     let (mut readings, mut instrument_s) = (0, 0.0);
     for _ in 0..config.refine_passes {
@@ -194,8 +196,14 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
                 balance = white_balance(model, &measured, &white).unwrap_or([1.0; 3]);
             }
         }
-        // A channel that would need more than full drive at the white: all three give
-        // up the same share, so the white keeps its chromaticity and loses luminance.
+        // A channel that would need more than full drive at the white asked for: all
+        // three give up the same share, so the white keeps its chromaticity and loses
+        // luminance, and the tone curve that ends at it comes down with it.
+        let asked_above = asked.y - black.y;
+        let toward_asked = match asked_above / (white.y - black.y) {
+            t if t.is_finite() && t > 0.0 => t,
+            _ => 1.0,
+        };
         let over = curves
             .curves
             .iter()
@@ -203,18 +211,18 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
             .zip(balance)
             .map(|((curve, law), b)| {
                 let last = curve.last().copied().unwrap_or(1.0);
-                law.excitation(last) * interpolate_gain(&gains, 1.0) * b
+                law.excitation(last) * interpolate_gain(&gains, 1.0) * toward_asked * b
                     / law.full_drive_excitation()
             })
             .fold(1.0, f64::max);
-        let balance = balance.map(|b| b / over.max(1.0));
-        if over > 1.0 {
-            // The luminance above black goes down by the same share, and so does the
-            // tone curve that ends at it.
-            white = black + (white - black) / over;
-            curves.white = [white.x, white.y, white.z];
-            curves.luminance_limited |= target.luminance.is_some();
+        let share = 1.0 / over;
+        let rescale = toward_asked * share;
+        for (_, gain) in &mut gains {
+            *gain *= rescale;
         }
+        white = black + (asked - black) * share;
+        curves.white = [white.x, white.y, white.z];
+        curves.luminance_limited |= over > 1.0 && target.luminance.is_some();
         for ((curve, law), b) in curves.curves.iter_mut().zip(&model.laws).zip(balance) {
             let top = law.full_drive_excitation();
             let n = curve.len();

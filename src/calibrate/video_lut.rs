@@ -19,18 +19,36 @@ pub fn hold(state_dir: &Path, devices: &mut Devices) -> Result<(), LutError> {
     let Some(window) = devices.display.window() else {
         return Ok(());
     };
-    if lut::pending(state_dir)?.is_none() {
-        lut::save(
+    let size = window.output().gamma_size;
+    if size < 2 {
+        tracing::warn!(output = %window.output().name, "the output has no video LUT chromacal can set: the curves go into the codes");
+        return Ok(());
+    }
+    let display = window.x_display().name().to_string();
+    let output = window.output().name.clone();
+    match lut::pending(state_dir)? {
+        None => lut::save(
             state_dir,
             &SavedLut {
-                x_display: window.x_display().name().to_string(),
-                output: window.output().name.clone(),
+                x_display: display,
+                output,
                 ramp: window.gamma()?,
                 pid: std::process::id(),
             },
-        )?;
+        )?,
+        // The user's own ramp, saved by a run on this output that did not finish.
+        Some(saved) if saved.x_display == display && saved.output == output => {}
+        Some(saved) => {
+            return Err(LutError::Foreign {
+                path: lut::saved_path(state_dir),
+                saved_display: saved.x_display,
+                saved_output: saved.output,
+                display,
+                output,
+            });
+        }
     }
-    window.set_gamma(&GammaRamp::identity(window.output().gamma_size))?;
+    window.set_gamma(&GammaRamp::identity(size))?;
     Ok(())
 }
 
@@ -45,6 +63,9 @@ pub fn release(
         return Ok(None);
     };
     let output = window.output().clone();
+    if output.gamma_size < 2 {
+        return Ok(None);
+    }
     let published = outcome.filter(|o| o.rejection.is_none());
     let (ramp, what) = match published.map(|o| o.profile.calibration.as_ref()) {
         Some(Some(calibration)) => (
@@ -57,16 +78,20 @@ pub fn release(
         Some(None) => (
             GammaRamp::identity(output.gamma_size),
             format!(
-                "the video LUT of {} is straight, as the profile was measured (no [target], so no curves)",
-                output.name
+                "the video LUT of {} is straight, as the profile was measured ({})",
+                output.name,
+                match outcome.and_then(|o| o.calibration_error.as_deref()) {
+                    Some(why) => format!("the curves could not be made: {why}"),
+                    None => "no [target], so no curves".to_string(),
+                }
             ),
         ),
         None => match lut::pending(state_dir)? {
-            Some(saved) => (
+            Some(saved) if saved.output == output.name => (
                 saved.ramp,
                 format!("the video LUT of {} is back as it was", output.name),
             ),
-            None => return Ok(None),
+            _ => return Ok(None),
         },
     };
     window.set_gamma(&ramp)?;

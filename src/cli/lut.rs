@@ -75,8 +75,15 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
     // A calibration killed while it held the LUT left the user's ramp behind; put it
     // back first, unless a calibration holds the directory now.
     let store = ProfileStore::new(&state_dir);
-    if let Ok(_lock) = store.lock("chromacal lut") {
+    let lock = store.lock("chromacal lut");
+    if lock.is_ok() {
         restore_pending_logged(&state_dir);
+    }
+    // A calibration or a daemon holds the directory: it owns the LUT meanwhile.
+    if let (Err(e), LutCommand::Load { .. } | LutCommand::Reset) = (&lock, &args.command) {
+        return Err(Failure::from(format!(
+            "{e}: it sets the video LUT itself; stop it first (or give another --state-dir)"
+        )));
     }
     let x = XDisplay::open(args.x_display.as_deref())?;
     let selector = args

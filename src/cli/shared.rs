@@ -117,6 +117,7 @@ impl DeviceArgs {
                 .display
                 .as_deref()
                 .and_then(|t| t.split_once(':'))
+                .filter(|(_, output)| !output.is_empty())
                 .map(|(_, output)| chromacal::x11::OutputSelector::parse(output)),
             x_display: self.x_display.clone(),
         })

@@ -250,6 +250,19 @@ pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String
                 "devices \"{other}\" and \"{name}\" both listen on {address}: give each display its own {key}"
             ));
         }
+        // A window's output has one video LUT: two devices would fight over it.
+        if device.display.sink() == super::Sink::Window {
+            let output = format!(
+                "{} of X display {}",
+                device.display.output.clone().unwrap_or_default().describe(),
+                device.display.x_display.as_deref().unwrap_or("$DISPLAY")
+            );
+            if let Some(other) = listeners.insert(output.clone(), name.clone()) {
+                return Err(format!(
+                    "devices \"{other}\" and \"{name}\" both put their window on {output}: give each its own display.output (one video LUT, one device)"
+                ));
+            }
+        }
         devices.push(DeviceConfig {
             name,
             loaded: LoadedConfig {

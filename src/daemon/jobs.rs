@@ -133,13 +133,17 @@ pub(crate) async fn run_job(
         }),
         Ok(devices) => {
             age_while_idle(device, devices);
-            // A window's patches are measured through the straight ramp; the LUT
-            // keeper loads the current curves again when the job ends.
+            // A window follows its output (a mode may have changed since the last
+            // job), saves the ramp it finds and measures through the straight one;
+            // the ramp goes back when the job ends, and the LUT keeper loads the
+            // current curves after that.
             if let Some(window) = devices.display.window()
-                && let Err(e) =
-                    window.set_gamma(&crate::x11::GammaRamp::identity(window.output().gamma_size))
+                && let Err(e) = window.refresh()
             {
-                tracing::warn!(device = %device.name, error = %e, "cannot straighten the video LUT for the job");
+                tracing::warn!(device = %device.name, error = %e, "the window's output");
+            }
+            if let Err(e) = crate::calibrate::video_lut::hold(device.store.root(), devices) {
+                tracing::warn!(device = %device.name, error = %e, "cannot hold the video LUT for the job");
             }
             match warm_up(device, id, devices, &stop).await {
                 Err(message) => Err(JobFailure {
@@ -164,9 +168,14 @@ pub(crate) async fn run_job(
         release_instrument(hardware);
     }
     drop(turn);
-    // The window leaves the screen to the user between jobs.
-    if let Some(window) = guard.as_mut().and_then(|h| h.display.window()) {
-        window.hide();
+    // The window leaves the screen, and its LUT, to the user between jobs.
+    if let Some(hardware) = guard.as_mut() {
+        if let Err(e) = crate::calibrate::video_lut::release(device.store.root(), hardware, None) {
+            tracing::warn!(device = %device.name, error = %e, "cannot put the video LUT back after the job");
+        }
+        if let Some(window) = hardware.display.window() {
+            window.hide();
+        }
     }
     match result {
         Ok(success) => JobOutcome {

@@ -138,7 +138,9 @@ impl Keeper {
             loop {
                 match events.try_recv() {
                     Ok(e) if e.device == self.device.name => self.on_event(&e.event),
-                    Ok(_) | Err(TryRecvError::Lagged(_)) => {}
+                    Ok(_) => {}
+                    // A job's end may be among what was missed.
+                    Err(TryRecvError::Lagged(_)) => self.due = Some("events were missed"),
                     Err(TryRecvError::Empty) => break,
                     Err(TryRecvError::Closed) => return,
                 }
@@ -181,13 +183,16 @@ impl Keeper {
             if self.device.job().is_none()
                 && let Some(w) = &watch
             {
-                let result = match self.due.take() {
+                let due = self.due.take();
+                let result = match due {
                     Some(reason) => self.load(w, reason),
                     None if Instant::now() >= self.next_check => self.check(w),
                     None => Ok(()),
                 };
                 if let Err(e) = result {
                     self.warn_once(format!("video LUT of {}: {e}", w.output.name));
+                    // Tried again once the display is reached again.
+                    self.due = due;
                     watch = None;
                 }
             }
@@ -221,7 +226,36 @@ impl Keeper {
             self.expected = None;
             return Ok(());
         }
+        // The profile of another monitor (a laptop docked: the external monitor
+        // became the primary output) is not loaded onto this one.
+        if let (Some(made_on), Some(here)) = (
+            &profile.provenance.edid,
+            w.output
+                .edid
+                .as_deref()
+                .and_then(|b| crate::edid::Edid::parse(b).ok()),
+        ) && (made_on.manufacturer != here.manufacturer
+            || made_on.product_code != here.product_code
+            || made_on.serial() != here.serial())
+        {
+            self.warn_once(format!(
+                "the current profile was made on {} but {} now shows {}: its curves are not loaded",
+                made_on.describe(),
+                w.output.name,
+                here.describe()
+            ));
+            self.expected = None;
+            return Ok(());
+        }
         let size = w.output.gamma_size;
+        if size < 2 {
+            self.warn_once(format!(
+                "{} has no video LUT chromacal can set",
+                w.output.name
+            ));
+            self.expected = None;
+            return Ok(());
+        }
         let ramp = match &profile.calibration {
             Some(c) => GammaRamp::from_curves(&c.curves, size),
             None => GammaRamp::identity(size),

@@ -40,6 +40,16 @@ pub enum LutError {
     },
     #[error("{path} is not a saved LUT: {reason}")]
     Corrupt { path: PathBuf, reason: String },
+    #[error(
+        "{path} keeps the video LUT of {saved_output} on {saved_display}, saved by a calibration that did not finish and not put back yet (that display cannot be reached); it is not this run's ({output} on {display}). Put it back with `chromacal lut show --x-display {saved_display}`, or remove the file to give it up"
+    )]
+    Foreign {
+        path: PathBuf,
+        saved_display: String,
+        saved_output: String,
+        display: String,
+        output: String,
+    },
     #[error(transparent)]
     X11(#[from] X11Error),
 }

@@ -41,6 +41,7 @@ pub struct WindowTarget {
 /// The patch window.
 pub struct PatchWindow {
     x: Arc<XDisplay>,
+    target: WindowTarget,
     output: OutputInfo,
     format: PixelFormat,
     window: u32,
@@ -66,9 +67,11 @@ impl PatchWindow {
         let output = x.output(&target.output)?;
         output.lit_crtc()?;
         let format = x.pixel_format()?;
-        let (window, patch, dpms_was_on) = create_windows(&x, &output)?;
+        let (window, patch) = create_windows(&x, &output)?;
+        let dpms_was_on = hold_screen_saver(&x)?;
         let mut w = PatchWindow {
             x,
+            target: target.clone(),
             output,
             format,
             window,
@@ -124,6 +127,7 @@ impl PatchWindow {
                 .conn
                 .map_window(self.window)
                 .map_err(|e| DisplayError::Lost(e.to_string()))?;
+            self.dpms_was_on = hold_screen_saver(&self.x)?;
             self.hidden = false;
         }
         let lost = |e: &dyn std::fmt::Display| DisplayError::Lost(format!("{}: {e}", self.name()));
@@ -172,13 +176,41 @@ impl PatchWindow {
         self.x.set_gamma(&self.output, ramp)
     }
 
-    /// Take the window off the screen until the next patch (a daemon between jobs).
+    /// Take the window off the screen until the next patch (a daemon between jobs),
+    /// and give back the screen saver and DPMS meanwhile.
     pub fn hide(&mut self) {
         if !self.hidden && !self.closed {
             let _ = self.x.conn.unmap_window(self.window);
-            let _ = self.x.sync();
+            release_screen_saver(&self.x, self.dpms_was_on);
             self.hidden = true;
         }
+    }
+
+    /// Look the output up again (a daemon's window lives across jobs, and a monitor
+    /// may have been plugged in or its mode changed meanwhile), and cover it anew.
+    pub fn refresh(&mut self) -> Result<(), DisplayError> {
+        let output = self.x.output(&self.target.output)?;
+        output.lit_crtc()?;
+        if output != self.output {
+            let to_i16 = |v: i32| i16::try_from(v).map_err(|e| DisplayError::Lost(e.to_string()));
+            let to_u16 =
+                |v: u32| u16::try_from(v.max(1)).map_err(|e| DisplayError::Lost(e.to_string()));
+            self.x
+                .conn
+                .configure_window(
+                    self.window,
+                    &ConfigureWindowAux::new()
+                        .x(i32::from(to_i16(output.x)?))
+                        .y(i32::from(to_i16(output.y)?))
+                        .width(u32::from(to_u16(output.width)?))
+                        .height(u32::from(to_u16(output.height)?)),
+                )
+                .map_err(|e| DisplayError::Lost(e.to_string()))?;
+            self.x.sync()?;
+            tracing::info!(output = %output.name, width = output.width, height = output.height, "the patch window follows its output");
+            self.output = output;
+        }
+        Ok(())
     }
 
     /// Unmap and destroy the window, give back the screen saver and DPMS.
@@ -187,11 +219,9 @@ impl PatchWindow {
             return;
         }
         self.closed = true;
-        let conn = &self.x.conn;
-        let _ = conn.destroy_window(self.window);
-        let _ = conn.screensaver_suspend(0);
-        if self.dpms_was_on {
-            let _ = conn.dpms_enable();
+        let _ = self.x.conn.destroy_window(self.window);
+        if !self.hidden {
+            release_screen_saver(&self.x, self.dpms_was_on);
         }
         let _ = self.x.sync();
     }
@@ -203,10 +233,49 @@ impl Drop for PatchWindow {
     }
 }
 
-/// Create the full-screen window and its patch child, map them, hide the cursor, and
-/// hold off the screen saver and DPMS. Returns the two window ids and whether DPMS
-/// was on.
-fn create_windows(x: &XDisplay, output: &OutputInfo) -> Result<(u32, u32, bool), DisplayError> {
+/// Hold off the screen saver and switch DPMS off, where the server has them; whether
+/// DPMS was on (to switch it on again).
+fn hold_screen_saver(x: &XDisplay) -> Result<bool, DisplayError> {
+    let lost = |e: &dyn std::fmt::Display| DisplayError::Lost(format!("{}: {e}", x.name()));
+    let conn = &x.conn;
+    let has = |name: &[u8]| {
+        conn.query_extension(name)
+            .ok()
+            .and_then(|c| c.reply().ok())
+            .is_some_and(|r| r.present)
+    };
+    if has(b"MIT-SCREEN-SAVER") {
+        conn.screensaver_suspend(1).map_err(|e| lost(&e))?;
+    } else {
+        tracing::warn!(
+            display = x.name(),
+            "no MIT-SCREEN-SAVER extension: the screen saver is not held off"
+        );
+    }
+    let mut dpms_was_on = false;
+    if has(b"DPMS")
+        && let Ok(info) = conn.dpms_info().map_err(|e| lost(&e))?.reply()
+        && info.state
+    {
+        dpms_was_on = true;
+        conn.dpms_disable().map_err(|e| lost(&e))?;
+    }
+    x.sync()?;
+    Ok(dpms_was_on)
+}
+
+/// Give back what [`hold_screen_saver`] held off.
+fn release_screen_saver(x: &XDisplay, dpms_was_on: bool) {
+    let _ = x.conn.screensaver_suspend(0);
+    if dpms_was_on {
+        let _ = x.conn.dpms_enable();
+    }
+    let _ = x.sync();
+}
+
+/// Create the full-screen window and its patch child, map them and hide the cursor.
+/// Returns the two window ids.
+fn create_windows(x: &XDisplay, output: &OutputInfo) -> Result<(u32, u32), DisplayError> {
     let lost = |e: &dyn std::fmt::Display| DisplayError::Lost(format!("{}: {e}", x.name()));
     let conn = &x.conn;
     let screen = &conn.setup().roots[x.screen];
@@ -285,31 +354,8 @@ fn create_windows(x: &XDisplay, output: &OutputInfo) -> Result<(u32, u32, bool),
     conn.map_window(patch).map_err(|e| lost(&e))?;
     conn.map_window(window).map_err(|e| lost(&e))?;
     conn.free_pixmap(pixmap).map_err(|e| lost(&e))?;
-    // The screen saver and DPMS, where the server has them.
-    let has = |name: &[u8]| {
-        conn.query_extension(name)
-            .ok()
-            .and_then(|c| c.reply().ok())
-            .is_some_and(|r| r.present)
-    };
-    if has(b"MIT-SCREEN-SAVER") {
-        conn.screensaver_suspend(1).map_err(|e| lost(&e))?;
-    } else {
-        tracing::warn!(
-            display = x.name(),
-            "no MIT-SCREEN-SAVER extension: the screen saver is not held off"
-        );
-    }
-    let mut dpms_was_on = false;
-    if has(b"DPMS")
-        && let Ok(info) = conn.dpms_info().map_err(|e| lost(&e))?.reply()
-        && info.state
-    {
-        dpms_was_on = true;
-        conn.dpms_disable().map_err(|e| lost(&e))?;
-    }
     x.sync()?;
-    Ok((window, patch, dpms_was_on))
+    Ok((window, patch))
 }
 
 impl PatchDisplay for PatchWindow {
@@ -342,6 +388,11 @@ impl PatchDisplay for PatchWindow {
 
     fn load_curves(&mut self, curves: Option<&CalibrationCurves>) -> Result<bool, DisplayError> {
         let size = self.output.gamma_size;
+        // An output without a settable ramp (XWayland, some VNC servers): the curves
+        // go into the codes instead.
+        if size < 2 {
+            return Ok(false);
+        }
         let ramp = match curves {
             Some(c) => GammaRamp::from_curves(c, size),
             None => GammaRamp::identity(size),

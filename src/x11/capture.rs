@@ -199,9 +199,12 @@ pub fn watch_output(
     aim: (f64, f64),
 ) -> Result<impl FnMut() -> Result<ScreenContent, X11Error> + Send + use<>, X11Error> {
     let x = XDisplay::open(display)?;
-    let output = x.output(output)?;
-    output.lit_crtc()?;
+    let selector = output.clone();
+    x.output(&selector)?.lit_crtc()?;
     Ok(move || {
+        // Looked up at every reading: the instrument stays on the monitor when its
+        // mode changes.
+        let output = x.output(&selector)?;
         let sample = x.sample(&output, aim)?;
         let ramp = x.gamma(&output)?;
         Ok(sample.content(&ramp, &output))

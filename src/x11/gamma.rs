@@ -137,7 +137,7 @@ impl XDisplay {
                 size,
             });
         }
-        let fitted = if ramp.len() == size {
+        let fitted = if ramp.channels().iter().all(|c| c.len() == size) {
             ramp.clone()
         } else {
             GammaRamp::from_fn(size, |c, x| ramp.output(c, x))

@@ -42,6 +42,11 @@ pub struct XServer {
 
 impl XServer {
     pub fn start() -> XServer {
+        super::need_tool("Xorg", "xserver-xorg-core");
+        assert!(
+            std::path::Path::new("/usr/lib/xorg/modules/drivers/dummy_drv.so").exists(),
+            "the tests need Xorg's dummy driver: scripts/test.sh installs xserver-xorg-video-dummy"
+        );
         let dir = tempfile::tempdir().unwrap();
         let config = dir.path().join("xorg.conf");
         std::fs::write(&config, CONFIG).unwrap();
@@ -98,7 +103,18 @@ impl XServer {
 }
 
 impl Drop for XServer {
+    /// SIGTERM, so that Xorg removes its lock file and socket.
     fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+        while std::time::Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
