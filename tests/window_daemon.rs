@@ -193,16 +193,16 @@ tone = "gamma:2.2"
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
-    // And without keep_lut an overwrite is said but left alone.
+    // And without keep_lut an overwrite is said but left alone. (Straightened before
+    // the start, whose load is then seen.)
     drop(daemon);
+    x.run("xrandr", &["--output", "DUMMY0", "--gamma", "1:1:1"]);
     let daemon = start_daemon_with(
         dir.path(),
         &config.replace("keep_lut = true", "keep_lut = false"),
         &[("DBUS_SYSTEM_BUS_ADDRESS", bus.address.as_str())],
     );
     let mut events = subscribe(&daemon.endpoint());
-    // Its start: the straight ramp left by the last step gets the curves.
-    x.run("xrandr", &["--output", "DUMMY0", "--gamma", "1:1:1"]);
     let deadline = std::time::Instant::now() + Duration::from_secs(20);
     while holds_curves(&x, &profile) > 1.0 {
         assert!(
