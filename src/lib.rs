@@ -8,7 +8,7 @@
 //! The modules stand in layers, each importing only from those below it (lowest
 //! first): `durable`, `linalg` → `color`, `numeric_csv`, `time` → `model` → `screen`, `edid` → `x11` → `sim` →
 //! `instrument` → `display` → `measurement` → `plan` → `journal`, `cgats` →
-//! `measurement_file`, `argyll` → `fit` → `profile` → `export` → `config` →
+//! `measurement_file`, `argyll`, `ccmx` → `fit` → `profile` → `export` → `config` →
 //! `calibrate` → `daemon`, `report`, `comparison`. `tests/layers.rs` holds the list
 //! and checks it.
 
@@ -18,6 +18,7 @@
 
 pub mod argyll;
 pub mod calibrate;
+pub mod ccmx;
 pub mod cgats;
 pub mod color;
 pub mod comparison;

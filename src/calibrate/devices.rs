@@ -204,6 +204,8 @@ pub struct Devices {
     pub clock: Arc<dyn TimeSource>,
     /// The simulated rig's clock, which a resumed run sets to where it stopped.
     pub virtual_clock: Option<Arc<VirtualClock>>,
+    /// Where the config's relative paths (a `.ccmx`) are taken from.
+    pub base_dir: PathBuf,
 }
 
 /// Open the devices `config` names; relative paths from `base_dir`.
@@ -225,9 +227,10 @@ pub async fn open_devices(
             instrument: RunInstrument::Simulated(rig.instrument),
             clock: rig.clock.clone(),
             virtual_clock: Some(rig.clock),
+            base_dir: base_dir.to_path_buf(),
         });
     };
-    let instrument = open_serial_instrument(config, kind, &port).await?;
+    let instrument = open_serial_instrument(config, base_dir, kind, &port).await?;
     let settle_s = config.display.settle_s;
     let display = match (config.display.sink(), &config.display.screen) {
         (Sink::Resolve, _) => RunDisplay::Resolve(
@@ -263,6 +266,7 @@ pub async fn open_devices(
         instrument,
         clock: Arc::new(WallClock),
         virtual_clock: None,
+        base_dir: base_dir.to_path_buf(),
     })
 }
 
@@ -270,17 +274,20 @@ pub async fn open_devices(
 /// correction matrix.
 async fn open_serial_instrument(
     config: &Config,
+    base_dir: &Path,
     kind: DeviceKind,
     port: &str,
 ) -> Result<RunInstrument, DevicesError> {
-    let correction = match config.instrument.correction {
-        Some(rows) if kind.capability() == Capability::Spectral => {
-            let _ = rows;
+    let correction: Option<Matrix3<f64>> = match &config.instrument.correction {
+        Some(_) if kind.capability() == Capability::Spectral => {
             return Err(DevicesError::Config(format!(
                 "instrument.correction is for colorimeters; the {kind} is a spectroradiometer"
             )));
         }
-        Some(rows) => Some(Matrix3::from_fn(|r, c| rows[r][c])),
+        Some(c) => Some(
+            c.matrix(base_dir)
+                .map_err(|e| DevicesError::Config(e.to_string()))?,
+        ),
         None => None,
     };
     let options = config.instrument.options;
@@ -302,7 +309,7 @@ pub async fn reopen_instrument(devices: &mut Devices, config: &Config) -> Result
         &devices.instrument,
         config.instrument.serial().map_err(DevicesError::Config)?,
     ) {
-        devices.instrument = open_serial_instrument(config, kind, &port).await?;
+        devices.instrument = open_serial_instrument(config, &devices.base_dir, kind, &port).await?;
     }
     Ok(())
 }

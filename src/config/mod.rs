@@ -64,9 +64,43 @@ pub struct InstrumentConfig {
     pub port: Option<String>,
     #[serde(default)]
     pub options: DriverOptions,
-    /// A 3×3 matrix applied to a colorimeter's XYZ (rows), from a calibration against a
-    /// reference instrument.
-    pub correction: Option<[[f64; 3]; 3]>,
+    /// A colorimeter's correction against a reference spectroradiometer: a 3×3 matrix
+    /// applied to its XYZ (rows), or an ArgyllCMS `.ccmx` file holding one
+    /// (`correction = "display.ccmx"`, relative to the config's directory).
+    pub correction: Option<Correction>,
+}
+
+/// `instrument.correction`: a matrix written out, or a `.ccmx` file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Correction {
+    Matrix([[f64; 3]; 3]),
+    File(PathBuf),
+}
+
+impl Correction {
+    /// The matrix, read from its file relative to `base_dir` if need be, and checked
+    /// (`ccmx::check_matrix`).
+    pub fn matrix(
+        &self,
+        base_dir: &Path,
+    ) -> Result<nalgebra::Matrix3<f64>, crate::ccmx::CcmxError> {
+        match self {
+            Correction::Matrix(rows) => {
+                let m = nalgebra::Matrix3::from_fn(|r, c| rows[r][c]);
+                crate::ccmx::check_matrix(&m, "instrument.correction")?;
+                Ok(m)
+            }
+            Correction::File(path) => {
+                let path = if path.is_absolute() {
+                    path.clone()
+                } else {
+                    base_dir.join(path)
+                };
+                Ok(crate::ccmx::read_ccmx(&path)?.matrix)
+            }
+        }
+    }
 }
 
 impl InstrumentConfig {
@@ -449,10 +483,9 @@ pub fn check_config(config: &Config) -> Result<(), String> {
             "instrument: give either [instrument.simulated] or a driver and port, not both".into(),
         );
     }
-    if let Some(m) = config.instrument.correction
-        && m.iter().flatten().any(|v| !v.is_finite())
-    {
-        return Err("instrument.correction has a value that is not a number".into());
+    if let Some(Correction::Matrix(rows)) = &config.instrument.correction {
+        let m = nalgebra::Matrix3::from_fn(|r, c| rows[r][c]);
+        crate::ccmx::check_matrix(&m, "instrument.correction").map_err(|e| e.to_string())?;
     }
     Ok(())
 }
