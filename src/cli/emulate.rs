@@ -84,6 +84,10 @@ pub struct EmulateArgs {
     /// video card sends them (e.g. :1, an Xvfb showing `--display window`).
     #[arg(long, value_name = "DISPLAY")]
     pub x_display: Option<String>,
+    /// An emulated colorimeter (k10a, cs100a, colorcal2) reads exact CIE XYZ instead of
+    /// reading through its filters.
+    #[arg(long)]
+    pub ideal_filters: bool,
     /// The output looked at, by RandR name [default: the primary].
     #[arg(long, requires = "x_display")]
     pub output: Option<String>,
@@ -116,12 +120,17 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
     let monitor = Arc::new(Mutex::new(
         VirtualMonitor::new(spec, clock).map_err(|e| e.to_string())?,
     ));
-    let simulated = loaded
+    let mut simulated = loaded
         .config
         .instrument
         .simulated
         .clone()
         .unwrap_or_default();
+    // A colorimeter reads through its filters, as the real one does.
+    if let Some(model) = kind.filter_model().filter(|_| !args.ideal_filters) {
+        simulated.kind = chromacal::instrument::simulated::SimulatedKind::Tristimulus;
+        simulated.filters = simulated.filters.or(Some(model));
+    }
     let mut meter = Meter::new(monitor.clone(), simulated, faults.device(), faults.seed);
     if let Some(display) = &args.x_display {
         let aim = parse_aim(&args.aim)?;

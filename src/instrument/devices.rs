@@ -78,6 +78,17 @@ impl DeviceKind {
         }
     }
 
+    /// The filters of a tristimulus colorimeter (what its emulator reads through).
+    pub fn filter_model(self) -> Option<super::filters::FilterModel> {
+        use super::filters::FilterModel;
+        match self {
+            DeviceKind::K10a => Some(FilterModel::K10a),
+            DeviceKind::Cs100a => Some(FilterModel::Cs100a),
+            DeviceKind::ColorCal2 => Some(FilterModel::Colorcal2),
+            _ => None,
+        }
+    }
+
     /// Line settings the instrument uses.
     pub fn settings(self) -> SerialSettings {
         match self {

@@ -7,6 +7,7 @@ pub mod colorcal;
 pub mod devices;
 pub mod driver;
 pub mod emulator;
+pub mod filters;
 pub mod jeti;
 pub mod klein;
 pub mod minolta;

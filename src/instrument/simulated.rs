@@ -56,6 +56,10 @@ pub struct SimulatedInstrumentSpec {
     /// Longest integration, used for dim patches, seconds.
     pub max_integration_s: f64,
     pub seed: u64,
+    /// A colorimeter's filters (`kind = "tristimulus"`): unset, it reads exact CIE
+    /// XYZ; `"k10a"`, `"cs100a"` or `"colorcal2"`, through filters that are not the
+    /// CIE functions, as those instruments read (`instrument::filters`).
+    pub filters: Option<super::filters::FilterModel>,
 }
 
 impl Default for SimulatedInstrumentSpec {
@@ -70,6 +74,7 @@ impl Default for SimulatedInstrumentSpec {
             integration_s: 1.0,
             max_integration_s: 10.0,
             seed: 1,
+            filters: None,
         }
     }
 }
@@ -82,11 +87,22 @@ const FULL_SIGNAL_CD_M2: f64 = 10.0;
 pub struct SimulatedInstrument {
     monitor: Arc<Mutex<VirtualMonitor>>,
     spec: SimulatedInstrumentSpec,
+    /// The filters `spec.filters` names, built once.
+    filters: Option<Arc<super::filters::ColorimeterFilters>>,
 }
 
 impl SimulatedInstrument {
     pub fn new(monitor: Arc<Mutex<VirtualMonitor>>, spec: SimulatedInstrumentSpec) -> Self {
-        SimulatedInstrument { monitor, spec }
+        let filters = spec
+            .filters
+            .filter(|_| spec.kind == SimulatedKind::Tristimulus)
+            .and_then(|model| super::filters::ColorimeterFilters::new(model).ok())
+            .map(Arc::new);
+        SimulatedInstrument {
+            monitor,
+            spec,
+            filters,
+        }
     }
 
     pub fn spec(&self) -> &SimulatedInstrumentSpec {
@@ -254,7 +270,13 @@ impl SimulatedInstrument {
                 let xyz = emission_to_xyz(&noisy, Observer::default()).map_err(simulation_error)?;
                 (xyz, Some(noisy))
             }
-            SimulatedKind::Tristimulus => (self.noisy_xyz(&clean_xyz, &mut rng), None),
+            SimulatedKind::Tristimulus => {
+                let seen = match &self.filters {
+                    Some(filters) => filters.xyz(clean),
+                    None => clean_xyz,
+                };
+                (self.noisy_xyz(&seen, &mut rng), None)
+            }
         };
         Ok(Reading {
             xyz: Some(xyz),
