@@ -443,18 +443,7 @@ pub fn edid_summary(profile: &Profile) -> String {
         return String::new();
     };
     let mut out = format!("monitor (EDID): {}\n", edid.describe());
-    let rows: Vec<Vec<String>> = comparison
-        .rows
-        .iter()
-        .map(|(name, e, m, d)| {
-            vec![
-                name.to_string(),
-                format!("{:.4}, {:.4}", e[0], e[1]),
-                format!("{:.4}, {:.4}", m[0], m[1]),
-                format!("{d:.4}"),
-            ]
-        })
-        .collect();
+    let rows = comparison.table_rows();
     out += &table(&["", "EDID xy", "measured xy", "apart"], &rows);
     if comparison.mismatch() {
         out += &format!(

@@ -372,36 +372,59 @@ fn ctrl_c_puts_the_lut_back_and_after_kill_9_any_start_does() {
         config.to_str().unwrap(),
     ]);
     let state = dir.path().join("state");
-    let mut run = chromacal()
-        .args([
-            "calibrate",
-            "--display",
-            "window",
-            "--x-display",
-            &x.display,
-        ])
-        .arg("--config")
-        .arg(&config)
-        .arg("--instrument")
-        .arg(format!("pr670:{}", emulator.device))
-        .args(["--timing-scale", "0.05", "--state-dir"])
-        .arg(&state)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
+    let start = || {
+        chromacal()
+            .args([
+                "calibrate",
+                "--display",
+                "window",
+                "--x-display",
+                &x.display,
+            ])
+            .arg("--config")
+            .arg(&config)
+            .arg("--instrument")
+            .arg(format!("pr670:{}", emulator.device))
+            .args(["--timing-scale", "0.05", "--state-dir"])
+            .arg(&state)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap()
+    };
+    let measuring = |run: &mut std::process::Child, readings: usize| {
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while journal_lines(&state) < readings {
+            assert!(
+                Instant::now() < deadline,
+                "the calibration took no readings"
+            );
+            assert!(
+                run.try_wait().unwrap().is_none(),
+                "the calibration ended early"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    // Ctrl-C: the run stops after the reading under way and puts the user's ramp back.
+    let mut run = start();
+    measuring(&mut run, 4);
+    assert!(xd.gamma(&output).unwrap().is_identity());
+    let interrupted = std::process::Command::new("kill")
+        .args(["-INT", &run.id().to_string()])
+        .status()
         .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(120);
-    while journal_lines(&state) < 4 {
-        assert!(
-            Instant::now() < deadline,
-            "the calibration took no readings"
-        );
-        assert!(
-            run.try_wait().unwrap().is_none(),
-            "the calibration ended early"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    assert!(interrupted.success());
+    assert_eq!(run.wait().unwrap().code(), Some(130));
+    assert!(
+        xd.gamma(&output).unwrap().max_difference(&users) <= 1.0,
+        "Ctrl-C left the LUT as it was not"
+    );
+    assert!(!state.join("lut-saved.json").exists());
+
+    // kill -9: nothing runs on the way out.
+    let mut run = start();
+    measuring(&mut run, journal_lines(&state) + 4);
     // Characterising through the straight ramp, the user's kept in the state directory.
     assert!(xd.gamma(&output).unwrap().is_identity());
     assert!(state.join("lut-saved.json").exists());
@@ -423,6 +446,40 @@ fn ctrl_c_puts_the_lut_back_and_after_kill_9_any_start_does() {
         "the user's ramp was not put back"
     );
     assert!(!state.join("lut-saved.json").exists());
+
+    // A ramp saved for another screen that cannot be reached is never loaded onto
+    // this one: the run refuses to start and says how to put it back.
+    let foreign = serde_json::json!({
+        "x_display": ":4998",
+        "output": "HDMI-1",
+        "ramp": GammaRamp::identity(4),
+        "pid": 1
+    });
+    std::fs::write(state.join("lut-saved.json"), foreign.to_string()).unwrap();
+    let refused = chromacal()
+        .args([
+            "calibrate",
+            "--display",
+            "window",
+            "--x-display",
+            &x.display,
+        ])
+        .arg("--config")
+        .arg(&config)
+        .arg("--instrument")
+        .arg(format!("pr670:{}", emulator.device))
+        .args(["--timing-scale", "0.05", "--state-dir"])
+        .arg(&state)
+        .output()
+        .unwrap();
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("HDMI-1 on :4998") && err.contains("not put back yet"),
+        "{err}"
+    );
+    assert!(xd.gamma(&output).unwrap().max_difference(&users) <= 1.0);
+    assert!(state.join("lut-saved.json").exists());
 }
 
 /// Calibrate with `args` besides the config and state directory; the profile.
@@ -546,6 +603,34 @@ fn a_calibration_in_the_window_matches_the_emulator_screen_and_verifies_through_
             .unwrap()
             .contains("window on DUMMY0")
     );
+    // The EDID's Adobe RGB green is far from the CRT's: said at once, and kept.
+    assert_eq!(
+        profile.provenance.edid.as_ref().unwrap().manufacturer,
+        "EIZ"
+    );
+    assert!(
+        summary.contains("is this the display you meant?"),
+        "{summary}"
+    );
+    let shown = succeed(
+        chromacal()
+            .args(["profile", "show"])
+            .arg(state.join("current.toml")),
+    );
+    let shown = String::from_utf8_lossy(&shown.stdout);
+    assert!(
+        shown.contains("monitor (EDID): EIZ CS2740 (serial 23150512, week 40 of 2019)"),
+        "{shown}"
+    );
+    assert!(shown.contains("is this the display you meant?"));
+    let page = succeed(
+        chromacal()
+            .arg("report")
+            .arg(state.join("current.toml"))
+            .args(["-o", "-"]),
+    );
+    let page = String::from_utf8_lossy(&page.stdout);
+    assert!(page.contains("What the monitor's EDID states") && page.contains("0.2100, 0.7100"));
     common::assert_same_model("window", &profile, &reference);
     let (held, reference_held) = (
         profile.report.held_out.unwrap(),

@@ -83,6 +83,27 @@ async fn read_level<D: PatchDisplay, I: Instrument>(
     Ok((xyz, reading.integration_s))
 }
 
+/// The mean of `reads` readings of the grey of input `x` through `curves`, with the
+/// instrument time they took.
+async fn read_mean<D: PatchDisplay, I: Instrument>(
+    curves: &CalibrationCurves,
+    x: f64,
+    reads: usize,
+    through: Through,
+    geometry: Geometry,
+    display: &mut D,
+    instrument: &mut I,
+) -> Result<(Xyz, f64), RefineError> {
+    let mut mean = Xyz::zeros();
+    let mut seconds = 0.0;
+    for _ in 0..reads {
+        let (xyz, s) = read_level(curves, x, through, geometry, display, instrument).await?;
+        mean += xyz / reads as f64;
+        seconds += s;
+    }
+    Ok((mean, seconds))
+}
+
 /// Piecewise-linear interpolation through `(x, y)` points sorted by x, constant
 /// beyond the ends.
 fn interpolate_gain(points: &[(f64, f64)], x: f64) -> f64 {
@@ -124,15 +145,14 @@ fn white_balance(model: &MonitorModel, measured: &Xyz, target: &Xyz) -> Option<[
     {
         return None;
     }
-    let factors = [0, 1, 2].map(|c| needed[c] / obtained[c]);
+    let factors = [0, 1, 2].map(|c| (needed[c] / obtained[c]).clamp(0.8, 1.2));
     let luminance = |f: [f64; 3]| {
         (0..3)
             .map(|c| model.matrix[(1, c)] * obtained[c] * f[c])
             .sum::<f64>()
     };
     let keep = luminance([1.0; 3]) / luminance(factors);
-    keep.is_finite()
-        .then(|| factors.map(|f| (f * keep).clamp(0.8, 1.2)))
+    (keep.is_finite() && keep > 0.0).then(|| factors.map(|f| f * keep))
 }
 
 /// The model's curves for `config`, measured into place on `display` and `instrument`.
@@ -180,14 +200,10 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         for &x in &inputs {
             // The white three times: its chromaticity is corrected too.
             let reads = if x == 1.0 { WHITE_READS } else { 1 };
-            let mut measured = Xyz::zeros();
-            for _ in 0..reads {
-                let (xyz, seconds) =
-                    read_level(&curves, x, through, geometry, display, instrument).await?;
-                readings += 1;
-                instrument_s += seconds;
-                measured += xyz / reads as f64;
-            }
+            let (measured, seconds) =
+                read_mean(&curves, x, reads, through, geometry, display, instrument).await?;
+            readings += reads;
+            instrument_s += seconds;
             let above = measured.y - black.y;
             if above > 0.0 {
                 gains.push((x, ((want(x, &white) - black.y) / above).clamp(0.5, 2.0)));
@@ -242,14 +258,10 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
     let mut measured_white = white;
     for &x in &inputs {
         let reads = if x == 1.0 { WHITE_READS } else { 1 };
-        let mut measured = Xyz::zeros();
-        for _ in 0..reads {
-            let (xyz, seconds) =
-                read_level(&curves, x, through, geometry, display, instrument).await?;
-            readings += 1;
-            instrument_s += seconds;
-            measured += xyz / reads as f64;
-        }
+        let (measured, seconds) =
+            read_mean(&curves, x, reads, through, geometry, display, instrument).await?;
+        readings += reads;
+        instrument_s += seconds;
         levels.push(LevelCheck {
             input: x,
             target_luminance: want(x, &white),

@@ -429,18 +429,7 @@ fn primaries(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
             "<h3 id=\"edid\">What the monitor's EDID states</h3>\n<p>{}</p>",
             escape(&edid.describe())
         );
-        let rows: Vec<Vec<String>> = comparison
-            .rows
-            .iter()
-            .map(|(name, e, m, d)| {
-                vec![
-                    name.to_string(),
-                    format!("{:.4}, {:.4}", e[0], e[1]),
-                    format!("{:.4}, {:.4}", m[0], m[1]),
-                    format!("{d:.4}"),
-                ]
-            })
-            .collect();
+        let rows = comparison.table_rows();
         table(out, &["", "EDID xy", "measured xy", "apart"], &rows);
         if comparison.mismatch() {
             note(

@@ -147,6 +147,21 @@ pub struct EdidComparison {
 }
 
 impl EdidComparison {
+    /// The rows as a table's text: the light, EDID xy, measured xy, how far apart.
+    pub fn table_rows(&self) -> Vec<Vec<String>> {
+        self.rows
+            .iter()
+            .map(|(name, e, m, d)| {
+                vec![
+                    name.to_string(),
+                    format!("{:.4}, {:.4}", e[0], e[1]),
+                    format!("{:.4}, {:.4}", m[0], m[1]),
+                    format!("{d:.4}"),
+                ]
+            })
+            .collect()
+    }
+
     /// The EDID is grossly unlike what was measured.
     pub fn mismatch(&self) -> bool {
         self.worst > EDID_MISMATCH_XY
