@@ -372,8 +372,9 @@ fn ctrl_c_puts_the_lut_back_and_after_kill_9_any_start_does() {
         config.to_str().unwrap(),
     ]);
     let state = dir.path().join("state");
-    let start = || {
-        chromacal()
+    let calibrate = || {
+        let mut command = chromacal();
+        command
             .args([
                 "calibrate",
                 "--display",
@@ -386,7 +387,11 @@ fn ctrl_c_puts_the_lut_back_and_after_kill_9_any_start_does() {
             .arg("--instrument")
             .arg(format!("pr670:{}", emulator.device))
             .args(["--timing-scale", "0.05", "--state-dir"])
-            .arg(&state)
+            .arg(&state);
+        command
+    };
+    let start = || {
+        calibrate()
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::null())
             .spawn()
@@ -456,22 +461,7 @@ fn ctrl_c_puts_the_lut_back_and_after_kill_9_any_start_does() {
         "pid": 1
     });
     std::fs::write(state.join("lut-saved.json"), foreign.to_string()).unwrap();
-    let refused = chromacal()
-        .args([
-            "calibrate",
-            "--display",
-            "window",
-            "--x-display",
-            &x.display,
-        ])
-        .arg("--config")
-        .arg(&config)
-        .arg("--instrument")
-        .arg(format!("pr670:{}", emulator.device))
-        .args(["--timing-scale", "0.05", "--state-dir"])
-        .arg(&state)
-        .output()
-        .unwrap();
+    let refused = calibrate().output().unwrap();
     assert!(!refused.status.success());
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(

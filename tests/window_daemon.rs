@@ -12,7 +12,7 @@ use chromacal::profile::Profile;
 use chromacal::x11::{GammaRamp, OutputSelector, XDisplay};
 
 mod common;
-use common::daemon::{events_until, get, start_daemon_with, start_job, subscribe};
+use common::daemon::{TestDaemon, events_until, get, start_daemon_with, start_job, subscribe};
 use common::emulate;
 use common::xserver::XServer;
 
@@ -23,6 +23,19 @@ fn holds_curves(x: &XServer, profile: &Profile) -> f64 {
     let ramp = xd.gamma(&output).unwrap();
     let curves = &profile.calibration.as_ref().unwrap().curves;
     ramp.max_difference(&GammaRamp::from_curves(curves, ramp.len()))
+}
+
+/// Wait (20 s at most) until the LUT holds `profile`'s curves.
+async fn until_curves_loaded(x: &XServer, profile: &Profile, daemon: &TestDaemon) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    while holds_curves(x, profile) > 1.0 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            daemon.log_text()
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
 }
 
 fn loaded_for(seen: &Event, why: &str) -> bool {
@@ -184,15 +197,7 @@ tone = "gamma:2.2"
         &config,
         &[("DBUS_SYSTEM_BUS_ADDRESS", bus.address.as_str())],
     );
-    let deadline = std::time::Instant::now() + Duration::from_secs(20);
-    while holds_curves(&x, &profile) > 1.0 {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "{}",
-            daemon.log_text()
-        );
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    until_curves_loaded(&x, &profile, &daemon).await;
     // And without keep_lut an overwrite is said but left alone. (Straightened before
     // the start, whose load is then seen.)
     drop(daemon);
@@ -203,15 +208,7 @@ tone = "gamma:2.2"
         &[("DBUS_SYSTEM_BUS_ADDRESS", bus.address.as_str())],
     );
     let mut events = subscribe(&daemon.endpoint());
-    let deadline = std::time::Instant::now() + Duration::from_secs(20);
-    while holds_curves(&x, &profile) > 1.0 {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "{}",
-            daemon.log_text()
-        );
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    until_curves_loaded(&x, &profile, &daemon).await;
     x.run("xrandr", &["--output", "DUMMY0", "--gamma", "0.8:0.8:0.8"]);
     let seen = events_until(&mut events, Duration::from_secs(20), |e| {
         matches!(e, Event::LutOverwritten { .. })

@@ -10,7 +10,7 @@ use crate::config::devices::device_configs;
 use crate::config::{LoadedConfig, Sink};
 use crate::edid::Edid;
 use crate::profile::store::ProfileStore;
-use crate::x11::{OutputInfo, OutputSelector, X11Error, XDisplay};
+use crate::x11::{OutputInfo, X11Error, XDisplay};
 
 /// One output, as `chromacal displays` shows it.
 #[derive(Debug, Clone, Serialize)]
@@ -33,25 +33,6 @@ pub struct DeviceOnOutput {
     pub name: String,
     /// Its current profile's id, if it has one.
     pub profile: Option<String>,
-}
-
-/// Whether `selector` picks `output` among `all`.
-pub fn selects(selector: &OutputSelector, output: &OutputInfo, all: &[OutputInfo]) -> bool {
-    match selector {
-        OutputSelector::Name(name) => &output.name == name,
-        OutputSelector::Edid { edid_serial } => output
-            .edid
-            .as_deref()
-            .and_then(|b| Edid::parse(b).ok())
-            .is_some_and(|e| e.matches_serial(edid_serial)),
-        OutputSelector::Primary => {
-            let primary = all
-                .iter()
-                .find(|o| o.primary && o.crtc.is_some())
-                .or_else(|| all.iter().find(|o| o.crtc.is_some()));
-            primary.is_some_and(|p| p.id == output.id)
-        }
-    }
 }
 
 /// Every output of `x`, with the devices of `loaded` (stores under `state_dir`) that
@@ -82,11 +63,12 @@ pub fn list_displays(
                 .filter(|d| {
                     let display = &d.loaded.config.display;
                     display.sink() == Sink::Window
-                        && selects(
-                            &display.output.clone().unwrap_or_default(),
-                            output,
-                            &outputs,
-                        )
+                        && display
+                            .output
+                            .clone()
+                            .unwrap_or_default()
+                            .pick(&outputs)
+                            .is_some_and(|o| o.id == output.id)
                 })
                 .map(|d| DeviceOnOutput {
                     name: d.name.clone(),

@@ -3,15 +3,17 @@
 
 use std::path::{Path, PathBuf};
 
-use chromacal::export::{ExportOptions, Format, parse_target};
+use chromacal::export::{ExportOptions, Format};
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
 
-use super::shared::{COLORD_UNAVAILABLE, Failure};
+use super::shared::{COLORD_UNAVAILABLE, Failure, TargetArgs};
 
 /// Write a profile for other tools: ICC v4 or v2 display profiles (with vcgt when a
 /// target is given), ArgyllCMS .ti3 (the run's measurements) and .cal (calibration
 /// curves to a target), a PsychoPy monitor file, or the profile as JSON or TOML.
+/// Curves go into icc4, icc2 (vcgt) and cal; cal needs a target or curves the profile
+/// measured into place.
 #[derive(clap::Args)]
 pub struct ExportArgs {
     /// The profile (a chromacal .toml).
@@ -28,20 +30,8 @@ pub struct ExportArgs {
     /// profile names].
     #[arg(long)]
     measurements: Option<PathBuf>,
-    /// Calibration target white: native, D50, D55, D65, D75, 6500K or x,y (either
-    /// case). Any of --white, --tone, --luminance asks for curves computed from the
-    /// model, which icc4, icc2 and cal carry; without them, the curves the profile
-    /// measured into place, if it has them. cal needs one or the other.
-    #[arg(long)]
-    white: Option<String>,
-    /// Calibration target tone curve: gamma:G, srgb, bt1886 or lstar (gamma:2.2 when
-    /// --white or --luminance is given alone).
-    #[arg(long)]
-    tone: Option<String>,
-    /// Calibration target white luminance in cd/m², or max (max when --white or
-    /// --tone is given alone).
-    #[arg(long)]
-    luminance: Option<String>,
+    #[command(flatten)]
+    target: TargetArgs,
     /// Also make the ICC file the default profile of this display in colord
     /// (e.g. xrandr-Dell-U2713HM-SN123, the id GNOME or KDE gave it), over the system
     /// D-Bus ($DBUS_SYSTEM_BUS_ADDRESS). Exit 4 when colord cannot be reached.
@@ -55,7 +45,7 @@ pub fn run(args: ExportArgs) -> Result<(), Failure> {
         &args.format,
         &args.output,
         args.measurements.as_deref(),
-        [args.white, args.tone, args.luminance],
+        &args.target,
         args.register_colord.as_deref(),
     )
 }
@@ -65,7 +55,7 @@ fn export(
     format: &str,
     output: &Path,
     measurements: Option<&Path>,
-    target: [Option<String>; 3],
+    target: &TargetArgs,
     register_colord: Option<&str>,
 ) -> Result<(), Failure> {
     let profile = Profile::read(profile_path).map_err(Failure::from)?;
@@ -81,9 +71,7 @@ fn export(
             "--register-colord needs an ICC format (icc4 or icc2)".to_string(),
         ));
     }
-    let [white, tone, luminance] = target;
-    let target = parse_target(white.as_deref(), tone.as_deref(), luminance.as_deref())
-        .map_err(|e| Failure::from(e.to_string()))?;
+    let target = target.target()?;
     let measurements = match measurements {
         Some(path) => Some(read_measurements(path).map_err(|e| Failure::from(e.to_string()))?),
         None => None,

@@ -8,13 +8,12 @@ use clap::Subcommand;
 use chromacal::calibrate::video_lut::{desktop_lut_loader, lut_status};
 use chromacal::display::lut::restore_pending_logged;
 use chromacal::export::cal::curves_cal_text;
-use chromacal::export::parse_target;
-use chromacal::model::target::calibration_curves;
+use chromacal::export::calibration_for;
 use chromacal::profile::Profile;
 use chromacal::profile::store::{ProfileStore, default_state_dir};
 use chromacal::x11::{GammaRamp, OutputSelector, XDisplay};
 
-use super::shared::Failure;
+use super::shared::{Failure, TargetArgs};
 
 /// The video LUT (CRTC gamma ramp) of an X11 output.
 #[derive(clap::Args)]
@@ -43,16 +42,10 @@ enum LutCommand {
         /// The state directory's current profile instead.
         #[arg(long, conflicts_with = "profile")]
         current: bool,
-        /// Curves computed now from the profile's model for this white (native, D65,
-        /// 6500K, x,y) instead of the curves it carries.
-        #[arg(long)]
-        white: Option<String>,
-        /// Tone curve for computed curves: gamma:G, srgb, bt1886 or lstar.
-        #[arg(long)]
-        tone: Option<String>,
-        /// White luminance for computed curves, cd/m², or max.
-        #[arg(long)]
-        luminance: Option<String>,
+        /// Curves computed now from the profile's model for a target, instead of
+        /// the curves it carries.
+        #[command(flatten)]
+        target: TargetArgs,
     },
     /// Show the ramp: size, straight or not, samples, and whether a desktop program
     /// loads curves itself.
@@ -94,26 +87,17 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
     let output = x.output(&selector)?;
     match args.command {
         LutCommand::Load {
-            profile,
-            current,
-            white,
-            tone,
-            luminance,
+            profile, target, ..
         } => {
-            let path = match (profile, current) {
-                (Some(p), _) => p,
-                (None, _) => store.current_path(),
-            };
+            // Without a path, --current (clap requires one of the two).
+            let path = profile.unwrap_or_else(|| store.current_path());
             let profile = Profile::read(&path)?;
-            let curves = match parse_target(white.as_deref(), tone.as_deref(), luminance.as_deref())? {
-                Some(target) => calibration_curves(&profile.model, &target)?,
-                None => profile.calibration.map(|c| c.curves).ok_or_else(|| {
-                    format!(
-                        "{} carries no calibration curves: calibrate with a [target], or give --white/--tone to compute them from its model",
-                        path.display()
-                    )
-                })?,
-            };
+            let curves = calibration_for(&profile, target.target()?.as_ref())?.ok_or_else(|| {
+                format!(
+                    "{} carries no calibration curves: calibrate with a [target], or give --white/--tone to compute them from its model",
+                    path.display()
+                )
+            })?;
             x.set_gamma(&output, &GammaRamp::from_curves(&curves, output.gamma_size))?;
             if let Some(loader) = desktop_lut_loader() {
                 eprintln!(

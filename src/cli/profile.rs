@@ -9,7 +9,7 @@ use chromacal::profile::Profile;
 use chromacal::report;
 
 use super::daemon::{ApiArgs, current_profile};
-use super::shared::Failure;
+use super::shared::{Failure, TargetArgs};
 
 /// Work with profiles.
 #[derive(clap::Args)]
@@ -41,16 +41,9 @@ enum ProfileCommand {
         /// Write to this file instead of standard output.
         #[arg(short, long)]
         output: Option<PathBuf>,
-        /// Calibration target white for the curves (icc4, icc2, cal), as `export`
-        /// takes it: native, D50, D55, D65, D75, 6500K or x,y.
-        #[arg(long)]
-        white: Option<String>,
-        /// Calibration target tone curve: gamma:G, srgb, bt1886 or lstar.
-        #[arg(long)]
-        tone: Option<String>,
-        /// Calibration target white luminance in cd/m², or max.
-        #[arg(long)]
-        luminance: Option<String>,
+        /// The curves' target (icc4, icc2, cal), as `export` takes it.
+        #[command(flatten)]
+        target: TargetArgs,
     },
 }
 
@@ -64,14 +57,16 @@ pub fn run(args: ProfileArgs) -> Result<(), Failure> {
             json,
             format,
             output,
-            white,
-            tone,
-            luminance,
+            target,
         } => current_profile(
             &api,
             json,
             format.as_deref(),
-            [("white", white), ("tone", tone), ("luminance", luminance)],
+            [
+                ("white", target.white),
+                ("tone", target.tone),
+                ("luminance", target.luminance),
+            ],
             output.as_deref(),
         )
         .map_err(Failure::from),

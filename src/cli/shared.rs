@@ -124,6 +124,37 @@ impl DeviceArgs {
     }
 }
 
+/// A calibration target on the command line (`export`, `profile current`, `lut load`).
+#[derive(clap::Args, Default)]
+pub struct TargetArgs {
+    /// Calibration target white: native, D50, D55, D65, D75, 6500K or x,y (either
+    /// case). Any of --white, --tone, --luminance asks for curves computed from the
+    /// profile's model; without them, the curves the profile measured into place, if
+    /// it has them.
+    #[arg(long)]
+    pub white: Option<String>,
+    /// Calibration target tone curve: gamma:G, srgb, bt1886 or lstar (gamma:2.2 when
+    /// --white or --luminance is given alone).
+    #[arg(long)]
+    pub tone: Option<String>,
+    /// Calibration target white luminance in cd/m², or max (max when --white or
+    /// --tone is given alone).
+    #[arg(long)]
+    pub luminance: Option<String>,
+}
+
+impl TargetArgs {
+    /// The target, if any part of one was given.
+    pub fn target(&self) -> Result<Option<chromacal::model::target::Target>, Failure> {
+        chromacal::export::parse_target(
+            self.white.as_deref(),
+            self.tone.as_deref(),
+            self.luminance.as_deref(),
+        )
+        .map_err(Failure::from)
+    }
+}
+
 /// KIND:PORT.
 pub fn parse_instrument(spec: &str) -> Result<(DeviceKind, String), Failure> {
     let (kind, port) = spec.split_once(':').ok_or_else(|| {

@@ -38,6 +38,24 @@ pub struct WindowTarget {
     pub output: OutputSelector,
 }
 
+/// A black screen: what the window shows when it opens and when blanked.
+const BLACK: Patch = Patch {
+    codes: Codes {
+        rgb: [0; 3],
+        bit_depth: 8,
+    },
+    background: Codes {
+        rgb: [0; 3],
+        bit_depth: 8,
+    },
+    geometry: crate::screen::Geometry {
+        x: 0.5,
+        y: 0.5,
+        width: 0.0,
+        height: 0.0,
+    },
+};
+
 /// The patch window.
 pub struct PatchWindow {
     x: Arc<XDisplay>,
@@ -81,11 +99,7 @@ impl PatchWindow {
             closed: false,
             hidden: false,
         };
-        w.draw(&Patch {
-            codes: Codes::from_drive([0.0; 3], 8),
-            background: Codes::from_drive([0.0; 3], 8),
-            geometry: crate::screen::Geometry::centred(0.0),
-        })?;
+        w.draw(&BLACK)?;
         Ok(w)
     }
 
@@ -325,14 +339,6 @@ fn create_windows(x: &XDisplay, output: &OutputInfo) -> Result<(u32, u32), Displ
             .cursor(cursor),
     )
     .map_err(|e| lost(&e))?;
-    let atom = |name: &[u8]| -> Result<u32, DisplayError> {
-        Ok(conn
-            .intern_atom(false, name)
-            .map_err(|e| lost(&e))?
-            .reply()
-            .map_err(|e| lost(&e))?
-            .atom)
-    };
     let title = b"chromacal patches";
     conn.change_property8(
         PropMode::REPLACE,
@@ -346,7 +352,7 @@ fn create_windows(x: &XDisplay, output: &OutputInfo) -> Result<(u32, u32), Displ
     conn.change_property32(
         PropMode::REPLACE,
         window,
-        atom(b"_NET_WM_BYPASS_COMPOSITOR")?,
+        x.atom(b"_NET_WM_BYPASS_COMPOSITOR", false)?,
         AtomEnum::CARDINAL,
         &[1],
     )
@@ -379,11 +385,7 @@ impl PatchDisplay for PatchWindow {
     }
 
     async fn blank(&mut self) -> Result<(), DisplayError> {
-        self.draw(&Patch {
-            codes: Codes::from_drive([0.0; 3], 8),
-            background: Codes::from_drive([0.0; 3], 8),
-            geometry: crate::screen::Geometry::centred(0.0),
-        })
+        self.draw(&BLACK)
     }
 
     fn load_curves(&mut self, curves: Option<&CalibrationCurves>) -> Result<bool, DisplayError> {

@@ -281,6 +281,19 @@ fn details(profile: &Profile, notes: &[String], calibration: Option<&Calibration
     text
 }
 
+/// The calibration curves of `profile` for `target`: computed now from its model when
+/// a target is given, otherwise the curves its calibration measured into place, if it
+/// made any.
+pub fn calibration_for(
+    profile: &Profile,
+    target: Option<&Target>,
+) -> Result<Option<CalibrationCurves>, TargetError> {
+    Ok(match target {
+        Some(target) => Some(calibration_curves(&profile.model, target)?),
+        None => profile.calibration.as_ref().map(|c| c.curves.clone()),
+    })
+}
+
 /// Export `profile` as `format`.
 pub fn export(
     profile: &Profile,
@@ -289,12 +302,7 @@ pub fn export(
 ) -> Result<Exported, ExportError> {
     let mut notes = limitations(profile);
     let mut warnings = Vec::new();
-    // A target given now is computed from the model; otherwise the curves the
-    // calibration measured into place, if it made any.
-    let calibration = match &options.target {
-        Some(target) => Some(calibration_curves(&profile.model, target)?),
-        None => profile.calibration.as_ref().map(|c| c.curves.clone()),
-    };
+    let calibration = calibration_for(profile, options.target.as_ref())?;
     if let Some(k) = &calibration
         && k.luminance_limited
     {

@@ -81,9 +81,16 @@ impl XDisplay {
         })
     }
 
-    /// The pixels of a rectangle of the root window, row by row.
-    pub fn pixels(&self, x: i16, y: i16, width: u16, height: u16) -> Result<Vec<u32>, X11Error> {
-        let format = self.pixel_format()?;
+    /// The pixels of a rectangle of the root window, row by row, in `format` (the root
+    /// visual's, [`XDisplay::pixel_format`]).
+    pub fn pixels(
+        &self,
+        format: &PixelFormat,
+        x: i16,
+        y: i16,
+        width: u16,
+        height: u16,
+    ) -> Result<Vec<u32>, X11Error> {
         let reply = self
             .conn
             .get_image(ImageFormat::Z_PIXMAP, self.root, x, y, width, height, !0)
@@ -126,12 +133,14 @@ impl XDisplay {
         let to_i16 = |v: i64| i16::try_from(v).map_err(|e| self.protocol(e));
         let to_u16 = |v: u32| u16::try_from(v).map_err(|e| self.protocol(e));
         let row = self.pixels(
+            &format,
             to_i16(i64::from(output.x))?,
             to_i16(i64::from(output.y) + i64::from(ay))?,
             to_u16(w)?,
             1,
         )?;
         let column = self.pixels(
+            &format,
             to_i16(i64::from(output.x) + i64::from(ax))?,
             to_i16(i64::from(output.y))?,
             1,

@@ -117,6 +117,17 @@ impl XDisplay {
         }
     }
 
+    /// The atom named `name`; with `only_if_exists`, 0 when the server has none.
+    pub(crate) fn atom(&self, name: &[u8], only_if_exists: bool) -> Result<u32, X11Error> {
+        Ok(
+            x11rb::protocol::xproto::ConnectionExt::intern_atom(&self.conn, only_if_exists, name)
+                .map_err(|e| self.protocol(e))?
+                .reply()
+                .map_err(|e| self.protocol(e))?
+                .atom,
+        )
+    }
+
     /// Wait until the server has handled every request sent so far (a round trip).
     pub fn sync(&self) -> Result<(), X11Error> {
         x11rb::protocol::xproto::ConnectionExt::get_input_focus(&self.conn)

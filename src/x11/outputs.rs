@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 use x11rb::protocol::randr::ConnectionExt as _;
-use x11rb::protocol::xproto::{AtomEnum, ConnectionExt as _};
+use x11rb::protocol::xproto::AtomEnum;
 
 use super::{X11Error, XDisplay};
 
@@ -34,6 +34,23 @@ impl OutputSelector {
             }
         } else {
             OutputSelector::Name(text.to_string())
+        }
+    }
+
+    /// The output this selector means among `outputs`.
+    pub fn pick<'a>(&self, outputs: &'a [OutputInfo]) -> Option<&'a OutputInfo> {
+        match self {
+            OutputSelector::Primary => outputs
+                .iter()
+                .find(|o| o.primary && o.crtc.is_some())
+                .or_else(|| outputs.iter().find(|o| o.crtc.is_some())),
+            OutputSelector::Name(name) => outputs.iter().find(|o| &o.name == name),
+            OutputSelector::Edid { edid_serial } => outputs.iter().find(|o| {
+                o.edid
+                    .as_deref()
+                    .and_then(|bytes| crate::edid::Edid::parse(bytes).ok())
+                    .is_some_and(|e| e.matches_serial(edid_serial))
+            }),
         }
     }
 
@@ -107,13 +124,7 @@ impl XDisplay {
             .reply()
             .map_err(|e| err(&e))?
             .output;
-        let edid_atom = self
-            .conn
-            .intern_atom(true, b"EDID")
-            .map_err(|e| err(&e))?
-            .reply()
-            .map_err(|e| err(&e))?
-            .atom;
+        let edid_atom = self.atom(b"EDID", true)?;
         let mut outputs = Vec::new();
         for &output in &resources.outputs {
             let info = self
@@ -213,24 +224,14 @@ impl XDisplay {
                 names.join(", ")
             }
         };
-        let found = match selector {
-            OutputSelector::Primary => outputs
-                .iter()
-                .find(|o| o.primary && o.crtc.is_some())
-                .or_else(|| outputs.iter().find(|o| o.crtc.is_some())),
-            OutputSelector::Name(name) => outputs.iter().find(|o| &o.name == name),
-            OutputSelector::Edid { edid_serial } => outputs.iter().find(|o| {
-                o.edid
-                    .as_deref()
-                    .and_then(|bytes| crate::edid::Edid::parse(bytes).ok())
-                    .is_some_and(|e| e.matches_serial(edid_serial))
-            }),
-        };
-        found.cloned().ok_or_else(|| X11Error::NoOutput {
-            wanted: selector.describe(),
-            display: self.name().to_string(),
-            have: have(),
-        })
+        selector
+            .pick(&outputs)
+            .cloned()
+            .ok_or_else(|| X11Error::NoOutput {
+                wanted: selector.describe(),
+                display: self.name().to_string(),
+                have: have(),
+            })
     }
 
     /// Put `edid` on `output` as its `EDID` property: what a driver does when a monitor
@@ -238,13 +239,7 @@ impl XDisplay {
     /// no monitor to read one from.
     pub fn set_edid(&self, output: u32, edid: &[u8]) -> Result<(), X11Error> {
         let err = |e: &dyn std::fmt::Display| self.protocol(e);
-        let atom = self
-            .conn
-            .intern_atom(false, b"EDID")
-            .map_err(|e| err(&e))?
-            .reply()
-            .map_err(|e| err(&e))?
-            .atom;
+        let atom = self.atom(b"EDID", false)?;
         let units = u32::try_from(edid.len()).map_err(|e| err(&e))?;
         self.conn
             .randr_change_output_property(
