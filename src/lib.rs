@@ -19,6 +19,7 @@
 pub mod argyll;
 pub mod calibrate;
 pub mod ccmx;
+pub mod ccss;
 pub mod cgats;
 pub mod color;
 pub mod comparison;

@@ -35,7 +35,7 @@ const LAYERS: &[&[&str]] = &[
     // The two measurement file formats.
     &["journal", "cgats"],
     // Reading either of them; ArgyllCMS as a yardstick, fed the same files.
-    &["measurement_file", "argyll", "ccmx"],
+    &["measurement_file", "argyll", "ccmx", "ccss"],
     &["fit"],
     &["profile"],
     // The colour reproduction function: scenes through a profile's model.

@@ -8,14 +8,14 @@ use std::sync::Arc;
 use nalgebra::Matrix3;
 
 use crate::calibrate::rig::SimulatedRig;
-use crate::config::{Config, Sink};
+use crate::config::{Config, Correction, Sink};
 use crate::display::emulator_link::EmulatorScreen;
 use crate::display::resolve::ResolveDisplay;
 use crate::display::simulated::SimulatedDisplay;
 use crate::display::web::WebDisplay;
 use crate::display::window::{PatchWindow, WindowTarget};
 use crate::display::{DisplayError, PatchDisplay};
-use crate::instrument::devices::DeviceKind;
+use crate::instrument::devices::InstrumentAddress;
 use crate::instrument::driver::AsyncSerialInstrument;
 use crate::instrument::simulated::SimulatedInstrument;
 use crate::instrument::{Capability, Instrument, InstrumentError, InstrumentInfo, Reading};
@@ -41,7 +41,7 @@ pub enum DevicesError {
 /// Settings given on the command line that win over the config's.
 #[derive(Debug, Clone, Default)]
 pub struct Overrides {
-    pub instrument: Option<(DeviceKind, String)>,
+    pub instrument: Option<InstrumentAddress>,
     pub screen: Option<PathBuf>,
     pub timing_scale: Option<f64>,
     pub sink: Option<Sink>,
@@ -56,9 +56,9 @@ pub struct Overrides {
 
 impl Overrides {
     pub fn apply(&self, config: &mut Config) {
-        if let Some((kind, port)) = &self.instrument {
-            config.instrument.driver = Some(kind.name().to_string());
-            config.instrument.port = Some(port.clone());
+        if let Some(address) = &self.instrument {
+            config.instrument.driver = Some(address.driver());
+            config.instrument.port = Some(address.port());
             config.instrument.simulated = None;
         }
         if let Some(screen) = &self.screen {
@@ -214,8 +214,7 @@ pub async fn open_devices(
     base_dir: &Path,
     realtime_scale: Option<f64>,
 ) -> Result<Devices, DevicesError> {
-    let serial = config.instrument.serial().map_err(DevicesError::Config)?;
-    let Some((kind, port)) = serial else {
+    let Some(address) = config.instrument.address().map_err(DevicesError::Config)? else {
         let rig = SimulatedRig::new(
             config.monitor.resolve(base_dir)?,
             config.instrument.simulated.clone().unwrap_or_default(),
@@ -230,7 +229,7 @@ pub async fn open_devices(
             base_dir: base_dir.to_path_buf(),
         });
     };
-    let instrument = open_serial_instrument(config, base_dir, kind, &port).await?;
+    let instrument = open_serial_instrument(config, base_dir, &address).await?;
     let settle_s = config.display.settle_s;
     let display = match (config.display.sink(), &config.display.screen) {
         (Sink::Resolve, _) => RunDisplay::Resolve(
@@ -256,7 +255,7 @@ pub async fn open_devices(
         )?),
         (sink, _) => {
             return Err(DevicesError::Config(format!(
-                "the {kind} needs a display it can measure, not '{}': set display.sink (--display) to resolve or web, or give an emulator's --screen",
+                "the {address} needs a display it can measure, not '{}': set display.sink (--display) to window, resolve or web, or give an emulator's --screen",
                 sink.name()
             )));
         }
@@ -270,31 +269,58 @@ pub async fn open_devices(
     })
 }
 
-/// Open the serial instrument `config` names (a `kind` on `port`), with its
-/// correction matrix.
+/// Open the real instrument `config` names (at `address`), with its correction matrix.
 async fn open_serial_instrument(
     config: &Config,
     base_dir: &Path,
-    kind: DeviceKind,
-    port: &str,
+    address: &InstrumentAddress,
 ) -> Result<RunInstrument, DevicesError> {
-    let correction: Option<Matrix3<f64>> = match &config.instrument.correction {
-        Some(_) if kind.capability() == Capability::Spectral => {
+    let mut options = config.instrument.options.clone();
+    // A .ccss is spectral samples of the display type: only a colorimeter whose
+    // spectral sensitivities are known can use it, and of chromacal's instruments only
+    // ArgyllCMS knows them (for the ones it drives). It is handed to Argyll.
+    let correction: Option<Matrix3<f64>> = match (&config.instrument.correction, address) {
+        (Some(Correction::File(path)), InstrumentAddress::Argyll { .. })
+            if crate::ccss::is_ccss_path(path) =>
+        {
+            if options.argyll_correction.is_some() {
+                return Err(DevicesError::Config(
+                    "instrument.correction and instrument.options.argyll_correction both name a correction: keep one".into(),
+                ));
+            }
+            options.argyll_correction = Some(path.clone());
+            None
+        }
+        (Some(Correction::File(path)), InstrumentAddress::Serial { kind, .. })
+            if crate::ccss::is_ccss_path(path) =>
+        {
             return Err(DevicesError::Config(format!(
-                "instrument.correction is for colorimeters; the {kind} is a spectroradiometer"
+                "{}: a .ccss needs the colorimeter's spectral sensitivities, which chromacal does not have for the {kind}; make a .ccmx against a spectroradiometer with `chromacal correction make`",
+                path.display()
             )));
         }
-        Some(c) => Some(
+        (Some(_), _) if address.capability() == Some(Capability::Spectral) => {
+            return Err(DevicesError::Config(format!(
+                "instrument.correction is for colorimeters; the {address} is a spectroradiometer"
+            )));
+        }
+        (Some(c), _) => Some(
             c.matrix(base_dir)
                 .map_err(|e| DevicesError::Config(e.to_string()))?,
         ),
-        None => None,
+        (None, _) => None,
     };
-    let options = config.instrument.options;
-    let port = port.to_string();
-    let instrument = tokio::task::spawn_blocking(move || kind.open(&port, options))
+    let address_owned = address.clone();
+    let base = base_dir.to_path_buf();
+    let instrument = tokio::task::spawn_blocking(move || address_owned.open(options, &base))
         .await
         .map_err(|e| DevicesError::Config(format!("the driver's thread failed: {e}")))??;
+    if correction.is_some() && instrument.info().capability == Capability::Spectral {
+        return Err(DevicesError::Config(format!(
+            "instrument.correction is for colorimeters; the {} is a spectrometer",
+            instrument.info().name
+        )));
+    }
     Ok(RunInstrument::Serial {
         instrument: AsyncSerialInstrument::new(instrument),
         correction,
@@ -305,11 +331,11 @@ async fn open_serial_instrument(
 /// instrument shared by several displays: the daemon hands it from one to the next).
 /// A simulated instrument is part of its rig and stays as it is.
 pub async fn reopen_instrument(devices: &mut Devices, config: &Config) -> Result<(), DevicesError> {
-    if let (RunInstrument::Released(_), Some((kind, port))) = (
+    if let (RunInstrument::Released(_), Some(address)) = (
         &devices.instrument,
-        config.instrument.serial().map_err(DevicesError::Config)?,
+        config.instrument.address().map_err(DevicesError::Config)?,
     ) {
-        devices.instrument = open_serial_instrument(config, &devices.base_dir, kind, &port).await?;
+        devices.instrument = open_serial_instrument(config, &devices.base_dir, &address).await?;
     }
     Ok(())
 }

@@ -88,6 +88,10 @@ pub struct EmulateArgs {
     /// reading through its filters.
     #[arg(long)]
     pub ideal_filters: bool,
+    /// The baud rate an emulated specbos 1211 is set to [default: 115200, so that a
+    /// driver has to look past the factory 921600].
+    #[arg(long, value_name = "BAUD")]
+    pub baud: Option<u32>,
     /// The output looked at, by RandR name [default: the primary].
     #[arg(long, requires = "x_display")]
     pub output: Option<String>,
@@ -164,6 +168,17 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
                     1.0
                 },
         )),
+        DeviceKind::Specbos1211 if args.baud.is_some() => {
+            Box::new(chromacal::instrument::jeti::emulator::SpecbosEmulator::new(
+                meter,
+                args.baud.unwrap_or_default(),
+            ))
+        }
+        _ if args.baud.is_some() => {
+            return Err(format!(
+                "--baud is for the specbos1211, whose rate is a setting; the {kind} has a fixed rate"
+            ));
+        }
         _ => kind.emulator(meter),
     };
     let screen = args.screen.unwrap_or_else(|| {

@@ -1,5 +1,8 @@
-//! `chromacal instruments`: list serial ports and identify the instruments on them.
+//! `chromacal instruments`: list serial ports and identify the instruments on them, and
+//! the instruments ArgyllCMS sees.
 
+use chromacal::instrument::argyll::driver::list_ports;
+use chromacal::instrument::argyll::transport::spotread_program;
 use chromacal::instrument::scan::{PortFinding, candidate_ports, scan};
 
 use super::shared::Failure;
@@ -13,17 +16,22 @@ pub struct InstrumentsArgs {
     /// Print the ports and what answered on them as JSON.
     #[arg(long)]
     json: bool,
+    /// Do not ask ArgyllCMS which instruments it sees.
+    #[arg(long)]
+    no_argyll: bool,
 }
 
 pub fn run(args: InstrumentsArgs) -> Result<(), Failure> {
-    instruments(&args.port, args.json)
+    instruments(&args.port, args.json, !args.no_argyll)
 }
 
-fn instruments(extra: &[String], json: bool) -> Result<(), Failure> {
+fn instruments(extra: &[String], json: bool, argyll: bool) -> Result<(), Failure> {
     let ports = candidate_ports(extra);
     let findings = scan(&ports);
+    // ArgyllCMS is optional: without it the list says so and carries on.
+    let argyll_ports = argyll.then(|| list_ports(&spotread_program()));
     if json {
-        let rows: Vec<serde_json::Value> = findings
+        let mut rows: Vec<serde_json::Value> = findings
             .iter()
             .map(|(port, f)| match f {
                 PortFinding::Found { kind, identity } => serde_json::json!({"port": port, "instrument": kind.name(), "identity": identity}),
@@ -31,6 +39,13 @@ fn instruments(extra: &[String], json: bool) -> Result<(), Failure> {
                 PortFinding::Unopenable(why) => serde_json::json!({"port": port, "error": why}),
             })
             .collect();
+        match &argyll_ports {
+            Some(Ok(ports)) => rows.extend(ports.iter().map(|p| {
+                serde_json::json!({"port": p.path, "instrument": format!("argyll:{}", p.number), "identity": p.instrument})
+            })),
+            Some(Err(why)) => rows.push(serde_json::json!({"instrument": "argyll", "error": why})),
+            None => {}
+        }
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
@@ -45,6 +60,21 @@ fn instruments(extra: &[String], json: bool) -> Result<(), Failure> {
             PortFinding::Silent => println!("{port}: no known instrument answered"),
             PortFinding::Unopenable(why) => println!("{port}: cannot open: {why}"),
         }
+    }
+    match argyll_ports {
+        Some(Ok(ports)) if ports.is_empty() => println!("ArgyllCMS sees no instrument"),
+        Some(Ok(ports)) => {
+            for p in ports {
+                println!(
+                    "{}: {}  (--instrument argyll:{}, through ArgyllCMS)",
+                    p.path,
+                    p.instrument.as_deref().unwrap_or("not identified"),
+                    p.number
+                );
+            }
+        }
+        Some(Err(why)) => println!("ArgyllCMS: {why}"),
+        None => {}
     }
     Ok(())
 }

@@ -8,7 +8,7 @@ use super::shared::{Failure, parse_instrument};
 /// Measure what the display shows now with a serial instrument.
 #[derive(clap::Args)]
 pub struct MeasureArgs {
-    /// KIND:PORT, e.g. pr670:/dev/ttyACM0.
+    /// KIND:PORT, e.g. pr670:/dev/ttyACM0, or argyll[:N].
     #[arg(long)]
     instrument: String,
     /// How many readings to take.
@@ -27,16 +27,16 @@ pub fn run(args: MeasureArgs) -> Result<(), Failure> {
 }
 
 fn measure(spec: &str, count: usize, timing_scale: f64, json: bool) -> Result<(), Failure> {
-    let (kind, port) = parse_instrument(spec)?;
+    let address = parse_instrument(spec)?;
     let options = DriverOptions {
         timing_scale,
         ..DriverOptions::default()
     };
-    let mut instrument = kind.open(&port, options)?;
+    let mut instrument = address.open(options, std::path::Path::new("."))?;
     let info = instrument.info().clone();
     if !json {
         println!(
-            "{} (serial {}) on {port}",
+            "{} (serial {}), {address}",
             info.name,
             info.serial.as_deref().unwrap_or("unknown")
         );

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use chromacal::calibrate::devices::Overrides;
 use chromacal::config::Sink;
-use chromacal::instrument::devices::DeviceKind;
+use chromacal::instrument::devices::InstrumentAddress;
 
 /// A failure to report and the exit code to leave with.
 pub struct Failure {
@@ -69,7 +69,8 @@ pub fn init_logging(service: bool, verbose: u8, quiet: bool) {
 /// Which instrument and display a calibration uses, when not the config's.
 #[derive(clap::Args, Default)]
 pub struct DeviceArgs {
-    /// A serial instrument as KIND:PORT, e.g. pr670:/dev/ttyACM0 (see `chromacal instruments`).
+    /// A serial instrument as KIND:PORT, e.g. pr670:/dev/ttyACM0, or argyll[:N] for
+    /// what ArgyllCMS drives on its port N (see `chromacal instruments`).
     #[arg(long)]
     instrument: Option<String>,
     /// The screen socket of `chromacal emulate`, whose virtual monitor shows the patches.
@@ -155,17 +156,9 @@ impl TargetArgs {
     }
 }
 
-/// KIND:PORT.
-pub fn parse_instrument(spec: &str) -> Result<(DeviceKind, String), Failure> {
-    let (kind, port) = spec.split_once(':').ok_or_else(|| {
-        Failure::from(format!(
-            "--instrument wants KIND:PORT, e.g. pr670:/dev/ttyACM0, not '{spec}'"
-        ))
-    })?;
-    Ok((
-        DeviceKind::parse(kind).map_err(Failure::from)?,
-        port.to_string(),
-    ))
+/// KIND:PORT, or argyll[:N].
+pub fn parse_instrument(spec: &str) -> Result<InstrumentAddress, Failure> {
+    InstrumentAddress::parse(spec).map_err(Failure::from)
 }
 
 /// A CIE illuminant on the command line (either case: D65 or d65).

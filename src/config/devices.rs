@@ -226,7 +226,8 @@ pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String
         let device: Config = parse_config(&text, &origin).map_err(|e| e.to_string())?;
         // One port, one instrument: devices may name it only through one shared
         // [instruments.NAME].
-        if let Some((_, port)) = device.instrument.serial()?
+        if let Some(address) = device.instrument.address()?
+            && let port = address.resource()
             && let Some((other, other_shared)) =
                 ports.insert(port.clone(), (name.clone(), shared_instrument.clone()))
             && (shared_instrument.is_none() || other_shared != shared_instrument)

@@ -21,7 +21,7 @@ use crate::display::resolve::ResolveConfig;
 use crate::display::web::WebConfig;
 use crate::fit::FitOptions;
 use crate::fit::stats::ErrorStats;
-use crate::instrument::devices::DeviceKind;
+use crate::instrument::devices::InstrumentAddress;
 use crate::instrument::driver::DriverOptions;
 use crate::instrument::simulated::SimulatedInstrumentSpec;
 use crate::plan::PlanConfig;
@@ -104,12 +104,14 @@ impl Correction {
 }
 
 impl InstrumentConfig {
-    /// The serial instrument this section names, if it names one.
-    pub fn serial(&self) -> Result<Option<(DeviceKind, String)>, String> {
+    /// The real instrument this section names (a serial one, or ArgyllCMS's), if it
+    /// names one.
+    pub fn address(&self) -> Result<Option<InstrumentAddress>, String> {
         match (&self.driver, &self.port) {
             (None, None) => Ok(None),
-            (Some(d), Some(p)) => Ok(Some((DeviceKind::parse(d)?, p.clone()))),
-            (Some(_), None) => Err("instrument.driver needs instrument.port".into()),
+            (Some(d), p) => InstrumentAddress::from_parts(d, p.as_deref())
+                .map(Some)
+                .map_err(|e| format!("instrument: {e}")),
             (None, Some(_)) => Err("instrument.port needs instrument.driver".into()),
         }
     }
@@ -427,10 +429,10 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     if config.fit.laws.is_empty() {
         return Err("fit.laws must name at least one law".into());
     }
-    let serial = config.instrument.serial()?;
+    let serial = config.instrument.address()?;
     // A light meter's readings make no model without the primaries' chromaticities:
     // say so now, not after every patch has been measured.
-    if let Some((kind, _)) = &serial
+    if let Some(InstrumentAddress::Serial { kind, .. }) = &serial
         && kind.capability() == crate::instrument::Capability::Luminance
         && config.fit.primaries_xy.is_none()
     {

@@ -185,6 +185,109 @@ impl DeviceKind {
     }
 }
 
+/// Where a real instrument is: a serial instrument of a known kind on a port, or
+/// whatever ArgyllCMS drives on its port N (the bridge, [`super::argyll`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum InstrumentAddress {
+    Serial { kind: DeviceKind, port: String },
+    Argyll { port: u32 },
+}
+
+impl InstrumentAddress {
+    /// The driver name of the ArgyllCMS bridge.
+    pub const ARGYLL: &'static str = "argyll";
+
+    /// From the command line: `KIND:PORT` (e.g. `pr670:/dev/ttyACM0`) or `argyll[:N]`.
+    pub fn parse(spec: &str) -> Result<Self, String> {
+        let (kind, port) = match spec.split_once(':') {
+            Some((k, p)) => (k, Some(p)),
+            None => (spec, None),
+        };
+        Self::from_parts(kind, port).map_err(|e| format!("--instrument {spec}: {e}"))
+    }
+
+    /// From a config's `driver` and `port`.
+    pub fn from_parts(driver: &str, port: Option<&str>) -> Result<Self, String> {
+        if driver.trim().eq_ignore_ascii_case(Self::ARGYLL) {
+            let port = match port.map(str::trim) {
+                None | Some("") => 1,
+                Some(p) => p.parse::<u32>().ok().filter(|n| *n >= 1).ok_or_else(|| {
+                    format!(
+                        "the ArgyllCMS port is the number `spotread -?` lists (1, 2, …), not '{p}'"
+                    )
+                })?,
+            };
+            return Ok(InstrumentAddress::Argyll { port });
+        }
+        let kind = DeviceKind::parse(driver).map_err(|e| format!("{e}, or argyll"))?;
+        match port {
+            Some(p) if !p.trim().is_empty() => Ok(InstrumentAddress::Serial {
+                kind,
+                port: p.to_string(),
+            }),
+            _ => Err(format!(
+                "the {kind} needs its port, e.g. {kind}:/dev/ttyUSB0 (see `chromacal instruments`)"
+            )),
+        }
+    }
+
+    /// The config's `driver` value.
+    pub fn driver(&self) -> String {
+        match self {
+            InstrumentAddress::Serial { kind, .. } => kind.name().to_string(),
+            InstrumentAddress::Argyll { .. } => Self::ARGYLL.to_string(),
+        }
+    }
+
+    /// The config's `port` value.
+    pub fn port(&self) -> String {
+        match self {
+            InstrumentAddress::Serial { port, .. } => port.clone(),
+            InstrumentAddress::Argyll { port } => port.to_string(),
+        }
+    }
+
+    /// What one process at a time may open: the serial port, or Argyll's port N.
+    pub fn resource(&self) -> String {
+        match self {
+            InstrumentAddress::Serial { port, .. } => port.clone(),
+            InstrumentAddress::Argyll { port } => format!("ArgyllCMS port {port}"),
+        }
+    }
+
+    /// What the instrument measures, where known before it is opened (an Argyll
+    /// instrument says when spotread has identified it).
+    pub fn capability(&self) -> Option<Capability> {
+        match self {
+            InstrumentAddress::Serial { kind, .. } => Some(kind.capability()),
+            InstrumentAddress::Argyll { .. } => None,
+        }
+    }
+
+    /// Connect; relative paths in `options` from `base_dir`.
+    pub fn open(
+        &self,
+        options: DriverOptions,
+        base_dir: &std::path::Path,
+    ) -> Result<SerialInstrument, InstrumentError> {
+        match self {
+            InstrumentAddress::Serial { kind, port } => kind.open(port, options),
+            InstrumentAddress::Argyll { port } => {
+                super::argyll::driver::open(*port, options, base_dir)
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for InstrumentAddress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            InstrumentAddress::Serial { kind, port } => write!(f, "{kind} on {port}"),
+            InstrumentAddress::Argyll { port } => write!(f, "ArgyllCMS instrument {port}"),
+        }
+    }
+}
+
 impl std::fmt::Display for DeviceKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())

@@ -19,7 +19,7 @@ use super::transport::{Link, TransportError};
 use super::{Instrument, InstrumentError, InstrumentInfo, Reading};
 
 /// Options common to the serial drivers.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DriverOptions {
     /// Multiplies every protocol timeout and pause (1 for real instruments; tests run
@@ -31,6 +31,34 @@ pub struct DriverOptions {
     pub reconnects: usize,
     /// Synchronise integration to the display's refresh where the instrument can.
     pub sync: bool,
+    /// ArgyllCMS bridge: the display type, as `spotread -y` takes it for the
+    /// instrument (`l`, `c`, `e`… as `spotread -?` lists them; for a colorimeter it
+    /// picks the built-in calibration).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub display_type: Option<String>,
+    /// ArgyllCMS bridge: `refresh` or `non-refresh` (`spotread -Y r|n`), for
+    /// instruments that synchronise to a CRT's or a PWM backlight's refresh.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refresh_mode: Option<RefreshMode>,
+    /// ArgyllCMS bridge: a `.ccss` or `.ccmx` Argyll applies itself (`spotread -X`),
+    /// relative to the config's directory.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub argyll_correction: Option<std::path::PathBuf>,
+    /// ArgyllCMS bridge: average this many readings in the instrument where it can
+    /// (`spotread -Y a`, `aa`, `aaa`: 2 to 4), for longer integration at low light.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub averaging: Option<u8>,
+    /// ArgyllCMS bridge: seconds to wait for spotread to start the instrument (its
+    /// port scan and initialisation) and for one reading.
+    pub argyll_timeout_s: f64,
+}
+
+/// Whether an instrument synchronises its integration to the display's refresh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RefreshMode {
+    Refresh,
+    NonRefresh,
 }
 
 impl Default for DriverOptions {
@@ -40,6 +68,11 @@ impl Default for DriverOptions {
             attempts: 3,
             reconnects: 3,
             sync: true,
+            display_type: None,
+            refresh_mode: None,
+            argyll_correction: None,
+            averaging: None,
+            argyll_timeout_s: 60.0,
         }
     }
 }
@@ -100,7 +133,9 @@ impl SerialInstrument {
                         options,
                     });
                 }
-                Err(e @ InstrumentError::Disconnected(_)) => return Err(e),
+                Err(e @ (InstrumentError::Disconnected(_) | InstrumentError::Unavailable(_))) => {
+                    return Err(e);
+                }
                 Err(e) => {
                     tracing::warn!(attempt, error = %e, "could not connect");
                     last = Some(e);
@@ -130,6 +165,7 @@ impl SerialInstrument {
                     }
                     return Ok(reading);
                 }
+                Err(e @ InstrumentError::Unavailable(_)) => return Err(e),
                 Err(InstrumentError::Disconnected(why)) => {
                     tracing::warn!(%why, "the instrument vanished; reconnecting");
                     self.reconnect(&why)?;

@@ -3,6 +3,7 @@
 //! A reading never hides a failure: light below the instrument's range or above it
 //! is flagged in [`ReadingStatus`], never turned into a zero.
 
+pub mod argyll;
 pub mod colorcal;
 pub mod devices;
 pub mod driver;
@@ -136,6 +137,10 @@ pub enum InstrumentError {
     Protocol(String),
     #[error("the instrument reports error {code}: {meaning}")]
     Device { code: String, meaning: String },
+    /// The instrument cannot be used at all (its program missing, no such port, its
+    /// options refused): trying again will not help.
+    #[error("{0}")]
+    Unavailable(String),
 }
 
 /// A light meter, colorimeter or spectroradiometer.

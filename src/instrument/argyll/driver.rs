@@ -1,0 +1,348 @@
+//! The spotread dialogue as a [`Protocol`]: start (wait for the reading prompt), one
+//! key per reading, results and failures turned into readings and instrument errors.
+//! The recovery policy is the serial drivers' ([`crate::instrument::driver`]): a
+//! failed reading is taken again, and a spotread that has gone is started again.
+
+use std::path::Path;
+
+use super::protocol::{Event, is_saturation, is_spectral, next_event};
+use super::transport::{SpotreadTransport, spotread_program, usage_text};
+use crate::instrument::driver::{DriverOptions, Protocol, RefreshMode, SerialInstrument};
+use crate::instrument::transport::{Link, TransportError};
+use crate::instrument::{Capability, InstrumentError, InstrumentInfo, Reading, ReadingStatus};
+
+/// How long `spotread -?` may take to scan the ports (s).
+const SCAN_TIMEOUT_S: u64 = 60;
+
+/// spotread's arguments for port `port` and `options` (emissive mode, spectra shown),
+/// with relative paths taken from `base_dir`.
+pub fn spotread_args(port: u32, options: &DriverOptions, base_dir: &Path) -> Vec<String> {
+    let mut args = vec!["-c".to_string(), port.to_string(), "-e".into(), "-s".into()];
+    if let Some(t) = &options.display_type {
+        args.extend(["-y".to_string(), t.clone()]);
+    }
+    match options.refresh_mode {
+        Some(RefreshMode::Refresh) => args.extend(["-Y".to_string(), "r".into()]),
+        Some(RefreshMode::NonRefresh) => args.extend(["-Y".to_string(), "n".into()]),
+        None => {}
+    }
+    if let Some(n) = options.averaging.filter(|n| *n >= 2) {
+        args.extend(["-Y".to_string(), "a".repeat(usize::from(n.min(4) - 1))]);
+    }
+    if let Some(file) = &options.argyll_correction {
+        let path = if file.is_absolute() {
+            file.clone()
+        } else {
+            base_dir.join(file)
+        };
+        args.extend(["-X".to_string(), path.display().to_string()]);
+    }
+    args
+}
+
+/// The ports ArgyllCMS sees and the instruments it identified on them (`spotread -?`).
+pub fn list_ports(program: &str) -> Result<Vec<super::protocol::ArgyllPort>, String> {
+    let usage = usage_text(program, std::time::Duration::from_secs(SCAN_TIMEOUT_S))?;
+    if !usage.contains("-c listno") {
+        return Err(format!(
+            "{program} -? printed no port list; is it ArgyllCMS's spotread?"
+        ));
+    }
+    Ok(super::protocol::parse_port_list(&usage))
+}
+
+/// The instrument ArgyllCMS sees on port `port` (`spotread -?`), or an error naming the
+/// ports it does see.
+pub fn identify(program: &str, port: u32) -> Result<String, InstrumentError> {
+    let ports = list_ports(program).map_err(InstrumentError::Unavailable)?;
+    match ports.iter().find(|p| p.number == port) {
+        Some(p) => Ok(p.instrument.clone().unwrap_or_else(|| p.path.clone())),
+        None if ports.is_empty() => Err(InstrumentError::Unavailable(
+            "ArgyllCMS sees no instrument: is one plugged in, and may this user open it?".into(),
+        )),
+        None => Err(InstrumentError::Unavailable(format!(
+            "ArgyllCMS has no instrument {port}; it sees: {}",
+            ports
+                .iter()
+                .map(|p| format!(
+                    "{} = {}{}",
+                    p.number,
+                    p.path,
+                    p.instrument
+                        .as_ref()
+                        .map(|i| format!(" ({i})"))
+                        .unwrap_or_default()
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))),
+    }
+}
+
+/// Start spotread on ArgyllCMS port `port` and connect to the instrument there.
+pub fn open(
+    port: u32,
+    options: DriverOptions,
+    base_dir: &Path,
+) -> Result<SerialInstrument, InstrumentError> {
+    let program = spotread_program();
+    let name = identify(&program, port)?;
+    let transport = SpotreadTransport::spawn(&program, &spotread_args(port, &options, base_dir))
+        .map_err(|e| match e {
+            TransportError::Disconnected(m) => InstrumentError::Unavailable(m),
+            other => InstrumentError::from(other),
+        })?;
+    let link = Link::new(Box::new(transport), options.timing_scale);
+    let protocol = Spotread::new(link, name, options.argyll_timeout_s);
+    SerialInstrument::connect(Box::new(protocol), options)
+}
+
+/// spotread, driven key by key.
+pub struct Spotread {
+    link: Link,
+    name: String,
+    timeout_s: f64,
+    /// Output read and not yet taken as an event.
+    text: String,
+}
+
+impl Spotread {
+    pub fn new(link: Link, name: String, timeout_s: f64) -> Self {
+        Spotread {
+            link,
+            name,
+            timeout_s,
+            text: String::new(),
+        }
+    }
+
+    /// The next event, reading spotread's output for up to `timeout_s`. Its end of
+    /// output is an error holding the last of what it printed.
+    fn next(&mut self) -> Result<Event, InstrumentError> {
+        let deadline = self.link.transport().now() + self.link.wait(self.timeout_s);
+        loop {
+            match next_event(&self.text) {
+                Ok(Some((event, used))) => {
+                    self.text.drain(..used);
+                    tracing::debug!(?event, "spotread");
+                    return Ok(event);
+                }
+                Ok(None) => {}
+                Err(why) => {
+                    self.text.clear();
+                    return Err(InstrumentError::Protocol(why));
+                }
+            }
+            let remaining = deadline - self.link.transport().now();
+            if remaining <= 0.0 {
+                return Err(InstrumentError::Timeout {
+                    seconds: self.timeout_s,
+                });
+            }
+            match self.link.transport().read(remaining.min(0.5)) {
+                Ok(bytes) => self.text.push_str(&String::from_utf8_lossy(&bytes)),
+                Err(TransportError::Timeout { .. }) => {}
+                Err(TransportError::Disconnected(why)) => {
+                    let last = self.last_words();
+                    return Err(InstrumentError::Disconnected(format!("{why}{last}")));
+                }
+                Err(e) => return Err(e.into()),
+            }
+            // Keep the buffer bounded when spotread prints what we do not parse.
+            if self.text.len() > 1 << 20 {
+                let cut = self.text.len() - (1 << 16);
+                let cut = (cut..self.text.len())
+                    .find(|i| self.text.is_char_boundary(*i))
+                    .unwrap_or(0);
+                self.text.drain(..cut);
+            }
+        }
+    }
+
+    /// What spotread last printed that was not an event, for an error message.
+    fn last_words(&mut self) -> String {
+        let words: Vec<&str> = self
+            .text
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .collect();
+        let tail = words[words.len().saturating_sub(3)..].join(" / ");
+        self.text.clear();
+        if tail.is_empty() {
+            String::new()
+        } else {
+            format!("; it last said: {tail}")
+        }
+    }
+
+    /// Press a key.
+    fn key(&mut self, key: u8) -> Result<(), InstrumentError> {
+        self.link.send(&[key]).map_err(InstrumentError::from)
+    }
+
+    /// After a failure that ends at the retry prompt: back to the reading prompt.
+    fn retry(&mut self) -> Result<(), InstrumentError> {
+        loop {
+            match self.next()? {
+                Event::RetryPrompt => {
+                    self.key(b' ')?;
+                }
+                Event::Ready => return Ok(()),
+                _ => {}
+            }
+        }
+    }
+}
+
+impl Protocol for Spotread {
+    fn link(&mut self) -> &mut Link {
+        &mut self.link
+    }
+
+    fn connect(&mut self) -> Result<InstrumentInfo, InstrumentError> {
+        match self.next()? {
+            Event::Ready => {}
+            Event::StartFailed(why) => {
+                return Err(InstrumentError::Unavailable(format!(
+                    "spotread could not start the {}: {why}",
+                    self.name
+                )));
+            }
+            Event::NeedsCalibration(instructions) => {
+                // Calibrating needs a person at the instrument; an unattended run
+                // cannot do it. spotread -N or a calibration with spotread first.
+                return Err(InstrumentError::Device {
+                    code: "needs-calibration".into(),
+                    meaning: format!(
+                        "the {} needs a calibration first (run spotread once and follow it): {instructions}",
+                        self.name
+                    ),
+                });
+            }
+            Event::Fatal(why) => {
+                return Err(InstrumentError::Device {
+                    code: "fatal".into(),
+                    meaning: why,
+                });
+            }
+            other => {
+                return Err(InstrumentError::Protocol(format!(
+                    "spotread said {other:?} before its first prompt"
+                )));
+            }
+        }
+        let capability = if is_spectral(&self.name) {
+            Capability::Spectral
+        } else {
+            Capability::Tristimulus
+        };
+        Ok(InstrumentInfo {
+            name: format!("{} (ArgyllCMS)", self.name),
+            serial: None,
+            capability,
+        })
+    }
+
+    fn measure_once(&mut self) -> Result<Reading, InstrumentError> {
+        self.key(b' ')?;
+        loop {
+            match self.next()? {
+                Event::Result { xyz, spectrum } => {
+                    // The prompt for the next reading follows.
+                    loop {
+                        match self.next()? {
+                            Event::Ready => break,
+                            Event::Result { .. } => {
+                                return Err(InstrumentError::Protocol(
+                                    "spotread gave two results for one key".into(),
+                                ));
+                            }
+                            _ => {}
+                        }
+                    }
+                    let spectrum = match spectrum {
+                        Some(s) => match crate::instrument::check_spectrum(
+                            &s,
+                            &xyz,
+                            s.wavelengths_nm()[0],
+                            s.wavelengths_nm()[1] - s.wavelengths_nm()[0],
+                            s.wavelengths_nm().len(),
+                        ) {
+                            Ok(()) => Some(s),
+                            Err(e) => {
+                                tracing::warn!(error = %e, "spotread's spectrum is dropped");
+                                None
+                            }
+                        },
+                        None => None,
+                    };
+                    return Ok(Reading {
+                        xyz: Some(xyz),
+                        luminance: None,
+                        spectrum,
+                        status: ReadingStatus::Ok,
+                        integration_s: 0.0,
+                        device_code: None,
+                        raw: Some(format!("Result is XYZ: {} {} {}", xyz.x, xyz.y, xyz.z)),
+                    });
+                }
+                Event::Misread(reason) => {
+                    self.retry()?;
+                    if is_saturation(&reason) {
+                        return Ok(Reading {
+                            status: ReadingStatus::Overload,
+                            device_code: Some(reason),
+                            ..Reading::default()
+                        });
+                    }
+                    return Err(InstrumentError::Device {
+                        code: "misread".into(),
+                        meaning: reason,
+                    });
+                }
+                Event::CommunicationFailed => {
+                    self.retry()?;
+                    return Err(InstrumentError::Protocol(format!(
+                        "spotread lost the {} (communication problem)",
+                        self.name
+                    )));
+                }
+                Event::WrongPosition(why) => {
+                    return Err(InstrumentError::Device {
+                        code: "wrong-position".into(),
+                        meaning: why,
+                    });
+                }
+                Event::NeedsCalibration(instructions) => {
+                    return Err(InstrumentError::Device {
+                        code: "needs-calibration".into(),
+                        meaning: instructions,
+                    });
+                }
+                Event::Fatal(why) => {
+                    return Err(InstrumentError::Device {
+                        code: "fatal".into(),
+                        meaning: why,
+                    });
+                }
+                Event::StartFailed(why) => {
+                    return Err(InstrumentError::Unavailable(why));
+                }
+                Event::Ready | Event::RetryPrompt => {}
+            }
+        }
+    }
+
+    /// After a timeout or nonsense: a spotread not at its prompt is started again.
+    fn resync(&mut self) -> Result<(), InstrumentError> {
+        self.text.clear();
+        self.link.reopen().map_err(InstrumentError::from)?;
+        self.connect().map(|_| ())
+    }
+
+    fn disconnect(&mut self) {
+        let _ = self.key(b'q');
+        let _ = self.key(b'q');
+    }
+}
