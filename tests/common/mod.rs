@@ -2,6 +2,7 @@
 //! `../shared/data`, which tests use but the project does not carry.
 #![allow(dead_code)]
 
+pub mod argyll;
 pub mod bus;
 pub mod daemon;
 pub mod xserver;
