@@ -184,6 +184,12 @@ pub fn ccmx_text(ccmx: &Ccmx, created: &str) -> String {
     ] {
         out += &format!("KEYWORD \"{key}\"\n{key} {}\n", quoted(value));
     }
+    // ArgyllCMS applies a matrix only on the base calibration it was made in (its
+    // "cbid"): chromacal's colorimeters read in their default calibration, which is
+    // Argyll's base 1. The display is taken as not refreshing (an LCD's or OLED's);
+    // Argyll does the same when it is not told.
+    out += "KEYWORD \"DISPLAY_TYPE_BASE_ID\"\nDISPLAY_TYPE_BASE_ID \"1\"\n";
+    out += "KEYWORD \"DISPLAY_TYPE_REFRESH\"\nDISPLAY_TYPE_REFRESH \"NO\"\n";
     out += "KEYWORD \"COLOR_REP\"\nCOLOR_REP \"XYZ\"\n\n";
     out += "NUMBER_OF_FIELDS 3\nBEGIN_DATA_FORMAT\nXYZ_X XYZ_Y XYZ_Z\nEND_DATA_FORMAT\n\n";
     out += "NUMBER_OF_SETS 3\nBEGIN_DATA\n";

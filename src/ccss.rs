@@ -11,7 +11,7 @@
 
 use std::path::Path;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Matrix3;
 
 use crate::cgats::parse_cgats;
 use crate::color::Xyz;
@@ -134,26 +134,8 @@ pub fn correction_from_samples(
     for s in samples {
         let truth = emission_to_xyz(s, Observer::default()).ok()?;
         let read = sensitivities(s)?;
-        pairs.push((read, truth));
-    }
-    fit_correction(&pairs)
-}
-
-/// The weighted least-squares matrix taking `(read, truth)` pairs' readings to their
-/// truths, each pair weighted by 1/Y_truth² (relative error); `None` when the readings
-/// do not span three dimensions.
-pub fn fit_correction(pairs: &[(Xyz, Xyz)]) -> Option<Matrix3<f64>> {
-    let mut ata = Matrix3::<f64>::zeros();
-    let mut atb = Matrix3::<f64>::zeros();
-    for (read, truth) in pairs {
         let w = 1.0 / truth.y.abs().max(1e-9).powi(2);
-        let r = Vector3::new(read.x, read.y, read.z);
-        let t = Vector3::new(truth.x, truth.y, truth.z);
-        ata += w * r * r.transpose();
-        atb += w * r * t.transpose();
+        pairs.push((read, truth, w));
     }
-    // Normal equations: (Σ r rᵀ) Mᵀ = Σ r tᵀ.
-    let mt = ata.try_inverse()? * atb;
-    let m = mt.transpose();
-    m.iter().all(|v| v.is_finite()).then_some(m)
+    crate::linalg::weighted_linear_map(&pairs)
 }

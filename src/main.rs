@@ -8,8 +8,8 @@ use clap::{CommandFactory, Parser, Subcommand};
 mod cli;
 
 use cli::{
-    bench, calibrate, check, completions, config, daemon, displays, emulate, export, fit,
-    instruments, lut, measure, profile, render, report, spectrum,
+    bench, calibrate, check, completions, config, correction, daemon, displays, emulate, export,
+    fit, instruments, lut, measure, profile, render, report, spectrum,
 };
 
 #[derive(Parser)]
@@ -43,6 +43,7 @@ enum Command {
     Report(report::ReportArgs),
     Emulate(emulate::EmulateArgs),
     Measure(measure::MeasureArgs),
+    Correction(correction::CorrectionArgs),
     Instruments(instruments::InstrumentsArgs),
     Displays(displays::DisplaysArgs),
     Lut(lut::LutArgs),
@@ -76,6 +77,7 @@ fn main() -> ExitCode {
         Command::Report(args) => report::run(args),
         Command::Emulate(args) => emulate::run(args),
         Command::Measure(args) => measure::run(args),
+        Command::Correction(args) => correction::run(args),
         Command::Instruments(args) => instruments::run(args),
         Command::Displays(args) => displays::run(args),
         Command::Lut(args) => lut::run(args),

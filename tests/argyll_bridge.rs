@@ -174,7 +174,11 @@ fn pulling_the_instrument_out_mid_run_is_an_instrument_error_and_the_run_resumes
         .args(["-f", &wrapper.path.display().to_string()])
         .output()
         .unwrap();
-    assert!(left.stdout.is_empty(), "{}", String::from_utf8_lossy(&left.stdout));
+    assert!(
+        left.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&left.stdout)
+    );
 
     // Plugged in again (a new pseudo-terminal): the run goes on where it stopped.
     let emulator = specbos();

@@ -229,7 +229,7 @@ pub async fn open_devices(
             base_dir: base_dir.to_path_buf(),
         });
     };
-    let instrument = open_serial_instrument(config, base_dir, &address).await?;
+    let instrument = open_instrument(config, base_dir, &address).await?;
     let settle_s = config.display.settle_s;
     let display = match (config.display.sink(), &config.display.screen) {
         (Sink::Resolve, _) => RunDisplay::Resolve(
@@ -270,7 +270,7 @@ pub async fn open_devices(
 }
 
 /// Open the real instrument `config` names (at `address`), with its correction matrix.
-async fn open_serial_instrument(
+pub async fn open_instrument(
     config: &Config,
     base_dir: &Path,
     address: &InstrumentAddress,
@@ -335,7 +335,7 @@ pub async fn reopen_instrument(devices: &mut Devices, config: &Config) -> Result
         &devices.instrument,
         config.instrument.address().map_err(DevicesError::Config)?,
     ) {
-        devices.instrument = open_serial_instrument(config, &devices.base_dir, &address).await?;
+        devices.instrument = open_instrument(config, &devices.base_dir, &address).await?;
     }
     Ok(())
 }

@@ -15,6 +15,7 @@ use chromacal::instrument::emulator::faults::FaultSpec;
 use chromacal::instrument::emulator::pty::{PtyEmulator, PtyOptions};
 use chromacal::instrument::emulator::screen::serve_screen;
 use chromacal::instrument::minolta;
+use chromacal::instrument::simulated::SimulatedInstrumentSpec;
 use chromacal::sim::clock::VirtualClock;
 use chromacal::sim::monitor::VirtualMonitor;
 
@@ -92,6 +93,11 @@ pub struct EmulateArgs {
     /// driver has to look past the factory 921600].
     #[arg(long, value_name = "BAUD")]
     pub baud: Option<u32>,
+    /// Also emulate this instrument, on a pseudo-terminal of its own, aimed at the same
+    /// virtual monitor (e.g. a colorimeter beside a reference spectroradiometer, for
+    /// `correction make`); printed as `also KIND /dev/pts/N`.
+    #[arg(long, value_name = "KIND")]
+    pub also: Vec<String>,
     /// The output looked at, by RandR name [default: the primary].
     #[arg(long, requires = "x_display")]
     pub output: Option<String>,
@@ -130,10 +136,36 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
         .simulated
         .clone()
         .unwrap_or_default();
+    let base_spec = simulated.clone();
     // A colorimeter reads through its filters, as the real one does.
-    if let Some(model) = kind.filter_model().filter(|_| !args.ideal_filters) {
-        simulated.kind = chromacal::instrument::simulated::SimulatedKind::Tristimulus;
-        simulated.filters = simulated.filters.or(Some(model));
+    let through_filters = |kind: DeviceKind, spec: &mut SimulatedInstrumentSpec| {
+        if let Some(model) = kind.filter_model().filter(|_| !args.ideal_filters) {
+            spec.kind = chromacal::instrument::simulated::SimulatedKind::Tristimulus;
+            spec.filters = spec.filters.or(Some(model));
+        }
+    };
+    through_filters(kind, &mut simulated);
+    let also: Vec<DeviceKind> = args
+        .also
+        .iter()
+        .map(|k| DeviceKind::parse(k))
+        .collect::<Result<_, _>>()?;
+    let mut others = Vec::new();
+    for (n, other) in also.iter().enumerate() {
+        let mut spec = base_spec.clone();
+        through_filters(*other, &mut spec);
+        // Its own noise: another seed.
+        spec.seed = spec.seed.wrapping_add(1 + n as u64);
+        let meter = Meter::new(monitor.clone(), spec, Default::default(), faults.seed);
+        let emulator = PtyEmulator::spawn(
+            other.emulator(meter),
+            PtyOptions {
+                time_scale: args.time_scale,
+                ..PtyOptions::default()
+            },
+        )
+        .map_err(|e| format!("cannot open a pseudo-terminal: {e}"))?;
+        others.push((*other, emulator));
     }
     let mut meter = Meter::new(monitor.clone(), simulated, faults.device(), faults.seed);
     if let Some(display) = &args.x_display {
@@ -218,6 +250,9 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
     let _ = writeln!(out, "screen {}", screen.display());
     if let Some(address) = &args.resolve {
         let _ = writeln!(out, "resolve {address}");
+    }
+    for (other, emulator) in &others {
+        let _ = writeln!(out, "also {other} {}", emulator.path());
     }
     let _ = out.flush();
     drop(out);

@@ -20,19 +20,36 @@ pub struct MeasureArgs {
     /// Print each reading (XYZ, spectrum, the instrument's code and reply) as JSON.
     #[arg(long)]
     json: bool,
+    /// Take [instrument.options] from this config (e.g. an ArgyllCMS display type or
+    /// argyll_correction).
+    #[arg(long)]
+    config: Option<std::path::PathBuf>,
 }
 
 pub fn run(args: MeasureArgs) -> Result<(), Failure> {
-    measure(&args.instrument, args.count, args.timing_scale, args.json)
+    let (options, base_dir) = match &args.config {
+        Some(path) => {
+            let loaded = chromacal::config::load_config(Some(path))?;
+            (loaded.config.instrument.options, loaded.base_dir)
+        }
+        None => (DriverOptions::default(), std::path::PathBuf::from(".")),
+    };
+    let options = DriverOptions {
+        timing_scale: args.timing_scale,
+        ..options
+    };
+    measure(&args.instrument, args.count, options, &base_dir, args.json)
 }
 
-fn measure(spec: &str, count: usize, timing_scale: f64, json: bool) -> Result<(), Failure> {
+fn measure(
+    spec: &str,
+    count: usize,
+    options: DriverOptions,
+    base_dir: &std::path::Path,
+    json: bool,
+) -> Result<(), Failure> {
     let address = parse_instrument(spec)?;
-    let options = DriverOptions {
-        timing_scale,
-        ..DriverOptions::default()
-    };
-    let mut instrument = address.open(options, std::path::Path::new("."))?;
+    let mut instrument = address.open(options, base_dir)?;
     let info = instrument.info().clone();
     if !json {
         println!(

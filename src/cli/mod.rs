@@ -10,6 +10,7 @@ pub mod calibrate;
 pub mod check;
 pub mod completions;
 pub mod config;
+pub mod correction;
 pub mod daemon;
 pub mod displays;
 pub mod emulate;

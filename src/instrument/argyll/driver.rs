@@ -14,10 +14,19 @@ use crate::instrument::{Capability, InstrumentError, InstrumentInfo, Reading, Re
 /// How long `spotread -?` may take to scan the ports (s).
 const SCAN_TIMEOUT_S: u64 = 60;
 
-/// spotread's arguments for port `port` and `options` (emissive mode, spectra shown),
+/// spotread's arguments for port `port` and `options` (emissive mode; spectra shown
+/// for a `spectral` instrument: asked of a colorimeter, spotread refuses to start),
 /// with relative paths taken from `base_dir`.
-pub fn spotread_args(port: u32, options: &DriverOptions, base_dir: &Path) -> Vec<String> {
-    let mut args = vec!["-c".to_string(), port.to_string(), "-e".into(), "-s".into()];
+pub fn spotread_args(
+    port: u32,
+    options: &DriverOptions,
+    base_dir: &Path,
+    spectral: bool,
+) -> Vec<String> {
+    let mut args = vec!["-c".to_string(), port.to_string(), "-e".into()];
+    if spectral {
+        args.push("-s".into());
+    }
     if let Some(t) = &options.display_type {
         args.extend(["-y".to_string(), t.clone()]);
     }
@@ -87,11 +96,11 @@ pub fn open(
 ) -> Result<SerialInstrument, InstrumentError> {
     let program = spotread_program();
     let name = identify(&program, port)?;
-    let transport = SpotreadTransport::spawn(&program, &spotread_args(port, &options, base_dir))
-        .map_err(|e| match e {
-            TransportError::Disconnected(m) => InstrumentError::Unavailable(m),
-            other => InstrumentError::from(other),
-        })?;
+    let args = spotread_args(port, &options, base_dir, is_spectral(&name));
+    let transport = SpotreadTransport::spawn(&program, &args).map_err(|e| match e {
+        TransportError::Disconnected(m) => InstrumentError::Unavailable(m),
+        other => InstrumentError::from(other),
+    })?;
     let link = Link::new(Box::new(transport), options.timing_scale);
     let protocol = Spotread::new(link, name, options.argyll_timeout_s);
     SerialInstrument::connect(Box::new(protocol), options)
