@@ -38,6 +38,25 @@ pub fn bounded_symmetric_eigen(m: Matrix3<f64>) -> Option<SymmetricEigen<f64, na
     SymmetricEigen::try_new(m, f64::EPSILON, MAX_DECOMPOSITION_SWEEPS)
 }
 
+/// The 3 × 3 matrix M minimising Σ wᵢ‖M·aᵢ − bᵢ‖² over `(a, b, w)` (weighted linear
+/// least squares, by its normal equations M = (Σ w b aᵀ)(Σ w a aᵀ)⁻¹); `None` when the
+/// `a` do not span three dimensions or a value is not finite.
+pub fn weighted_linear_map(
+    pairs: &[(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>, f64)],
+) -> Option<Matrix3<f64>> {
+    let mut aa = Matrix3::<f64>::zeros();
+    let mut ba = Matrix3::<f64>::zeros();
+    for (a, b, w) in pairs {
+        aa += *w * a * a.transpose();
+        ba += *w * b * a.transpose();
+    }
+    if !aa.iter().chain(ba.iter()).all(|v| v.is_finite()) {
+        return None;
+    }
+    let m = ba * aa.try_inverse()?;
+    m.iter().all(|v| v.is_finite()).then_some(m)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -56,23 +75,4 @@ mod tests {
         s[(0, 0)] = f64::NEG_INFINITY;
         assert!(bounded_symmetric_eigen(s).is_none());
     }
-}
-
-/// The 3 × 3 matrix M minimising Σ wᵢ‖M·aᵢ − bᵢ‖² over `(a, b, w)` (weighted linear
-/// least squares, by its normal equations M = (Σ w b aᵀ)(Σ w a aᵀ)⁻¹); `None` when the
-/// `a` do not span three dimensions or a value is not finite.
-pub fn weighted_linear_map(
-    pairs: &[(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>, f64)],
-) -> Option<Matrix3<f64>> {
-    let mut aa = Matrix3::<f64>::zeros();
-    let mut ba = Matrix3::<f64>::zeros();
-    for (a, b, w) in pairs {
-        aa += *w * a * a.transpose();
-        ba += *w * b * a.transpose();
-    }
-    if !aa.iter().chain(ba.iter()).all(|v| v.is_finite()) {
-        return None;
-    }
-    let m = ba * aa.try_inverse()?;
-    m.iter().all(|v| v.is_finite()).then_some(m)
 }

@@ -220,8 +220,15 @@ fn patch_for(drive: Drive) -> Patch {
     }
 }
 
-/// Read every patch not yet in `journal` with both instruments. `stop` is asked
-/// between patches.
+/// What a run asks between patches: whether to stop, and where it is.
+pub struct Hooks<'a> {
+    pub stop: Box<dyn Fn() -> bool + 'a>,
+    /// Pairs read so far, of how many.
+    pub progress: Box<dyn Fn(usize, usize) + 'a>,
+}
+
+/// Read every patch not yet in `journal` with both instruments. `hooks.stop` is
+/// asked between patches.
 pub async fn measure_pairs(
     display: &mut impl PatchDisplay,
     reference: &mut impl Instrument,
@@ -229,9 +236,9 @@ pub async fn measure_pairs(
     patches: &[CorrectionPatch],
     journal: &mut PairJournal,
     aiming: Aiming<'_>,
-    stop: &dyn Fn() -> bool,
-    progress: &dyn Fn(usize, usize),
+    hooks: &Hooks<'_>,
 ) -> Result<(), CorrectionError> {
+    let (stop, progress) = (&hooks.stop, &hooks.progress);
     let todo: Vec<CorrectionPatch> = patches
         .iter()
         .filter(|p| !journal.has(p.index))
@@ -445,8 +452,7 @@ pub struct MakeRequest<'a> {
     pub technology: String,
     /// Command-line settings for the display.
     pub overrides: crate::calibrate::devices::Overrides,
-    pub stop: Box<dyn Fn() -> bool + 'a>,
-    pub progress: Box<dyn Fn(usize, usize) + 'a>,
+    pub hooks: Hooks<'a>,
 }
 
 /// The journal beside a `.ccmx`.
@@ -497,8 +503,7 @@ pub async fn make_correction(
         &patches,
         &mut journal,
         request.aiming,
-        request.stop.as_ref(),
-        request.progress.as_ref(),
+        &request.hooks,
     )
     .await;
     devices.instrument.close();

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use chromacal::calibrate::correction::{
-    Aiming, CorrectionFit, Errors, MakeRequest, make_correction, pairs_path,
+    Aiming, CorrectionFit, Errors, Hooks, MakeRequest, make_correction, pairs_path,
 };
 use chromacal::calibrate::devices::Overrides;
 use chromacal::config::{Sink, config_search_paths, load_config_searching};
@@ -126,8 +126,10 @@ fn make(args: MakeArgs) -> Result<(), Failure> {
         display_name: args.display_name.clone(),
         technology: args.technology.clone(),
         overrides,
-        stop: Box::new(move || flag.load(Ordering::SeqCst)),
-        progress: Box::new(|done, total| eprintln!("  {done}/{total} patches read by both")),
+        hooks: Hooks {
+            stop: Box::new(move || flag.load(Ordering::SeqCst)),
+            progress: Box::new(|done, total| eprintln!("  {done}/{total} patches read by both")),
+        },
     };
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()

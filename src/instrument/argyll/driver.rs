@@ -145,7 +145,7 @@ impl Spotread {
             let remaining = deadline - self.link.transport().now();
             if remaining <= 0.0 {
                 return Err(InstrumentError::Timeout {
-                    seconds: self.timeout_s,
+                    seconds: self.link.wait(self.timeout_s),
                 });
             }
             match self.link.transport().read(remaining.min(0.5)) {
