@@ -133,3 +133,109 @@ fn failure_text(out: std::process::Output) -> String {
     assert!(!out.status.success());
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
+
+/// A `.ccss` of a display's primaries and white, written as ArgyllCMS writes one
+/// (CGATS `CCSS`, `SPEC_NNN` fields), corrects a colorimeter whose sensitivities are
+/// known (here the emulated K-10A's filters) on that display's other colours; a
+/// `.ccss` with too few samples, or a native colorimeter given one, is refused.
+#[test]
+fn a_ccss_corrects_a_colorimeter_of_known_sensitivities() {
+    use chromacal::ccss::{correction_from_samples, parse_ccss};
+    use chromacal::color::difference::delta_e_2000;
+    use chromacal::color::spaces::xyz_to_lab;
+    use chromacal::color::spectrum::{Observer, emission_to_xyz};
+    use chromacal::instrument::filters::{ColorimeterFilters, FilterModel};
+    use chromacal::model::ScreenPosition;
+    use chromacal::sim::monitor::{VirtualMonitor, centre_patch};
+
+    let text = common::isetbio_monitor("isetbio_lcd_dell", "");
+    let config = chromacal::config::parse_config(&text, "lcd").unwrap();
+    let spec = config.monitor.resolve(std::path::Path::new(".")).unwrap();
+    let clock = std::sync::Arc::new(chromacal::sim::clock::VirtualClock::new(None));
+    let mut monitor = VirtualMonitor::new(spec, clock).unwrap();
+    let mut radiance = |drive: [f64; 3]| {
+        monitor.show(centre_patch(drive));
+        monitor.radiance_at(ScreenPosition::CENTRE).unwrap()
+    };
+    let samples: Vec<_> = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0; 3]]
+        .iter()
+        .map(|d| radiance(*d))
+        .collect();
+    // On the spectra's own grid: the CCFL's lines are narrow, and a coarser one would
+    // not hold them.
+    let grid: Vec<f64> = samples[0].wavelengths_nm().to_vec();
+    let mut ccss = String::from(
+        "CCSS\n\nDESCRIPTOR \"test\"\nKEYWORD \"DISPLAY\"\nDISPLAY \"ISETBio Dell LCD\"\nKEYWORD \"TECHNOLOGY\"\nTECHNOLOGY \"LCD CCFL\"\n\n",
+    );
+    ccss += &format!(
+        "NUMBER_OF_FIELDS {}\nBEGIN_DATA_FORMAT\nSAMPLE_ID {}\nEND_DATA_FORMAT\n\nNUMBER_OF_SETS {}\nBEGIN_DATA\n",
+        grid.len() + 1,
+        grid.iter()
+            .map(|nm| format!("SPEC_{nm:.0}"))
+            .collect::<Vec<_>>()
+            .join(" "),
+        samples.len()
+    );
+    for (i, s) in samples.iter().enumerate() {
+        let values: Vec<String> = grid
+            .iter()
+            .map(|nm| format!("{:.6e}", s.value_at(*nm).unwrap_or(0.0)))
+            .collect();
+        ccss += &format!("{} {}\n", i + 1, values.join(" "));
+    }
+    ccss += "END_DATA\n";
+    let parsed = parse_ccss(&ccss, "lcd.ccss").unwrap();
+    assert_eq!(parsed.display, "ISETBio Dell LCD");
+    assert_eq!(parsed.samples.len(), 4);
+
+    let filters = ColorimeterFilters::new(FilterModel::K10a).unwrap();
+    let m = correction_from_samples(&parsed.samples, |s| Some(filters.xyz(s))).unwrap();
+    let white = emission_to_xyz(&samples[3], Observer::default()).unwrap();
+    let (mut before, mut after) = (0.0f64, 0.0f64);
+    for drive in [
+        [0.8, 0.5, 0.4],
+        [0.4, 0.7, 0.6],
+        [0.5, 0.4, 0.8],
+        [0.2, 0.6, 0.3],
+    ] {
+        let s = radiance(drive);
+        let truth = emission_to_xyz(&s, Observer::default()).unwrap();
+        let read = filters.xyz(&s);
+        let lab = |x| xyz_to_lab(&x, &white);
+        before = before.max(delta_e_2000(&lab(truth), &lab(read)));
+        after = after.max(delta_e_2000(&lab(truth), &lab(m * read)));
+    }
+    eprintln!("K-10A on the Dell LCD through a .ccss: max ΔE00 {before:.3} → {after:.3}");
+    assert!(before > 0.5, "{before}");
+    assert!(after < 0.1, "{after}");
+
+    // Two samples cannot fix a matrix.
+    let short: String = ccss
+        .lines()
+        .filter(|l| !l.starts_with("3 ") && !l.starts_with("4 "))
+        .map(|l| l.replace("NUMBER_OF_SETS 4", "NUMBER_OF_SETS 2") + "\n")
+        .collect();
+    let err = parse_ccss(&short, "short.ccss").unwrap_err().to_string();
+    assert!(
+        err.contains("short.ccss") && err.contains("2 spectral samples"),
+        "{err}"
+    );
+
+    // A native colorimeter has no known sensitivities: refused, naming the remedy.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("lcd.ccss"), &ccss).unwrap();
+    let config = dir.path().join("config.toml");
+    std::fs::write(&config, "[instrument]\ncorrection = \"lcd.ccss\"\n").unwrap();
+    let emulator = emulate(&["--instrument", "k10a", "--time-scale", TIME_SCALE]);
+    let out = calibrate(
+        &config,
+        &dir.path().join("state"),
+        &emulator.device,
+        &emulator.screen,
+    );
+    let text = failure_text(out);
+    assert!(
+        text.contains("correction make") && text.contains(".ccss"),
+        "{text}"
+    );
+}
