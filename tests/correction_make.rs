@@ -388,3 +388,27 @@ fn corrections_on_real_display_spectra_reach_the_colorimeters_noise() {
         rows.join("\n")
     );
 }
+
+/// `chromacal bench corrections` prints the table in process (in-memory emulators on
+/// virtual time): nine rows, every correction within 1.5 × the colorimeter's
+/// repeatability and below the uncorrected error.
+#[test]
+fn the_corrections_bench_prints_its_table() {
+    let out = succeed(chromacal().args(["bench", "corrections", "--quick"]));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let rows: Vec<Vec<&str>> = text
+        .lines()
+        .filter(|l| l.contains("(ISETBio"))
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    assert_eq!(rows.len(), 9, "{text}");
+    for row in rows {
+        let n = row.len();
+        let (uncorrected, corrected, ratio): (f64, f64, f64) = (
+            row[n - 5].parse().unwrap(),
+            row[n - 4].parse().unwrap(),
+            row[n - 2].parse().unwrap(),
+        );
+        assert!(corrected < uncorrected && ratio <= 1.5, "{row:?}");
+    }
+}

@@ -132,11 +132,20 @@ impl PairedReading {
 /// The pairs read so far: an append-only JSON-lines file, one pair a line, flushed
 /// and synced as each is taken.
 pub struct PairJournal {
-    path: std::path::PathBuf,
+    /// None: kept in memory only (benches).
+    path: Option<std::path::PathBuf>,
     pub pairs: Vec<PairedReading>,
 }
 
 impl PairJournal {
+    /// A journal that writes nothing (for benches on emulators).
+    pub fn in_memory() -> Self {
+        PairJournal {
+            path: None,
+            pairs: Vec::new(),
+        }
+    }
+
     /// Open `path`: with `resume`, the pairs in it are kept (a torn last line, from a
     /// crash, is dropped); without, it must not exist yet.
     pub fn open(path: &Path, resume: bool) -> Result<Self, CorrectionError> {
@@ -171,14 +180,18 @@ impl PairJournal {
             crate::durable::write_atomic(path, clean.as_bytes()).map_err(|e| err(e.to_string()))?;
         }
         Ok(PairJournal {
-            path: path.to_path_buf(),
+            path: Some(path.to_path_buf()),
             pairs,
         })
     }
 
     fn append(&mut self, pair: PairedReading) -> Result<(), CorrectionError> {
+        let Some(path) = &self.path else {
+            self.pairs.push(pair);
+            return Ok(());
+        };
         let err = |reason: String| CorrectionError::Journal {
-            path: self.path.display().to_string(),
+            path: path.display().to_string(),
             reason,
         };
         let mut line = serde_json::to_string(&pair).map_err(|e| err(e.to_string()))?;
@@ -186,7 +199,7 @@ impl PairJournal {
         let mut file = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
-            .open(&self.path)
+            .open(path)
             .map_err(|e| err(e.to_string()))?;
         file.write_all(line.as_bytes())
             .and_then(|_| file.sync_data())
@@ -245,63 +258,47 @@ pub async fn measure_pairs(
         .copied()
         .collect();
     let total = patches.len();
-    match aiming {
-        Aiming::Together => {
-            for p in todo {
-                if stop() {
-                    return Err(CorrectionError::Stopped);
-                }
-                display.show(&patch_for(p.drive)).await?;
-                let r = reference
-                    .measure()
-                    .await
-                    .map_err(CorrectionError::Reference)?;
-                let c = colorimeter
-                    .measure()
-                    .await
-                    .map_err(CorrectionError::Colorimeter)?;
-                journal.append(PairedReading {
-                    patch: p,
-                    reference: r,
-                    colorimeter: c,
-                })?;
-                progress(journal.pairs.len(), total);
-            }
-        }
-        Aiming::OneAtATime { mut swap } => {
-            let mut references = Vec::new();
-            for p in &todo {
-                if stop() {
-                    return Err(CorrectionError::Stopped);
-                }
-                display.show(&patch_for(p.drive)).await?;
-                references.push(
-                    reference
-                        .measure()
-                        .await
-                        .map_err(CorrectionError::Reference)?,
-                );
-            }
-            if !todo.is_empty() && !swap() {
+    // One at a time: the reference reads every patch first, and its readings wait here.
+    let mut references: Vec<Option<Reading>> = vec![None; todo.len()];
+    if let Aiming::OneAtATime { mut swap } = aiming {
+        for (p, slot) in todo.iter().zip(references.iter_mut()) {
+            if stop() {
                 return Err(CorrectionError::Stopped);
             }
-            for (p, r) in todo.into_iter().zip(references) {
-                if stop() {
-                    return Err(CorrectionError::Stopped);
-                }
-                display.show(&patch_for(p.drive)).await?;
-                let c = colorimeter
+            display.show(&patch_for(p.drive)).await?;
+            *slot = Some(
+                reference
                     .measure()
                     .await
-                    .map_err(CorrectionError::Colorimeter)?;
-                journal.append(PairedReading {
-                    patch: p,
-                    reference: r,
-                    colorimeter: c,
-                })?;
-                progress(journal.pairs.len(), total);
-            }
+                    .map_err(CorrectionError::Reference)?,
+            );
         }
+        if !todo.is_empty() && !swap() {
+            return Err(CorrectionError::Stopped);
+        }
+    }
+    for (p, read) in todo.into_iter().zip(references) {
+        if stop() {
+            return Err(CorrectionError::Stopped);
+        }
+        display.show(&patch_for(p.drive)).await?;
+        let r = match read {
+            Some(r) => r,
+            None => reference
+                .measure()
+                .await
+                .map_err(CorrectionError::Reference)?,
+        };
+        let c = colorimeter
+            .measure()
+            .await
+            .map_err(CorrectionError::Colorimeter)?;
+        journal.append(PairedReading {
+            patch: p,
+            reference: r,
+            colorimeter: c,
+        })?;
+        progress(journal.pairs.len(), total);
     }
     Ok(())
 }
@@ -542,4 +539,64 @@ pub enum MakeError {
     Devices(#[from] crate::calibrate::devices::DevicesError),
     #[error("{0}")]
     Setup(String),
+}
+
+/// The correction an emulated PR-670 and an emulated `colorimeter` (reading through
+/// its filters) make on a virtual `monitor`, both in process over in-memory transports
+/// on virtual time, with noise seeded by `seed` (`chromacal bench corrections`).
+pub async fn emulated_correction(
+    monitor: crate::sim::monitor::MonitorSpec,
+    colorimeter: crate::instrument::devices::DeviceKind,
+    seed: u64,
+) -> Result<CorrectionFit, MakeError> {
+    use crate::instrument::devices::DeviceKind;
+    use crate::instrument::driver::{AsyncSerialInstrument, DriverOptions};
+    use crate::instrument::emulator::Meter;
+    use crate::instrument::emulator::faults::FaultSpec;
+    use crate::instrument::emulator::memory::MemoryTransport;
+    use crate::instrument::simulated::{SimulatedInstrumentSpec, SimulatedKind};
+    use std::sync::{Arc, Mutex};
+    let clock = Arc::new(crate::sim::clock::VirtualClock::new(None));
+    let monitor = Arc::new(Mutex::new(
+        crate::sim::monitor::VirtualMonitor::new(monitor, clock)
+            .map_err(|e| MakeError::Setup(e.to_string()))?,
+    ));
+    let open = |kind: DeviceKind, seed: u64| -> Result<AsyncSerialInstrument, MakeError> {
+        let mut spec = SimulatedInstrumentSpec {
+            seed,
+            ..SimulatedInstrumentSpec::default()
+        };
+        if let Some(filters) = kind.filter_model() {
+            spec.kind = SimulatedKind::Tristimulus;
+            spec.filters = Some(filters);
+        }
+        let meter = Meter::new(monitor.clone(), spec, Default::default(), seed);
+        let transport = MemoryTransport::new(
+            kind.emulator(meter),
+            FaultSpec::default(),
+            kind.settings().baud,
+        );
+        let instrument = kind
+            .connect(Box::new(transport), DriverOptions::default())
+            .map_err(|e| MakeError::Setup(format!("{kind}: {e}")))?;
+        Ok(AsyncSerialInstrument::new(instrument))
+    };
+    let mut reference = open(DeviceKind::Pr670, seed)?;
+    let mut colorimeter = open(colorimeter, seed.wrapping_add(1))?;
+    let mut display = crate::display::simulated::SimulatedDisplay::new(monitor.clone(), 0.0);
+    let mut journal = PairJournal::in_memory();
+    measure_pairs(
+        &mut display,
+        &mut reference,
+        &mut colorimeter,
+        &correction_patches(),
+        &mut journal,
+        Aiming::Together,
+        &Hooks {
+            stop: Box::new(|| false),
+            progress: Box::new(|_, _| {}),
+        },
+    )
+    .await?;
+    Ok(fit_pairs(&journal.pairs)?)
 }

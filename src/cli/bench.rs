@@ -247,7 +247,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', ignore_case = true)]
     laws: Option<Vec<LawArg>>,
     /// Only these tables (comma-separated): fit-time, budget, sequential, argyll,
-    /// spectral, render, fleet.
+    /// spectral, render, fleet, corrections.
     #[arg(long, value_delimiter = ',', value_parser = TABLES, ignore_case = true)]
     only: Vec<String>,
     /// The same as --only, as words: `chromacal bench spectral`.
@@ -256,7 +256,7 @@ pub struct BenchArgs {
 }
 
 /// The tables `bench` prints.
-const TABLES: [&str; 7] = [
+const TABLES: [&str; 8] = [
     "fit-time",
     "budget",
     "sequential",
@@ -264,6 +264,7 @@ const TABLES: [&str; 7] = [
     "spectral",
     "render",
     "fleet",
+    "corrections",
 ];
 
 /// The shared reference data: `../shared/data` from the project chromacal was built
@@ -307,6 +308,9 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
     }
     if wanted("fleet") {
         super::bench_fleet::fleet_table(args.quick)?;
+    }
+    if wanted("corrections") {
+        super::bench_corrections::corrections_table(&data, args.quick)?;
     }
     Ok(())
 }

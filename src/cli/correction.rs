@@ -10,10 +10,10 @@ use chromacal::calibrate::correction::{
     Aiming, CorrectionFit, Errors, Hooks, MakeRequest, make_correction, pairs_path,
 };
 use chromacal::calibrate::devices::Overrides;
-use chromacal::config::{Sink, config_search_paths, load_config_searching};
+use chromacal::config::{config_search_paths, load_config_searching};
 use chromacal::report::table;
 
-use super::shared::{Failure, parse_instrument};
+use super::shared::{Failure, parse_instrument, parse_sink, parse_sink_output};
 
 /// Colorimeter corrections.
 #[derive(clap::Args)]
@@ -85,18 +85,8 @@ fn make(args: MakeArgs) -> Result<(), Failure> {
     let overrides = Overrides {
         screen: args.screen.clone(),
         timing_scale: args.timing_scale,
-        sink: match &args.display {
-            Some(text) => Some(Sink::parse(
-                text.split_once(':').map_or(text.as_str(), |(s, _)| s),
-            )?),
-            None => None,
-        },
-        output: args
-            .display
-            .as_deref()
-            .and_then(|t| t.split_once(':'))
-            .filter(|(_, o)| !o.is_empty())
-            .map(|(_, o)| chromacal::x11::OutputSelector::parse(o)),
+        sink: parse_sink(args.display.as_deref())?,
+        output: parse_sink_output(args.display.as_deref()),
         ..Overrides::default()
     };
     let stop = Arc::new(AtomicBool::new(false));

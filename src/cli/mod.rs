@@ -3,6 +3,7 @@
 //! and dispatches; what the commands share is in `shared`.
 
 pub mod bench;
+pub mod bench_corrections;
 pub mod bench_fleet;
 pub mod bench_render;
 pub mod bench_spectral;

@@ -105,24 +105,29 @@ impl DeviceArgs {
             },
             screen: self.screen.clone(),
             timing_scale: self.timing_scale,
-            sink: match &self.display {
-                Some(text) => Some(
-                    Sink::parse(text.split_once(':').map_or(text.as_str(), |(s, _)| s))
-                        .map_err(Failure::from)?,
-                ),
-                None => None,
-            },
+            sink: parse_sink(self.display.as_deref())?,
             listen: self.listen.clone(),
             prompt_positions: self.prompt_positions,
-            output: self
-                .display
-                .as_deref()
-                .and_then(|t| t.split_once(':'))
-                .filter(|(_, output)| !output.is_empty())
-                .map(|(_, output)| chromacal::x11::OutputSelector::parse(output)),
+            output: parse_sink_output(self.display.as_deref()),
             x_display: self.x_display.clone(),
         })
     }
+}
+
+/// `--display SINK[:OUTPUT]`: the sink.
+pub fn parse_sink(display: Option<&str>) -> Result<Option<Sink>, Failure> {
+    display
+        .map(|text| Sink::parse(text.split_once(':').map_or(text, |(s, _)| s)))
+        .transpose()
+        .map_err(Failure::from)
+}
+
+/// `--display window:OUTPUT`: the output, when one is named.
+pub fn parse_sink_output(display: Option<&str>) -> Option<chromacal::x11::OutputSelector> {
+    display
+        .and_then(|t| t.split_once(':'))
+        .filter(|(_, output)| !output.is_empty())
+        .map(|(_, output)| chromacal::x11::OutputSelector::parse(output))
 }
 
 /// A calibration target on the command line (`export`, `profile current`, `lut load`).
