@@ -196,9 +196,19 @@ fn pulling_the_instrument_out_mid_run_is_an_instrument_error_and_the_run_resumes
     assert!(state.join("current.toml").exists());
 }
 
-/// A stand-in for spotread that lists one port, reads `good` readings, then prints
-/// nonsense for a result (its count kept in a file, across restarts).
-fn fake_spotread(dir: &Path, good: usize) -> std::path::PathBuf {
+/// What the stand-in does after its good readings.
+#[derive(Clone, Copy, PartialEq)]
+enum Then {
+    /// Prints nonsense for a result.
+    Nonsense,
+    /// Asks for a calibration; a key pressed at that prompt is written to
+    /// `fake-calibrated` (it would calibrate against the screen).
+    Calibration,
+}
+
+/// A stand-in for spotread that lists one port, reads `good` readings, then does
+/// `then` (its count kept in a file, across restarts).
+fn fake_spotread(dir: &Path, good: usize, then: Then) -> std::path::PathBuf {
     let path = dir.join("fake-spotread");
     let count = dir.join("fake-count");
     std::fs::write(&count, "0").unwrap();
@@ -213,6 +223,13 @@ if [ "$1" = "-?" ]; then
 fi
 stty raw -echo
 prompt() {{ printf '\nPlace instrument on spot to be measured,\r\nHit ESC or Q to exit, any other key to take a reading: '; }}
+# Started again once its calibration has run out, it asks at once (as an i1Pro does).
+if [ {calibrate} = 1 ] && [ "$(cat "{count}")" -ge {good} ]; then
+  printf '\r\nSpot read needs a calibration before continuing\r\nPlace the instrument on its white tile,\r\n and then hit any key to continue,\r\n or hit Esc or Q to abort: '
+  key=$(dd bs=1 count=1 2>/dev/null)
+  case "$key" in q|Q|"$(printf '\033')") exit 0;; esac
+  echo "$key" >> "{calibrated}"
+fi
 prompt
 while true; do
   key=$(dd bs=1 count=1 2>/dev/null)
@@ -220,13 +237,20 @@ while true; do
   n=$(cat "{count}"); n=$((n + 1)); echo $n > "{count}"
   if [ $n -le {good} ]; then
     printf '\r\n Result is XYZ: 20.%d 21.0 22.0, D50 Lab: 50 1 2\r\n' $n
+  elif [ {calibrate} = 1 ]; then
+    printf '\r\nSpot read needs a calibration before continuing\r\nPlace the instrument on its white tile,\r\n and then hit any key to continue,\r\n or hit Esc or Q to abort: '
+    key=$(dd bs=1 count=1 2>/dev/null)
+    case "$key" in q|Q|"$(printf '\033')") exit 0;; esac
+    echo "$key" >> "{calibrated}"
   else
     printf '\r\n Result is XYZ: 20.0 twenty-one 22.0, D50 Lab: 50 1 2\r\n'
   fi
   prompt
 done
 "#,
-        count = count.display()
+        count = count.display(),
+        calibrate = u8::from(then == Then::Calibration),
+        calibrated = dir.join("fake-calibrated").display(),
     );
     std::fs::write(&path, script).unwrap();
     use std::os::unix::fs::PermissionsExt;
@@ -250,7 +274,7 @@ fn a_missing_argyll_and_an_argyll_that_talks_nonsense_are_named() {
         "{stderr}"
     );
     // A port Argyll does not have: the ports it has are named.
-    let fake = fake_spotread(dir.path(), 4);
+    let fake = fake_spotread(dir.path(), 4, Then::Nonsense);
     let out = chromacal()
         .args(["measure", "--instrument", "argyll:3"])
         .env("CHROMACAL_SPOTREAD", &fake)
@@ -286,4 +310,38 @@ fn a_missing_argyll_and_an_argyll_that_talks_nonsense_are_named() {
     let (_, readings, _) = Journal::read(&journal_of(&state)).unwrap();
     assert_eq!(readings.len(), 4);
     assert!((readings[3].reading.xyz.unwrap().x - 20.4).abs() < 1e-9);
+}
+
+/// An instrument that asks for a calibration mid-run (an i1Pro's expires): the run
+/// stops with Argyll's instructions, no key is pressed at that prompt (it would
+/// calibrate against the screen), and the readings so far are kept.
+#[test]
+fn a_calibration_request_stops_the_run_without_answering_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let fake = fake_spotread(dir.path(), 3, Then::Calibration);
+    let emulator = emulate(&["--instrument", "k10a", "--time-scale", TIME_SCALE]);
+    let config = dir.path().join("config.toml");
+    std::fs::write(&config, SHORT_PLAN).unwrap();
+    let state = dir.path().join("state");
+    let out = chromacal()
+        .args(["calibrate", "--config"])
+        .arg(&config)
+        .args(["--instrument", "argyll", "--screen", &emulator.screen])
+        .arg("--state-dir")
+        .arg(&state)
+        .env("CHROMACAL_SPOTREAD", &fake)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("needs a calibration") && stderr.contains("white tile"),
+        "{stderr}"
+    );
+    assert!(
+        !dir.path().join("fake-calibrated").exists(),
+        "a key was pressed at the calibration prompt"
+    );
+    let (_, readings, _) = Journal::read(&journal_of(&state)).unwrap();
+    assert_eq!(readings.len(), 3);
 }

@@ -208,9 +208,12 @@ impl PairJournal {
         Ok(())
     }
 
-    /// Whether patch `index` has been read by both.
+    /// Whether patch `index` has been read by both, in range (a patch that overloaded
+    /// or gave no value is read again on resume).
     fn has(&self, index: usize) -> bool {
-        self.pairs.iter().any(|p| p.patch.index == index)
+        self.pairs
+            .iter()
+            .any(|p| p.patch.index == index && p.xyz().is_some())
     }
 }
 
@@ -343,10 +346,18 @@ pub struct CorrectionFit {
 /// Fit the correction to `pairs` (first readings of the non-held-out patches) and
 /// score it.
 pub fn fit_pairs(pairs: &[PairedReading]) -> Result<CorrectionFit, CorrectionError> {
-    let usable: Vec<(&PairedReading, Xyz, Xyz)> = pairs
-        .iter()
-        .filter_map(|p| p.xyz().map(|(r, c)| (p, r, c)))
-        .collect();
+    // One reading a patch: the first usable one (a patch read again on resume after
+    // an overload counts once).
+    let mut usable: Vec<(&PairedReading, Xyz, Xyz)> = Vec::new();
+    for p in pairs {
+        if let Some((r, c)) = p.xyz()
+            && !usable
+                .iter()
+                .any(|(q, _, _)| q.patch.index == p.patch.index)
+        {
+            usable.push((p, r, c));
+        }
+    }
     let whites: Vec<f64> = usable
         .iter()
         .filter(|(p, _, _)| p.patch.drive == [1.0; 3])
@@ -469,8 +480,10 @@ pub async fn make_correction(
     use crate::calibrate::devices::{open_devices, open_instrument};
     use crate::instrument::Capability;
     let mut config = config.clone();
-    // Neither instrument is corrected while the correction is made.
+    // Neither instrument is corrected while the correction is made: by chromacal or by
+    // ArgyllCMS (the new matrix would be fitted on top of the old one).
     config.instrument.correction = None;
+    config.instrument.options.argyll_correction = None;
     let mut overrides = request.overrides;
     overrides.instrument = Some(request.reference.clone());
     overrides.apply(&mut config);

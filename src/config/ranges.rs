@@ -58,7 +58,7 @@ pub const RANGES: &[Range] = &[
     r("instrument.options.timing_scale", 1e-6, 1000.0),
     r("instrument.options.attempts", 1.0, 100.0),
     r("instrument.options.argyll_timeout_s", 1.0, 3600.0),
-    r("instrument.options.averaging", 1.0, 4.0),
+    r("instrument.options.averaging", 1.0, 2.0),
     r("instrument.options.reconnects", 0.0, 100.0),
     r("instrument.correction[][]", -1000.0, 1000.0),
     // [display]

@@ -44,8 +44,8 @@ pub struct DriverOptions {
     /// relative to the config's directory.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub argyll_correction: Option<std::path::PathBuf>,
-    /// ArgyllCMS bridge: average this many readings in the instrument where it can
-    /// (`spotread -Y a`, `aa`, `aaa`: 2 to 4), for longer integration at low light.
+    /// ArgyllCMS bridge: 2 asks the instrument to average readings where it can
+    /// (`spotread -Y a`), for longer integration at low light; 1 leaves it off.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub averaging: Option<u8>,
     /// ArgyllCMS bridge: seconds to wait for spotread to start the instrument (its

@@ -35,8 +35,8 @@ pub fn spotread_args(
         Some(RefreshMode::NonRefresh) => args.extend(["-Y".to_string(), "n".into()]),
         None => {}
     }
-    if let Some(n) = options.averaging.filter(|n| *n >= 2) {
-        args.extend(["-Y".to_string(), "a".repeat(usize::from(n.min(4) - 1))]);
+    if options.averaging.is_some_and(|n| n >= 2) {
+        args.extend(["-Y".to_string(), "a".to_string()]);
     }
     if let Some(file) = &options.argyll_correction {
         let path = if file.is_absolute() {
@@ -113,6 +113,10 @@ pub struct Spotread {
     timeout_s: f64,
     /// Output read and not yet taken as an event.
     text: String,
+    /// spotread is at its reading prompt, waiting for a key: only then is a key a
+    /// reading (at any other prompt it would answer a question, a calibration's
+    /// among them).
+    at_prompt: bool,
 }
 
 impl Spotread {
@@ -122,6 +126,7 @@ impl Spotread {
             name,
             timeout_s,
             text: String::new(),
+            at_prompt: false,
         }
     }
 
@@ -187,7 +192,18 @@ impl Spotread {
 
     /// Press a key.
     fn key(&mut self, key: u8) -> Result<(), InstrumentError> {
+        self.at_prompt = false;
         self.link.send(&[key]).map_err(InstrumentError::from)
+    }
+
+    /// A calibration request: it needs a person at the instrument (a cap, a tile),
+    /// which an unattended run cannot be, and pressing on would calibrate against the
+    /// screen. Not retried.
+    fn needs_calibration(&self, instructions: &str) -> InstrumentError {
+        InstrumentError::Unavailable(format!(
+            "the {} needs a calibration (run spotread once and follow it, then start again): {instructions}",
+            self.name
+        ))
     }
 
     /// After a failure that ends at the retry prompt: back to the reading prompt.
@@ -197,7 +213,13 @@ impl Spotread {
                 Event::RetryPrompt => {
                     self.key(b' ')?;
                 }
-                Event::Ready => return Ok(()),
+                Event::Ready => {
+                    self.at_prompt = true;
+                    return Ok(());
+                }
+                Event::NeedsCalibration(instructions) => {
+                    return Err(self.needs_calibration(&instructions));
+                }
                 _ => {}
             }
         }
@@ -210,8 +232,19 @@ impl Protocol for Spotread {
     }
 
     fn connect(&mut self) -> Result<InstrumentInfo, InstrumentError> {
-        match self.next()? {
-            Event::Ready => {}
+        // After a resync spotread is already at its prompt.
+        let first = loop {
+            match if self.at_prompt {
+                Event::Ready
+            } else {
+                self.next()?
+            } {
+                Event::Notice(what) => tracing::info!(%what, "spotread"),
+                event => break event,
+            }
+        };
+        match first {
+            Event::Ready => self.at_prompt = true,
             Event::StartFailed(why) => {
                 return Err(InstrumentError::Unavailable(format!(
                     "spotread could not start the {}: {why}",
@@ -219,15 +252,7 @@ impl Protocol for Spotread {
                 )));
             }
             Event::NeedsCalibration(instructions) => {
-                // Calibrating needs a person at the instrument; an unattended run
-                // cannot do it. spotread -N or a calibration with spotread first.
-                return Err(InstrumentError::Device {
-                    code: "needs-calibration".into(),
-                    meaning: format!(
-                        "the {} needs a calibration first (run spotread once and follow it): {instructions}",
-                        self.name
-                    ),
-                });
+                return Err(self.needs_calibration(&instructions));
             }
             Event::Fatal(why) => {
                 return Err(InstrumentError::Device {
@@ -254,6 +279,11 @@ impl Protocol for Spotread {
     }
 
     fn measure_once(&mut self) -> Result<Reading, InstrumentError> {
+        if !self.at_prompt {
+            return Err(InstrumentError::Protocol(
+                "spotread is not at its reading prompt".into(),
+            ));
+        }
         self.key(b' ')?;
         loop {
             match self.next()? {
@@ -261,7 +291,13 @@ impl Protocol for Spotread {
                     // The prompt for the next reading follows.
                     loop {
                         match self.next()? {
-                            Event::Ready => break,
+                            Event::Ready => {
+                                self.at_prompt = true;
+                                break;
+                            }
+                            Event::NeedsCalibration(instructions) => {
+                                return Err(self.needs_calibration(&instructions));
+                            }
                             Event::Result { .. } => {
                                 return Err(InstrumentError::Protocol(
                                     "spotread gave two results for one key".into(),
@@ -317,17 +353,17 @@ impl Protocol for Spotread {
                         self.name
                     )));
                 }
+                Event::Notice(what) => tracing::info!(%what, "spotread"),
                 Event::WrongPosition(why) => {
+                    // spotread shows its menu again.
+                    self.retry()?;
                     return Err(InstrumentError::Device {
                         code: "wrong-position".into(),
                         meaning: why,
                     });
                 }
                 Event::NeedsCalibration(instructions) => {
-                    return Err(InstrumentError::Device {
-                        code: "needs-calibration".into(),
-                        meaning: instructions,
-                    });
+                    return Err(self.needs_calibration(&instructions));
                 }
                 Event::Fatal(why) => {
                     return Err(InstrumentError::Device {
@@ -338,13 +374,33 @@ impl Protocol for Spotread {
                 Event::StartFailed(why) => {
                     return Err(InstrumentError::Unavailable(why));
                 }
-                Event::Ready | Event::RetryPrompt => {}
+                // The reading was stopped ("Spot read stopped at user request!"):
+                // back to the prompt, and the reading is taken again.
+                Event::RetryPrompt => {
+                    self.key(b' ')?;
+                    self.retry()?;
+                    return Err(InstrumentError::Protocol(
+                        "spotread stopped the reading".into(),
+                    ));
+                }
+                Event::Ready => {
+                    // A prompt without a result: the key was taken as a command.
+                    self.at_prompt = true;
+                    return Err(InstrumentError::Protocol(
+                        "spotread showed its prompt again without a reading".into(),
+                    ));
+                }
             }
         }
     }
 
-    /// After a timeout or nonsense: a spotread not at its prompt is started again.
+    /// After a failure: spotread back at its prompt needs nothing (a misread is
+    /// answered there); one that is not (a timeout, nonsense) is started again, up to
+    /// its prompt.
     fn resync(&mut self) -> Result<(), InstrumentError> {
+        if self.at_prompt {
+            return Ok(());
+        }
         self.text.clear();
         self.link.reopen().map_err(InstrumentError::from)?;
         self.connect().map(|_| ())

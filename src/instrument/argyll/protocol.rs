@@ -129,6 +129,8 @@ pub enum Event {
     StartFailed(String),
     /// The prompt after a failed reading.
     RetryPrompt,
+    /// Something Argyll says that asks nothing (a calibration it did by itself).
+    Notice(String),
 }
 
 /// Whether a misread reason means too much light (the reading is an overload, not an
@@ -228,10 +230,30 @@ pub fn next_event(text: &str) -> Result<Option<(Event, usize)>, String> {
 /// A calibration request at `at`: everything up to Argyll's calibration prompt is the
 /// user's instructions.
 fn calibration_request(text: &str, at: usize) -> Option<(Event, usize)> {
-    let (prompt_at, prompt) = CALIBRATION_PROMPTS
+    let prompt = CALIBRATION_PROMPTS
         .iter()
         .filter_map(|p| text[at..].find(p).map(|i| (at + i, *p)))
-        .min_by_key(|(i, _)| *i)?;
+        .min_by_key(|(i, _)| *i);
+    // Argyll calibrates by itself when no one need do anything, and goes on to its
+    // menu (or a result): then the request was only news.
+    let moved_on = [
+        READY_PROMPT,
+        RETRY_PROMPT,
+        " Result is XYZ:",
+        "Spectrum from ",
+    ]
+    .iter()
+    .filter_map(|p| text[at..].find(p).map(|i| at + i))
+    .min();
+    if let Some(next) = moved_on
+        && prompt.is_none_or(|(p, _)| next < p)
+    {
+        let end = text[at..]
+            .find('\n')
+            .map_or(next, |nl| (at + nl + 1).min(next));
+        return Some((Event::Notice(text[at..end].trim().to_string()), end));
+    }
+    let (prompt_at, prompt) = prompt?;
     let end = prompt_at + prompt.len();
     // The prompt's last line ("or hit Esc or Q to abort: ") belongs to it.
     let end = match text[end..].find(':') {
@@ -394,6 +416,14 @@ mod tests {
             panic!()
         };
         assert!(m.contains("reflective white reference"), "{m}");
+    }
+
+    #[test]
+    fn a_calibration_argyll_does_by_itself_is_news_not_a_request() {
+        let text = "\nSpot read needs a calibration before continuing\n\nPlace instrument on spot to be measured,\nHit ESC or Q to exit, any other key to take a reading: ";
+        let (e, used) = next_event(text).unwrap().unwrap();
+        assert!(matches!(e, Event::Notice(_)), "{e:?}");
+        assert_eq!(next_event(&text[used..]).unwrap().unwrap().0, Event::Ready);
     }
 
     #[test]
