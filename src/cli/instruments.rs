@@ -7,6 +7,9 @@ use chromacal::instrument::scan::{PortFinding, candidate_ports, scan};
 
 use super::shared::Failure;
 
+/// Seconds ArgyllCMS's port scan may take in the listing.
+const ARGYLL_SCAN_S: u64 = 15;
+
 /// List serial ports and identify the instruments on them.
 #[derive(clap::Args)]
 pub struct InstrumentsArgs {
@@ -29,7 +32,15 @@ fn instruments(extra: &[String], json: bool, argyll: bool) -> Result<(), Failure
     let ports = candidate_ports(extra);
     let findings = scan(&ports);
     // ArgyllCMS is optional: without it the list says so and carries on.
-    let argyll_ports = argyll.then(|| list_ports(&spotread_program()));
+    // After the serial scan, not beside it: both would probe the same ports. Bounded,
+    // so that a port Argyll's scan hangs on costs seconds, not a minute.
+    let argyll_ports = argyll.then(|| {
+        list_ports(
+            &spotread_program(),
+            std::time::Duration::from_secs(ARGYLL_SCAN_S),
+        )
+        .map_err(|e| format!("{e} (--no-argyll skips it)"))
+    });
     if json {
         let mut rows: Vec<serde_json::Value> = findings
             .iter()

@@ -49,9 +49,14 @@ pub fn spotread_args(
     args
 }
 
-/// The ports ArgyllCMS sees and the instruments it identified on them (`spotread -?`).
-pub fn list_ports(program: &str) -> Result<Vec<super::protocol::ArgyllPort>, String> {
-    let usage = usage_text(program, std::time::Duration::from_secs(SCAN_TIMEOUT_S))?;
+/// The ports ArgyllCMS sees and the instruments it identified on them (`spotread -?`),
+/// within `timeout`: Argyll's scan reads every serial port it lists, and one that never
+/// answers holds it up.
+pub fn list_ports(
+    program: &str,
+    timeout: std::time::Duration,
+) -> Result<Vec<super::protocol::ArgyllPort>, String> {
+    let usage = usage_text(program, timeout)?;
     if !usage.contains("-c listno") {
         return Err(format!(
             "{program} -? printed no port list; is it ArgyllCMS's spotread?"
@@ -63,7 +68,8 @@ pub fn list_ports(program: &str) -> Result<Vec<super::protocol::ArgyllPort>, Str
 /// The instrument ArgyllCMS sees on port `port` (`spotread -?`), or an error naming the
 /// ports it does see.
 pub fn identify(program: &str, port: u32) -> Result<String, InstrumentError> {
-    let ports = list_ports(program).map_err(InstrumentError::Unavailable)?;
+    let ports = list_ports(program, std::time::Duration::from_secs(SCAN_TIMEOUT_S))
+        .map_err(InstrumentError::Unavailable)?;
     match ports.iter().find(|p| p.number == port) {
         Some(p) => Ok(p.instrument.clone().unwrap_or_else(|| p.path.clone())),
         None if ports.is_empty() => Err(InstrumentError::Unavailable(

@@ -242,7 +242,7 @@ pub fn usage_text(program: &str, timeout: Duration) -> Result<String, String> {
                 let _ = child.kill();
                 let _ = child.wait();
                 return Err(format!(
-                    "{program} -? did not finish within {} s (a port that never answers?)",
+                    "{program} -? did not finish within {} s: its scan reads every serial port, and one never answered",
                     timeout.as_secs()
                 ));
             }
