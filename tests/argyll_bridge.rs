@@ -223,12 +223,16 @@ if [ "$1" = "-?" ]; then
 fi
 stty raw -echo
 prompt() {{ printf '\nPlace instrument on spot to be measured,\r\nHit ESC or Q to exit, any other key to take a reading: '; }}
-# Started again once its calibration has run out, it asks at once (as an i1Pro does).
-if [ {calibrate} = 1 ] && [ "$(cat "{count}")" -ge {good} ]; then
+# Asks for a calibration; a key at that prompt would calibrate, and is written down.
+ask_calibration() {{
   printf '\r\nSpot read needs a calibration before continuing\r\nPlace the instrument on its white tile,\r\n and then hit any key to continue,\r\n or hit Esc or Q to abort: '
   key=$(dd bs=1 count=1 2>/dev/null)
   case "$key" in q|Q|"$(printf '\033')") exit 0;; esac
   echo "$key" >> "{calibrated}"
+}}
+# Started again once its calibration has run out, it asks at once (as an i1Pro does).
+if [ {calibrate} = 1 ] && [ "$(cat "{count}")" -ge {good} ]; then
+  ask_calibration
 fi
 prompt
 while true; do
@@ -238,10 +242,7 @@ while true; do
   if [ $n -le {good} ]; then
     printf '\r\n Result is XYZ: 20.%d 21.0 22.0, D50 Lab: 50 1 2\r\n' $n
   elif [ {calibrate} = 1 ]; then
-    printf '\r\nSpot read needs a calibration before continuing\r\nPlace the instrument on its white tile,\r\n and then hit any key to continue,\r\n or hit Esc or Q to abort: '
-    key=$(dd bs=1 count=1 2>/dev/null)
-    case "$key" in q|Q|"$(printf '\033')") exit 0;; esac
-    echo "$key" >> "{calibrated}"
+    ask_calibration
   else
     printf '\r\n Result is XYZ: 20.0 twenty-one 22.0, D50 Lab: 50 1 2\r\n'
   fi

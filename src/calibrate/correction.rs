@@ -384,12 +384,13 @@ pub fn fit_pairs(pairs: &[PairedReading]) -> Result<CorrectionFit, CorrectionErr
         0.002
     };
     let floor = 1e-3 * white_y;
+    // (colorimeter, reference, weight): the map is fitted from the first to the second.
     let fit: Vec<(Xyz, Xyz, f64)> = usable
         .iter()
         .filter(|(p, _, _)| !p.patch.held_out && p.patch.repeat_of.is_none())
         .map(|(_, r, c)| {
             let w = 1.0 / ((reference_noise * r.y).powi(2) + floor.powi(2));
-            (*r, *c, w)
+            (*c, *r, w)
         })
         .collect();
     if fit.len() < 4 {
@@ -398,8 +399,7 @@ pub fn fit_pairs(pairs: &[PairedReading]) -> Result<CorrectionFit, CorrectionErr
             fit.len()
         )));
     }
-    let weighted: Vec<(Xyz, Xyz, f64)> = fit.iter().map(|(r, c, w)| (*c, *r, *w)).collect();
-    let matrix = crate::linalg::weighted_linear_map(&weighted).ok_or_else(|| {
+    let matrix = crate::linalg::weighted_linear_map(&fit).ok_or_else(|| {
         CorrectionError::Fit(
             "the colorimeter's readings do not span three dimensions: is it a colorimeter, aimed at the patch?".into(),
         )

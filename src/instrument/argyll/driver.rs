@@ -112,6 +112,14 @@ pub fn open(
     SerialInstrument::connect(Box::new(protocol), options)
 }
 
+/// A fatal error spotread reported (it ends after it).
+fn fatal(why: String) -> InstrumentError {
+    InstrumentError::Device {
+        code: "fatal".into(),
+        meaning: why,
+    }
+}
+
 /// spotread, driven key by key.
 pub struct Spotread {
     link: Link,
@@ -260,12 +268,7 @@ impl Protocol for Spotread {
             Event::NeedsCalibration(instructions) => {
                 return Err(self.needs_calibration(&instructions));
             }
-            Event::Fatal(why) => {
-                return Err(InstrumentError::Device {
-                    code: "fatal".into(),
-                    meaning: why,
-                });
-            }
+            Event::Fatal(why) => return Err(fatal(why)),
             other => {
                 return Err(InstrumentError::Protocol(format!(
                     "spotread said {other:?} before its first prompt"
@@ -371,12 +374,7 @@ impl Protocol for Spotread {
                 Event::NeedsCalibration(instructions) => {
                     return Err(self.needs_calibration(&instructions));
                 }
-                Event::Fatal(why) => {
-                    return Err(InstrumentError::Device {
-                        code: "fatal".into(),
-                        meaning: why,
-                    });
-                }
+                Event::Fatal(why) => return Err(fatal(why)),
                 Event::StartFailed(why) => {
                     return Err(InstrumentError::Unavailable(why));
                 }
