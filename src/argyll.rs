@@ -1,16 +1,17 @@
 //! ArgyllCMS as a yardstick. `colprof -qm -as` builds its matrix/shaper display profile
 //! (per-channel shaper curves and a matrix, fitted to every reading given) from a
-//! training set, and `xicclu` (absolute colorimetric, XYZ out) predicts the XYZ of any
-//! RGB through it. `chromacal bench` and the tests use this to score chromacal and
-//! ArgyllCMS on one split, with one ΔE00 formula against one white. Needs ArgyllCMS on
-//! the PATH (Debian's `argyll`).
+//! training set, `xicclu` (absolute colorimetric, XYZ out) predicts the XYZ of any RGB
+//! through it, and `profcheck -k` judges any profile on a `.ti3` of readings.
+//! `chromacal bench` and the tests use these to score chromacal's exported profile and
+//! ArgyllCMS's on one split, by one judge. Needs ArgyllCMS on the PATH (Debian's
+//! `argyll`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use crate::cgats::to_ti3;
 use crate::color::Xyz;
-use crate::measurement::{MeasurementSet, Units};
+use crate::measurement::MeasurementSet;
 use crate::model::Drive;
 
 /// Why ArgyllCMS gave no predictions.
@@ -31,15 +32,19 @@ pub enum ArgyllError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("xicclu's line {line} is not RGB -> XYZ: '{text}'")]
-    Unreadable { line: usize, text: String },
+    #[error("{program}'s line {line} is not what it prints: '{text}'")]
+    Unreadable {
+        program: &'static str,
+        line: usize,
+        text: String,
+    },
     #[error("the training set has no white reading to scale by")]
     NoWhite,
 }
 
-/// True when `colprof` and `xicclu` can be run.
+/// True when `colprof`, `xicclu` and `profcheck` can be run.
 pub fn available() -> bool {
-    ["colprof", "xicclu"].iter().all(|p| {
+    ["colprof", "xicclu", "profcheck"].iter().all(|p| {
         Command::new(p)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
@@ -55,43 +60,55 @@ pub fn matrix_shaper_predictions(
     drives: &[Drive],
     work: &Path,
 ) -> Result<Vec<Xyz>, ArgyllError> {
-    let io = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| ArgyllError::Io { path, source }
-    };
-    std::fs::create_dir_all(work).map_err(io(work))?;
-    let base = work.join("train");
-    let ti3 = base.with_extension("ti3");
-    std::fs::write(&ti3, to_ti3(train)).map_err(io(&ti3))?;
+    let icc = matrix_shaper_profile(&to_ti3(train), work, "train")?;
+    // Absolute colorimetric XYZ comes scaled to white Y = 100, as the .ti3 went in.
+    let scale = train.mean_white().ok_or(ArgyllError::NoWhite)?.y / 100.0;
+    Ok(absolute_xyz(&icc, drives)?
+        .into_iter()
+        .map(|xyz| xyz * scale)
+        .collect())
+}
+
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> ArgyllError {
+    let path = path.to_path_buf();
+    move |source| ArgyllError::Io { path, source }
+}
+
+/// `colprof -qm -as` on the `.ti3` text `ti3`, written as `work/name.ti3`: the path of
+/// the matrix/shaper profile it made.
+pub fn matrix_shaper_profile(ti3: &str, work: &Path, name: &str) -> Result<PathBuf, ArgyllError> {
+    std::fs::create_dir_all(work).map_err(io_error(work))?;
+    let base = work.join(name);
+    let ti3_path = base.with_extension("ti3");
+    std::fs::write(&ti3_path, ti3).map_err(io_error(&ti3_path))?;
     run(
         "colprof",
         Command::new("colprof")
             .args(["-qm", "-as"])
-            .arg(&base)
+            .arg(name)
             .current_dir(work),
         None,
     )?;
+    Ok(base.with_extension("icc"))
+}
+
+/// `xicclu -ia -pX`: the absolute colorimetric XYZ (white Y = 100) of each of `drives`
+/// through the profile at `icc`.
+pub fn absolute_xyz(icc: &Path, drives: &[Drive]) -> Result<Vec<Xyz>, ArgyllError> {
     let input: String = drives
         .iter()
         .map(|d| format!("{} {} {}\n", d[0], d[1], d[2]))
         .collect();
     let output = run(
         "xicclu",
-        Command::new("xicclu")
-            .args(["-ia", "-pX"])
-            .arg(base.with_extension("icc")),
+        Command::new("xicclu").args(["-ia", "-pX"]).arg(icc),
         Some(input),
     )?;
-    // Absolute colorimetric XYZ comes scaled to white Y = 100, as the .ti3 went in.
-    let scale = match train.units {
-        Units::Relative => 1.0,
-        Units::Absolute => train.mean_white().ok_or(ArgyllError::NoWhite)?.y / 100.0,
-    };
     let predictions: Vec<Xyz> = output
         .lines()
         .enumerate()
         .filter(|(_, l)| l.contains("[XYZ]"))
-        .map(|(i, line)| parse_xicclu_line(line, i + 1).map(|xyz| xyz * scale))
+        .map(|(i, line)| parse_xicclu_line(line, i + 1))
         .collect::<Result<_, _>>()?;
     if predictions.len() != drives.len() {
         return Err(ArgyllError::Failed {
@@ -106,9 +123,43 @@ pub fn matrix_shaper_predictions(
     Ok(predictions)
 }
 
+/// ArgyllCMS's judge of a profile: `profcheck -v2 -k`, the CIEDE2000 error of each
+/// patch of the `.ti3` at `ti3` against the profile at `icc`, absolute colorimetric,
+/// L*a*b* taken against D50 from XYZ scaled to white Y = 100. In the file's order.
+pub fn profcheck_delta_e00(ti3: &Path, icc: &Path) -> Result<Vec<f64>, ArgyllError> {
+    let output = run(
+        "profcheck",
+        Command::new("profcheck")
+            .args(["-v2", "-k"])
+            .arg(ti3)
+            .arg(icc),
+        None,
+    )?;
+    output
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.starts_with('['))
+        .map(|(i, line)| parse_profcheck_line(line, i + 1))
+        .collect()
+}
+
+/// `[0.245] 12: 0.5 0.2 0.1 -> …` → 0.245.
+fn parse_profcheck_line(line: &str, number: usize) -> Result<f64, ArgyllError> {
+    line.strip_prefix('[')
+        .and_then(|rest| rest.split(']').next())
+        .and_then(|v| v.trim().parse::<f64>().ok())
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| ArgyllError::Unreadable {
+            program: "profcheck",
+            line: number,
+            text: line.to_string(),
+        })
+}
+
 /// `0.5 0.5 0.5 [RGB] -> MatrixFwd -> 20.39 21.46 23.56 [XYZ]` → the XYZ.
 fn parse_xicclu_line(line: &str, number: usize) -> Result<Xyz, ArgyllError> {
     let unreadable = || ArgyllError::Unreadable {
+        program: "xicclu",
         line: number,
         text: line.to_string(),
     };

@@ -406,17 +406,29 @@ const ARGYLL_SPECTRAL_MILLI: f64 = 1000.0;
 /// only condition the format can describe). Absolute sets are written normalised to
 /// white Y = 100 with `LUMINANCE_XYZ_CDM2`, as ArgyllCMS writes display files.
 pub fn to_ti3(set: &MeasurementSet) -> String {
+    to_ti3_against(set, set.mean_white(), 1.0)
+}
+
+/// As [`to_ti3`], normalised to `white` (Y = 100) rather than the set's own, and every
+/// XYZ multiplied by `factor`. A set of mixtures held out of a fit has no white of its
+/// own: written against the training set's white, ArgyllCMS's `profcheck` judges a
+/// profile of the training set on it in the frame the profile was made in. `factor`
+/// rescales a training set slightly (`comparison`: how much `colprof`'s optimum moves
+/// when its white is renormalised).
+pub fn to_ti3_against(set: &MeasurementSet, white: Option<Xyz>, factor: f64) -> String {
     let rows: Vec<(&Measurement, Xyz)> = set
         .measurements
         .iter()
         .filter(|m| m.is_standard_condition())
         .filter_map(|m| Some((m, m.usable_xyz()?)))
         .collect();
-    let white = set.mean_white();
+    // Relative sets are said to be normalised to white Y = 100 too, so they are made so.
     let (scale, luminance) = match (set.units, white) {
         (Units::Absolute, Some(w)) if w.y > 0.0 => (100.0 / w.y, Some(w)),
+        (Units::Relative, Some(w)) if w.y > 0.0 => (100.0 / w.y, None),
         _ => (1.0, None),
     };
+    let scale = scale * factor;
     let mut out =
         String::from("CTI3\n\nDESCRIPTOR \"Argyll Calibration Target chart information 3\"\n");
     out += &format!("ORIGINATOR \"chromacal {}\"\n", env!("CARGO_PKG_VERSION"));

@@ -4,10 +4,10 @@
 use std::fmt::Write as _;
 
 use crate::color::spaces::xyz_to_xyy;
-use crate::fit::FitReport;
 use crate::fit::checks::Verdict;
 use crate::fit::stats::ErrorStats;
 use crate::fit::validate::Evaluation;
+use crate::fit::{FitReport, WhiteAnchor};
 use crate::model::spatial::SpatialMap;
 use crate::model::{CHANNELS, MonitorModel};
 use crate::plan::BudgetBreakdown;
@@ -97,6 +97,25 @@ pub fn budget_line(b: &BudgetBreakdown) -> String {
 
 /// The part of a summary that any fit has: laws tried, spatial map, held-out error,
 /// assumptions.
+/// One line on how the model was anchored at the measured white.
+pub fn white_anchor_line(w: &WhiteAnchor) -> String {
+    let xyz = |v: &crate::color::Xyz| format!("{:.4} {:.4} {:.4}", v.x, v.y, v.z);
+    let how = if w.anchored {
+        format!(
+            "anchored: each channel's light × {:.4} {:.4} {:.4}",
+            w.gains[0], w.gains[1], w.gains[2]
+        )
+    } else {
+        format!("not anchored: {}", w.note.as_deref().unwrap_or("-"))
+    };
+    format!(
+        "white: measured XYZ {}, the fitted model gave {} ({:.2} % in Y); {how}, so every export is relative to the measured white",
+        xyz(&w.measured),
+        xyz(&w.predicted),
+        (w.predicted.y / w.measured.y - 1.0) * 100.0
+    )
+}
+
 pub fn fit_summary(report: &FitReport) -> String {
     let mut out = String::new();
     let rows: Vec<Vec<String>> = report
@@ -173,6 +192,9 @@ pub fn fit_summary(report: &FitReport) -> String {
         );
         out.push_str(&table(&["terms", "CV mean", "CV p95", "CV max"], &rows));
         let _ = writeln!(out, "  rule: {}", report.terms_rule);
+    }
+    if let Some(w) = &report.white_anchor {
+        let _ = writeln!(out, "\n{}", white_anchor_line(w));
     }
     if report.spatial.positions > 0 {
         let rows: Vec<Vec<String>> = report

@@ -16,7 +16,9 @@ use std::time::Instant;
 use chromacal::calibrate::session::{block_on, measure_simulated};
 use chromacal::cgats::read_ti3;
 use chromacal::color::Xyz;
-use chromacal::comparison::{MAX_TRAIN, compare_with_argyll, compare_with_argyll_across};
+use chromacal::comparison::{
+    MAX_TRAIN, RESCALINGS, compare_with_argyll, compare_with_argyll_across,
+};
 use chromacal::config::{Config, parse_config};
 use chromacal::fit::laws::fit_law;
 use chromacal::fit::primaries::{ChannelRamp, RampPoint};
@@ -548,24 +550,29 @@ pub fn real_sets(data: &Path) -> Vec<(String, RealSet)> {
     sets
 }
 
-/// chromacal against ArgyllCMS's `colprof -qm -as` on every real set, one split.
+/// chromacal against ArgyllCMS's `colprof -qm -as` on every real set, one split, one
+/// judge (`comparison`).
 fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
     let sets = real_sets(data);
     if sets.is_empty() {
         println!("\nno real measurement sets under {}", data.display());
         return Ok(());
     }
+    let (first, last) = (RESCALINGS.start(), RESCALINGS.end());
     println!(
-        "\nreal displays: held-out ΔE00 (train: black, greys and single-channel ramps, at most {MAX_TRAIN}; test: every mixture), chromacal against ArgyllCMS colprof -qm -as, mean / p95 / max:"
+        "\nreal displays: held-out ΔE00 mean (train: black, greys and single-channel ramps, at most {MAX_TRAIN}; test: every mixture), judged by ArgyllCMS profcheck -k on each tool's ICC profile; colprof -qm -as run on the rows as measured and rescaled by 1 + k·10⁻⁴, k = {first}…{last}:"
     );
     let work = std::env::temp_dir().join(format!("chromacal-argyll-{}", std::process::id()));
+    let rescalings: Vec<i32> = RESCALINGS.collect();
     let mut rows = Vec::new();
-    let mut ratios = Vec::new();
+    let (mut ratios, mut best_ratios) = (Vec::new(), Vec::new());
     for (k, (name, set)) in sets.iter().enumerate() {
         let dir = work.join(k.to_string());
         let compared = match set {
-            RealSet::One(set) => compare_with_argyll(set, options, &dir),
-            RealSet::Two(train, test) => compare_with_argyll_across(train, test, options, &dir),
+            RealSet::One(set) => compare_with_argyll(set, options, &rescalings, &dir),
+            RealSet::Two(train, test) => {
+                compare_with_argyll_across(train, test, options, &rescalings, &dir)
+            }
         };
         // One display that cannot be compared leaves its row saying why, not the table.
         let c = match compared {
@@ -575,17 +582,25 @@ fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
                 continue;
             }
         };
-        let stats = |s: &ErrorStats| format!("{:.3} / {:.3} / {:.3}", s.mean, s.p95, s.max);
         ratios.extend(c.ratio());
+        best_ratios.extend(c.ratio_to_best());
+        let ratio = |r: Option<f64>| r.map_or("-".into(), |r| format!("{r:.2}"));
         rows.push(vec![
             name.clone(),
             format!("{} / {}", c.train, c.test),
-            stats(&c.chromacal),
-            match &c.argyll {
-                Ok(s) => stats(s),
-                Err(why) => format!("not run: {why}"),
+            format!("{:.3}", c.chromacal.mean),
+            format!("{:.3}", c.model_judged.mean),
+            match &c.chromacal_icc {
+                Ok(s) => format!("{:.3}", s.mean),
+                Err(why) => format!("not judged: {why}"),
             },
-            c.ratio().map_or("-".into(), |r| format!("{r:.2}")),
+            match (c.argyll_spread(), &c.argyll) {
+                (Some(s), _) => format!("{:.3} / {:.3} / {:.3}", s.min, s.median, s.max),
+                (None, Err(why)) => format!("not run: {why}"),
+                (None, Ok(_)) => "-".into(),
+            },
+            ratio(c.ratio()),
+            ratio(c.ratio_to_best()),
             c.fitted
                 .report
                 .chosen_law()
@@ -600,24 +615,28 @@ fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
             &[
                 "display",
                 "train / test",
-                "chromacal",
-                "ArgyllCMS",
+                "model (own check)",
+                "model (judge's frame)",
+                "chromacal ICC v2",
+                "colprof min / median / max",
                 "ratio",
+                "to best",
                 "law",
                 "fit time"
             ],
             &rows
         )
     );
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        chromacal::fit::stats::percentile(&v, 50.0)
+    };
     if !ratios.is_empty() {
-        ratios.sort_by(|a, b| a.total_cmp(b));
-        let n = ratios.len();
-        let median = if n % 2 == 1 {
-            ratios[n / 2]
-        } else {
-            (ratios[n / 2 - 1] + ratios[n / 2]) / 2.0
-        };
-        println!("  median ratio chromacal / ArgyllCMS: {median:.2}");
+        println!(
+            "  median ratio chromacal ICC / colprof's median run: {:.2}; to colprof's best run: {:.2}",
+            median(ratios),
+            median(best_ratios)
+        );
     }
     Ok(())
 }

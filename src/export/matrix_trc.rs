@@ -81,7 +81,25 @@ pub struct MatrixTrc {
 
 impl MatrixTrc {
     /// The display at the centre of the screen, through `calibration` when given.
+    ///
+    /// A matrix/TRC cannot hold the model's additivity terms: its additive part is
+    /// exported, each channel scaled so that the description still passes through the
+    /// model's white (which the fit anchored at the measured one), since everything in
+    /// the profile is relative to that white.
     pub fn from_model(model: &MonitorModel, calibration: Option<&CalibrationCurves>) -> Self {
+        let additive;
+        let model = if model.terms.is_empty() {
+            model
+        } else {
+            let part = MonitorModel {
+                terms: Default::default(),
+                ..model.clone()
+            };
+            additive = part
+                .anchored_at_white(&model.white())
+                .map_or(part, |(anchored, _)| anchored);
+            &additive
+        };
         let inverse = model.matrix.try_inverse().unwrap_or_else(Matrix3::zeros);
         let t0 = inverse * model.black;
         // The excitation each channel gives at input x, through the curves if any.

@@ -16,7 +16,9 @@
 //!    moves with drive), each kept only if it lowers the cross-validated error
 //!    (`terms`), and if one is kept the curves fitted again with the greys corrected
 //!    by it (`refit_curves_for_terms`);
-//! 6. the spatial map from the uniformity grid, chosen the same way (`spatial`);
+//! 6. the spatial map from the uniformity grid, chosen the same way (`spatial`), and
+//!    the model anchored at the measured white (`anchor_at_measured_white`), which
+//!    every export is normalised to;
 //! 7. held-out error on the verification patches (`validate_on_held_out`), and the
 //!    assumption checks (`checks`).
 //!
@@ -165,6 +167,10 @@ pub struct FitReport {
     pub terms_rule: String,
     #[serde(default)]
     pub terms: Vec<TermReport>,
+    /// How the model was made to pass through the measured white (absent in profiles
+    /// made before it was, and where no white was measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white_anchor: Option<WhiteAnchor>,
     /// The chosen law against itself corrected at the measured levels (absent in
     /// profiles made before there was a correction, and where it was not tried).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -288,10 +294,13 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     );
     let grid = readings_of_role(&corrected, Role::Uniformity);
     let (spatial_map, spatial) = choose_spatial_map(&base, &grid, &noise);
-    let model = MonitorModel {
-        spatial: spatial_map,
-        ..base
-    };
+    let (model, white_anchor) = anchor_at_measured_white(
+        MonitorModel {
+            spatial: spatial_map,
+            ..base
+        },
+        measured_white(&corrected),
+    );
     let (evaluation, held_out) = validate_on_held_out(&model, &corrected);
     let checks = check_assumptions(
         &corrected,
@@ -312,6 +321,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
             laws: selection.reports(),
             terms_rule: choice.rule,
             terms: choice.reports,
+            white_anchor,
             law_correction: selection.correction.clone(),
             code_correction: selection.codes.clone(),
             spatial,
@@ -438,6 +448,16 @@ fn grey_readings(corrected: &[Corrected<'_>]) -> Vec<(usize, f64, Xyz)> {
         .collect()
 }
 
+/// The mean of the white readings (drift-corrected), if white was measured.
+fn measured_white(corrected: &[Corrected<'_>]) -> Option<Xyz> {
+    let whites: Vec<Xyz> = corrected
+        .iter()
+        .filter(|r| is_standard_white(r.measurement))
+        .map(|r| r.xyz)
+        .collect();
+    (!whites.is_empty()).then(|| whites.iter().sum::<Xyz>() / whites.len() as f64)
+}
+
 /// The white ΔE00 is taken against: the mean of the white readings, else black plus the
 /// three channels at full drive.
 fn reference_white(
@@ -445,16 +465,81 @@ fn reference_white(
     black: &BlackEstimate,
     ramps: &[ChannelRamp; 3],
 ) -> Xyz {
-    let whites: Vec<Xyz> = corrected
-        .iter()
-        .filter(|r| is_standard_white(r.measurement))
-        .map(|r| r.xyz)
-        .collect();
-    if whites.is_empty() {
-        black.xyz + ramps.iter().map(|r| r.column(1.0)).sum::<Xyz>()
-    } else {
-        whites.iter().sum::<Xyz>() / whites.len() as f64
+    measured_white(corrected)
+        .unwrap_or_else(|| black.xyz + ramps.iter().map(|r| r.column(1.0)).sum::<Xyz>())
+}
+
+/// How the model was anchored at the measured white.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WhiteAnchor {
+    /// The mean white reading, drift-corrected.
+    pub measured: Xyz,
+    /// What the model predicted for white before it was anchored.
+    pub predicted: Xyz,
+    /// Each channel's light scaled by this (1 where it was not anchored).
+    pub gains: [f64; 3],
+    pub anchored: bool,
+    /// Why it was not, when it was not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+/// Largest share by which anchoring may change a channel's light. The ramps' own full
+/// drive readings fix each column to within noise, so a white that asks for more is a
+/// white the model cannot reach by scaling its channels (a reading gone wrong, or a
+/// display far from additive) and is reported, not followed.
+pub const MAX_ANCHOR_GAIN_CHANGE: f64 = 0.15;
+
+/// Step 6b: the model made to pass through the measured white. Every export is
+/// normalised to the white (an ICC profile's PCS, a `.cal`'s target, PsychoPy's
+/// relative curves) and ArgyllCMS normalises a `.ti3` to its measured white, so a
+/// model that predicts white a little off rescales every colour it exports: one
+/// wide-gamut monitor's ICC lost 20 % against its own model that way. Each channel's
+/// light is scaled by the gain that brings the predicted white onto the measured one
+/// (`MonitorModel::anchored_at_white`); a channel's chromaticity and curve are kept.
+fn anchor_at_measured_white(
+    model: MonitorModel,
+    measured: Option<Xyz>,
+) -> (MonitorModel, Option<WhiteAnchor>) {
+    let Some(measured) = measured else {
+        return (model, None);
+    };
+    let predicted = model.white();
+    let refused = |model: MonitorModel, note: String| {
+        let report = WhiteAnchor {
+            measured,
+            predicted,
+            gains: [1.0; 3],
+            anchored: false,
+            note: Some(note),
+        };
+        (model, Some(report))
+    };
+    let Some((anchored, gains)) = model.anchored_at_white(&measured) else {
+        return refused(
+            model,
+            "no positive gains of the channels reach the measured white".into(),
+        );
+    };
+    if let Some(c) = (0..3).find(|c| (gains[*c] - 1.0).abs() > MAX_ANCHOR_GAIN_CHANGE) {
+        return refused(
+            model,
+            format!(
+                "the measured white asks {} for × {:.3} of its light, beyond ± {:.0} %: not followed",
+                CHANNELS[c],
+                gains[c],
+                MAX_ANCHOR_GAIN_CHANGE * 100.0
+            ),
+        );
     }
+    let report = WhiteAnchor {
+        measured,
+        predicted,
+        gains,
+        anchored: true,
+        note: None,
+    };
+    (anchored, Some(report))
 }
 
 /// Step 4: every candidate law fitted to every channel and scored on readings it was

@@ -52,6 +52,24 @@ pub fn simplest_within(
     Some(best)
 }
 
+/// Does `candidate` lower the error of `base` (the same held-out items, in the same
+/// order) by more than `standard_errors` standard errors of the paired differences and
+/// more than `noise_tolerance`? The test for adding a term to a model: it is asked of
+/// the model the term adds to, never of a third candidate.
+pub fn improves_on(
+    candidate: &[f64],
+    base: &[f64],
+    noise_tolerance: f64,
+    standard_errors: f64,
+) -> bool {
+    if candidate.is_empty() || candidate.len() != base.len() {
+        return false;
+    }
+    let gain: Vec<f64> = base.iter().zip(candidate).map(|(b, c)| b - c).collect();
+    let se = standard_errors * standard_deviation(&gain) / (gain.len() as f64).sqrt();
+    mean(&gain) > se.max(noise_tolerance)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -74,6 +92,20 @@ mod tests {
             simplest_within_noise(&[Some(worse), Some(complex)], 0.05),
             Some(0)
         );
+    }
+
+    #[test]
+    fn a_term_improves_only_on_what_it_adds_to() {
+        let base = vec![1.0, 1.2, 0.9, 1.1, 1.0, 1.3];
+        let better: Vec<f64> = base.iter().map(|b| b - 0.2).collect();
+        let noisy = vec![0.7, 1.5, 0.6, 1.4, 0.8, 1.5];
+        assert!(improves_on(&better, &base, 0.05, 2.0));
+        // The same gain is not enough when noise alone explains it.
+        assert!(!improves_on(&better, &base, 0.3, 2.0));
+        // Lower on some items, higher on others: not an improvement.
+        assert!(!improves_on(&noisy, &base, 0.0, 2.0));
+        assert!(!improves_on(&base, &better, 0.0, 2.0));
+        assert!(!improves_on(&[], &[], 0.0, 2.0));
     }
 
     #[test]

@@ -10,10 +10,10 @@
 //! are cross-validated over drive levels as the laws are (`law_selection`): the levels
 //! are dealt into at most `MAX_FOLDS` folds, each left out in turn, the coefficients
 //! fitted without it and its readings predicted, in ΔE00 against the display's white.
-//! The simplest candidate within noise of the best is kept (`select::simplest_within`),
-//! with a stricter bound than the laws' (two standard errors, and at least what noise
-//! does to one reading): on additive virtual monitors that keeps a term in under 5 % of
-//! runs (`tests/additivity_terms.rs`). The curves are
+//! A term is kept only if it lowers the error of the model without it, paired, by more
+//! than two standard errors and than what noise does to one reading
+//! (`forward_selection`, `select::improves_on`): on additive virtual monitors that keeps
+//! a term in under 5 % of runs (`tests/additivity_terms.rs`). The curves are
 //! held fixed in this comparison; when a term is kept the curves are fitted again with
 //! the greys corrected by it (`fit::refit_curves_for_terms`), since the greys shaped
 //! them as if the display were additive.
@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use super::law_selection::{MAX_FOLDS, level_folds};
 use super::noise::NoiseModel;
-use super::select::simplest_within;
+use super::select::improves_on;
 use super::stats::ErrorStats;
 use super::validate::{delta_e00_xyz, noise_delta_e00};
 use crate::color::Xyz;
@@ -285,6 +285,40 @@ fn cross_validate(
     Some(errors)
 }
 
+/// The terms kept, from the cross-validated errors of `TermSet::ALL` (in its order):
+/// each term is kept only if it lowers the error of the model without it, paired, by
+/// more than `STANDARD_ERRORS` standard errors and than `tolerance` (`select::improves_on`).
+/// First the single terms against the additive model (of two that pass, the one with the
+/// lower error); then both together against what was kept. A term is never kept because
+/// a third candidate was best: on a fresh TN set the former rule (the simplest within
+/// two standard errors of the best) kept an interaction whose cross-validated mean
+/// (1.224) and max (3.04) were worse than the additive model's (1.155, 2.62), because
+/// the best was the chromaticity shift.
+fn forward_selection(scores: &[Option<Vec<f64>>], tolerance: f64) -> TermSet {
+    let score = |set: TermSet| {
+        TermSet::ALL
+            .iter()
+            .position(|s| *s == set)
+            .and_then(|k| scores.get(k))
+            .and_then(|s| s.as_deref())
+    };
+    let improves = |candidate: TermSet, base: TermSet| match (score(candidate), score(base)) {
+        (Some(c), Some(b)) => improves_on(c, b, tolerance, STANDARD_ERRORS),
+        _ => false,
+    };
+    let mean_of = |set: TermSet| score(set).map_or(f64::INFINITY, super::stats::mean);
+    let kept = [TermSet::Interaction, TermSet::ChromaticityShift]
+        .into_iter()
+        .filter(|single| improves(*single, TermSet::None))
+        .min_by(|a, b| mean_of(*a).total_cmp(&mean_of(*b)))
+        .unwrap_or(TermSet::None);
+    if improves(TermSet::Both, kept) {
+        TermSet::Both
+    } else {
+        kept
+    }
+}
+
 /// Fit and cross-validate each candidate set of terms on `readings` with the curves
 /// and matrix of `model`, and keep the simplest within noise of the best.
 pub fn choose_terms(
@@ -302,8 +336,7 @@ pub fn choose_terms(
     let xyz: Vec<Xyz> = readings.iter().map(|r| r.xyz).collect();
     let tolerance = noise_delta_e00(&xyz, noise, white);
     let chosen = if n >= 2 {
-        simplest_within(&scores, tolerance * TOLERANCE_SHARE, STANDARD_ERRORS)
-            .map_or(TermSet::None, |k| TermSet::ALL[k])
+        forward_selection(&scores, tolerance * TOLERANCE_SHARE)
     } else {
         TermSet::None
     };
@@ -332,7 +365,7 @@ pub fn choose_terms(
         .collect();
     let rule = if n >= 2 {
         format!(
-            "simplest of additive, interaction, chromaticity shift, both whose ΔE00 on ramp readings, greys and whites left out by level ({n} folds) exceeds the best's by no more than {STANDARD_ERRORS} standard errors (paired) or than noise alone ({:.3})",
+            "a term is kept only if it lowers the ΔE00 on ramp readings, greys and whites left out by level ({n} folds) of the model without it by more than {STANDARD_ERRORS} standard errors (paired) and than noise alone ({:.3}): single terms against the additive model, then both against what was kept",
             tolerance * TOLERANCE_SHARE
         )
     } else {
@@ -343,5 +376,58 @@ pub fn choose_terms(
         chosen,
         reports,
         rule,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::select::simplest_within;
+
+    /// Errors on 40 left-out readings: `base` plus `shift` plus a zig-zag of `wobble`.
+    fn errors(shift: f64, wobble: f64) -> Vec<f64> {
+        (0..40)
+            .map(|i| 1.0 + 0.3 * ((i * 7 % 11) as f64 / 10.0) + shift)
+            .enumerate()
+            .map(|(i, e)| e + if i % 2 == 0 { wobble } else { -wobble })
+            .collect()
+    }
+
+    #[test]
+    fn a_term_worse_than_the_model_without_it_is_not_kept_because_a_third_was_best() {
+        // Issue 27's TN set: the interaction worse than additive, noisily; the shift
+        // best. The former rule kept the interaction, the simplest within two standard
+        // errors of the best.
+        let additive = errors(0.0, 0.0);
+        let interaction = errors(0.07, 0.8);
+        let shift = errors(-0.15, 0.02);
+        let both = errors(-0.14, 0.5);
+        let scores = vec![
+            Some(additive),
+            Some(interaction),
+            Some(shift),
+            Some(both),
+        ];
+        assert_eq!(simplest_within(&scores, 0.05, STANDARD_ERRORS), Some(1));
+        assert_eq!(forward_selection(&scores, 0.05), TermSet::ChromaticityShift);
+        // Neither single term helps, nor do both: additive.
+        let flat = vec![
+            Some(errors(0.0, 0.0)),
+            Some(errors(0.01, 0.1)),
+            Some(errors(-0.01, 0.1)),
+            Some(errors(0.0, 0.2)),
+        ];
+        assert_eq!(forward_selection(&flat, 0.05), TermSet::None);
+        // Both kept only when they beat the single term kept.
+        let both_better = vec![
+            Some(errors(0.0, 0.0)),
+            Some(errors(-0.2, 0.01)),
+            Some(errors(-0.1, 0.01)),
+            Some(errors(-0.4, 0.01)),
+        ];
+        assert_eq!(forward_selection(&both_better, 0.05), TermSet::Both);
+        // A candidate that could not be scored is never kept.
+        let unscored = vec![Some(errors(0.0, 0.0)), None, None, None];
+        assert_eq!(forward_selection(&unscored, 0.05), TermSet::None);
     }
 }

@@ -273,6 +273,51 @@ impl MonitorModel {
         }
     }
 
+    /// Each channel's light above black in full white at the centre, terms included
+    /// (at full drive the chromaticity shift vanishes and the interaction multiplies
+    /// channel c by 1 + γ_c s_c): the columns of a matrix whose row sums, with black,
+    /// give the white.
+    pub fn white_contributions(&self) -> Matrix3<f64> {
+        let k = self.spatial.gains(ScreenPosition::CENTRE);
+        let full = self.full_drive_excitations();
+        let light = Vector3::new(k[0] * full[0], k[1] * full[1], k[2] * full[2]);
+        let s = interaction_basis(&drive_shares(&light, &full));
+        let mut contributions = Matrix3::zeros();
+        for c in 0..3 {
+            let gain = 1.0 + self.terms.interaction.map_or(0.0, |g| g[c] * s[c]);
+            contributions.set_column(c, &(self.matrix.column(c) * (light[c] * gain)));
+        }
+        contributions
+    }
+
+    /// The same display with each channel's light scaled by its own gain g_c (its
+    /// column and its chromaticity shift alike), so that full white at the centre
+    /// gives `white`: g = C⁻¹ (white − black), with C the channels' shares of white
+    /// (`white_contributions`). This is how a fit is anchored at the measured white
+    /// (`fit::anchor_at_measured_white`): an ICC profile, a `.cal` target and every
+    /// relative export are normalised to the white, so a model that misses the
+    /// measured white rescales every colour it exports. `None` when C is singular or a
+    /// gain is not a positive finite number.
+    pub fn anchored_at_white(&self, white: &Xyz) -> Option<(MonitorModel, [f64; 3])> {
+        let gains = self
+            .white_contributions()
+            .try_inverse()
+            .map(|inverse| inverse * (white - self.black))?;
+        let gains = [gains[0], gains[1], gains[2]];
+        if !gains.iter().all(|g| g.is_finite() && *g > 0.0) {
+            return None;
+        }
+        let mut anchored = self.clone();
+        for (c, g) in gains.iter().enumerate() {
+            let column = anchored.matrix.column(c) * *g;
+            anchored.matrix.set_column(c, &column);
+            if let Some(u) = anchored.terms.chromaticity_shift.as_mut() {
+                u[c] = u[c].map(|v| v * g);
+            }
+        }
+        Some((anchored, gains))
+    }
+
     /// 2-norm condition number of the primary matrix: how much the inverse amplifies
     /// relative errors. Near-collinear primaries make it large.
     pub fn condition_number(&self) -> f64 {
