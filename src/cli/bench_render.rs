@@ -10,6 +10,8 @@
 //! codes (16 bits) are judged by chromacal's exact model: the ΔE00 between the colour
 //! asked for and what the display shows for them.
 
+use std::cell::RefCell;
+use std::rc::Rc;
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -66,22 +68,62 @@ fn drives(n: usize) -> Vec<[f64; 3]> {
     (0..n).map(|_| [next(), next(), next()]).collect()
 }
 
-struct Row {
-    tool: String,
+/// Rounds the tools are timed over, each tool once a round beside the reference, in an
+/// order that turns round by round: one machine's background load then lands on every
+/// tool alike, and each ratio is taken between neighbouring samples. Timed one after another, once each, the ratio
+/// to moxcms swung from 0.69 to 1.30 across four runs on a quiet machine.
+const ROUNDS: usize = 11;
+
+/// Shortest time one sample of a tool takes: passes are repeated until it is reached,
+/// so a fast tool's sample is not one 40 ms pass at the mercy of the scheduler.
+const MIN_SAMPLE_S: f64 = 0.3;
+
+/// A tool as timed: one pass over the image, and the ΔE00 of what its last pass gave.
+struct Tool<'a> {
+    name: String,
     cores: String,
-    pixels_per_second: f64,
-    error: ErrorStats,
+    run: Box<dyn FnMut() + 'a>,
+    error: Box<dyn Fn() -> ErrorStats + 'a>,
 }
 
-/// Time `work` over the image (best of `repeats`), in pixels per second.
-fn throughput(repeats: usize, mut work: impl FnMut()) -> f64 {
-    let mut best = f64::INFINITY;
-    for _ in 0..repeats {
-        let start = Instant::now();
-        work();
-        best = best.min(start.elapsed().as_secs_f64());
+/// Seconds of one sample of `tool`: passes repeated until `MIN_SAMPLE_S`, per pass.
+fn sample(tool: &mut Tool<'_>) -> f64 {
+    let start = Instant::now();
+    let mut passes = 0;
+    while passes == 0 || start.elapsed().as_secs_f64() < MIN_SAMPLE_S {
+        (tool.run)();
+        passes += 1;
     }
-    (SIDE * SIDE) as f64 / best
+    start.elapsed().as_secs_f64() / passes as f64
+}
+
+/// Each tool's seconds a pass and its time over the reference's (tool 0), round by
+/// round: `(seconds[round][tool], ratios[round][tool])`. Within a round every tool is
+/// sampled next to a sample of the reference (before it in even rounds, after it in
+/// odd ones), in an order that turns round by round, so each ratio is of two tools
+/// timed under the same load.
+fn interleaved_rounds(tools: &mut [Tool<'_>], rounds: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let n = tools.len();
+    let mut seconds = vec![vec![0.0; n]; rounds];
+    let mut ratios = vec![vec![1.0; n]; rounds];
+    for round in 0..rounds {
+        let mut reference = Vec::new();
+        for i in 0..n.saturating_sub(1) {
+            let t = 1 + (i + round) % (n - 1);
+            let (r, s) = if round % 2 == 0 {
+                let r = sample(&mut tools[0]);
+                (r, sample(&mut tools[t]))
+            } else {
+                let s = sample(&mut tools[t]);
+                (sample(&mut tools[0]), s)
+            };
+            reference.push(r);
+            seconds[round][t] = s;
+            ratios[round][t] = s / r;
+        }
+        seconds[round][0] = reference.iter().sum::<f64>() / reference.len().max(1) as f64;
+    }
+    (seconds, ratios)
 }
 
 /// ΔE00 of the codes (0–1) at a sample of pixels, judged by `model`.
@@ -109,7 +151,6 @@ fn error_of(
 }
 
 pub fn render_table(quick: bool) -> Result<(), String> {
-    let repeats = if quick { 1 } else { 3 };
     let profile = default_profile()?;
     let full = profile.model.clone();
     let centre_only = MonitorModel {
@@ -133,75 +174,73 @@ pub fn render_table(quick: bool) -> Result<(), String> {
         .map(|(k, d)| full.forward(d, at(k)))
         .collect();
     let centre = |_: usize| ScreenPosition::CENTRE;
-    let mut rows = Vec::new();
-    let mut codes = vec![[0u16; 3]; n];
     let to_codes = |d: [f64; 3]| d.map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16);
     let from_codes = |c: [u16; 3]| c.map(|v| v as f64 / 65535.0);
+    let chunk = 4096;
+    let threads = format!("{}", rayon::current_num_threads());
 
     // chromacal, the part an ICC profile carries (laws inverted exactly, then by
     // their tables, as `render` does), then the whole model.
     let crf = ColourReproduction::new(&centre_only).map_err(|e| e.to_string())?;
-    let exact = throughput(repeats, || {
-        for (c, x) in codes.iter_mut().zip(&asked_centre) {
-            *c = to_codes(crf.drive_exact_for(x, ScreenPosition::CENTRE));
-        }
-    });
-    let error = error_of(&full, &asked_centre, &centre, &|k| from_codes(codes[k]));
-    rows.push(Row {
-        tool: "chromacal (matrix and laws, each law inverted exactly)".into(),
-        cores: "1".into(),
-        pixels_per_second: exact,
-        error,
-    });
-    let chunk = 4096;
-    let one = throughput(repeats, || {
-        crf.codes16(&asked_centre, centre, &mut codes);
-    });
-    let error = error_of(&full, &asked_centre, &centre, &|k| from_codes(codes[k]));
-    rows.push(Row {
-        tool: "chromacal (matrix and laws, tabulated inverse)".into(),
-        cores: "1".into(),
-        pixels_per_second: one,
-        error,
-    });
-    let all = throughput(repeats, || {
-        codes
-            .par_chunks_mut(chunk)
-            .zip(asked_centre.par_chunks(chunk))
-            .for_each(|(c, x)| crf.codes16(x, centre, c));
-    });
-    let error = error_of(&full, &asked_centre, &centre, &|k| from_codes(codes[k]));
-    rows.push(Row {
-        tool: "chromacal (matrix and laws, tabulated inverse)".into(),
-        cores: format!("{}", rayon::current_num_threads()),
-        pixels_per_second: all,
-        error,
-    });
     let whole = ColourReproduction::new(&full).map_err(|e| e.to_string())?;
-    for parallel in [false, true] {
-        let speed = throughput(repeats, || {
-            if parallel {
-                codes
-                    .par_chunks_mut(chunk)
-                    .zip(asked_screen.par_chunks(chunk))
-                    .enumerate()
-                    .for_each(|(i, (c, x))| whole.codes16(x, |k| at(i * chunk + k), c));
-            } else {
-                whole.codes16(&asked_screen, at, &mut codes);
+    let codes_buffer = || RefCell::new(vec![[0u16; 3]; n]);
+    let buffers: Vec<RefCell<Vec<[u16; 3]>>> = (0..5).map(|_| codes_buffer()).collect();
+    let judged = |codes: &RefCell<Vec<[u16; 3]>>, asked: &[Xyz], on_screen: bool| {
+        let codes = codes.borrow();
+        if on_screen {
+            error_of(&full, asked, &at, &|k| from_codes(codes[k]))
+        } else {
+            error_of(&full, asked, &centre, &|k| from_codes(codes[k]))
+        }
+    };
+    let mut tools: Vec<Tool<'_>> = Vec::new();
+    tools.push(Tool {
+        name: "chromacal (matrix and laws, tabulated inverse)".into(),
+        cores: "1".into(),
+        run: Box::new(|| crf.codes16(&asked_centre, centre, &mut buffers[0].borrow_mut())),
+        error: Box::new(|| judged(&buffers[0], &asked_centre, false)),
+    });
+    tools.push(Tool {
+        name: "chromacal (matrix and laws, each law inverted exactly)".into(),
+        cores: "1".into(),
+        run: Box::new(|| {
+            for (c, x) in buffers[1].borrow_mut().iter_mut().zip(&asked_centre) {
+                *c = to_codes(crf.drive_exact_for(x, ScreenPosition::CENTRE));
             }
-        });
-        let error = error_of(&full, &asked_screen, &at, &|k| from_codes(codes[k]));
-        rows.push(Row {
-            tool: "chromacal (with the spatial map, whole screen)".into(),
-            cores: if parallel {
-                format!("{}", rayon::current_num_threads())
-            } else {
-                "1".into()
-            },
-            pixels_per_second: speed,
-            error,
-        });
-    }
+        }),
+        error: Box::new(|| judged(&buffers[1], &asked_centre, false)),
+    });
+    tools.push(Tool {
+        name: "chromacal (matrix and laws, tabulated inverse)".into(),
+        cores: threads.clone(),
+        run: Box::new(|| {
+            buffers[2]
+                .borrow_mut()
+                .par_chunks_mut(chunk)
+                .zip(asked_centre.par_chunks(chunk))
+                .for_each(|(c, x)| crf.codes16(x, centre, c));
+        }),
+        error: Box::new(|| judged(&buffers[2], &asked_centre, false)),
+    });
+    tools.push(Tool {
+        name: "chromacal (with the spatial map, whole screen)".into(),
+        cores: "1".into(),
+        run: Box::new(|| whole.codes16(&asked_screen, at, &mut buffers[3].borrow_mut())),
+        error: Box::new(|| judged(&buffers[3], &asked_screen, true)),
+    });
+    tools.push(Tool {
+        name: "chromacal (with the spatial map, whole screen)".into(),
+        cores: threads,
+        run: Box::new(|| {
+            buffers[4]
+                .borrow_mut()
+                .par_chunks_mut(chunk)
+                .zip(asked_screen.par_chunks(chunk))
+                .enumerate()
+                .for_each(|(i, (c, x))| whole.codes16(x, |k| at(i * chunk + k), c));
+        }),
+        error: Box::new(|| judged(&buffers[4], &asked_screen, true)),
+    });
 
     // The same colours as the ICC profile's connection space sees them: relative to
     // the display's white, adapted to D50 (Bradford), as the v4 profile's chad says.
@@ -227,38 +266,41 @@ pub fn render_table(quick: bool) -> Result<(), String> {
         .iter()
         .map(|x| (chad * (x / white.y)).into())
         .collect();
-    rows.push(moxcms_row(
-        &exported.bytes,
-        &pcs,
-        repeats,
-        &full,
-        &asked_centre,
-    )?);
-    rows.push(lcms_row(
-        &exported.bytes,
-        &pcs,
-        repeats,
-        &full,
-        &asked_centre,
-    )?);
+    tools.push(moxcms_tool(&exported.bytes, &pcs, &full, &asked_centre)?);
+    tools.push(lcms_tool(&exported.bytes, &pcs, &full, &asked_centre)?);
 
-    let ours = rows[1].pixels_per_second;
-    let cells: Vec<Vec<String>> = rows
+    let rounds = if quick { ROUNDS.min(3) } else { ROUNDS };
+    let (seconds, ratios) = interleaved_rounds(&mut tools, rounds);
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(|a, b| a.total_cmp(b));
+        chromacal::fit::stats::percentile(&v, 50.0)
+    };
+    let cells: Vec<Vec<String>> = tools
         .iter()
-        .map(|r| {
+        .enumerate()
+        .map(|(t, tool)| {
+            // The ratio within each round, to chromacal on one core (tool 0).
+            let ratios: Vec<f64> = ratios.iter().map(|r| r[t]).collect();
+            let (low, high) = ratios
+                .iter()
+                .fold((f64::INFINITY, 0.0f64), |(l, h), r| (l.min(*r), h.max(*r)));
+            let error = (tool.error)();
             vec![
-                r.tool.clone(),
-                r.cores.clone(),
-                format!("{:.1}", r.pixels_per_second / 1e6),
-                format!("{:.2}", ours / r.pixels_per_second),
-                format!("{:.4} / {:.4}", r.error.mean, r.error.max),
+                tool.name.clone(),
+                tool.cores.clone(),
+                format!(
+                    "{:.1}",
+                    n as f64 / median(seconds.iter().map(|r| r[t]).collect()) / 1e6
+                ),
+                format!("{:.2} ({low:.2}–{high:.2})", median(ratios)),
+                format!("{:.4} / {:.4}", error.mean, error.max),
             ]
         })
         .collect();
     println!(
-        "XYZ → display codes (16 bits), {SIDE} × {SIDE} = {:.1} megapixels, colours inside the gamut; ΔE00 judged by chromacal's exact model on {} pixels\n",
+        "XYZ → display codes (16 bits), {SIDE} × {SIDE} = {:.1} megapixels, colours inside the gamut; each tool timed beside chromacal on one core, interleaved over {rounds} rounds (the median, and each ratio's spread over the rounds); ΔE00 judged by chromacal's exact model on {} pixels\n",
         n as f64 / 1e6,
-        rows[0].error.n
+        ERROR_SAMPLE.min(n)
     );
     println!(
         "{}",
@@ -267,7 +309,7 @@ pub fn render_table(quick: bool) -> Result<(), String> {
                 "tool",
                 "cores",
                 "Mpixel/s",
-                "chromacal 1 core ÷ this",
+                "this ÷ chromacal 1 core (time)",
                 "ΔE00 mean / max",
             ],
             &cells
@@ -278,13 +320,12 @@ pub fn render_table(quick: bool) -> Result<(), String> {
 
 /// moxcms: a source profile whose "RGB" is PCS XYZ itself (identity colorants,
 /// linear curves), to the display's profile, 32-bit float.
-fn moxcms_row(
+fn moxcms_tool<'a>(
     icc: &[u8],
     pcs: &[[f64; 3]],
-    repeats: usize,
-    model: &MonitorModel,
-    asked: &[Xyz],
-) -> Result<Row, String> {
+    model: &'a MonitorModel,
+    asked: &'a [Xyz],
+) -> Result<Tool<'a>, String> {
     use moxcms::{ColorProfile, Layout, ToneReprCurve, TransformOptions, Xyzd};
     let display = ColorProfile::new_from_slice(icc).map_err(|e| format!("moxcms: {e:?}"))?;
     let mut source = ColorProfile::new_srgb();
@@ -306,33 +347,34 @@ fn moxcms_row(
         )
         .map_err(|e| format!("moxcms: {e:?}"))?;
     let input: Vec<f32> = pcs.iter().flat_map(|p| p.map(|v| v as f32)).collect();
-    let mut output = vec![0f32; input.len()];
-    let speed = throughput(repeats, || {
-        let _ = transform.transform(&input, &mut output);
-    });
+    let output = Rc::new(RefCell::new(vec![0f32; input.len()]));
     transform
-        .transform(&input, &mut output)
+        .transform(&input, &mut output.borrow_mut())
         .map_err(|e| format!("moxcms: {e:?}"))?;
-    let error = error_of(model, asked, &|_| ScreenPosition::CENTRE, &|k| {
-        [0, 1, 2].map(|c| f64::from(output[3 * k + c]))
-    });
-    Ok(Row {
-        tool: "moxcms 0.8 (the exported ICC v4, f32)".into(),
+    let judged = Rc::clone(&output);
+    Ok(Tool {
+        name: "moxcms 0.8 (the exported ICC v4, f32)".into(),
         cores: "1".into(),
-        pixels_per_second: speed,
-        error,
+        run: Box::new(move || {
+            let _ = transform.transform(&input, &mut output.borrow_mut());
+        }),
+        error: Box::new(move || {
+            let output = judged.borrow();
+            error_of(model, asked, &|_| ScreenPosition::CENTRE, &|k| {
+                [0, 1, 2].map(|c| f64::from(output[3 * k + c]))
+            })
+        }),
     })
 }
 
 /// Little CMS: its built-in XYZ profile (doubles, Y = 1 at white) to the display's
 /// profile, relative colorimetric, doubles out.
-fn lcms_row(
+fn lcms_tool<'a>(
     icc: &[u8],
     pcs: &[[f64; 3]],
-    repeats: usize,
-    model: &MonitorModel,
-    asked: &[Xyz],
-) -> Result<Row, String> {
+    model: &'a MonitorModel,
+    asked: &'a [Xyz],
+) -> Result<Tool<'a>, String> {
     use lcms2::{Intent, PixelFormat, Profile as LcmsProfile, Transform};
     let display = LcmsProfile::new_icc(icc).map_err(|e| format!("Little CMS: {e}"))?;
     let xyz = LcmsProfile::new_xyz();
@@ -344,18 +386,22 @@ fn lcms_row(
         Intent::RelativeColorimetric,
     )
     .map_err(|e| format!("Little CMS: {e}"))?;
-    let mut output = vec![[0f64; 3]; pcs.len()];
-    let speed = throughput(repeats, || transform.transform_pixels(pcs, &mut output));
-    let error = error_of(model, asked, &|_| ScreenPosition::CENTRE, &|k| output[k]);
-    Ok(Row {
+    let input = pcs.to_vec();
+    let output = Rc::new(RefCell::new(vec![[0f64; 3]; pcs.len()]));
+    transform.transform_pixels(&input, &mut output.borrow_mut());
+    let judged = Rc::clone(&output);
+    Ok(Tool {
         // Little CMS numbers its versions as 1000 × major + 10 × minor: 2190 is 2.19.
-        tool: format!(
+        name: format!(
             "Little CMS {}.{} (the exported ICC v4, double)",
             lcms2::version() / 1000,
             lcms2::version() % 1000 / 10
         ),
         cores: "1".into(),
-        pixels_per_second: speed,
-        error,
+        run: Box::new(move || transform.transform_pixels(&input, &mut output.borrow_mut())),
+        error: Box::new(move || {
+            let output = judged.borrow();
+            error_of(model, asked, &|_| ScreenPosition::CENTRE, &|k| output[k])
+        }),
     })
 }

@@ -402,12 +402,7 @@ mod tests {
         let interaction = errors(0.07, 0.8);
         let shift = errors(-0.15, 0.02);
         let both = errors(-0.14, 0.5);
-        let scores = vec![
-            Some(additive),
-            Some(interaction),
-            Some(shift),
-            Some(both),
-        ];
+        let scores = vec![Some(additive), Some(interaction), Some(shift), Some(both)];
         assert_eq!(simplest_within(&scores, 0.05, STANDARD_ERRORS), Some(1));
         assert_eq!(forward_selection(&scores, 0.05), TermSet::ChromaticityShift);
         // Neither single term helps, nor do both: additive.
