@@ -14,7 +14,7 @@ use chromacal::crf::gamut::{GamutMapping, UniformSpace};
 use chromacal::crf::spectral::{MethodKind, SpectralMethod};
 use chromacal::crf::spectral_table::{Case, colorchecker_family};
 use chromacal::crf::tone::ToneOperator;
-use chromacal::crf::{ColourReproduction, RenderSettings, Scene, ScenePixel};
+use chromacal::crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
 use chromacal::fit::validate::delta_e00_xyz;
 use chromacal::model::spatial::SpatialMap;
 use chromacal::model::{MonitorModel, ScreenPosition};
@@ -89,6 +89,7 @@ fn settings(gamut: GamutMapping, bits: u32) -> RenderSettings {
         tone: ToneOperator::Colorimetric,
         gamut,
         bits,
+        codes: CodeChoice::default(),
     }
 }
 
@@ -388,6 +389,7 @@ fn the_tone_operators_map_a_bright_scene_into_the_display() {
                 tone,
                 gamut: GamutMapping::Clip,
                 bits: 16,
+                codes: CodeChoice::default(),
             },
         )
         .unwrap()
@@ -854,4 +856,117 @@ fn spectra_and_a_spectral_image_render_as_their_xyz_would() {
         from_csv[0][0] > from_csv[0][1] && from_csv[0][0] > from_csv[0][2],
         "{from_csv:?}"
     );
+}
+
+/// Issue 27: at 8 bits the codes are the nearest of the 8 around the exact drive, in
+/// ΔE00 by the profile's forward model, not each channel rounded on its own. Never
+/// worse than rounding, better on some colours, and no neighbour of the chosen codes
+/// in its cell is nearer; everywhere on the screen.
+#[test]
+fn codes_are_the_nearest_of_their_cell_in_delta_e00() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let positions = grid(3);
+    let pixels: Vec<ScenePixel> = (0..660)
+        .map(|k| {
+            let d = [
+                0.03 + 0.94 * ((k * 37 % 101) as f64 / 100.0),
+                0.03 + 0.94 * ((k * 53 % 103) as f64 / 102.0),
+                0.03 + 0.94 * ((k * 71 % 107) as f64 / 106.0),
+            ];
+            let position = positions[k % positions.len()];
+            ScenePixel {
+                xyz: model.forward(d, position),
+                position,
+            }
+        })
+        .collect();
+    let scene = Scene {
+        pixels,
+        white: None,
+    };
+    let render = |codes| {
+        crf.render(
+            &scene,
+            &RenderSettings {
+                codes,
+                ..settings(GamutMapping::Clip, 8)
+            },
+        )
+        .unwrap()
+    };
+    let nearest = render(CodeChoice::NearestInDeltaE00);
+    let rounded = render(CodeChoice::Rounded);
+    let white = crf.white();
+    let mut better = 0;
+    for ((n, r), p) in nearest
+        .pixels
+        .iter()
+        .zip(&rounded.pixels)
+        .zip(&scene.pixels)
+    {
+        assert!(!n.outside);
+        assert!(n.inversion_delta_e00 <= r.inversion_delta_e00 + 1e-12);
+        if n.inversion_delta_e00 < r.inversion_delta_e00 - 0.02 {
+            better += 1;
+        }
+        // No code of the cell around the exact drive is nearer.
+        let drive = crf
+            .drive_for(&Xyz::from(n.mapped), p.position)
+            .map(|d| d * 255.0);
+        for corner in 0..8 {
+            let codes = [0, 1, 2].map(|c| {
+                let v = if corner >> c & 1 == 1 {
+                    drive[c].ceil()
+                } else {
+                    drive[c].floor()
+                };
+                v.clamp(0.0, 255.0) / 255.0
+            });
+            let error = delta_e00_xyz(
+                &Xyz::from(n.mapped),
+                &model.forward(codes, p.position),
+                &white,
+            );
+            assert!(
+                error >= n.inversion_delta_e00 - 1e-12,
+                "at {:?}: {codes:?} shows {error}, the chosen {:?} {}",
+                p.position,
+                n.codes,
+                n.inversion_delta_e00
+            );
+        }
+    }
+    let (n, r) = (
+        nearest.summary.inversion.unwrap(),
+        rounded.summary.inversion.unwrap(),
+    );
+    eprintln!(
+        "8 bits, 660 colours: rounded mean {:.4} max {:.4}; nearest mean {:.4} max {:.4}; {better} better by more than 0.02",
+        r.mean, r.max, n.mean, n.max
+    );
+    assert!(better > 10, "{better}");
+    assert!(n.mean < r.mean && n.max <= r.max);
+
+    // The command takes `--codes rounded` and `--codes nearest`, and gives each.
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("scene.csv");
+    let mut text = String::from("X,Y,Z\n");
+    for p in &scene.pixels[..40] {
+        text += &format!("{},{},{}\n", p.xyz.x, p.xyz.y, p.xyz.z);
+    }
+    std::fs::write(&csv, text).unwrap();
+    let codes_of = |choice: &str| {
+        render_ok(&[
+            OsStr::new("--xyz"),
+            csv.as_os_str(),
+            OsStr::new("--codes"),
+            OsStr::new(choice),
+            OsStr::new("-o"),
+            OsStr::new("-"),
+        ])
+    };
+    let (by_cli_nearest, by_cli_rounded) = (codes_of("nearest"), codes_of("rounded"));
+    assert_ne!(by_cli_nearest, by_cli_rounded);
+    assert_eq!(by_cli_nearest, codes_of("NEAREST"));
 }

@@ -18,7 +18,9 @@ use chromacal::crf::scene::{
 use chromacal::crf::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
 use chromacal::crf::spectral_table::standard_methods;
 use chromacal::crf::tone::{TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
-use chromacal::crf::{ColourReproduction, RenderSettings, RenderSummary, Scene, ScenePixel};
+use chromacal::crf::{
+    CodeChoice, ColourReproduction, RenderSettings, RenderSummary, Scene, ScenePixel,
+};
 use chromacal::fit::validate::delta_e00_xyz;
 use chromacal::measurement::Units;
 use chromacal::model::ScreenPosition;
@@ -97,6 +99,11 @@ pub struct RenderArgs {
     /// Bits per channel of the codes.
     #[arg(long, default_value_t = 8)]
     bits: u32,
+    /// How codes are chosen: nearest (of the 8 codes around the exact drive, the one
+    /// the profile shows nearest the colour, in ΔE00) or rounded (each channel on its
+    /// own).
+    #[arg(long, value_enum, ignore_case = true, default_value = "nearest")]
+    codes: CodesArg,
     /// The scene's white, for --tone linear and --adapt: D50, D65, 6500K or x,y, at
     /// --white-luminance [default: a reflectance scene's illuminant].
     #[arg(long)]
@@ -287,7 +294,17 @@ fn settings_of(args: &RenderArgs) -> Result<RenderSettings, Failure> {
         tone,
         gamut,
         bits: args.bits,
+        codes: match args.codes {
+            CodesArg::Nearest => CodeChoice::NearestInDeltaE00,
+            CodesArg::Rounded => CodeChoice::Rounded,
+        },
     })
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum CodesArg {
+    Nearest,
+    Rounded,
 }
 
 fn write_codes(
