@@ -172,3 +172,50 @@ fn a_model_with_terms_inverts_what_it_predicts_and_survives_its_file() {
     let read: chromacal::model::MonitorModel = toml::from_str(&text).unwrap();
     assert_eq!(&read, model);
 }
+
+/// Issue 27: a plasma-like panel, whose light drops with the mean output of the screen
+/// (an automatic brightness limiter), built from a real measured table and real spectra
+/// (ISETBio's Sony OLED): its greys read 5–8 % below the sum of their channels at mid
+/// drive. What the greys and whites show is carried to the mixtures by the interaction
+/// term, which is a light-dependent gain to first order, and the mixtures held out of
+/// the fit gain from it.
+#[test]
+fn a_plasma_like_limiter_is_learnt_from_the_greys_and_carried_to_the_mixtures() {
+    let monitor = isetbio_monitor("isetbio_oled_sony", "");
+    let (mut with_sum, mut plain_sum) = (0.0, 0.0);
+    for seed in 1..=6 {
+        let (with, plain) = fits(&monitor, "channel_interaction = 0.35", seed);
+        let deficit: Vec<(f64, f64)> = with
+            .report
+            .checks
+            .additivity
+            .iter()
+            .map(|a| (a.drive, a.luminance_departure_percent))
+            .collect();
+        // The hard case as the issue states it: mid grey 5–8 % below the channel sum.
+        let mid = deficit
+            .iter()
+            .min_by(|a, b| (a.0 - 0.5).abs().total_cmp(&(b.0 - 0.5).abs()))
+            .unwrap();
+        assert!((-8.0..=-5.0).contains(&mid.1), "seed {seed}: {deficit:?}");
+        eprintln!(
+            "seed {seed}: kept {:?}, held-out {:.3} with, {:.3} without; greys' departure from the channel sum (drive, %) {deficit:.3?}",
+            kept(&with),
+            held_out(&with),
+            held_out(&plain)
+        );
+        assert!(
+            matches!(kept(&with), TermSet::Interaction | TermSet::Both),
+            "seed {seed}: {:?}",
+            with.report.terms
+        );
+        with_sum += held_out(&with);
+        plain_sum += held_out(&plain);
+    }
+    assert!(
+        with_sum < 0.5 * plain_sum,
+        "held-out mean {} with the term, {} without",
+        with_sum / 6.0,
+        plain_sum / 6.0
+    );
+}
