@@ -244,6 +244,7 @@ fn write_judged_files(
         copyright: "No copyright.".into(),
         created: [2026, 1, 1, 0, 0, 0],
     };
-    let profile = MatrixTrc::from_model(&fitted.model, None);
+    let measured = fitted.report.white_anchor.as_ref().map(|w| w.measured);
+    let profile = MatrixTrc::relative_to(&fitted.model, None, measured);
     write("chromacal.icc", &encode(&profile, &text, IccVersion::V2))
 }

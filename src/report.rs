@@ -100,16 +100,17 @@ pub fn budget_line(b: &BudgetBreakdown) -> String {
 /// One line on how the model was anchored at the measured white.
 pub fn white_anchor_line(w: &WhiteAnchor) -> String {
     let xyz = |v: &crate::color::Xyz| format!("{:.4} {:.4} {:.4}", v.x, v.y, v.z);
+    let gains = format!("{:.4} {:.4} {:.4}", w.gains[0], w.gains[1], w.gains[2]);
     let how = if w.anchored {
-        format!(
-            "anchored: each channel's light × {:.4} {:.4} {:.4}",
-            w.gains[0], w.gains[1], w.gains[2]
-        )
+        format!("the model made to pass through it (each channel's light × {gains})")
     } else {
-        format!("not anchored: {}", w.note.as_deref().unwrap_or("-"))
+        format!(
+            "the model not made to pass through it ({}; it would take each channel's light × {gains})",
+            w.note.as_deref().unwrap_or("-")
+        )
     };
     format!(
-        "white: measured XYZ {}, the fitted model gave {} ({:.2} % in Y); {how}, so every export is relative to the measured white",
+        "white: measured XYZ {}, the fit gave {} ({:+.2} % in Y); every export is relative to the measured white; {how}",
         xyz(&w.measured),
         xyz(&w.predicted),
         (w.predicted.y / w.measured.y - 1.0) * 100.0

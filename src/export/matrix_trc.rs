@@ -87,6 +87,20 @@ impl MatrixTrc {
     /// model's white (which the fit anchored at the measured one), since everything in
     /// the profile is relative to that white.
     pub fn from_model(model: &MonitorModel, calibration: Option<&CalibrationCurves>) -> Self {
+        Self::relative_to(model, calibration, None)
+    }
+
+    /// As [`MatrixTrc::from_model`], everything relative to `white` (the measured
+    /// white) when given rather than to the model's own: an absolute lookup through the
+    /// profile then gives exactly what the model gives, the normalisation the `.ti3`
+    /// and every reader of the profile use. Where the model does not pass through the
+    /// measured white (`fit::WhiteAnchor`), device white maps to the model's white
+    /// relative to the measured one, not exactly to the PCS white.
+    pub fn relative_to(
+        model: &MonitorModel,
+        calibration: Option<&CalibrationCurves>,
+        white: Option<Xyz>,
+    ) -> Self {
         let additive;
         let model = if model.terms.is_empty() {
             model
@@ -145,7 +159,9 @@ impl MatrixTrc {
             }
         });
         let white_vector = colorants * Vector3::new(1.0, 1.0, 1.0);
-        let white = Xyz::new(white_vector.x, white_vector.y, white_vector.z);
+        let white = white
+            .filter(|w| w.y > 0.0 && w.iter().all(|v| v.is_finite()))
+            .unwrap_or(Xyz::new(white_vector.x, white_vector.y, white_vector.z));
         MatrixTrc {
             white,
             black: model.black,

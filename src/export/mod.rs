@@ -319,7 +319,13 @@ pub fn export(
             if profile.model.matrix.try_inverse().is_none() {
                 return Err(ExportError::Singular);
             }
-            let matrix_trc = MatrixTrc::from_model(&profile.model, calibration.as_ref());
+            // Through calibration curves the display's white is the calibrated one;
+            // without, the measured white the `.ti3` is normalised to.
+            let measured = match calibration {
+                None => profile.report.white_anchor.as_ref().map(|w| w.measured),
+                Some(_) => None,
+            };
+            let matrix_trc = MatrixTrc::relative_to(&profile.model, calibration.as_ref(), measured);
             if matrix_trc.black_clipped {
                 notes.push("the black's chromaticity (outside the primaries' triangle)".into());
             }
