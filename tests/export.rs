@@ -57,8 +57,10 @@ fn export_said(profile: &Path, format: &str, output: &Path, extra: &[&str]) -> (
 
 /// The model's colour of `rgb` as an ICC reader should give it: relative to the
 /// display's white, adapted to D50 by Bradford, in L*a*b* (D50).
-fn model_lab(model: &MonitorModel, rgb: [f64; 3]) -> Lab {
-    let white = model.white();
+/// L*a*b* (D50) of `rgb` by `model`, relative to `white` (the measured white, which
+/// every export is relative to) and adapted to D50, as a profile's PCS holds it.
+fn model_lab(model: &MonitorModel, white: &Xyz, rgb: [f64; 3]) -> Lab {
+    let white = *white;
     let d50 = Xyz::new(D50[0], D50[1], D50[2]);
     let chad = adaptation_matrix(AdaptationTransform::Bradford, &(white / white.y), &d50);
     xyz_to_lab(&(chad * (model.forward_centre(rgb) / white.y)), &d50)
@@ -127,13 +129,18 @@ fn transicc_lab(icc: &Path, codes: &[[f64; 3]]) -> Vec<Lab> {
 }
 
 /// The worst ΔE00 between the model and `read` over `codes`.
-fn worst_against_model(model: &MonitorModel, codes: &[[f64; 3]], read: &[Lab]) -> (f64, [f64; 3]) {
+fn worst_against_model(
+    model: &MonitorModel,
+    white: &Xyz,
+    codes: &[[f64; 3]],
+    read: &[Lab],
+) -> (f64, [f64; 3]) {
     codes
         .iter()
         .zip(read)
         .map(|(c, lab)| {
             let rgb = c.map(|v| v / 255.0);
-            (delta_e_2000(&model_lab(model, rgb), lab), *c)
+            (delta_e_2000(&model_lab(model, white, rgb), lab), *c)
         })
         .fold((0.0, [0.0; 3]), |w, e| if e.0 > w.0 { e } else { w })
 }
@@ -230,15 +237,17 @@ fn icc_profiles_read_back_by_lcms_and_moxcms_match_the_model() {
             let said = export(&path, format, &icc, &[]);
             assert!(said.contains("not carried: the spatial map"), "{said}");
             let bytes = std::fs::read(&icc).unwrap();
+            // Relative to the measured white, as the run's .ti3 is.
+            let white = profile.report.white_anchor.as_ref().unwrap().measured;
             let (worst, at) =
-                worst_against_model(&profile.model, &codes, &transicc_lab(&icc, &codes));
+                worst_against_model(&profile.model, &white, &codes, &transicc_lab(&icc, &codes));
             eprintln!("{name} {format}: lcms worst ΔE00 {worst:.4} at {at:?}");
             assert!(
                 worst < 0.1,
                 "{name} {format} via lcms: ΔE00 {worst} at {at:?}"
             );
             let (worst, at) =
-                worst_against_model(&profile.model, &codes, &moxcms_lab(&bytes, &codes));
+                worst_against_model(&profile.model, &white, &codes, &moxcms_lab(&bytes, &codes));
             eprintln!("{name} {format}: moxcms worst ΔE00 {worst:.4} at {at:?}");
             assert!(
                 worst < 0.1,
@@ -247,10 +256,8 @@ fn icc_profiles_read_back_by_lcms_and_moxcms_match_the_model() {
 
             let icc_read = moxcms::ColorProfile::new_from_slice(&bytes).unwrap();
             let lumi = icc_read.luminance.unwrap().y;
-            assert!(
-                (lumi / profile.model.white().y - 1.0).abs() < 1e-4,
-                "{lumi}"
-            );
+            // `lumi` is the measured white's luminance, not the model's.
+            assert!((lumi / white.y - 1.0).abs() < 1e-4, "{lumi}");
             match format {
                 "icc4" => {
                     assert_eq!(icc_read.version(), moxcms::ProfileVersion::V4_4);
@@ -267,8 +274,8 @@ fn icc_profiles_read_back_by_lcms_and_moxcms_match_the_model() {
                 _ => {
                     assert_eq!(icc_read.version(), moxcms::ProfileVersion::V2_4);
                     assert!(icc_read.chromatic_adaptation.is_none());
-                    // v2 keeps the display's own white in wtpt.
-                    let w = profile.model.white();
+                    // v2 keeps the display's own white, as measured, in wtpt.
+                    let w = white;
                     let wtpt = icc_read.media_white_point.unwrap();
                     assert!((wtpt.x - w.x / w.y).abs() < 1e-4 && (wtpt.z - w.z / w.y).abs() < 1e-4);
                 }
@@ -769,14 +776,19 @@ fn terms_an_icc_profile_cannot_carry_are_named_and_the_rest_is_exact() {
         !said.contains("channel interaction (grey luminance"),
         "{said}"
     );
-    // What the profile can carry, the additive part, it carries exactly.
-    let additive = MonitorModel {
+    // What the profile can carry, the additive part (each channel scaled so that it
+    // still passes through the model's white), it carries exactly, relative to the
+    // measured white.
+    let (additive, _) = MonitorModel {
         terms: Default::default(),
         ..profile.model.clone()
-    };
+    }
+    .anchored_at_white(&profile.model.white())
+    .unwrap();
+    let white = profile.report.white_anchor.as_ref().unwrap().measured;
     let codes = test_codes();
     let bytes = std::fs::read(&icc).unwrap();
-    let (worst, at) = worst_against_model(&additive, &codes, &moxcms_lab(&bytes, &codes));
+    let (worst, at) = worst_against_model(&additive, &white, &codes, &moxcms_lab(&bytes, &codes));
     assert!(worst < 0.1, "via moxcms: ΔE00 {worst} at {at:?}");
     // The JSON and TOML exports carry the whole model, terms included.
     let toml_out = dir.path().join("whole.toml");
