@@ -299,14 +299,8 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     );
     let grid = readings_of_role(&corrected, Role::Uniformity);
     let (spatial_map, spatial) = choose_spatial_map(&base, &grid, &noise);
-    let (model, white_anchor) = anchor_at_measured_white(
-        MonitorModel {
-            spatial: spatial_map,
-            ..base
-        },
-        measured_white(&corrected),
-        options.anchor_at_white,
-    );
+    let (model, white_anchor) =
+        anchor_at_measured_white(base.with_spatial(spatial_map), &corrected, options);
     let (evaluation, held_out) = validate_on_held_out(&model, &corrected);
     let checks = check_assumptions(
         &corrected,
@@ -511,10 +505,10 @@ pub const MAX_ANCHOR_GAIN_CHANGE: f64 = 0.15;
 /// says what the model missed the white by and what anchoring would ask.
 fn anchor_at_measured_white(
     model: MonitorModel,
-    measured: Option<Xyz>,
-    anchor: bool,
+    corrected: &[Corrected<'_>],
+    options: &FitOptions,
 ) -> (MonitorModel, Option<WhiteAnchor>) {
-    let Some(measured) = measured else {
+    let Some(measured) = measured_white(corrected) else {
         return (model, None);
     };
     let mut report = WhiteAnchor {
@@ -529,7 +523,7 @@ fn anchor_at_measured_white(
         return (model, Some(report));
     };
     report.gains = gains;
-    if !anchor {
+    if !options.anchor_at_white {
         report.note = Some("fit.anchor_at_white is off".into());
         return (model, Some(report));
     }

@@ -256,6 +256,11 @@ impl MonitorModel {
         })
     }
 
+    /// The same display with `spatial` as its map.
+    pub fn with_spatial(self, spatial: SpatialMap) -> MonitorModel {
+        MonitorModel { spatial, ..self }
+    }
+
     /// The same display with all light scaled by `factor` (to compare a profile in
     /// cd/m² with measurements relative to white, say).
     pub fn scaled(&self, factor: f64) -> MonitorModel {
