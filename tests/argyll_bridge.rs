@@ -289,19 +289,7 @@ fn a_missing_argyll_and_an_argyll_that_talks_nonsense_are_named() {
 
     // Nonsense after four readings: a calibration stops with the line named, and the
     // four readings are in its journal.
-    let emulator = emulate(&["--instrument", "k10a", "--time-scale", TIME_SCALE]);
-    let config = dir.path().join("config.toml");
-    std::fs::write(&config, SHORT_PLAN).unwrap();
-    let state = dir.path().join("state");
-    let out = chromacal()
-        .args(["calibrate", "--config"])
-        .arg(&config)
-        .args(["--instrument", "argyll", "--screen", &emulator.screen])
-        .arg("--state-dir")
-        .arg(&state)
-        .env("CHROMACAL_SPOTREAD", &fake)
-        .output()
-        .unwrap();
+    let (out, state) = calibrate_through(dir.path(), &fake);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{stderr}");
     assert!(
@@ -313,6 +301,25 @@ fn a_missing_argyll_and_an_argyll_that_talks_nonsense_are_named() {
     assert!((readings[3].reading.xyz.unwrap().x - 20.4).abs() < 1e-9);
 }
 
+/// A short calibration of an emulated K-10A through `fake` as Argyll's spotread, its
+/// state in `dir/state`: what it printed, and that state directory.
+fn calibrate_through(dir: &Path, fake: &Path) -> (std::process::Output, std::path::PathBuf) {
+    let emulator = emulate(&["--instrument", "k10a", "--time-scale", TIME_SCALE]);
+    let config = dir.join("config.toml");
+    std::fs::write(&config, SHORT_PLAN).unwrap();
+    let state = dir.join("state");
+    let out = chromacal()
+        .args(["calibrate", "--config"])
+        .arg(&config)
+        .args(["--instrument", "argyll", "--screen", &emulator.screen])
+        .arg("--state-dir")
+        .arg(&state)
+        .env("CHROMACAL_SPOTREAD", fake)
+        .output()
+        .unwrap();
+    (out, state)
+}
+
 /// An instrument that asks for a calibration mid-run (an i1Pro's expires): the run
 /// stops with Argyll's instructions, no key is pressed at that prompt (it would
 /// calibrate against the screen), and the readings so far are kept.
@@ -320,19 +327,7 @@ fn a_missing_argyll_and_an_argyll_that_talks_nonsense_are_named() {
 fn a_calibration_request_stops_the_run_without_answering_it() {
     let dir = tempfile::tempdir().unwrap();
     let fake = fake_spotread(dir.path(), 3, Then::Calibration);
-    let emulator = emulate(&["--instrument", "k10a", "--time-scale", TIME_SCALE]);
-    let config = dir.path().join("config.toml");
-    std::fs::write(&config, SHORT_PLAN).unwrap();
-    let state = dir.path().join("state");
-    let out = chromacal()
-        .args(["calibrate", "--config"])
-        .arg(&config)
-        .args(["--instrument", "argyll", "--screen", &emulator.screen])
-        .arg("--state-dir")
-        .arg(&state)
-        .env("CHROMACAL_SPOTREAD", &fake)
-        .output()
-        .unwrap();
+    let (out, state) = calibrate_through(dir.path(), &fake);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{stderr}");
     assert!(

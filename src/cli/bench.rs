@@ -627,10 +627,7 @@ fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
             &rows
         )
     );
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(|a, b| a.total_cmp(b));
-        chromacal::fit::stats::percentile(&v, 50.0)
-    };
+    let median = |v: Vec<f64>| chromacal::fit::stats::percentile(&v, 50.0);
     if !ratios.is_empty() {
         println!(
             "  median ratio chromacal ICC / colprof's median run: {:.2}; to colprof's best run: {:.2}",

@@ -273,10 +273,7 @@ pub fn render_table(quick: bool) -> Result<(), String> {
 
     let rounds = if quick { ROUNDS.min(3) } else { ROUNDS };
     let (seconds, ratios) = interleaved_rounds(&mut tools, rounds);
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(|a, b| a.total_cmp(b));
-        chromacal::fit::stats::percentile(&v, 50.0)
-    };
+    let median = |v: Vec<f64>| chromacal::fit::stats::percentile(&v, 50.0);
     let cells: Vec<Vec<String>> = tools
         .iter()
         .enumerate()
