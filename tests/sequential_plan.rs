@@ -23,7 +23,7 @@ fn sequential(monitor: &str, budget: usize, target: f64, seed: u64) -> String {
 
 fn fixed(monitor: &str, budget: usize, seed: u64) -> String {
     format!(
-        "{monitor}\n[instrument.simulated]\nseed = {seed}\n[plan]\nbudget = {budget}\nseed = {seed}\n"
+        "{monitor}\n[instrument.simulated]\nseed = {seed}\n[plan]\nstrategy = \"fixed\"\nbudget = {budget}\nseed = {seed}\n"
     )
 }
 
@@ -89,14 +89,17 @@ async fn a_resumed_sequential_run_continues_the_same_sequence() {
 }
 
 /// On the ISETBio monitors (measured primaries and transfer tables), five seeds each:
-/// the sequential plan's 32 patches give a clearly lower held-out error than a fixed
-/// plan's 32 on the LCD and the CRT, and at most 15 % worse on the OLED, where both sit
-/// near the instrument's repeatability (about 0.1 ΔE00) and a fixed plan's levels
-/// already serve its smooth curve.
+/// the sequential plan's 32 patches give a lower held-out error than a fixed plan's
+/// 32 on the LCD and the CRT, and at most 15 % worse on the OLED, where both sit near
+/// the instrument's repeatability (about 0.1 ΔE00) and a fixed plan's levels already
+/// serve its smooth curve. The plan buys what is least sure per second of instrument
+/// time, not per patch: at a count of patches it gives up a little on the LCD
+/// (0.341 here, 0.236 choosing by spread alone) for 10 % less time, and over six
+/// virtual monitors it is both quicker and better (`bench sequential`).
 #[test]
 fn the_sequential_plan_beats_a_fixed_plan_of_the_same_size() {
     for (stem, at_most) in [
-        ("isetbio_lcd_dell", 0.85),
+        ("isetbio_lcd_dell", 0.9),
         ("isetbio_crt_dell", 0.5),
         ("isetbio_oled_sony", 1.15),
     ] {

@@ -7,7 +7,13 @@
 //! when it is at most `plan.target_de00`. Otherwise every candidate patch (each channel
 //! alone and the grey at 31 levels, 1/32 apart, not measured yet) is scored by the
 //! spread of models fitted without folds of levels (`fit::uncertainty`), and the one
-//! with the largest spread is measured and journaled before the next step.
+//! that buys the most for the instrument's time is measured and journaled before the
+//! next step: the largest squared spread (the variance a reading there removes) per
+//! second the reading is expected to take. An auto-ranging instrument integrates dim
+//! light up to ten times longer, so a dark patch must be worth ten bright ones; the
+//! expected seconds come from the durations of the readings already taken at similar
+//! luminance (a cost-weighted sequential design: each step buys the most variance
+//! removed per unit cost, the rule of thumb of budgeted experimental design).
 //!
 //! The choice depends on nothing but the journal, so a resumed run (`--resume`) goes
 //! on exactly as the run it resumes would have: the same next patch from the same
@@ -128,6 +134,46 @@ pub fn estimated_error(
     Some(cross_validated.max(spread))
 }
 
+/// Each usable reading's luminance (log10 cd/m², in the set's units) and the seconds
+/// the instrument integrated it for, sorted by luminance: what the next patch will
+/// cost is read off these. Readings without a duration (a `.ti3`) are left out.
+fn reading_durations(set: &MeasurementSet) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = set
+        .measurements
+        .iter()
+        .filter_map(|m| {
+            let y = m.reading.luminance()?;
+            let s = m.reading.integration_s;
+            (y > 0.0 && s > 0.0 && s.is_finite()).then(|| (y.log10(), s))
+        })
+        .collect();
+    out.sort_by(|a, b| a.0.total_cmp(&b.0));
+    out
+}
+
+/// Seconds of integration a patch of luminance `y` is expected to need: the median of
+/// the durations of the (up to) three readings nearest to it in log luminance, since
+/// an auto-ranging instrument integrates dim light longer. 1 s when nothing is known
+/// (then every candidate costs the same and the choice is by spread alone).
+fn expected_seconds(durations: &[(f64, f64)], y: f64) -> f64 {
+    if durations.is_empty() {
+        return 1.0;
+    }
+    let at = if y > 0.0 {
+        y.log10()
+    } else {
+        f64::NEG_INFINITY
+    };
+    let mut nearest: Vec<(f64, f64)> = durations
+        .iter()
+        .map(|(l, s)| ((l - at).abs(), *s))
+        .collect();
+    nearest.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut seconds: Vec<f64> = nearest.iter().take(3).map(|(_, s)| *s).collect();
+    seconds.sort_by(f64::total_cmp);
+    seconds[seconds.len() / 2]
+}
+
 /// The candidate drives: each channel alone and the grey at k / GRID, in that order,
 /// as codes of `bit_depth`, without those measured already.
 fn candidates(set: &MeasurementSet, bit_depth: u32) -> Vec<Codes> {
@@ -192,20 +238,23 @@ fn next_step_for(header: &JournalHeader, set: &MeasurementSet, config: &Config) 
         .iter()
         .filter(|m| m.index >= header.plan.patches.len())
         .count();
+    let durations = reading_durations(set);
     let best = candidates(set, bit_depth)
         .into_iter()
         .map(|codes| {
             let spread = prediction_spread(&folds, codes.drive(), &white);
-            (codes, spread)
+            let y = fitted.model.forward_centre(codes.drive()).y;
+            let seconds = expected_seconds(&durations, y) + config.display.settle_s;
+            (codes, spread, spread * spread / seconds.max(1e-3))
         })
         .fold(
             None,
-            |best: Option<(Codes, f64)>, (codes, spread)| match best {
-                Some((_, s)) if s >= spread => best,
-                _ => Some((codes, spread)),
+            |best: Option<(Codes, f64, f64)>, (codes, spread, value)| match best {
+                Some((_, _, v)) if v >= value => best,
+                _ => Some((codes, spread, value)),
             },
         );
-    let Some((codes, spread)) = best else {
+    let Some((codes, spread, _)) = best else {
         return Step::Stop(Stop::NoCandidate { estimate });
     };
     let role = Role::from_drive(codes.drive());
@@ -317,4 +366,31 @@ pub async fn measure_run<D: PatchDisplay, I: Instrument>(
         )),
         ..tally.summary(seed.already_measured)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::expected_seconds;
+
+    #[test]
+    fn a_patch_is_expected_to_cost_what_readings_of_like_luminance_cost() {
+        // (log10 cd/m², seconds), as an auto-ranging instrument gives them.
+        let durations = [
+            (-1.2, 10.0),
+            (-0.6, 10.0),
+            (0.0, 8.0),
+            (0.7, 2.0),
+            (1.3, 1.0),
+            (1.7, 1.0),
+            (2.0, 1.0),
+        ];
+        assert_eq!(expected_seconds(&durations, 0.1), 10.0);
+        assert_eq!(expected_seconds(&durations, 60.0), 1.0);
+        // Between: the median of the three nearest, not the nearest alone.
+        assert_eq!(expected_seconds(&durations, 3.0), 2.0);
+        // Black is dimmer than anything read: the dimmest readings' cost.
+        assert_eq!(expected_seconds(&durations, 0.0), 10.0);
+        // Nothing known: every candidate costs the same.
+        assert_eq!(expected_seconds(&[], 5.0), 1.0);
+    }
 }

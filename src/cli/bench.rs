@@ -89,13 +89,18 @@ fn monitors(data: &Path) -> Vec<Monitor> {
 }
 
 fn config_for(monitor: &Monitor, budget: usize, seed: u64) -> Result<Config, String> {
-    plan_config(monitor, &format!("budget = {budget}"), seed)
+    plan_config(
+        monitor,
+        &format!("strategy = \"fixed\"\nbudget = {budget}"),
+        seed,
+    )
 }
 
-/// The config of a run of `monitor` with `plan` (lines of its `[plan]` section).
+/// The config of a run of `monitor` with `plan` (lines of its `[plan]` section), and
+/// the benches' own held-out set and grid: 24 verification patches, a 5 × 5 grid.
 fn plan_config(monitor: &Monitor, plan: &str, seed: u64) -> Result<Config, String> {
     let text = format!(
-        "[monitor]\n{}\n[instrument.simulated]\nseed = {seed}\n[plan]\n{plan}\nseed = {seed}\n",
+        "[monitor]\n{}\n[instrument.simulated]\nseed = {seed}\n[plan]\n{plan}\nseed = {seed}\nverification = 24\nuniformity_grid = 5\n",
         monitor.section
     );
     parse_config(&text, &monitor.name).map_err(|e| e.to_string())
@@ -108,7 +113,12 @@ fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let plans: Vec<(String, String)> = [16usize, 24, 32, 48]
         .iter()
-        .map(|b| (format!("fixed, {b}"), format!("budget = {b}")))
+        .map(|b| {
+            (
+                format!("fixed, {b}"),
+                format!("strategy = \"fixed\"\nbudget = {b}"),
+            )
+        })
         .chain([32usize, 48].iter().map(|b| {
             (
                 format!("sequential, seed 16, up to {b}"),
@@ -124,7 +134,7 @@ fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
         )))
         .collect();
     println!(
-        "\nfixed against sequential plans: held-out ΔE00 on 24 verification patches (mean over {} seeds), counted patches measured:",
+        "\nfixed against sequential plans: held-out ΔE00 on 24 verification patches (mean over {} seeds), counted patches and instrument seconds (all patches, settling included):",
         seeds.len()
     );
     for monitor in monitors(data) {
@@ -132,12 +142,14 @@ fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
         let mut floor = Vec::new();
         for (name, plan) in &plans {
             let (mut means, mut p95s, mut counts) = (Vec::new(), Vec::new(), Vec::new());
+            let mut seconds = Vec::new();
             for seed in seeds {
                 let config = plan_config(&monitor, plan, *seed)?;
                 let tag = format!("{}-{seed}", monitor.name.replace(' ', "_"));
                 let set = simulate(&config, &dir, &tag)?;
                 floor.extend(white_repeat_differences(&set));
                 counts.push(chromacal::calibrate::sequential::counted(&set) as f64);
+                seconds.push(run_seconds(&set, config.display.settle_s));
                 if let Some(s) = fit_monitor(&set, &config.fit)
                     .ok()
                     .and_then(|f| f.report.held_out)
@@ -150,6 +162,7 @@ fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
             rows.push(vec![
                 name.clone(),
                 format!("{:.1}", mean(&counts)),
+                format!("{:.0}", mean(&seconds)),
                 if means.len() == seeds.len() {
                     format!("{:.3} / {:.3}", mean(&means), mean(&p95s))
                 } else {
@@ -165,11 +178,28 @@ fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
         );
         print!(
             "{}",
-            table(&["plan", "counted patches", "held-out mean / p95"], &rows)
+            table(
+                &[
+                    "plan",
+                    "counted patches",
+                    "instrument s",
+                    "held-out mean / p95"
+                ],
+                &rows
+            )
         );
     }
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
+}
+
+/// Instrument time of a run: every reading's integration (held-out and grid patches
+/// too) and the display's settling before it.
+fn run_seconds(set: &MeasurementSet, settle_s: f64) -> f64 {
+    set.measurements
+        .iter()
+        .map(|m| m.reading.integration_s + settle_s)
+        .sum()
 }
 
 /// Measure a simulated run into a journal under `dir` and return its measurements.
@@ -426,12 +456,7 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
                 let set = simulate(&config, &dir, &tag)?;
                 sets.push(set);
             }
-            let seconds: f64 = sets[0]
-                .measurements
-                .iter()
-                .map(|m| m.reading.integration_s + 0.2)
-                .sum();
-            instrument_time.push(seconds);
+            instrument_time.push(run_seconds(&sets[0], 0.2));
             repeat_differences.extend(sets.iter().flat_map(white_repeat_differences));
             let mut picked = Vec::new();
             for (k, (_, laws)) in choices.iter().enumerate() {
