@@ -72,15 +72,15 @@ pub struct SequentialLimits {
 impl Default for PlanConfig {
     fn default() -> Self {
         PlanConfig {
-            budget: 48,
-            verification: 24,
-            uniformity_grid: 5,
+            budget: 40,
+            verification: 12,
+            uniformity_grid: 3,
             uniformity_per_channel: false,
             bit_depth: 8,
             patch_size: 0.2,
             seed: 7,
-            strategy: Strategy::Fixed,
-            seed_budget: 16,
+            strategy: Strategy::Sequential,
+            seed_budget: 20,
             target_de00: 0.2,
         }
     }
@@ -384,11 +384,21 @@ fn make_fixed_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
         return Err(PlanError::BudgetTooSmall { budget: b, minimum });
     }
     let depth = config.bit_depth;
-    let reference = ((b as f64 / 12.0).round() as usize).max(2);
+    // From 20 patches on, every assumption the fit rests on gets its test (greys for
+    // additivity, a surround pair for spatial independence, three references for
+    // drift), at the cost of a second black below 24: a black reading is the slowest
+    // of all (an auto-ranging instrument integrates it longest), the others are fast.
+    let reference = if (20..24).contains(&b) {
+        3
+    } else {
+        ((b as f64 / 12.0).round() as usize).max(2)
+    };
     let (grey, surround) = if b >= 96 {
         (5, 2)
     } else if b >= 24 {
         (3, 2)
+    } else if b >= 20 {
+        (2, 2)
     } else {
         (0, 0)
     };
@@ -517,9 +527,10 @@ mod tests {
 
     #[test]
     fn budgets_are_spent_exactly() {
-        for budget in [9, 12, 24, 48, 96, 200] {
+        for budget in [9, 12, 20, 23, 24, 48, 96, 200] {
             let config = PlanConfig {
                 budget,
+                strategy: Strategy::Fixed,
                 ..Default::default()
             };
             let plan = make_plan(&config).unwrap();
@@ -535,9 +546,17 @@ mod tests {
             .sum();
             assert_eq!(counted, budget, "budget {budget}: {:?}", plan.budget);
             assert_eq!(plan.budget.counted, budget);
-            assert_eq!(count(&plan, Role::Verification), 24);
-            assert_eq!(count(&plan, Role::Uniformity), 24);
+            assert_eq!(count(&plan, Role::Verification), config.verification);
+            let n = config.uniformity_grid;
+            assert_eq!(count(&plan, Role::Uniformity), n * n - 1);
             assert!(count(&plan, Role::Black) >= 1);
+            if budget >= 20 {
+                // Every assumption gets its test: additivity, surround, drift.
+                assert!(count(&plan, Role::Grey) >= 2, "budget {budget}");
+                assert_eq!(count(&plan, Role::Surround), 2, "budget {budget}");
+                assert!(count(&plan, Role::Reference) >= 2, "budget {budget}");
+                assert!(plan.budget.ramp_levels_per_channel >= 4, "budget {budget}");
+            }
             assert_eq!(
                 count(&plan, Role::Ramp),
                 3 * plan.budget.ramp_levels_per_channel
@@ -549,6 +568,7 @@ mod tests {
         assert!(matches!(
             make_plan(&PlanConfig {
                 budget: 8,
+                strategy: Strategy::Fixed,
                 ..Default::default()
             }),
             Err(PlanError::BudgetTooSmall { .. })
@@ -588,6 +608,7 @@ mod tests {
     fn grid_covers_the_screen_without_the_centre() {
         let plan = make_plan(&PlanConfig {
             uniformity_per_channel: true,
+            uniformity_grid: 5,
             ..Default::default()
         })
         .unwrap();

@@ -19,7 +19,8 @@ use common::{chromacal, emulate};
 const TIME_SCALE: &str = "0.05";
 
 /// A shorter plan for the runs that are interrupted.
-const SHORT_PLAN: &str = "[plan]\nbudget = 24\nverification = 8\nuniformity_grid = 0\n";
+const SHORT_PLAN: &str =
+    "[plan]\nstrategy = \"fixed\"\nbudget = 24\nverification = 8\nuniformity_grid = 0\n";
 
 fn specbos() -> common::Emulator {
     // The specbos is set to its factory rate, which ArgyllCMS's driver expects.

@@ -20,7 +20,7 @@ const SEEDS: [u64; 5] = [1, 2, 3, 4, 5];
 
 fn seeded(monitor: &str, budget: usize, seed: u64) -> String {
     format!(
-        "{monitor}\n[instrument.simulated]\nseed = {seed}\n[plan]\nbudget = {budget}\nseed = {seed}\n"
+        "{monitor}\n[instrument.simulated]\nseed = {seed}\n[plan]\nstrategy = \"fixed\"\nbudget = {budget}\nseed = {seed}\n"
     )
 }
 

@@ -30,7 +30,8 @@ fn calibrate_runs_the_default_simulation_and_publishes_a_profile() {
     let (ok, stdout, stderr) = run(&["calibrate", "--state-dir", path(state.path())]);
     assert!(ok, "{stderr}");
     for expected in [
-        "patches measured: 48 counted",
+        "patches measured: 20 counted",
+        "sequential plan:",
         "simulated instrument time",
         "fit time",
         "transfer laws",
@@ -48,7 +49,20 @@ fn calibrate_runs_the_default_simulation_and_publishes_a_profile() {
     assert_eq!(profile.report.chosen_law(), Some(LawKind::GainOffsetGamma));
     let held = profile.report.held_out.unwrap();
     assert!(held.mean <= 0.5 && held.p95 <= 1.0, "{held:?}");
-    assert_eq!(held.n, 24);
+    assert_eq!(held.n, 12);
+    // The default is a sequential plan with a 3 × 3 grid and its held-out patches
+    // within two minutes of instrument time, every assumption tested.
+    let cost = profile.cost.clone().unwrap();
+    let seconds = cost.instrument_s.unwrap();
+    assert!(seconds <= 120.0, "{seconds} s of instrument time");
+    for assumption in [
+        "additivity             holds",
+        "spatial independence   holds",
+        "temporal stability     holds",
+    ] {
+        assert!(stdout.contains(assumption), "'{assumption}' in:\n{stdout}");
+    }
+    assert!(stdout.contains("spatial map (8 grid positions"), "{stdout}");
     // A second run publishes a second profile; both stay in the store.
     let (ok, _, _) = run(&["calibrate", "--state-dir", path(state.path())]);
     assert!(ok);
@@ -500,7 +514,8 @@ fn config_show_says_what_is_in_effect_and_the_user_config_is_found() {
         built_in.contains("chromacal/config.toml (absent)"),
         "{built_in}"
     );
-    assert!(built_in.contains("budget = 48"), "{built_in}");
+    assert!(built_in.contains("budget = 40"), "{built_in}");
+    assert!(built_in.contains("strategy = \"sequential\""), "{built_in}");
     // What it prints is a config that reads back as itself.
     let printed = dir.path().join("printed.toml");
     std::fs::write(&printed, &built_in).unwrap();

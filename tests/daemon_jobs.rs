@@ -75,23 +75,40 @@ async fn second_run_readings(
     tokio::time::sleep(Duration::from_millis(100)).await;
     let id = start_job(&api, "calibrate").await;
     // Every stream hears every reading of the run and its end.
+    let mut heard = Vec::new();
     for events in &mut streams {
         let (seen, _) = events_of_job(events, &id, Duration::from_secs(60)).await;
         let progress = seen
             .iter()
             .filter(|e| matches!(e, Event::Progress { job } if job.id == id))
             .count();
-        if progress != 96 {
-            failures.fetch_add(1, Ordering::SeqCst);
-        }
+        heard.push(progress);
     }
     wait_idle(&api, Duration::from_secs(60)).await;
     running.store(false, Ordering::SeqCst);
     for t in tasks {
         t.await.unwrap();
     }
-    let runs = daemon_runs(&daemon.state);
-    let (_, entries, _) = Journal::read(runs.last().unwrap()).unwrap();
+    // The second run: the later on the daemon's clock (two runs in one second may
+    // sort either way by name).
+    let (_, entries, _) = daemon_runs(&daemon.state)
+        .iter()
+        .map(|run| Journal::read(run).unwrap())
+        .max_by(|a, b| {
+            let start = |e: &[chromacal::measurement::Measurement]| {
+                e.iter()
+                    .filter_map(|m| m.time_s)
+                    .fold(f64::INFINITY, f64::min)
+            };
+            start(&a.1).total_cmp(&start(&b.1))
+        })
+        .unwrap();
+    for progress in heard {
+        if progress != entries.len() {
+            eprintln!("a stream heard {progress} readings of {}", entries.len());
+            failures.fetch_add(1, Ordering::SeqCst);
+        }
+    }
     (
         entries,
         failures.load(Ordering::SeqCst),
@@ -106,7 +123,8 @@ async fn a_run_under_a_load_of_clients_reads_what_it_reads_alone() {
     eprintln!("{answered} requests answered during the run, {failures} failed");
     assert_eq!(failures, 0);
     assert!(answered > 200, "the load was light: {answered}");
-    assert_eq!(alone.len(), 96);
+    // The default plan: a sequential one, its seed of 40 patches at least.
+    assert!(alone.len() >= 40, "{}", alone.len());
     assert_eq!(loaded, alone, "the load changed the readings");
 }
 
@@ -240,7 +258,10 @@ async fn warm_up_waits_for_the_screen_to_settle_and_is_bounded() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_uniformity_job_gives_the_profile_a_new_spatial_map() {
     let dir = tempfile::tempdir().unwrap();
-    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.001\n");
+    let daemon = start_daemon(
+        dir.path(),
+        "[daemon]\nsimulated_time_scale = 0.001\n[plan]\nuniformity_grid = 5\n",
+    );
     let api = daemon.endpoint();
     start_job(&api, "calibrate").await;
     wait_idle(&api, Duration::from_secs(60)).await;

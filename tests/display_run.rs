@@ -128,7 +128,8 @@ fn each_new_patch_position_is_prompted_and_a_closed_terminal_keeps_the_readings(
     assert!(out.status.success(), "{stderr}");
     let (_, after, _) = Journal::read(&journal).unwrap();
     assert_eq!(&after[..before.len()], &before[..]);
-    assert_eq!(after.len(), header.plan.patches.len());
+    // The default plan is a sequential one: its seed plan, then what it adds.
+    assert!(after.len() >= header.plan.patches.len());
     let rest = &after[before.len()..];
     let moves = 1 + rest
         .windows(2)
@@ -140,7 +141,7 @@ fn each_new_patch_position_is_prompted_and_a_closed_terminal_keeps_the_readings(
         "{stderr}"
     );
     assert!(
-        moves >= 25,
-        "the 5 × 5 grid has 25 positions, prompted {moves}"
+        moves >= 9,
+        "the default 3 × 3 grid has 9 positions, prompted {moves}"
     );
 }

@@ -21,9 +21,11 @@ use common::{chromacal, in_process_profile, isetbio_monitor};
 const D50: [f64; 3] = [0.9642, 1.0, 0.8249];
 
 /// Calibrate the monitor a config describes; returns the profile and its path.
+/// Calibrate with `config`, on the fixed plan these tests were written against in
+/// what it leaves out (`common::with_fixed_plan`).
 fn calibrate(dir: &Path, name: &str, config: &str) -> (Profile, PathBuf) {
     let config_path = dir.join(format!("{name}.toml"));
-    std::fs::write(&config_path, config).unwrap();
+    std::fs::write(&config_path, common::with_fixed_plan(config)).unwrap();
     let state = dir.join(name);
     let profile = in_process_profile(&config_path, &state);
     (profile, state.join("current.toml"))
@@ -604,7 +606,7 @@ fn calibration_curves_bring_the_virtual_monitor_to_its_target() {
     // table law, which follows the measured ramps, is asked for.
     for (stem, extra, budget, [white, tone, luminance]) in cases {
         let config = format!(
-            "{}[plan]\nbudget = {budget}\n",
+            "{}[plan]\nstrategy = \"fixed\"\nbudget = {budget}\n",
             isetbio_monitor(stem, extra)
         );
         let (profile, path) = calibrate(dir.path(), stem, &config);
@@ -638,7 +640,7 @@ fn measured_refinement_corrects_what_the_fitted_law_gets_wrong() {
         "black_luminance = 0.0005\nflare_luminance = 0.05\nbit_depth = 10",
     );
     let config = format!(
-        "{monitor}[plan]\nbudget = 96\n[target]\nwhite = \"0.3,0.32\"\ntone = \"lstar\"\nluminance = 120\nbit_depth = 10\n"
+        "{monitor}[plan]\nstrategy = \"fixed\"\nbudget = 96\n[target]\nwhite = \"0.3,0.32\"\ntone = \"lstar\"\nluminance = 120\nbit_depth = 10\n"
     );
     let (profile, path) = calibrate(dir.path(), "oled", &config);
     let stored = profile

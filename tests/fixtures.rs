@@ -15,6 +15,23 @@ use common::{LCD_CONFIG, fixture};
 /// Readings kept in the interrupted fixture (of 96).
 const INTERRUPTED_AFTER: usize = 40;
 
+/// The built-in config with the plan the fixtures were recorded with, the default
+/// before it became a sequential plan: fixed, 48 counted patches, 24 held out, a 5 × 5
+/// grid.
+fn recorded_default() -> String {
+    let mut text = DEFAULT_CONFIG.to_string();
+    for (now, then) in [
+        ("strategy = \"sequential\"", "strategy = \"fixed\""),
+        ("budget = 40 ", "budget = 48 "),
+        ("verification = 12 ", "verification = 24 "),
+        ("uniformity_grid = 3 ", "uniformity_grid = 5 "),
+    ] {
+        assert!(text.contains(now), "the built-in config has no '{now}'");
+        text = text.replacen(now, then, 1);
+    }
+    text
+}
+
 fn generate(dir: &Path) {
     let journals = dir.join("journals");
     let ti3 = dir.join("ti3");
@@ -22,10 +39,11 @@ fn generate(dir: &Path) {
     std::fs::create_dir_all(&ti3).unwrap();
     let here = Path::new(".");
 
-    let crt = parse_config(DEFAULT_CONFIG, "default").unwrap();
+    let default_text = recorded_default();
+    let crt = parse_config(&default_text, "default").unwrap();
     let path = journals.join("crt-default.jsonl");
     let _ = std::fs::remove_file(&path);
-    let journal = block_on(measure_simulated(&crt, DEFAULT_CONFIG, here, &path))
+    let journal = block_on(measure_simulated(&crt, &default_text, here, &path))
         .unwrap()
         .unwrap();
     std::fs::write(
@@ -34,10 +52,11 @@ fn generate(dir: &Path) {
     )
     .unwrap();
 
-    let lcd = parse_config(LCD_CONFIG, "lcd").unwrap();
+    let lcd_text = LCD_CONFIG.to_string();
+    let lcd = parse_config(&lcd_text, "lcd").unwrap();
     let path = journals.join("lcd-interrupted.jsonl");
     let _ = std::fs::remove_file(&path);
-    block_on(measure_simulated(&lcd, LCD_CONFIG, here, &path))
+    block_on(measure_simulated(&lcd, &lcd_text, here, &path))
         .unwrap()
         .unwrap();
     // Keep the header and the first readings, and end in a line cut short, as a
@@ -49,7 +68,7 @@ fn generate(dir: &Path) {
     cut.push_str(&lines[INTERRUPTED_AFTER + 1][..40]);
     std::fs::write(&path, cut).unwrap();
 
-    let lcd2_text = LCD_CONFIG.replace("seed = 11", "seed = 12");
+    let lcd2_text = lcd_text.replace("seed = 11", "seed = 12");
     let lcd2 = parse_config(&lcd2_text, "lcd2").unwrap();
     let path = dir.join("lcd-seed12.jsonl");
     let _ = std::fs::remove_file(&path);

@@ -46,7 +46,10 @@ fn config_values_out_of_range_are_refused_before_anything_is_measured() {
     let dir = tempfile::tempdir().unwrap();
     let state = dir.path().join("state");
     let cases = [
-        ("[plan]\nbudget = 9223372036854775807\n", "plan.budget"),
+        (
+            "[plan]\nstrategy = \"fixed\"\nbudget = 9223372036854775807\n",
+            "plan.budget",
+        ),
         (
             "[plan]\nverification = 9223372036854775807\n",
             "plan.verification",

@@ -323,7 +323,7 @@ fn configs() {
         "config",
         &[
             include_str!("../config/default.toml").to_string(),
-            "[plan]\nbudget = 48\nuniformity_grid = 5\n[instrument.simulated]\nintegration_s = 1.0\n"
+            "[plan]\nstrategy = \"fixed\"\nbudget = 48\nuniformity_grid = 5\n[instrument.simulated]\nintegration_s = 1.0\n"
                 .to_string(),
         ],
         parse_config,

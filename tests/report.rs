@@ -83,7 +83,8 @@ fn red_ramp_readings(path: &Path) -> u64 {
 fn a_simulated_calibration_writes_a_report_with_every_figure() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("config.toml");
-    std::fs::write(&config, TARGET).unwrap();
+    // The fixed plan of 96 patches: many red readings and a 5 × 5 grid to draw.
+    std::fs::write(&config, format!("{TARGET}{}", common::FIXED_PLAN)).unwrap();
     let page = dir.path().join("report.html");
     let out = succeed(
         chromacal()
@@ -268,7 +269,7 @@ async fn the_daemon_serves_the_report_with_its_history() {
     let dir = tempfile::tempdir().unwrap();
     let daemon = start_daemon(
         dir.path(),
-        "[daemon]\nsimulated_time_scale = 0.001\n[plan]\nbudget = 48\nuniformity_grid = 3\n",
+        "[daemon]\nsimulated_time_scale = 0.001\n[plan]\nstrategy = \"fixed\"\nbudget = 48\nuniformity_grid = 3\n",
     );
     let api = daemon.endpoint();
     let none = get(&api, "/report").await;

@@ -41,9 +41,9 @@ pub fn fixture(relative: &str) -> PathBuf {
         .join(relative)
 }
 
-/// The simulated LCD with its own seeds, as the fixtures use it.
-pub const LCD_CONFIG: &str =
-    "[monitor]\npreset = \"lcd\"\n[instrument.simulated]\nseed = 11\n[plan]\nseed = 11\n";
+/// The simulated LCD with its own seeds and the fixed plan of 96 patches, as the
+/// fixtures were recorded with it.
+pub const LCD_CONFIG: &str = "[monitor]\npreset = \"lcd\"\n[instrument.simulated]\nseed = 11\n[plan]\nseed = 11\nstrategy = \"fixed\"\nbudget = 48\nverification = 24\nuniformity_grid = 5\n";
 
 /// Path of the built `chromacal` binary.
 pub fn chromacal() -> std::process::Command {
@@ -64,8 +64,45 @@ pub fn succeed(command: &mut std::process::Command) -> std::process::Output {
     out
 }
 
+/// The plan the fit's tests were written against, the default until the default
+/// became a sequential plan: fixed, 48 counted patches, 24 held out, a 5 × 5 grid.
+/// Under `[plan]`.
+pub const FIXED_PLAN_KEYS: [(&str, &str); 4] = [
+    ("strategy", "\"fixed\""),
+    ("budget", "48"),
+    ("verification", "24"),
+    ("uniformity_grid", "5"),
+];
+
+/// [`FIXED_PLAN_KEYS`] as a `[plan]` section, for a config that has none.
+pub const FIXED_PLAN: &str =
+    "[plan]\nstrategy = \"fixed\"\nbudget = 48\nverification = 24\nuniformity_grid = 5\n";
+
+/// `config_text` with each key of [`FIXED_PLAN_KEYS`] it does not give itself.
+pub fn with_fixed_plan(config_text: &str) -> String {
+    let missing: String = FIXED_PLAN_KEYS
+        .iter()
+        .filter(|(key, _)| {
+            !config_text.lines().any(|l| {
+                l.trim_start().starts_with(&format!("{key} "))
+                    || l.trim_start().starts_with(&format!("{key}="))
+            })
+        })
+        .map(|(key, value)| format!("{key} = {value}\n"))
+        .collect();
+    match config_text.find("[plan]\n") {
+        Some(at) => {
+            let at = at + "[plan]\n".len();
+            format!("{}{missing}{}", &config_text[..at], &config_text[at..])
+        }
+        None => format!("{config_text}\n[plan]\n{missing}"),
+    }
+}
+
 /// Simulate the run a config describes (relative paths from `base_dir`), and return
-/// its measurements with the virtual monitor's true model.
+/// its measurements with the virtual monitor's true model. The plan is the fixed one
+/// the fit's tests were written against ([`FIXED_PLAN_KEYS`]) in what the config
+/// leaves out.
 pub fn simulate(
     config_text: &str,
     base_dir: &std::path::Path,
@@ -73,6 +110,7 @@ pub fn simulate(
     chromacal::measurement::MeasurementSet,
     chromacal::model::MonitorModel,
 ) {
+    let config_text = &with_fixed_plan(config_text);
     let config = chromacal::config::parse_config(config_text, "test config").unwrap();
     let dir = tempfile::tempdir().unwrap();
     let journal =
@@ -244,14 +282,20 @@ pub fn daemon_runs(state: &std::path::Path) -> Vec<PathBuf> {
     runs
 }
 
-/// Every patch the journal's plan has is in it exactly once.
+/// Every patch the journal's plan has is in it exactly once; for a sequential plan,
+/// so is each patch it added, numbered on from the seed plan without a gap.
 pub fn assert_each_planned_patch_once(
     header: &chromacal::journal::JournalHeader,
     entries: &[chromacal::measurement::Measurement],
 ) {
     let mut seen: Vec<usize> = entries.iter().map(|m| m.index).collect();
     seen.sort();
-    let planned: Vec<usize> = header.plan.patches.iter().map(|p| p.index).collect();
+    let mut planned: Vec<usize> = header.plan.patches.iter().map(|p| p.index).collect();
+    if let Some(limits) = &header.plan.sequential {
+        let added = seen.len().saturating_sub(planned.len());
+        assert!(added <= limits.budget, "{added} patches added");
+        planned.extend(planned.len()..planned.len() + added);
+    }
     assert_eq!(seen, planned, "a patch was lost or measured twice");
 }
 
