@@ -9,14 +9,24 @@
 //! | `<device>/state` | yes | the device's job, current profile, last verification and last job |
 //! | `<device>/event/<name>` | no | each event (`job_started`, `progress`, `job_finished`, `published`, `verification`, `rolled_back`, `device_lost`, …) as `GET /events` gives it, with `device`, `host` and `at` |
 //!
-//! A broker that is down or slow never holds a job up: events go into the client's
-//! bounded queue (`mqtt.queue`), and when it is full they are dropped, counted
-//! (`chromacal_mqtt_events_dropped_total`) and warned of (at most every 10 s). The
-//! retained status and states are published again at every connection, so a broker
-//! that restarted without its store learns them again.
+//! A broker that is down or slow never holds a job up, and loses no outcome:
+//! - outcome events (everything but `progress` and `warmup`) go into the client's
+//!   bounded queue (`mqtt.queue`), and past it into a backlog of their own (up to
+//!   [`MAX_BACKLOG`]), sent in order once the broker is back;
+//! - progress is coalesced while the broker is away or the queue is full: only each
+//!   device's newest is kept, sent on reconnection, and forgotten when the device's
+//!   job ends (what it said is stale by then). What is coalesced away is counted
+//!   (`chromacal_mqtt_events_dropped_total`) and warned of (at most every 10 s).
+//!
+//! The retained status and states are published again at every connection, so a
+//! broker that restarted without its store learns them again. A clean stop publishes
+//! the `"stopped"` status, disconnects, and reads until the broker closes the
+//! connection: closing with the broker's acknowledgements unread would reset the
+//! connection, and a broker that sees a reset before the DISCONNECT sends the will.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -32,6 +42,83 @@ use crate::profile::store::VerificationRecord;
 
 /// The largest packet sent or taken, bytes.
 const MAX_PACKET: usize = 1 << 20;
+
+/// Most outcome events kept beyond the client's queue while the broker is away; past
+/// it the oldest are dropped, counted. A day of a busy fleet's outcomes fits.
+pub const MAX_BACKLOG: usize = 10_000;
+
+/// A message for the broker.
+#[derive(Debug, Clone)]
+struct Message {
+    topic: String,
+    qos: QoS,
+    retain: bool,
+    payload: String,
+}
+
+/// What waits for the broker: outcome events in order, and each device's newest
+/// progress (by its topic).
+#[derive(Default)]
+struct Waiting {
+    outcomes: VecDeque<Message>,
+    progress: BTreeMap<String, Message>,
+    /// A connection's catch-up is sending `outcomes`: new ones only join the end.
+    catching_up: bool,
+}
+
+/// At each connection: the newest of each retained topic, then the outcome events
+/// that waited, in order, then each device's newest progress, each waiting for room
+/// in the client's queue (which the event loop empties) rather than dropped.
+async fn catch_up(
+    client: AsyncClient,
+    retained: Arc<Mutex<BTreeMap<String, String>>>,
+    waiting: Arc<Mutex<Waiting>>,
+) {
+    let topics = retained.lock().map(|r| r.clone()).unwrap_or_default();
+    for (topic, payload) in topics {
+        if client
+            .publish(topic, QoS::AtLeastOnce, true, payload)
+            .await
+            .is_err()
+        {
+            return;
+        }
+    }
+    loop {
+        let next = {
+            let Ok(mut w) = waiting.lock() else {
+                return;
+            };
+            match w.outcomes.pop_front() {
+                Some(m) => {
+                    w.catching_up = true;
+                    m
+                }
+                None => {
+                    w.catching_up = false;
+                    break;
+                }
+            }
+        };
+        if client
+            .publish(next.topic, next.qos, next.retain, next.payload)
+            .await
+            .is_err()
+        {
+            if let Ok(mut w) = waiting.lock() {
+                w.catching_up = false;
+            }
+            return;
+        }
+    }
+    let progress = match waiting.lock() {
+        Ok(mut w) => std::mem::take(&mut w.progress),
+        Err(_) => return,
+    };
+    for m in progress.into_values() {
+        let _ = client.try_publish(m.topic, m.qos, m.retain, m.payload);
+    }
+}
 
 /// Why MQTT could not be set up.
 #[derive(Debug, thiserror::Error)]
@@ -106,6 +193,9 @@ pub struct Mqtt {
     /// Each device's state, as its `state` topic gives it.
     states: Mutex<BTreeMap<String, Value>>,
     dropped: Mutex<LogThrottle>,
+    /// Whether the client is connected to the broker (its event loop says).
+    connected: Arc<AtomicBool>,
+    waiting: Arc<Mutex<Waiting>>,
     /// The client's event loop, which ends once it has said goodbye.
     task: Mutex<Option<tokio::task::JoinHandle<()>>>,
 }
@@ -156,37 +246,38 @@ impl Mqtt {
         })
         .to_string();
         let retained = Arc::new(Mutex::new(BTreeMap::from([(status_topic, online)])));
+        let connected = Arc::new(AtomicBool::new(false));
+        let waiting = Arc::new(Mutex::new(Waiting::default()));
         let task = {
             let client = client.clone();
             let retained = retained.clone();
+            let connected = connected.clone();
+            let waiting = waiting.clone();
             let broker = config.broker.clone();
             tokio::spawn(async move {
                 let mut failures = LogThrottle::default();
+                let mut leaving = false;
                 loop {
                     match eventloop.poll().await {
                         Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
                             tracing::info!(%broker, "MQTT connected");
-                            // The newest of each retained topic, waiting for room in
-                            // the queue (which this loop empties) rather than dropped.
-                            let topics = retained.lock().map(|r| r.clone()).unwrap_or_default();
+                            connected.store(true, Ordering::SeqCst);
                             let client = client.clone();
-                            tokio::spawn(async move {
-                                for (topic, payload) in topics {
-                                    if client
-                                        .publish(topic, QoS::AtLeastOnce, true, payload)
-                                        .await
-                                        .is_err()
-                                    {
-                                        return;
-                                    }
-                                }
-                            });
+                            let retained = retained.clone();
+                            let waiting = waiting.clone();
+                            tokio::spawn(catch_up(client, retained, waiting));
                         }
-                        Ok(rumqttc::Event::Outgoing(rumqttc::Outgoing::Disconnect)) => return,
+                        // Said goodbye: read on until the broker closes the connection,
+                        // so that its acknowledgements are not left unread.
+                        Ok(rumqttc::Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
+                            leaving = true;
+                        }
                         Ok(_) => {}
+                        Err(_) if leaving => return,
                         Err(e) => {
+                            connected.store(false, Ordering::SeqCst);
                             if let Some(n) = failures.note() {
-                                tracing::warn!(%broker, error = %e, failures = n, "MQTT broker unreachable; trying again every second (events queue, and past mqtt.queue are dropped)");
+                                tracing::warn!(%broker, error = %e, failures = n, "MQTT broker unreachable; trying again every second (outcome events wait, progress is coalesced)");
                             }
                             tokio::time::sleep(Duration::from_secs(1)).await;
                         }
@@ -203,25 +294,94 @@ impl Mqtt {
             retained,
             states: Mutex::default(),
             dropped: Mutex::default(),
+            connected,
+            waiting,
             task: Mutex::new(Some(task)),
         }))
     }
 
-    /// Hand a message to the client's queue; a full queue drops it, counted.
+    /// Hand a retained message or an outcome event to the client's queue, behind any
+    /// that wait already; what the queue has no room for waits (see the module's doc).
     fn send(&self, topic: String, qos: QoS, retain: bool, payload: String) {
         if retain && let Ok(mut r) = self.retained.lock() {
             r.insert(topic.clone(), payload.clone());
         }
-        let sent = self.client.try_publish(topic, qos, retain, payload).is_ok();
-        self.metrics.mqtt(sent);
-        if !sent
-            && let Ok(mut throttle) = self.dropped.lock()
+        let Ok(mut waiting) = self.waiting.lock() else {
+            return;
+        };
+        if retain {
+            // Sent again, newest, at every connection: a full queue loses nothing.
+            if waiting.outcomes.is_empty()
+                && self.client.try_publish(topic, qos, retain, payload).is_ok()
+            {
+                self.metrics.mqtt(true);
+            }
+            return;
+        }
+        waiting.outcomes.push_back(Message {
+            topic,
+            qos,
+            retain,
+            payload,
+        });
+        if waiting.outcomes.len() > MAX_BACKLOG {
+            waiting.outcomes.pop_front();
+            self.note_dropped();
+        }
+        while !waiting.catching_up
+            && let Some(m) = waiting.outcomes.front()
+        {
+            let m = m.clone();
+            if self
+                .client
+                .try_publish(m.topic, m.qos, m.retain, m.payload)
+                .is_err()
+            {
+                break;
+            }
+            waiting.outcomes.pop_front();
+            self.metrics.mqtt(true);
+        }
+    }
+
+    /// Send a progress event now if the broker is there and the queue has room, else
+    /// keep it as its device's newest (the one it replaces is dropped, counted).
+    fn send_progress(&self, topic: String, payload: String) {
+        let Ok(mut waiting) = self.waiting.lock() else {
+            return;
+        };
+        if self.connected.load(Ordering::SeqCst)
+            && waiting.outcomes.is_empty()
+            && !waiting.catching_up
+            && self
+                .client
+                .try_publish(topic.clone(), QoS::AtMostOnce, false, payload.clone())
+                .is_ok()
+        {
+            self.metrics.mqtt(true);
+            return;
+        }
+        let message = Message {
+            topic: topic.clone(),
+            qos: QoS::AtMostOnce,
+            retain: false,
+            payload,
+        };
+        if waiting.progress.insert(topic, message).is_some() {
+            self.note_dropped();
+        }
+    }
+
+    /// Count a message that will never be sent, and warn (at most every 10 s).
+    fn note_dropped(&self) {
+        self.metrics.mqtt(false);
+        if let Ok(mut throttle) = self.dropped.lock()
             && let Some(n) = throttle.note()
         {
             tracing::warn!(
                 dropped = n,
                 total = self.metrics.mqtt_dropped(),
-                "MQTT queue full (is the broker down?): events dropped"
+                "MQTT broker away or slow: progress coalesced, older progress dropped"
             );
         }
     }
@@ -268,21 +428,31 @@ impl Mqtt {
             map.insert("host".into(), self.host.clone().into());
             map.insert("at".into(), now.clone().into());
         }
-        let qos = match event {
-            Event::Progress { .. } | Event::Warmup { .. } => QoS::AtMostOnce,
-            _ => QoS::AtLeastOnce,
-        };
-        self.send(
-            format!(
-                "{}/{}/event/{}",
-                self.root,
-                topic_level(device),
-                event.name()
-            ),
-            qos,
-            false,
-            payload.to_string(),
+        let topic = format!(
+            "{}/{}/event/{}",
+            self.root,
+            topic_level(device),
+            event.name()
         );
+        match event {
+            Event::Progress { .. } | Event::Warmup { .. } => {
+                self.send_progress(topic, payload.to_string())
+            }
+            _ => {
+                if matches!(event, Event::JobFinished { .. })
+                    && let Ok(mut waiting) = self.waiting.lock()
+                {
+                    // The job is over: what its progress said is stale.
+                    let mine = format!("{}/{}/event/", self.root, topic_level(device));
+                    let before = waiting.progress.len();
+                    waiting.progress.retain(|t, _| !t.starts_with(&mine));
+                    for _ in waiting.progress.len()..before {
+                        self.note_dropped();
+                    }
+                }
+                self.send(topic, QoS::AtLeastOnce, false, payload.to_string())
+            }
+        }
         // Changed and sent under one lock, so that two events of one device cannot
         // leave the older state retained.
         let Ok(mut states) = self.states.lock() else {
@@ -299,19 +469,31 @@ impl Mqtt {
     /// Say the daemon stopped (retained), leave the broker, and wait up to `timeout`
     /// for that to go out.
     pub async fn stop(&self, timeout: Duration) {
-        self.send(
-            format!("{}/status", self.root),
-            QoS::AtLeastOnce,
-            true,
-            json!({"online": false, "reason": "stopped"}).to_string(),
-        );
-        let _ = self.client.try_disconnect();
-        let task = self.task.lock().ok().and_then(|mut t| t.take());
-        if let Some(task) = task {
-            let abort = task.abort_handle();
-            if tokio::time::timeout(timeout, task).await.is_err() {
-                abort.abort();
-            }
+        let topic = format!("{}/status", self.root);
+        let stopped = json!({"online": false, "reason": "stopped"}).to_string();
+        if let Ok(mut r) = self.retained.lock() {
+            r.insert(topic.clone(), stopped.clone());
+        }
+        let Some(task) = self.task.lock().ok().and_then(|mut t| t.take()) else {
+            return;
+        };
+        let abort = task.abort_handle();
+        let goodbye = async {
+            // Waiting for room in the queue, behind what is queued: the status and
+            // the DISCONNECT go out last, in that order; then the event loop reads
+            // until the broker closes the connection.
+            let _ = self
+                .client
+                .publish(topic, QoS::AtLeastOnce, true, stopped)
+                .await;
+            let _ = self.client.disconnect().await;
+            let _ = task.await;
+        };
+        if tokio::time::timeout(timeout, goodbye).await.is_err() {
+            tracing::warn!(
+                "MQTT: the broker did not take the goodbye within {timeout:?}; it gives out the last will"
+            );
+            abort.abort();
         }
     }
 }
