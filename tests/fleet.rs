@@ -447,7 +447,15 @@ screen = "{}"
             "{line} not in\n{metrics}"
         );
     }
-    assert!(!metrics.contains("chromacal_instrument_faults_total{device=\"good\""));
+    // The device that worked has its fault series, at 0.
+    for kind in ["open", "warmup", "instrument", "display"] {
+        let line =
+            format!("chromacal_instrument_faults_total{{device=\"good\",kind=\"{kind}\"}} 0");
+        assert!(
+            metrics.lines().any(|l| l == line),
+            "{line} not in\n{metrics}"
+        );
+    }
 }
 
 #[test]

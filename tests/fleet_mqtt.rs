@@ -414,8 +414,8 @@ async fn with_the_broker_down_a_calibration_completes_and_the_dropped_events_are
             .and_then(|v| v.parse().ok())
             .unwrap_or_else(|| panic!("no {name} in {metrics}"))
     };
-    let dropped = count("chromacal_mqtt_events_dropped_total");
-    let queued = count("chromacal_mqtt_events_published_total");
+    let dropped = count("chromacal_mqtt_messages_dropped_total");
+    let queued = count("chromacal_mqtt_messages_queued_total");
     // Outcome events wait for the broker (up to the queue's 8 in the client, the rest
     // in the backlog); the job's progress was coalesced and, the job over, dropped.
     let progress = seen

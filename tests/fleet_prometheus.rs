@@ -32,7 +32,7 @@ fn the_shipped_scrape_config_and_alert_rules_pass_promtool() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/prometheus");
     let out = promtool(&["check", "config", "prometheus.yml"], &dir);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("4 rules found"), "{text}");
+    assert!(text.contains("6 rules found"), "{text}");
     // The rule tests: the drift alert fires on a drifting device only after 30
     // minutes, and not on its steady neighbour; the others likewise.
     let out = promtool(&["test", "rules", "alerts_test.yml"], &dir);
@@ -206,7 +206,10 @@ async fn prometheus_scrapes_two_daemons_with_three_devices() {
         r#"sum by (instance) (chromacal_readings_total{kind="ok"})"#,
     );
     assert_eq!(readings.len(), 2, "{readings:?}");
-    let since = query(prometheus_port, "chromacal_seconds_since_calibration < 600");
+    let since = query(
+        prometheus_port,
+        "time() - chromacal_last_calibration_timestamp_seconds < 600",
+    );
     assert_eq!(since.len(), 3, "{since:?}");
     // Nothing was verified yet, so nothing is said of it.
     assert!(query(prometheus_port, "chromacal_verification_delta_e00").is_empty());
@@ -222,6 +225,34 @@ async fn prometheus_scrapes_two_daemons_with_three_devices() {
         metrics
             .contains("chromacal_jobs_total{device=\"left\",kind=\"calibrate\",outcome=\"ok\"} 1"),
         "{metrics}"
+    );
+    // Asked without OpenMetrics, the classic format, which promtool lints: clean
+    // (units and `_total` in the names, an `_info` for the build).
+    assert!(
+        metrics.contains("chromacal_build_info{version="),
+        "{metrics}"
+    );
+    let mut lint = Command::new(installed("promtool"))
+        .args(["check", "metrics"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    {
+        use std::io::Write;
+        lint.stdin
+            .take()
+            .unwrap()
+            .write_all(metrics.as_bytes())
+            .unwrap();
+    }
+    let lint = lint.wait_with_output().unwrap();
+    assert!(
+        lint.status.success() && lint.stdout.is_empty() && lint.stderr.is_empty(),
+        "promtool check metrics: {}{}",
+        String::from_utf8_lossy(&lint.stdout),
+        String::from_utf8_lossy(&lint.stderr)
     );
     let refused = ureq::get(&format!("http://127.0.0.1:{port_a}/devices"))
         .config()

@@ -211,8 +211,8 @@ fn run_fleet(devices: usize, dir: &Path, mqtt: Option<u16>) -> Result<Run, Strin
             .text();
         let mqtt = mqtt.and_then(|_| {
             Some((
-                metric(&metrics, "chromacal_mqtt_events_published_total")?,
-                metric(&metrics, "chromacal_mqtt_events_dropped_total")?,
+                metric(&metrics, "chromacal_mqtt_messages_queued_total")?,
+                metric(&metrics, "chromacal_mqtt_messages_dropped_total")?,
             ))
         });
         Ok(Run {

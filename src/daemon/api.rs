@@ -464,10 +464,23 @@ async fn devices(State(state): State<Shared>) -> Response {
     axum::Json(DevicesReply { devices }).into_response()
 }
 
-/// `GET /metrics`.
-async fn metrics(State(state): State<Shared>) -> Response {
+/// `GET /metrics`: OpenMetrics to a client that asks for it (Prometheus does), the
+/// classic text format to any other (`curl`, `promtool check metrics`).
+async fn metrics(State(state): State<Shared>, headers: HeaderMap) -> Response {
+    let open_metrics = headers
+        .get_all(header::ACCEPT)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .any(|v| v.contains("application/openmetrics-text"));
     match state.daemon.bus.metrics.render() {
-        Ok(text) => ([(header::CONTENT_TYPE, super::metrics::CONTENT_TYPE)], text).into_response(),
+        Ok(text) if open_metrics => {
+            ([(header::CONTENT_TYPE, super::metrics::CONTENT_TYPE)], text).into_response()
+        }
+        Ok(text) => (
+            [(header::CONTENT_TYPE, super::metrics::CLASSIC_CONTENT_TYPE)],
+            super::metrics::to_classic_text(&text),
+        )
+            .into_response(),
         Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
 }

@@ -25,6 +25,48 @@ use crate::instrument::ReadingStatus;
 /// The content type of the answer (OpenMetrics text, which Prometheus reads).
 pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
 
+/// The content type of the classic text format (Prometheus exposition format 0.0.4).
+pub const CLASSIC_CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
+
+/// OpenMetrics text as the classic Prometheus text format reads it: a counter's
+/// family is named with its `_total`, an info metric is a gauge named with its
+/// `_info`, and OpenMetrics' own lines (`# UNIT`, `# EOF`) go. The samples are the
+/// same lines.
+pub fn to_classic_text(open_metrics: &str) -> String {
+    let mut out = String::with_capacity(open_metrics.len());
+    let mut help: Option<&str> = None;
+    for line in open_metrics.lines() {
+        if line == "# EOF" || line.starts_with("# UNIT ") {
+            continue;
+        }
+        if line.starts_with("# HELP ") {
+            help = Some(line);
+            continue;
+        }
+        if let Some(rest) = line.strip_prefix("# TYPE ") {
+            let (name, kind) = rest.split_once(' ').unwrap_or((rest, "untyped"));
+            let (name, kind) = match kind {
+                "counter" => (format!("{name}_total"), "counter"),
+                "info" => (format!("{name}_info"), "gauge"),
+                "gauge" | "histogram" | "summary" => (name.to_string(), kind),
+                _ => (name.to_string(), "untyped"),
+            };
+            if let Some(h) = help.take() {
+                let text = h
+                    .strip_prefix("# HELP ")
+                    .and_then(|r| r.split_once(' '))
+                    .map_or("", |(_, text)| text);
+                out.push_str(&format!("# HELP {name} {text}\n"));
+            }
+            out.push_str(&format!("# TYPE {name} {kind}\n"));
+            continue;
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
 /// White readings kept per device for the drift.
 const DRIFT_POINTS: usize = 64;
 /// Only whites within this many seconds (of the device's clock) of the newest count.
@@ -64,7 +106,20 @@ struct EventLabels {
     event: String,
 }
 
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct BuildLabels {
+    version: String,
+}
+
 type FloatGauge = Gauge<f64, AtomicU64>;
+
+/// Job kinds and outcomes, reading statuses and device faults, as the counters label
+/// them: each series exists at 0 from the start, so that `increase()` counts its
+/// first event (a series born at 1 has, to Prometheus, not increased).
+const JOB_KINDS: [&str; 3] = ["calibrate", "verify", "uniformity"];
+const JOB_OUTCOMES: [&str; 4] = ["ok", "failed", "cancelled", "interrupted"];
+const READING_STATUSES: [&str; 3] = ["ok", "below_range", "overload"];
+const FAULTS: [&str; 4] = ["open", "warmup", "instrument", "display"];
 
 /// When things last happened to a device, and its recent whites.
 #[derive(Debug, Default)]
@@ -84,8 +139,10 @@ pub struct Metrics {
     held_out: Family<StatLabels, FloatGauge>,
     white: Family<DeviceLabel, FloatGauge>,
     drift: Family<DeviceLabel, FloatGauge>,
-    since_calibration: Family<DeviceLabel, FloatGauge>,
-    since_verification: Family<DeviceLabel, FloatGauge>,
+    drift_error: Family<DeviceLabel, FloatGauge>,
+    calibrated_at: Family<DeviceLabel, FloatGauge>,
+    verified_at: Family<DeviceLabel, FloatGauge>,
+
     jobs: Family<JobLabels, Counter>,
     job_running: Family<DeviceLabel, Gauge>,
     progress: Family<DeviceLabel, FloatGauge>,
@@ -113,9 +170,13 @@ fn label(device: &str) -> DeviceLabel {
     }
 }
 
-/// Least-squares slope of `points` (y per unit of x); `None` under three points or
-/// when they span less than `min_span`.
-fn slope(points: &[(f64, f64)], min_span: f64) -> Option<f64> {
+/// Least-squares slope of `points` (y per unit of x) and its standard error,
+/// √(s² / Sxx) with s² the residual variance on n − 2 degrees of freedom (the
+/// ordinary least-squares line: e.g. Draper & Smith, *Applied Regression Analysis*,
+/// 3rd ed., §1.4); `None` under three points or when they span less than `min_span`.
+/// The error is what tells a drift from the scatter of single readings: over one
+/// calibration's whites, minutes apart, the slope alone swings by percent per hour.
+fn slope(points: &[(f64, f64)], min_span: f64) -> Option<(f64, f64)> {
     if points.len() < 3 {
         return None;
     }
@@ -125,7 +186,15 @@ fn slope(points: &[(f64, f64)], min_span: f64) -> Option<f64> {
     let sxx: f64 = points.iter().map(|p| (p.0 - mean_x).powi(2)).sum();
     let sxy: f64 = points.iter().map(|p| (p.0 - mean_x) * (p.1 - mean_y)).sum();
     let span = points.last()?.0 - points.first()?.0;
-    (span >= min_span && sxx > 0.0).then(|| sxy / sxx)
+    if !(span >= min_span && sxx > 0.0) {
+        return None;
+    }
+    let b = sxy / sxx;
+    let residual: f64 = points
+        .iter()
+        .map(|p| (p.1 - mean_y - b * (p.0 - mean_x)).powi(2))
+        .sum();
+    Some((b, (residual / (n - 2.0) / sxx).sqrt()))
 }
 
 /// A device's mean and max in `family`; none known, no series.
@@ -156,8 +225,9 @@ impl Metrics {
             held_out: Family::default(),
             white: Family::default(),
             drift: Family::default(),
-            since_calibration: Family::default(),
-            since_verification: Family::default(),
+            drift_error: Family::default(),
+            calibrated_at: Family::default(),
+            verified_at: Family::default(),
             jobs: Family::default(),
             job_running: Family::default(),
             progress: Family::default(),
@@ -198,19 +268,31 @@ impl Metrics {
             metrics.white.clone(),
         );
         r.register(
-            "white_luminance_drift_cd_m2_per_hour",
-            "Least-squares slope of the recent full-white readings (up to 64 within 24 h of the device's clock), cd/m² per hour",
+            "white_luminance_drift_cd_m2_per_second",
+            "Least-squares slope of the recent full-white readings (up to 64 within 24 h of the device's clock), cd/m² per second",
             metrics.drift.clone(),
         );
         r.register(
-            "seconds_since_calibration",
-            "Seconds since the current calibration was published (none: never calibrated)",
-            metrics.since_calibration.clone(),
+            "white_luminance_drift_standard_error_cd_m2_per_second",
+            "Standard error of that slope: a drift is told from the readings' scatter only when the slope is several times it",
+            metrics.drift_error.clone(),
         );
         r.register(
-            "seconds_since_verification",
-            "Seconds since the last verification ended (none: never verified)",
-            metrics.since_verification.clone(),
+            "last_calibration_timestamp_seconds",
+            "When the current calibration was published, Unix time (none: never calibrated)",
+            metrics.calibrated_at.clone(),
+        );
+        r.register(
+            "last_verification_timestamp_seconds",
+            "When the last verification ended, Unix time (none: never verified)",
+            metrics.verified_at.clone(),
+        );
+        r.register(
+            "build",
+            "The daemon's version",
+            prometheus_client::metrics::info::Info::new(BuildLabels {
+                version: env!("CARGO_PKG_VERSION").into(),
+            }),
         );
         r.register(
             "jobs",
@@ -253,13 +335,13 @@ impl Metrics {
             metrics.lut_overwritten.clone(),
         );
         r.register(
-            "mqtt_events_published",
-            "Messages (events, states, status) handed to the MQTT client's queue",
+            "mqtt_messages_queued",
+            "Messages (events, states, status) handed to the MQTT client to send",
             metrics.mqtt_published.clone(),
         );
         r.register(
-            "mqtt_events_dropped",
-            "Messages dropped because the MQTT queue was full (the broker down or slow)",
+            "mqtt_messages_dropped",
+            "Messages never sent: progress coalesced while the broker was away, outcomes past the backlog",
             metrics.mqtt_dropped.clone(),
         );
         let metrics = Metrics {
@@ -270,6 +352,34 @@ impl Metrics {
             metrics.up.get_or_create(&label(device)).set(1);
             metrics.job_running.get_or_create(&label(device)).set(0);
             metrics.progress.get_or_create(&label(device)).set(0.0);
+            metrics
+                .lut_overwritten
+                .get_or_create(&label(device))
+                .inc_by(0);
+            for kind in JOB_KINDS {
+                for outcome in JOB_OUTCOMES {
+                    metrics
+                        .jobs
+                        .get_or_create(&JobLabels {
+                            device: device.into(),
+                            kind: kind.into(),
+                            outcome: outcome.into(),
+                        })
+                        .inc_by(0);
+                }
+            }
+            let kinds = |family: &Family<KindLabels, Counter>, kinds: &[&str]| {
+                for kind in kinds {
+                    family
+                        .get_or_create(&KindLabels {
+                            device: device.into(),
+                            kind: (*kind).into(),
+                        })
+                        .inc_by(0);
+                }
+            };
+            kinds(&metrics.readings, &READING_STATUSES);
+            kinds(&metrics.faults, &FAULTS);
         }
         metrics
     }
@@ -408,12 +518,14 @@ impl Metrics {
             drift = slope(&t.whites, DRIFT_MIN_SPAN_S);
         });
         match drift {
-            Some(per_s) => {
-                self.drift.get_or_create(&label(device)).set(per_s * 3600.0);
+            Some((per_s, error)) => {
+                self.drift.get_or_create(&label(device)).set(per_s);
+                self.drift_error.get_or_create(&label(device)).set(error);
             }
             // Too few whites since the series began again: no drift to tell.
             None => {
                 self.drift.remove(&label(device));
+                self.drift_error.remove(&label(device));
             }
         }
     }
@@ -434,19 +546,19 @@ impl Metrics {
 
     /// The text a scrape gets.
     pub fn render(&self) -> Result<String, std::fmt::Error> {
-        let now = SystemTime::now();
-        let age = |t: SystemTime| now.duration_since(t).map_or(0.0, |d| d.as_secs_f64());
+        let unix = |t: SystemTime| {
+            t.duration_since(SystemTime::UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64())
+        };
         if let Ok(times) = self.times.lock() {
             for (device, t) in times.iter() {
                 if let Some(at) = t.calibrated {
-                    self.since_calibration
+                    self.calibrated_at
                         .get_or_create(&label(device))
-                        .set(age(at));
+                        .set(unix(at));
                 }
                 if let Some(at) = t.verified {
-                    self.since_verification
-                        .get_or_create(&label(device))
-                        .set(age(at));
+                    self.verified_at.get_or_create(&label(device)).set(unix(at));
                 }
             }
         }
@@ -534,12 +646,12 @@ mod tests {
         );
         let drift = line(
             &text,
-            "chromacal_white_luminance_drift_cd_m2_per_hour{device=\"b\"}",
+            "chromacal_white_luminance_drift_cd_m2_per_second{device=\"b\"}",
         )
         .and_then(|l| l.rsplit(' ').next())
         .and_then(|v| v.parse::<f64>().ok())
         .unwrap();
-        assert!((drift + 30.0).abs() < 1e-9, "{drift}");
+        assert!((drift * 3600.0 + 30.0).abs() < 1e-9, "{drift}");
         assert!(line(&text, "chromacal_white_luminance_cd_m2{device=\"b\"} 98").is_some());
         assert!(
             line(
@@ -549,7 +661,7 @@ mod tests {
             .is_some()
         );
         // Nothing is said of what is not known yet.
-        assert!(line(&text, "chromacal_seconds_since_calibration").is_none());
+        assert!(line(&text, "chromacal_last_calibration_timestamp_seconds").is_none());
         assert!(line(&text, "chromacal_verification_delta_e00{").is_none());
         assert!(text.trim_end().ends_with("# EOF"));
         // A verification is of the current profile: a new one makes it old news.
@@ -576,7 +688,17 @@ mod tests {
             .is_some(),
             "{text}"
         );
-        assert!(line(&text, "chromacal_seconds_since_verification{device=\"a\"}").is_some());
+        let verified = line(
+            &text,
+            "chromacal_last_verification_timestamp_seconds{device=\"a\"}",
+        )
+        .and_then(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+        .unwrap();
+        let now = SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .unwrap()
+            .as_secs_f64();
+        assert!((now - verified).abs() < 60.0, "{verified} against {now}");
         metrics.observe(
             "a",
             &Event::Published {
@@ -598,7 +720,80 @@ mod tests {
             .is_some(),
             "{text}"
         );
-        assert!(line(&text, "chromacal_seconds_since_calibration{device=\"a\"}").is_some());
+        assert!(
+            line(
+                &text,
+                "chromacal_last_calibration_timestamp_seconds{device=\"a\"}"
+            )
+            .is_some()
+        );
+    }
+
+    #[test]
+    fn the_drift_comes_with_its_standard_error_and_noise_alone_stays_within_it() {
+        use rand::SeedableRng;
+        use rand_distr::Distribution;
+        // 24 whites a minute apart, 0.3 % noise (a spectroradiometer's repeatability),
+        // 200 runs: on a flat line the slope alone passes 1 %/h in several percent of
+        // runs, but three standard errors only about as often as a t statistic on 22
+        // degrees of freedom does (0.7 %); a real drift of 3 %/h passes nearly always.
+        let noise = rand_distr::Normal::new(0.0, 0.3).unwrap();
+        let (mut large, mut false_alarms, mut found) = (0, 0, 0);
+        for seed in 0..200 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let whites: Vec<(f64, f64)> = (0..24)
+                .map(|k| (60.0 * k as f64, 100.0 + noise.sample(&mut rng)))
+                .collect();
+            let (b, se) = slope(&whites, 60.0).unwrap();
+            large += usize::from((b * 3600.0).abs() > 1.0);
+            false_alarms += usize::from(b.abs() > 3.0 * se);
+            let drifting: Vec<(f64, f64)> = whites
+                .iter()
+                .map(|(t, y)| (*t, y + 3.0 * t / 3600.0))
+                .collect();
+            let (b, se) = slope(&drifting, 60.0).unwrap();
+            found += usize::from(b > 3.0 * se);
+        }
+        eprintln!(
+            "of 200: flat past 1 %/h {large}, flat past 3 SE {false_alarms}, 3 %/h past 3 SE {found}"
+        );
+        assert!(large >= 10, "{large} of 200 flat runs past 1 %/h");
+        assert!(
+            false_alarms <= 6,
+            "{false_alarms} of 200 flat runs past 3 SE"
+        );
+        assert!(found >= 190, "{found} of 200 drifting runs past 3 SE");
+    }
+
+    #[test]
+    fn the_classic_format_names_counters_with_total_and_the_build_as_info() {
+        let text = to_classic_text(&Metrics::new(["a"]).render().unwrap());
+        for expected in [
+            "# TYPE chromacal_jobs_total counter",
+            "# HELP chromacal_jobs_total Jobs ended",
+            "# TYPE chromacal_build_info gauge",
+            "# TYPE chromacal_device_up gauge",
+            "chromacal_jobs_total{device=\"a\",kind=\"verify\",outcome=\"ok\"} 0",
+        ] {
+            assert!(text.contains(expected), "no {expected} in {text}");
+        }
+        assert!(!text.contains("# EOF") && !text.contains("# TYPE chromacal_jobs counter"));
+    }
+
+    #[test]
+    fn counters_exist_at_zero_before_their_first_event() {
+        let metrics = Metrics::new(["a"]);
+        let text = metrics.render().unwrap();
+        for series in [
+            "chromacal_instrument_faults_total{device=\"a\",kind=\"instrument\"} 0",
+            "chromacal_instrument_faults_total{device=\"a\",kind=\"display\"} 0",
+            "chromacal_jobs_total{device=\"a\",kind=\"calibrate\",outcome=\"failed\"} 0",
+            "chromacal_readings_total{device=\"a\",kind=\"overload\"} 0",
+            "chromacal_lut_overwritten_total{device=\"a\"} 0",
+            "chromacal_build_info{version=",
+        ] {
+            assert!(line(&text, series).is_some(), "no {series} in {text}");
+        }
     }
 
     #[test]
@@ -610,10 +805,17 @@ mod tests {
             metrics.reading("a", ReadingStatus::Ok, Some(y), t);
         }
         let text = metrics.render().unwrap();
+        // 1 cd/m² a minute, exactly on a line: no scatter, no standard error.
+        let per_s = line(
+            &text,
+            "chromacal_white_luminance_drift_cd_m2_per_second{device=\"a\"} ",
+        )
+        .and_then(|l| l.rsplit(' ').next()?.parse::<f64>().ok());
+        assert!((per_s.unwrap() - 1.0 / 60.0).abs() < 1e-12, "{text}");
         assert!(
             line(
                 &text,
-                "chromacal_white_luminance_drift_cd_m2_per_hour{device=\"a\"} 60"
+                "chromacal_white_luminance_drift_standard_error_cd_m2_per_second{device=\"a\"} 0.0"
             )
             .is_some(),
             "{text}"
@@ -621,7 +823,7 @@ mod tests {
         metrics.reading("a", ReadingStatus::Ok, Some(50.0), 5.0);
         let text = metrics.render().unwrap();
         assert!(
-            line(&text, "chromacal_white_luminance_drift_cd_m2_per_hour").is_none(),
+            line(&text, "chromacal_white_luminance_drift_cd_m2_per_second").is_none(),
             "{text}"
         );
         let times = metrics.times.lock().unwrap();

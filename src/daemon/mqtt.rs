@@ -16,7 +16,7 @@
 //! - progress is coalesced while the broker is away or the queue is full: only each
 //!   device's newest is kept, sent on reconnection, and forgotten when the device's
 //!   job ends (what it said is stale by then). What is coalesced away is counted
-//!   (`chromacal_mqtt_events_dropped_total`) and warned of (at most every 10 s).
+//!   (`chromacal_mqtt_messages_dropped_total`) and warned of (at most every 10 s).
 //!
 //! The retained status and states are published again at every connection, so a
 //! broker that restarted without its store learns them again. A clean stop publishes
