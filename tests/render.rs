@@ -625,6 +625,38 @@ fn check_weighs_the_verification_by_a_scenes_colours() {
     assert!(d["patches_used"].as_u64().unwrap() >= 1);
 }
 
+/// A ZIP-compressed OpenEXR of 4096 × 4096 zeros, a few megabytes, once took 7.4 GB
+/// to render: its size is refused from the header, before any pixel is allocated,
+/// under an address-space limit of 1.5 GB (`prlimit`) that an allocation of the
+/// image would break (an abort, not this error).
+#[test]
+fn a_small_compressed_exr_of_sixteen_megapixels_is_refused_within_bounded_memory() {
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("zeros.exr");
+    exr::prelude::write_rgb_file(&exr, 4096, 4096, |_, _| (0.0f32, 0.0f32, 0.0f32)).unwrap();
+    let bytes = std::fs::metadata(&exr).unwrap().len();
+    assert!(bytes < 8 << 20, "{bytes} bytes");
+    let out = std::process::Command::new("prlimit")
+        .arg("--as=1500000000")
+        .arg(env!("CARGO_BIN_EXE_chromacal"))
+        .arg("render")
+        .arg(profile_path())
+        .arg("--image")
+        .arg(&exr)
+        .arg("-o")
+        .arg(dir.path().join("out.png"))
+        .env("XDG_CONFIG_HOME", "/nonexistent/chromacal-tests-config")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("4096 × 4096 pixels would take about 8.1 GB to render"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("out.png").exists());
+}
+
 #[test]
 fn an_openexr_image_renders_like_the_same_pfm() {
     let dir = tempfile::tempdir().unwrap();

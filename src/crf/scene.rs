@@ -114,8 +114,29 @@ impl XyzImage {
     }
 }
 
-/// Largest image read, in pixels (a 64-megapixel image is 768 MB of XYZ).
-pub const MAX_PIXELS: usize = 64 << 20;
+/// Bytes a pixel of an image scene costs at the peak of `render`: the XYZ read, the
+/// scene and its adapted copy, the tone-mapped targets, each pixel's gamut and the
+/// rendered pixel (measured: 440 bytes, a 4096 × 4096 OpenEXR peaking at 7.35 GB
+/// resident), with a margin.
+pub const RENDER_BYTES_PER_PIXEL: usize = 480;
+
+/// Most memory an image scene may take to render: 4 GiB.
+pub const MAX_RENDER_BYTES: usize = 4 << 30;
+
+/// Largest image read, in pixels: what renders within [`MAX_RENDER_BYTES`] (8.9
+/// megapixels: a 3840 × 2160 frame fits). The size comes from the file's header and
+/// is checked before any pixel is allocated, so a small compressed file that claims
+/// a huge image is refused at once.
+pub const MAX_PIXELS: usize = MAX_RENDER_BYTES / RENDER_BYTES_PER_PIXEL;
+
+/// The error for an image of `width` × `height` pixels past [`MAX_PIXELS`].
+fn too_large(width: usize, height: usize) -> String {
+    let gb = width.saturating_mul(height) as f64 * RENDER_BYTES_PER_PIXEL as f64 / 1e9;
+    format!(
+        "{width} × {height} pixels would take about {gb:.1} GB to render: at most {MAX_PIXELS} pixels ({} GiB)",
+        MAX_RENDER_BYTES >> 30
+    )
+}
 
 /// A list of colours: columns `X`, `Y`, `Z`, optionally `screen_x`, `screen_y`.
 /// Values are multiplied by `scale` (1 for cd/m²).
@@ -238,7 +259,7 @@ pub fn read_pfm(path: &Path, grey: &Xyz) -> Result<XyzImage, SceneError> {
     let pixels = width
         .checked_mul(height)
         .filter(|p| *p <= MAX_PIXELS)
-        .ok_or_else(|| bad(format!("{width} × {height} pixels (at most {MAX_PIXELS})")))?;
+        .ok_or_else(|| bad(too_large(width, height)))?;
     let expected = pixels * channels * 4;
     let data = &bytes[at..];
     if data.len() != expected {
@@ -306,7 +327,7 @@ pub fn read_exr(path: &Path) -> Result<XyzImage, SceneError> {
     for header in &meta.headers {
         let (w, h) = (header.layer_size.width(), header.layer_size.height());
         if w.saturating_mul(h) > MAX_PIXELS {
-            return Err(bad(format!("{w} × {h} pixels (at most {MAX_PIXELS})")));
+            return Err(bad(too_large(w, h)));
         }
     }
     let by_names = |names: [&str; 3]| {
@@ -338,9 +359,7 @@ pub fn read_exr(path: &Path) -> Result<XyzImage, SceneError> {
     let size = image.layer_data.size;
     let (width, height) = (size.width(), size.height());
     if width == 0 || height == 0 || width.saturating_mul(height) > MAX_PIXELS {
-        return Err(bad(format!(
-            "{width} × {height} pixels (at most {MAX_PIXELS})"
-        )));
+        return Err(bad(too_large(width, height)));
     }
     let xyz = image.layer_data.channel_data.pixels.1;
     if let Some(k) = xyz.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
@@ -508,7 +527,10 @@ mod tests {
         let huge = dir.path().join("huge.exr");
         std::fs::write(&huge, bytes).unwrap();
         let e = read_exr(&huge).unwrap_err().to_string();
-        assert!(e.contains("100001 × 100001 pixels (at most"), "{e}");
+        assert!(
+            e.contains("100001 × 100001 pixels would take about 4800.1 GB to render"),
+            "{e}"
+        );
         let junk = dir.path().join("junk.exr");
         std::fs::write(&junk, b"not an image").unwrap();
         let e = read_exr(&junk).unwrap_err().to_string();
