@@ -21,8 +21,9 @@
 //!
 //! Every refusal is JSON `{"error": "…"}` with a status that says which: 401 (no or
 //! wrong token), 403 (not the socket's owner), 404 (no such endpoint), 405, 409, 413
-//! (body over `daemon.max_body_bytes`), 429 (over `daemon.requests_per_s`), 503 (too
-//! many event streams, or shutting down).
+//! (body over `daemon.max_body_bytes`), 429 (over `daemon.requests_per_s` on TCP, where
+//! token holders and clients without a token each have their own bucket; the owner's
+//! unix socket has none), 503 (too many event streams, or shutting down).
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -66,8 +67,11 @@ pub enum Peer {
     Tcp(SocketAddr),
 }
 
-/// A token bucket. There is one per listener: a token holder on TCP can use up its
-/// own, never the owner's on the unix socket.
+/// A token bucket. Token holders on TCP share one, and clients without a token (who
+/// may only read `/metrics`, when `daemon.metrics_token` is off) another, so that a
+/// flood of unauthenticated scrapes never starves a token holder. The owner on the
+/// unix socket has none: its requests are its own, and the socket's connection cap
+/// protects the daemon.
 struct RateLimit {
     state: Mutex<(f64, Instant)>,
     per_s: f64,
@@ -95,9 +99,9 @@ impl RateLimit {
 struct ApiState {
     daemon: Arc<Daemon>,
     access: Access,
-    /// The unix socket's bucket and the TCP listener's.
-    limit_local: RateLimit,
+    /// The TCP listener's buckets: token holders', and everyone else's.
     limit_tcp: RateLimit,
+    limit_anonymous: RateLimit,
     streams: AtomicUsize,
     /// Refused TCP clients, logged at most once per 10 s.
     refusals: Mutex<super::serve::LogThrottle>,
@@ -141,8 +145,8 @@ pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
         burst: config.burst as f64,
     };
     let state = Arc::new(ApiState {
-        limit_local: bucket(),
         limit_tcp: bucket(),
+        limit_anonymous: bucket(),
         access,
         streams: AtomicUsize::new(0),
         refusals: Mutex::default(),
@@ -215,33 +219,39 @@ async fn guard(
                 );
             }
         }
-        Peer::Tcp(_)
-            if request.uri().path() == "/metrics"
-                && !state.daemon.loaded.config.daemon.metrics_token => {}
+        Peer::Tcp(_) => {}
+    }
+    let limit = match peer {
+        Peer::Local { .. } => None,
         Peer::Tcp(addr) => {
             let sent = request
                 .headers()
                 .get(header::AUTHORIZATION)
                 .and_then(|v| v.to_str().ok())
                 .and_then(bearer_credentials);
-            let ok = match (&state.access.token, sent) {
+            let holder = match (&state.access.token, sent) {
                 (Some(token), Some(sent)) => same_secret(token, sent.trim()),
                 _ => false,
             };
-            if !ok {
+            let open_metrics = request.uri().path() == "/metrics"
+                && !state.daemon.loaded.config.daemon.metrics_token;
+            if !holder && !open_metrics {
                 state.log_refusal(&addr);
                 return refusal_and_close(
                     StatusCode::UNAUTHORIZED,
                     "send the API token as 'Authorization: Bearer <token>' (daemon.token_file)",
                 );
             }
+            Some(if holder {
+                &state.limit_tcp
+            } else {
+                &state.limit_anonymous
+            })
         }
-    }
-    let limit = match peer {
-        Peer::Local { .. } => &state.limit_local,
-        Peer::Tcp(_) => &state.limit_tcp,
     };
-    if !limit.allow() {
+    if let Some(limit) = limit
+        && !limit.allow()
+    {
         return (
             StatusCode::TOO_MANY_REQUESTS,
             [(header::RETRY_AFTER, "1")],
