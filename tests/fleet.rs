@@ -447,6 +447,16 @@ screen = "{}"
             "{line} not in\n{metrics}"
         );
     }
+    // The device that could not be opened is down, the other up.
+    for line in [
+        "chromacal_device_up{device=\"unplugged\"} 0",
+        "chromacal_device_up{device=\"good\"} 1",
+    ] {
+        assert!(
+            metrics.lines().any(|l| l == line),
+            "{line} not in\n{metrics}"
+        );
+    }
     // The device that worked has its fault series, at 0.
     for kind in ["open", "warmup", "instrument", "display"] {
         let line =

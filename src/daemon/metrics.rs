@@ -244,7 +244,7 @@ impl Metrics {
         let r = &mut registry;
         r.register(
             "device_up",
-            "A device this daemon holds (1)",
+            "The device's instrument and display answered its last job (1), or one of them failed it (0, with a device_lost event); 1 at start",
             metrics.up.clone(),
         );
         r.register(
@@ -441,6 +441,10 @@ impl Metrics {
                     .inc();
                 self.job_running.get_or_create(&label(device)).set(0);
                 self.progress.get_or_create(&label(device)).set(0.0);
+                if outcome.result == "ok" {
+                    // Both devices answered the whole job.
+                    self.up.get_or_create(&label(device)).set(1);
+                }
             }
             // A new current profile: the last verification was of another one.
             Event::Published { how, held_out, .. } => {
@@ -476,6 +480,7 @@ impl Metrics {
                 }
             }
             Event::DeviceLost { fault, .. } => {
+                self.up.get_or_create(&label(device)).set(0);
                 self.faults
                     .get_or_create(&KindLabels {
                         device: device.into(),
@@ -778,6 +783,39 @@ mod tests {
             assert!(text.contains(expected), "no {expected} in {text}");
         }
         assert!(!text.contains("# EOF") && !text.contains("# TYPE chromacal_jobs counter"));
+    }
+
+    #[test]
+    fn a_device_is_down_from_its_lost_devices_to_its_next_good_job() {
+        let metrics = Metrics::new(["a"]);
+        let up = |m: &Metrics| {
+            let text = m.render().unwrap();
+            line(&text, "chromacal_device_up{device=\"a\"} ")
+                .and_then(|l| l.rsplit(' ').next()?.parse::<i64>().ok())
+        };
+        assert_eq!(up(&metrics), Some(1));
+        metrics.observe(
+            "a",
+            &Event::DeviceLost {
+                fault: "instrument".into(),
+                message: "no reply".into(),
+            },
+        );
+        assert_eq!(up(&metrics), Some(0));
+        let finished = |result: &str| Event::JobFinished {
+            job: job(JobKind::Calibrate),
+            outcome: JobOutcome {
+                result: result.into(),
+                message: String::new(),
+                profile_id: None,
+                published: false,
+                escalated: false,
+            },
+        };
+        metrics.observe("a", &finished("failed"));
+        assert_eq!(up(&metrics), Some(0));
+        metrics.observe("a", &finished("ok"));
+        assert_eq!(up(&metrics), Some(1));
     }
 
     #[test]
