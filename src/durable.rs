@@ -32,14 +32,38 @@ pub fn read_limited_from(reader: impl Read, limit: u64) -> std::io::Result<Vec<u
     Ok(bytes)
 }
 
-/// The whole of `path`, if it is at most `limit` bytes.
-pub fn read_limited(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
-    read_limited_from(File::open(path)?, limit)
+/// `path` opened for reading if it is a regular file (or a link to one). Opening a
+/// FIFO blocks until something writes to it, and reading a device may never end: an
+/// input named by a user must be a file, and saying so beats hanging.
+pub fn open_regular(path: &Path) -> std::io::Result<File> {
+    let kind = fs::metadata(path)?.file_type();
+    if !kind.is_file() {
+        use std::os::unix::fs::FileTypeExt;
+        let what = if kind.is_dir() {
+            "a directory"
+        } else if kind.is_fifo() {
+            "a FIFO (named pipe)"
+        } else if kind.is_socket() {
+            "a socket"
+        } else {
+            "a device"
+        };
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("is {what}, not a regular file"),
+        ));
+    }
+    File::open(path)
 }
 
-/// The whole of `path` as UTF-8 text, if it is at most `limit` bytes.
+/// The whole of `path`, if it is a regular file of at most `limit` bytes.
+pub fn read_limited(path: &Path, limit: u64) -> std::io::Result<Vec<u8>> {
+    read_limited_from(open_regular(path)?, limit)
+}
+
+/// The whole of `path` as UTF-8 text, if it is a regular file of at most `limit` bytes.
 pub fn read_text_limited(path: &Path, limit: u64) -> std::io::Result<String> {
-    read_text_limited_from(File::open(path)?, limit)
+    read_text_limited_from(open_regular(path)?, limit)
 }
 
 /// All of `reader` as UTF-8 text, if it is at most `limit` bytes.

@@ -280,3 +280,46 @@ fn outputs_are_never_nan_with_success() {
         "{stderr}"
     );
 }
+
+/// A FIFO given as an input file: opening it would wait for a writer for ever. Each
+/// command says it is not a regular file, naming it, and exits at once.
+#[test]
+fn a_fifo_given_as_an_input_is_refused_not_waited_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = |name: &str| {
+        let path = dir.path().join(name);
+        let made = std::process::Command::new("mkfifo")
+            .arg(&path)
+            .status()
+            .unwrap();
+        assert!(made.success());
+        path.display().to_string()
+    };
+    let (ti3, exr, toml) = (fifo("run.ti3"), fifo("scene.exr"), fifo("config.toml"));
+    let profile = dir.path().join("p.toml").display().to_string();
+    let fixture = common::fixture("ti3/crt-default.ti3").display().to_string();
+    let (code, _, stderr) = run(&["fit", &fixture, "-o", &profile], Duration::from_secs(60));
+    assert_eq!(code, Some(0), "{stderr}");
+    let out = dir.path().join("out.png").display().to_string();
+    for args in [
+        vec!["fit", ti3.as_str(), "-o", "/dev/null"],
+        vec!["check", profile.as_str(), ti3.as_str()],
+        vec![
+            "render",
+            profile.as_str(),
+            "--image",
+            exr.as_str(),
+            "-o",
+            out.as_str(),
+        ],
+        vec!["config", "show", "--config", toml.as_str()],
+        vec!["report", ti3.as_str(), "-o", out.as_str()],
+    ] {
+        let (code, _, stderr) = run(&args, Duration::from_secs(20));
+        assert_eq!(code, Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("not a regular file") && stderr.contains("FIFO"),
+            "{args:?}: {stderr}"
+        );
+    }
+}

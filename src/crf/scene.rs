@@ -313,10 +313,12 @@ pub fn read_exr(path: &Path) -> Result<XyzImage, SceneError> {
         path: path.to_path_buf(),
         what,
     };
-    let size = std::fs::metadata(path).map_err(|source| SceneError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let size = crate::durable::open_regular(path)
+        .and_then(|f| f.metadata())
+        .map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
     if size.len() > (MAX_PIXELS * 16) as u64 {
         return Err(bad(format!("larger than {} bytes", MAX_PIXELS * 16)));
     }

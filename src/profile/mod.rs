@@ -334,7 +334,7 @@ const HEAD_BYTES: usize = 128;
 fn file_head(path: &Path) -> Option<Vec<u8>> {
     use std::io::Read as _;
     let mut head = Vec::with_capacity(HEAD_BYTES);
-    std::fs::File::open(path)
+    crate::durable::open_regular(path)
         .ok()?
         .take(HEAD_BYTES as u64)
         .read_to_end(&mut head)
