@@ -472,11 +472,18 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
     }
     match crate::durable::read_text_limited(path, crate::durable::limits::PROFILE) {
         Ok(text) if !text.trim().is_empty() => {
-            if !private()? {
-                return Ok(text.trim().to_string());
+            // Others could read it, so it may be known; but it is the user's, and
+            // clients may hold it: never overwritten, the start refused instead.
+            let mode = std::fs::metadata(path).map_err(io)?.permissions().mode();
+            if mode & 0o077 != 0 {
+                return Err(DaemonError::Config(format!(
+                    "the API token file {} can be read by others (mode {:o}): if the token is still secret, `chmod 600 {}`; if not, delete the file and a new token is made",
+                    path.display(),
+                    mode & 0o777,
+                    path.display()
+                )));
             }
-            // Others could read it, so it may be known: a new one replaces it below.
-            tracing::warn!(path = %path.display(), "the API token could be read by others; a new one replaces it (clients need the new token)");
+            return Ok(text.trim().to_string());
         }
         Ok(_) => {}
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
@@ -771,14 +778,15 @@ mod tests {
         assert_eq!(load_or_create_token(&fresh).unwrap().len(), 64);
         std::fs::write(&fresh, "abc123\n").unwrap();
         assert_eq!(load_or_create_token(&fresh).unwrap(), "abc123");
-        // One others could read may be known: it is replaced, and the file made private.
+        // One others could read may be known, but it is never overwritten: the start
+        // is refused, saying what to do, and the file stays as it was.
         let open = dir.path().join("open.token");
         std::fs::write(&open, "abc123\n").unwrap();
         std::fs::set_permissions(&open, std::fs::Permissions::from_mode(0o644)).unwrap();
-        let token = load_or_create_token(&open).unwrap();
-        assert_ne!(token, "abc123");
-        assert_eq!(std::fs::read_to_string(&open).unwrap().trim(), token);
-        assert_eq!(mode(&open), 0o600);
+        let e = load_or_create_token(&open).unwrap_err().to_string();
+        assert!(e.contains("mode 644") && e.contains("chmod 600"), "{e}");
+        assert_eq!(std::fs::read_to_string(&open).unwrap(), "abc123\n");
+        assert_eq!(mode(&open), 0o644);
         // A symbolic link is not followed to wherever it points.
         let link = dir.path().join("link.token");
         std::os::unix::fs::symlink(&open, &link).unwrap();
