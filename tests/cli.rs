@@ -688,3 +688,37 @@ fn help_names_the_exit_codes() {
         assert!(stdout.contains(code), "{code}: {stdout}");
     }
 }
+
+/// `config show` checks what the daemon checks: a fleet config with a device named
+/// twice prints, says it would be refused, and exits 1, as `chromacal daemon` would.
+#[test]
+fn config_show_refuses_what_the_daemon_refuses() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("fleet.toml");
+    std::fs::write(
+        &config,
+        "[[device]]\nname = \"a\"\n[[device]]\nname = \"a\"\n",
+    )
+    .unwrap();
+    let out = chromacal()
+        .args(["config", "show", "--config", path(&config)])
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    assert!(
+        stdout.contains("# It would be refused: device \"a\" is named twice"),
+        "{stdout}"
+    );
+    assert!(stderr.contains("would be refused"), "{stderr}");
+    let daemon = chromacal()
+        .args(["daemon", "--config", path(&config), "--state-dir"])
+        .arg(dir.path().join("state"))
+        .output()
+        .unwrap();
+    assert_eq!(daemon.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&daemon.stderr).contains("named twice"));
+}

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use chromacal::config::{check_config, config_search_paths, load_config_searching};
+use chromacal::config::{check_config, config_search_paths, device_configs, load_config_searching};
 
 use super::shared::Failure;
 
@@ -56,9 +56,18 @@ fn show(config: Option<PathBuf>) -> Result<(), Failure> {
         "# Relative paths are taken from {}.\n",
         loaded.base_dir.display()
     );
-    if let Err(why) = check_config(&loaded.config) {
+    // The daemon's own checks, in its order: the whole config, then each device.
+    let refused = check_config(&loaded.config)
+        .err()
+        .or_else(|| device_configs(&loaded).err());
+    if let Some(why) = &refused {
         out += &format!("# It would be refused: {why}\n");
     }
     print!("{out}\n{text}");
-    Ok(())
+    match refused {
+        Some(why) => Err(Failure::from(format!(
+            "this configuration would be refused: {why}"
+        ))),
+        None => Ok(()),
+    }
 }
