@@ -108,8 +108,13 @@ fn each_new_patch_position_is_prompted_and_a_closed_terminal_keeps_the_readings(
         4,
         "{stderr}"
     );
+    // The command it gives finds the run: it names the state directory it was given.
     assert!(
-        stderr.contains("terminal closed") && stderr.contains("--resume"),
+        stderr.contains("terminal closed")
+            && stderr.contains(&format!(
+                "chromacal calibrate --resume --state-dir {}",
+                state.path().display()
+            )),
         "{stderr}"
     );
     let run = std::fs::read_dir(state.path().join("runs"))

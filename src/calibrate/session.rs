@@ -25,6 +25,37 @@ use crate::sim::monitor::SimError;
 /// Name of the file in a run's directory that says the run ended in a profile.
 const DONE_MARKER: &str = "profile";
 
+/// The command that resumes the run whose journal is `journal`
+/// (`<state>/runs/<run>/journal.jsonl`): with the state directory it was given, which
+/// a plain `--resume` would not find unless it is the default one.
+fn resume_command(journal: &Path) -> String {
+    match journal
+        .parent()
+        .and_then(Path::parent)
+        .and_then(Path::parent)
+    {
+        Some(state) if !state.as_os_str().is_empty() => format!(
+            "chromacal calibrate --resume --state-dir {}",
+            shell_quoted(&state.display().to_string())
+        ),
+        _ => "chromacal calibrate --resume".into(),
+    }
+}
+
+/// `text` as one shell word: as it is when it has nothing the shell reads, else in
+/// single quotes.
+fn shell_quoted(text: &str) -> String {
+    if !text.is_empty()
+        && text
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "/._-+:,@%".contains(c))
+    {
+        text.to_string()
+    } else {
+        format!("'{}'", text.replace('\'', "'\\''"))
+    }
+}
+
 /// Why a calibration stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibrateError {
@@ -37,7 +68,8 @@ pub enum CalibrateError {
     #[error("journal: {0}")]
     Journal(#[from] JournalError),
     #[error(
-        "{source}\nEverything measured is kept in {journal}; run `chromacal calibrate --resume` to go on."
+        "{source}\nEverything measured is kept in {journal}; run `{}` to go on.",
+        resume_command(.journal)
     )]
     Run { source: RunError, journal: PathBuf },
     #[error("fit: {0}")]
@@ -773,4 +805,26 @@ pub fn rig_for(
         config.display.settle_s,
         realtime_scale,
     )?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::resume_command;
+    use std::path::Path;
+
+    #[test]
+    fn the_resume_command_names_the_state_directory_as_one_shell_word() {
+        assert_eq!(
+            resume_command(Path::new("/tmp/cc/runs/20261203T1/journal.jsonl")),
+            "chromacal calibrate --resume --state-dir /tmp/cc"
+        );
+        assert_eq!(
+            resume_command(Path::new("/home/a b/it's/runs/r/journal.jsonl")),
+            "chromacal calibrate --resume --state-dir '/home/a b/it'\\''s'"
+        );
+        assert_eq!(
+            resume_command(Path::new("runs/r/journal.jsonl")),
+            "chromacal calibrate --resume"
+        );
+    }
 }
