@@ -27,7 +27,9 @@ fn text(out: &Output) -> String {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn start_watch_status_history_rollback_and_cancel_from_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
-    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.002\n");
+    // Slow enough that a calibration (two minutes simulated) is still running when
+    // it is cancelled 300 ms in.
+    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.01\n");
     let socket = daemon.socket.clone();
 
     let out = run(&socket, &["status"]);
@@ -80,8 +82,23 @@ async fn start_watch_status_history_rollback_and_cancel_from_the_command_line() 
     wait_idle(&daemon.endpoint(), Duration::from_secs(30)).await;
     let out = run(&socket, &["job", "watch"]);
     assert!(text(&out).contains("cancelled"), "{}", text(&out));
+    // The newest run on the daemon's clock: runs started in one second sort either
+    // way by name.
     let runs = common::daemon_runs(&daemon.state);
-    let cancelled = runs.last().unwrap();
+    let started = |run: &std::path::PathBuf| {
+        chromacal::journal::Journal::read(run)
+            .map(|(_, entries, _)| {
+                entries
+                    .iter()
+                    .filter_map(|m| m.time_s)
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .unwrap_or(f64::NEG_INFINITY)
+    };
+    let cancelled = runs
+        .iter()
+        .max_by(|a, b| started(a).total_cmp(&started(b)))
+        .unwrap();
     assert_eq!(
         std::fs::read_to_string(cancelled.with_file_name("profile"))
             .unwrap()
@@ -89,7 +106,9 @@ async fn start_watch_status_history_rollback_and_cancel_from_the_command_line() 
         "discarded"
     );
     drop(daemon);
-    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.002\n");
+    // Slow enough that a calibration (two minutes simulated) is still running when
+    // it is cancelled 300 ms in.
+    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.01\n");
     tokio::time::sleep(Duration::from_millis(200)).await;
     let status = run(&daemon.socket, &["status", "--json"]);
     let status: serde_json::Value = serde_json::from_slice(&status.stdout).unwrap();
