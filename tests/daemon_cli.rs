@@ -82,23 +82,7 @@ async fn start_watch_status_history_rollback_and_cancel_from_the_command_line() 
     wait_idle(&daemon.endpoint(), Duration::from_secs(30)).await;
     let out = run(&socket, &["job", "watch"]);
     assert!(text(&out).contains("cancelled"), "{}", text(&out));
-    // The newest run on the daemon's clock: runs started in one second sort either
-    // way by name.
-    let runs = common::daemon_runs(&daemon.state);
-    let started = |run: &std::path::PathBuf| {
-        chromacal::journal::Journal::read(run)
-            .map(|(_, entries, _)| {
-                entries
-                    .iter()
-                    .filter_map(|m| m.time_s)
-                    .fold(f64::INFINITY, f64::min)
-            })
-            .unwrap_or(f64::NEG_INFINITY)
-    };
-    let cancelled = runs
-        .iter()
-        .max_by(|a, b| started(a).total_cmp(&started(b)))
-        .unwrap();
+    let cancelled = common::newest_run(&daemon.state);
     assert_eq!(
         std::fs::read_to_string(cancelled.with_file_name("profile"))
             .unwrap()

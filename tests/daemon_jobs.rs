@@ -16,7 +16,6 @@ mod common;
 use common::daemon::{
     events_of_job, events_until, get, start_daemon, start_job, subscribe, wait_idle,
 };
-use common::daemon_runs;
 
 /// Calibrate twice on a fresh daemon; with `clients`, API clients poll status,
 /// profile and history and follow the events during the second run, half of them
@@ -89,20 +88,8 @@ async fn second_run_readings(
     for t in tasks {
         t.await.unwrap();
     }
-    // The second run: the later on the daemon's clock (two runs in one second may
-    // sort either way by name).
-    let (_, entries, _) = daemon_runs(&daemon.state)
-        .iter()
-        .map(|run| Journal::read(run).unwrap())
-        .max_by(|a, b| {
-            let start = |e: &[chromacal::measurement::Measurement]| {
-                e.iter()
-                    .filter_map(|m| m.time_s)
-                    .fold(f64::INFINITY, f64::min)
-            };
-            start(&a.1).total_cmp(&start(&b.1))
-        })
-        .unwrap();
+    // The second run: the later on the daemon's clock.
+    let (_, entries, _) = Journal::read(&common::newest_run(&daemon.state)).unwrap();
     for progress in heard {
         if progress != entries.len() {
             eprintln!("a stream heard {progress} readings of {}", entries.len());

@@ -282,6 +282,27 @@ pub fn daemon_runs(state: &std::path::Path) -> Vec<PathBuf> {
     runs
 }
 
+/// The journal of the newest run under a daemon's `state`, by when its first reading
+/// was taken on the daemon's clock: run directories started within one second sort
+/// either way by name. A run without readings counts as the oldest.
+pub fn newest_run(state: &std::path::Path) -> std::path::PathBuf {
+    let started = |run: &std::path::PathBuf| {
+        chromacal::journal::Journal::read(run)
+            .ok()
+            .and_then(|(_, entries, _)| {
+                entries
+                    .iter()
+                    .filter_map(|m| m.time_s)
+                    .min_by(f64::total_cmp)
+            })
+            .unwrap_or(f64::NEG_INFINITY)
+    };
+    daemon_runs(state)
+        .into_iter()
+        .max_by(|a, b| started(a).total_cmp(&started(b)))
+        .expect("the daemon has no runs")
+}
+
 /// Every patch the journal's plan has is in it exactly once; for a sequential plan,
 /// so is each patch it added, numbered on from the seed plan without a gap.
 pub fn assert_each_planned_patch_once(
