@@ -2,11 +2,10 @@
 //! `status`, `job start|watch|cancel`, `history`, `rollback` (and `profile current`,
 //! whose arguments are with `profile`).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 use bytes::Bytes;
-use chromacal::config::{config_search_paths, load_config_searching};
 use chromacal::daemon::api::{DevicesReply, StatusReply};
 use chromacal::daemon::client::{Endpoint, Reply, follow_events_at, request};
 use chromacal::daemon::default_socket;
@@ -25,9 +24,13 @@ use super::shared::Failure;
 /// ([[device]] in the config) each under /devices/NAME/…; GET /devices, GET /metrics
 /// (Prometheus).
 /// Stops on SIGTERM after the reading under way; an interrupted calibration
-/// resumes at the next start.
+/// resumes at the next start. SIGHUP (or `chromacal daemon reload`) rereads the
+/// config.
 #[derive(clap::Args)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct DaemonArgs {
+    #[command(subcommand)]
+    command: Option<DaemonCommand>,
     /// Configuration file (TOML) [default: $XDG_CONFIG_HOME/chromacal/config.toml, else
     /// /etc/chromacal/config.toml, else the built-in config/default.toml; see
     /// `chromacal config show`].
@@ -87,6 +90,18 @@ pub struct RollbackArgs {
 }
 
 #[derive(Subcommand)]
+enum DaemonCommand {
+    /// Make the running daemon reread its config, as SIGHUP does: devices added
+    /// start, devices removed or changed leave after their running job (a changed one
+    /// then starts on its new config), the others are not touched. A config that does
+    /// not load is refused and the daemon runs on with the one it had (exit 1).
+    Reload {
+        #[command(flatten)]
+        api: ApiArgs,
+    },
+}
+
+#[derive(Subcommand)]
 enum JobCommand {
     /// Start a job: calibrate, verify or uniformity.
     Start {
@@ -106,23 +121,8 @@ enum JobCommand {
     Cancel,
 }
 
-fn daemon(
-    config: Option<&Path>,
-    state_dir: Option<PathBuf>,
-    socket: Option<PathBuf>,
-    tcp: Option<String>,
-    time_scale: Option<f64>,
-) -> Result<(), Failure> {
-    let mut loaded = load_config_searching(config, &config_search_paths())?;
-    if let Some(scale) = time_scale {
-        loaded.config.daemon.simulated_time_scale = scale;
-        loaded.config.daemon.check().map_err(Failure::from)?;
-    }
-    let options = chromacal::daemon::DaemonOptions {
-        state_dir: state_dir.unwrap_or_else(default_state_dir),
-        socket,
-        tcp,
-    };
+fn daemon(options: chromacal::daemon::DaemonOptions) -> Result<(), Failure> {
+    let loaded = options.load_config().map_err(Failure::from)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -135,13 +135,53 @@ fn daemon(
 }
 
 pub fn run(args: DaemonArgs) -> Result<(), Failure> {
-    daemon(
-        args.config.as_deref(),
-        args.state_dir,
-        args.socket,
-        args.tcp,
-        args.time_scale,
-    )
+    if let Some(DaemonCommand::Reload { api }) = &args.command {
+        return reload(api).map_err(Failure::from);
+    }
+    daemon(chromacal::daemon::DaemonOptions {
+        config: args.config,
+        state_dir: args.state_dir.unwrap_or_else(default_state_dir),
+        socket: args.socket,
+        tcp: args.tcp,
+        time_scale: args.time_scale,
+    })
+}
+
+/// `chromacal daemon reload`: `POST /reload`, and what it changed.
+fn reload(api: &ApiArgs) -> Result<(), String> {
+    let endpoint = api.endpoint()?;
+    runtime()?.block_on(async {
+        let reply = post(&endpoint, "/reload", serde_json::json!({})).await?;
+        let value = reply.json()?;
+        let list = |key: &str| {
+            let names: Vec<&str> = value[key]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|n| n.as_str())
+                .collect();
+            match names.is_empty() {
+                true => "none".to_string(),
+                false => names.join(", "),
+            }
+        };
+        println!(
+            "config reloaded: added {}; removed {}; changed {}",
+            list("added"),
+            list("removed"),
+            list("changed")
+        );
+        if value["restart_needed"]
+            .as_array()
+            .is_some_and(|a| !a.is_empty())
+        {
+            println!(
+                "changes to {} take effect at the next restart",
+                list("restart_needed")
+            );
+        }
+        Ok(())
+    })
 }
 
 pub fn run_status(args: StatusArgs) -> Result<(), Failure> {

@@ -47,6 +47,7 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
             readings: readings.as_ref(),
             readings_note: note,
             history: None,
+            device: None,
         },
         &args.output,
     )
@@ -80,6 +81,7 @@ pub fn write_for(
             readings,
             readings_note: None,
             history: None,
+            device: None,
         },
         output,
     )

@@ -129,8 +129,33 @@ fn merge_tables(base: &mut toml::Table, over: &toml::Table) {
     }
 }
 
-/// The devices `loaded` describes, each with its effective config.
+/// Names a device may not have: its folder would sit among the store files of the
+/// state directory itself (a config without `[[device]]` keeps its store there).
+const RESERVED_DEVICE_NAMES: [&str; 3] = ["profiles", "runs", "lock"];
+
+/// The devices `loaded` describes, each with its effective config, checked as far as
+/// can be without opening hardware: a simulated monitor's section is resolved (its
+/// preset named, its tables read), so that a daemon refuses it at start or reload
+/// rather than failing its first job.
 pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String> {
+    let devices = split_devices(loaded)?;
+    for device in &devices {
+        let config = &device.loaded.config;
+        if config.instrument.address()?.is_none() {
+            config
+                .monitor
+                .resolve(&device.loaded.base_dir)
+                .map_err(|e| match devices.len() {
+                    1 if !device.own_folder => format!("[monitor]: {e}"),
+                    _ => format!("device \"{}\": [monitor]: {e}", device.name),
+                })?;
+        }
+    }
+    Ok(devices)
+}
+
+/// The devices `loaded` describes, each with its effective config.
+fn split_devices(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String> {
     let config = &loaded.config;
     if config.device.is_empty() {
         if !config.instruments.is_empty() {
@@ -165,6 +190,12 @@ pub fn device_configs(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String
             None => return Err(format!("{at}: give it a name")),
         };
         check_name(&at, &name)?;
+        if RESERVED_DEVICE_NAMES.contains(&name.as_str()) {
+            return Err(format!(
+                "{at}: \"{name}\" is reserved (the state directory's own {} are named so); name the device otherwise",
+                RESERVED_DEVICE_NAMES.join(", ")
+            ));
+        }
         let at = format!("device \"{name}\"");
         if devices.iter().any(|d| d.name == name) {
             return Err(format!("{at} is named twice"));
@@ -431,6 +462,12 @@ name = "c"
                 "named by no device",
             ),
             ("[instruments.meter.simulated]\n", "there are none"),
+            ("[[device]]\nname = \"runs\"\n", "\"runs\" is reserved"),
+            (
+                "[[device]]\nname = \"a\"\n[[device]]\nname = \"b\"\n[device.monitor]\npreset = \"plasma\"\n",
+                "device \"b\": [monitor]",
+            ),
+            ("[monitor]\npreset = \"plasma\"\n", "[monitor]"),
             (
                 "[[device]]\nname = \"a\"\n[device.schedule]\nthreshold_de00 = -1.0\n",
                 "device \"a\"",

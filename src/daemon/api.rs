@@ -46,6 +46,7 @@ use serde_json::json;
 use tokio_stream::StreamExt;
 use tokio_stream::wrappers::BroadcastStream;
 
+use super::browser;
 use super::events::{JobKind, JobOutcome, JobStatus};
 use super::{Daemon, Device, JobRefused};
 use crate::config::devices::NoDevice;
@@ -105,6 +106,8 @@ struct ApiState {
     streams: AtomicUsize,
     /// Refused TCP clients, logged at most once per 10 s.
     refusals: Mutex<super::serve::LogThrottle>,
+    /// Browsers logged in on the TCP listener (see `browser`).
+    sessions: super::browser::Sessions,
 }
 
 impl ApiState {
@@ -150,6 +153,7 @@ pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
         access,
         streams: AtomicUsize::new(0),
         refusals: Mutex::default(),
+        sessions: Default::default(),
         daemon: daemon.clone(),
     });
     let max_body = config.max_body_bytes;
@@ -171,6 +175,10 @@ pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
         .nest("/devices/{device}", device_routes())
         .route("/devices", get(devices))
         .route("/metrics", get(metrics))
+        .route("/reload", post(reload))
+        .route("/", get(fleet))
+        .route("/login", get(login_page).post(login))
+        .route("/logout", post(logout))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(max_body))
@@ -189,7 +197,7 @@ fn bearer_credentials(value: &str) -> Option<&str> {
 }
 
 /// Compare without an early exit, so that timing tells nothing of the token.
-fn same_secret(a: &str, b: &str) -> bool {
+pub(crate) fn same_secret(a: &str, b: &str) -> bool {
     a.len() == b.len()
         && a.bytes()
             .zip(b.bytes())
@@ -233,16 +241,32 @@ async fn guard(
                 (Some(token), Some(sent)) => same_secret(token, sent.trim()),
                 _ => false,
             };
-            let open_metrics = request.uri().path() == "/metrics"
-                && !state.daemon.loaded.config.daemon.metrics_token;
-            if !holder && !open_metrics {
+            let path = request.uri().path();
+            let session = !holder && state.sessions.valid(request.headers());
+            // A browser session only looks: whatever acts needs the token.
+            if session && !browser::session_may(request.method(), path) {
+                return refusal(
+                    StatusCode::FORBIDDEN,
+                    format!(
+                        "a browser session may only look (GET); {} {path} needs the API token as 'Authorization: Bearer <token>'",
+                        request.method()
+                    ),
+                );
+            }
+            let open = (path == "/metrics" && !state.daemon.loaded.config.daemon.metrics_token)
+                || browser::open_path(path);
+            if !holder && !session && !open {
+                // A browser asking for the fleet page is shown the way in.
+                if path == "/" && request.method() == axum::http::Method::GET {
+                    return browser::see_other("/login", None);
+                }
                 state.log_refusal(&addr);
                 return refusal_and_close(
                     StatusCode::UNAUTHORIZED,
                     "send the API token as 'Authorization: Bearer <token>' (daemon.token_file)",
                 );
             }
-            Some(if holder {
+            Some(if holder || session {
                 &state.limit_tcp
             } else {
                 &state.limit_anonymous
@@ -372,6 +396,10 @@ pub struct StatusReply {
     pub uptime_s: f64,
     pub state_dir: String,
     pub shutting_down: bool,
+    /// A reload removed or changed the device: it takes no new job and leaves (or
+    /// starts again on its new config) when its running job ends.
+    #[serde(default)]
+    pub retiring: bool,
     pub job: Option<JobStatus>,
     pub last_job: Option<(JobStatus, JobOutcome)>,
     pub current_profile: Option<CurrentProfile>,
@@ -405,7 +433,10 @@ fn read_current(device: &Device) -> Result<Option<(Profile, String)>, String> {
 }
 
 /// A device's status.
-async fn device_status(daemon: &Daemon, device: &Arc<Device>) -> Result<StatusReply, String> {
+pub(crate) async fn device_status(
+    daemon: &Daemon,
+    device: &Arc<Device>,
+) -> Result<StatusReply, String> {
     // Listing the runs reads their journals: off the async workers.
     let unfinished_runs = {
         let device = device.clone();
@@ -428,6 +459,7 @@ async fn device_status(daemon: &Daemon, device: &Arc<Device>) -> Result<StatusRe
         uptime_s: daemon.uptime_s(),
         state_dir: device.store().root().display().to_string(),
         shutting_down: daemon.is_shutting_down(),
+        retiring: device.is_retired(),
         job: device.job(),
         last_job: device.last_outcome(),
         current_profile: current,
@@ -462,7 +494,7 @@ pub struct DeviceEntry {
 async fn devices(State(state): State<Shared>) -> Response {
     let mut devices = Vec::new();
     for device in state.daemon.devices() {
-        match device_status(&state.daemon, device).await {
+        match device_status(&state.daemon, &device).await {
             Ok(status) => devices.push(DeviceEntry {
                 name: device.name.clone(),
                 shared_instrument: device.shared_instrument.as_ref().map(|(n, _)| n.clone()),
@@ -520,9 +552,36 @@ async fn start_job(Dev(device): Dev, body: axum::body::Bytes) -> Response {
     match device.start_job(kind, "api", None) {
         Ok(job) => (StatusCode::ACCEPTED, axum::Json(job)).into_response(),
         Err(e @ JobRefused::Busy { .. }) => refusal(StatusCode::CONFLICT, e.to_string()),
-        Err(e @ JobRefused::ShuttingDown) => {
+        Err(e @ (JobRefused::ShuttingDown | JobRefused::Retired(_))) => {
             refusal(StatusCode::SERVICE_UNAVAILABLE, e.to_string())
         }
+    }
+}
+
+/// `GET /`: the fleet page; over TCP with a logout button (the session's).
+async fn fleet(State(state): State<Shared>, ConnectInfo(peer): ConnectInfo<Peer>) -> Response {
+    browser::fleet_page(&state.daemon, matches!(peer, Peer::Tcp(_))).await
+}
+
+async fn login_page() -> Response {
+    browser::login_page()
+}
+
+/// `POST /login` with `token=…` (a form): a session cookie.
+async fn login(State(state): State<Shared>, body: axum::body::Bytes) -> Response {
+    browser::login(&state.sessions, state.access.token.as_deref(), &body)
+}
+
+async fn logout(State(state): State<Shared>, headers: HeaderMap) -> Response {
+    browser::logout(&state.sessions, &headers)
+}
+
+/// `POST /reload`: reread the config (as SIGHUP does). 200 with what changed, or 422
+/// with why the config was refused (the daemon runs on with the one it had).
+async fn reload(State(state): State<Shared>) -> Response {
+    match state.daemon.reload("api").await {
+        Ok(reloaded) => axum::Json(reloaded).into_response(),
+        Err(e) => refusal(StatusCode::UNPROCESSABLE_ENTITY, e),
     }
 }
 
@@ -704,6 +763,7 @@ async fn report(Dev(device): Dev) -> Response {
             readings: readings.as_ref(),
             readings_note,
             history: Some(HistoryView::from_store(device.store())),
+            device: Some(device.name.clone()),
         })
     })
     .await;

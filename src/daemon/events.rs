@@ -140,6 +140,23 @@ pub enum Event {
         reloading: bool,
     },
     ShuttingDown,
+    /// The daemon reread its config (`origin`: `SIGHUP` or `api`): devices `added`
+    /// (started now), `removed` and `changed` (each retired after its running job, a
+    /// changed one then started on its new config), and the sections whose changes
+    /// wait for a restart (`[daemon]`'s listeners and limits, `[mqtt]`). A daemon-wide
+    /// event: its `device` is empty.
+    ConfigReloaded {
+        origin: String,
+        added: Vec<String>,
+        removed: Vec<String>,
+        changed: Vec<String>,
+        restart_needed: Vec<String>,
+    },
+    /// The config reread was refused; the daemon runs on with the one it had.
+    ConfigRefused {
+        origin: String,
+        error: String,
+    },
 }
 
 impl Event {
@@ -157,6 +174,8 @@ impl Event {
             Event::LutLoaded { .. } => "lut_loaded",
             Event::LutOverwritten { .. } => "lut_overwritten",
             Event::ShuttingDown => "shutting_down",
+            Event::ConfigReloaded { .. } => "config_reloaded",
+            Event::ConfigRefused { .. } => "config_refused",
         }
     }
 }

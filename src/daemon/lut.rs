@@ -13,7 +13,7 @@
 //! runtime. It talks to the rest of the daemon through the event bus only.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use tokio::sync::broadcast::error::TryRecvError;
@@ -32,7 +32,7 @@ use crate::x11::{GammaRamp, OutputInfo, OutputSelector, X11Error, XDisplay};
 const TICK: Duration = Duration::from_millis(100);
 
 /// Start the keeper of `device`'s LUT, if its patches go to the native window.
-pub(crate) fn start(device: &Arc<Device>, resumed: Arc<AtomicBool>) {
+pub(crate) fn start(device: &Arc<Device>) {
     if device.loaded.config.display.sink() != Sink::Window {
         return;
     }
@@ -40,7 +40,7 @@ pub(crate) fn start(device: &Arc<Device>, resumed: Arc<AtomicBool>) {
     let events = device.bus.events.subscribe();
     let spawned = std::thread::Builder::new()
         .name(format!("lut-{}", device.name))
-        .spawn(move || Keeper::new(device, resumed).run(events));
+        .spawn(move || Keeper::new(device).run(events));
     if let Err(e) = spawned {
         tracing::error!(error = %e, "cannot start the video LUT keeper");
     }
@@ -89,7 +89,8 @@ impl Watch {
 
 struct Keeper {
     device: Arc<Device>,
-    resumed: Arc<AtomicBool>,
+    /// The bus's count of resumes from suspend when the keeper last looked.
+    resumes_seen: u64,
     selector: OutputSelector,
     /// What the keeper last loaded (none: nothing to keep, or a job holds the LUT).
     expected: Option<GammaRamp>,
@@ -100,7 +101,7 @@ struct Keeper {
 }
 
 impl Keeper {
-    fn new(device: Arc<Device>, resumed: Arc<AtomicBool>) -> Self {
+    fn new(device: Arc<Device>) -> Self {
         let selector = device
             .loaded
             .config
@@ -109,8 +110,8 @@ impl Keeper {
             .clone()
             .unwrap_or_default();
         Keeper {
+            resumes_seen: device.bus.resumes.load(Ordering::SeqCst),
             device,
-            resumed,
             selector,
             expected: None,
             due: Some("start"),
@@ -134,7 +135,8 @@ impl Keeper {
     fn run(mut self, mut events: tokio::sync::broadcast::Receiver<DeviceEvent>) {
         let x_display = self.device.loaded.config.display.x_display.clone();
         let mut watch: Option<Watch> = None;
-        while !self.device.is_shutting_down() {
+        // A device retired by a reload leaves its LUT to the device that replaces it.
+        while !self.device.is_shutting_down() && !self.device.is_retired() {
             loop {
                 match events.try_recv() {
                     Ok(e) if e.device == self.device.name => self.on_event(&e.event),
@@ -145,7 +147,9 @@ impl Keeper {
                     Err(TryRecvError::Closed) => return,
                 }
             }
-            if self.resumed.swap(false, Ordering::SeqCst) {
+            let resumes = self.device.bus.resumes.load(Ordering::SeqCst);
+            if resumes != self.resumes_seen {
+                self.resumes_seen = resumes;
                 self.due = Some("resume from suspend");
             }
             if watch.is_none() {
@@ -299,9 +303,9 @@ impl Keeper {
     }
 }
 
-/// Set every flag of `resumed` whenever logind says the machine woke (`PrepareForSleep(false)` on
+/// Count a resume in `bus` whenever logind says the machine woke (`PrepareForSleep(false)` on
 /// the system bus). Without a system bus this does nothing.
-pub(crate) async fn watch_resume(resumed: Vec<Arc<AtomicBool>>) {
+pub(crate) async fn watch_resume(bus: Arc<super::Bus>) {
     use tokio_stream::StreamExt;
     let Ok(connection) = zbus::Connection::system().await else {
         tracing::debug!("no system bus: resume from suspend is not watched");
@@ -322,9 +326,7 @@ pub(crate) async fn watch_resume(resumed: Vec<Arc<AtomicBool>>) {
     while let Some(Ok(message)) = stream.next().await {
         if let Ok(false) = message.body().deserialize::<bool>() {
             tracing::info!("the machine resumed from suspend");
-            for flag in &resumed {
-                flag.store(true, Ordering::SeqCst);
-            }
+            bus.resumes.fetch_add(1, Ordering::SeqCst);
         }
     }
 }

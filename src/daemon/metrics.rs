@@ -113,6 +113,9 @@ struct BuildLabels {
 
 type FloatGauge = Gauge<f64, AtomicU64>;
 
+/// A least-squares slope and its standard error.
+pub type Drift = (f64, f64);
+
 /// Job kinds and outcomes, reading statuses and device faults, as the counters label
 /// them: each series exists at 0 from the start, so that `increase()` counts its
 /// first event (a series born at 1 has, to Prometheus, not increased).
@@ -128,6 +131,8 @@ struct DeviceTimes {
     verified: Option<SystemTime>,
     /// (device clock seconds, cd/m²), oldest first.
     whites: Vec<(f64, f64)>,
+    /// The events counted for the device: their series go with it.
+    events: std::collections::BTreeSet<&'static str>,
 }
 
 /// The daemon's metrics.
@@ -153,6 +158,8 @@ pub struct Metrics {
     lut_overwritten: Family<DeviceLabel, Counter>,
     mqtt_published: Counter,
     mqtt_dropped: Counter,
+    reload_ok: Gauge,
+    reload_ok_at: FloatGauge,
     times: Mutex<BTreeMap<String, DeviceTimes>>,
 }
 
@@ -238,6 +245,8 @@ impl Metrics {
             lut_overwritten: Family::default(),
             mqtt_published: Counter::default(),
             mqtt_dropped: Counter::default(),
+            reload_ok: Gauge::default(),
+            reload_ok_at: FloatGauge::default(),
             times: Mutex::default(),
             registry: Registry::default(),
         };
@@ -344,11 +353,51 @@ impl Metrics {
             "Messages never sent: progress coalesced while the broker was away, outcomes past the backlog",
             metrics.mqtt_dropped.clone(),
         );
+        r.register(
+            "config_last_reload_successful",
+            "The last config reload (SIGHUP, POST /reload) was applied (1; also at start) or refused (0: the daemon runs on the config it had)",
+            metrics.reload_ok.clone(),
+        );
+        r.register(
+            "config_last_reload_success_timestamp_seconds",
+            "When the config was last loaded (at start or by a reload), Unix time",
+            metrics.reload_ok_at.clone(),
+        );
         let metrics = Metrics {
             registry,
             ..metrics
         };
+        metrics.reloaded(true);
         for device in devices {
+            metrics.add_device(device);
+        }
+        metrics
+    }
+
+    /// A config load's outcome.
+    fn reloaded(&self, ok: bool) {
+        self.reload_ok.set(i64::from(ok));
+        if ok {
+            let now = SystemTime::now()
+                .duration_since(SystemTime::UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64());
+            self.reload_ok_at.set(now);
+        }
+    }
+
+    /// Count an event of the whole daemon.
+    pub fn observe_daemon(&self, event: &Event) {
+        match event {
+            Event::ConfigReloaded { .. } => self.reloaded(true),
+            Event::ConfigRefused { .. } => self.reloaded(false),
+            _ => {}
+        }
+    }
+
+    /// A device's series, its counters at 0 (at start, and when a reload adds it).
+    pub fn add_device(&self, device: &str) {
+        let metrics = self;
+        {
             metrics.up.get_or_create(&label(device)).set(1);
             metrics.job_running.get_or_create(&label(device)).set(0);
             metrics.progress.get_or_create(&label(device)).set(0.0);
@@ -381,7 +430,58 @@ impl Metrics {
             kinds(&metrics.readings, &READING_STATUSES);
             kinds(&metrics.faults, &FAULTS);
         }
-        metrics
+    }
+
+    /// A device a reload removed: its series go (a scrape no longer shows it).
+    pub fn remove_device(&self, device: &str) {
+        for family in [&self.up, &self.job_running, &self.lut_loaded] {
+            family.remove(&label(device));
+        }
+        for family in [
+            &self.threshold,
+            &self.white,
+            &self.drift,
+            &self.drift_error,
+            &self.calibrated_at,
+            &self.verified_at,
+            &self.progress,
+        ] {
+            family.remove(&label(device));
+        }
+        self.lut_overwritten.remove(&label(device));
+        set_stats(&self.verification, device, None);
+        set_stats(&self.held_out, device, None);
+        for kind in JOB_KINDS {
+            for outcome in JOB_OUTCOMES {
+                self.jobs.remove(&JobLabels {
+                    device: device.into(),
+                    kind: kind.into(),
+                    outcome: outcome.into(),
+                });
+            }
+        }
+        for (family, kinds) in [
+            (&self.readings, &READING_STATUSES[..]),
+            (&self.faults, &FAULTS[..]),
+        ] {
+            for kind in kinds {
+                family.remove(&KindLabels {
+                    device: device.into(),
+                    kind: (*kind).into(),
+                });
+            }
+        }
+        let Ok(mut times) = self.times.lock() else {
+            return;
+        };
+        if let Some(gone) = times.remove(device) {
+            for event in gone.events {
+                self.events.remove(&EventLabels {
+                    device: device.into(),
+                    event: event.into(),
+                });
+            }
+        }
     }
 
     fn with_times(&self, device: &str, f: impl FnOnce(&mut DeviceTimes)) {
@@ -419,6 +519,9 @@ impl Metrics {
 
     /// Count an event of `device` and update what it tells.
     pub fn observe(&self, device: &str, event: &Event) {
+        self.with_times(device, |t| {
+            t.events.insert(event.name());
+        });
         self.events
             .get_or_create(&EventLabels {
                 device: device.into(),
@@ -533,6 +636,24 @@ impl Metrics {
                 self.drift_error.remove(&label(device));
             }
         }
+    }
+
+    /// A device's recent full whites at the centre, (device clock s, cd/m²) oldest
+    /// first, and their drift (slope per second, standard error) if it can be told.
+    pub fn whites(&self, device: &str) -> (Vec<(f64, f64)>, Option<Drift>) {
+        let whites = self
+            .times
+            .lock()
+            .ok()
+            .and_then(|t| t.get(device).map(|t| t.whites.clone()))
+            .unwrap_or_default();
+        let drift = slope(&whites, DRIFT_MIN_SPAN_S);
+        (whites, drift)
+    }
+
+    /// Whether the device's instrument and display answered its last job.
+    pub fn device_up(&self, device: &str) -> bool {
+        self.up.get(&label(device)).is_none_or(|g| g.get() == 1)
     }
 
     /// Count an event handed to MQTT, or one dropped.

@@ -13,6 +13,7 @@
 //! next start with nothing lost or measured twice.
 
 pub mod api;
+pub mod browser;
 pub mod client;
 pub mod events;
 pub mod jobs;
@@ -20,11 +21,13 @@ pub mod lut;
 pub mod metrics;
 pub mod mqtt;
 pub mod notify;
+pub mod reload;
 pub mod serve;
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
 use std::time::{Duration, Instant};
 
 use tokio::sync::broadcast;
@@ -93,6 +96,9 @@ pub struct Bus {
     /// Set once the devices' stores are locked and the socket bound: a daemon that
     /// cannot start never says it is online.
     mqtt: std::sync::OnceLock<Arc<mqtt::Mqtt>>,
+    /// Resumes from suspend logind has told of: each LUT keeper loads its curves
+    /// again when the count moves.
+    pub(crate) resumes: AtomicU64,
 }
 
 impl Bus {
@@ -105,7 +111,21 @@ impl Bus {
             shutting_down: AtomicBool::new(false),
             metrics,
             mqtt: std::sync::OnceLock::new(),
+            resumes: AtomicU64::new(0),
         })
+    }
+
+    /// Tell of an event of the whole daemon (a reload): counted by the metrics, sent
+    /// on MQTT under the daemon's own topic, and to subscribers with no device.
+    fn publish_daemon(&self, event: Event) {
+        self.metrics.observe_daemon(&event);
+        if let Some(mqtt) = self.mqtt.get() {
+            mqtt.observe_daemon(&event);
+        }
+        let _ = self.events.send(DeviceEvent {
+            device: String::new(),
+            event,
+        });
     }
 
     /// Tell the metrics, MQTT and the subscribers (in that order: a subscriber that
@@ -142,9 +162,14 @@ pub struct Device {
     /// When the last job ended (or the daemon started).
     pub(crate) idle_since: Mutex<Instant>,
     next_verification: Mutex<Option<std::time::SystemTime>>,
-    /// The store's lock: it lives as long as the device does, including any job task
-    /// still holding it after `run` returns.
-    _store_lock: crate::profile::store::StoreLock,
+    /// Set when a reload removed or changed the device: it takes no new job, and once
+    /// its running job ends it leaves the daemon (and a changed one starts again).
+    retired: AtomicBool,
+    /// Told when the device is retired: its scheduler stops waiting.
+    retired_notify: tokio::sync::Notify,
+    /// The store's lock: held while the device serves, given back when a reload
+    /// retires it (so that its successor can take it).
+    store_lock: Mutex<Option<crate::profile::store::StoreLock>>,
 }
 
 /// Why a job was not started.
@@ -158,6 +183,8 @@ pub enum JobRefused {
     },
     #[error("the daemon is shutting down")]
     ShuttingDown,
+    #[error("{0} is leaving the daemon: the config was reloaded without it or with it changed")]
+    Retired(String),
 }
 
 impl Device {
@@ -181,8 +208,21 @@ impl Device {
             job_done: tokio::sync::Notify::new(),
             idle_since: Mutex::new(Instant::now()),
             next_verification: Mutex::new(None),
-            _store_lock: store_lock,
+            retired: AtomicBool::new(false),
+            retired_notify: tokio::sync::Notify::new(),
+            store_lock: Mutex::new(Some(store_lock)),
         })
+    }
+
+    /// Whether a reload retired it.
+    pub fn is_retired(&self) -> bool {
+        self.retired.load(Ordering::SeqCst)
+    }
+
+    /// Take no new job; the running one carries on to its end.
+    fn retire(&self) {
+        self.retired.store(true, Ordering::SeqCst);
+        self.retired_notify.notify_waiters();
     }
 
     pub fn store(&self) -> &ProfileStore {
@@ -266,6 +306,9 @@ impl Device {
     ) -> Result<JobStatus, JobRefused> {
         if self.is_shutting_down() {
             return Err(JobRefused::ShuttingDown);
+        }
+        if self.is_retired() {
+            return Err(JobRefused::Retired(self.name.clone()));
         }
         let mut slot = self.job.lock().map_err(|_| JobRefused::ShuttingDown)?;
         if let Some(running) = slot.as_ref() {
@@ -355,20 +398,32 @@ impl Device {
 
 /// The daemon: its devices and what they share.
 pub struct Daemon {
-    /// The whole config (its `[daemon]` section is the daemon's).
+    /// The config the daemon started with (its `[daemon]` and `[mqtt]` sections are
+    /// the daemon's; a reload changes only the devices).
     pub(crate) loaded: LoadedConfig,
-    devices: Vec<Arc<Device>>,
+    /// The devices serving, in the config's order; a reload changes the list.
+    devices: RwLock<Vec<Arc<Device>>>,
     pub(crate) bus: Arc<Bus>,
     started: Instant,
+    /// Where the config came from, to read it again.
+    options: DaemonOptions,
+    /// The devices the newest accepted config describes: a retired device's successor
+    /// is started from it when the retired one's job ends.
+    wanted: Mutex<Vec<DeviceConfig>>,
+    /// Each shared instrument's turn, kept across reloads.
+    turns: Mutex<BTreeMap<String, Arc<tokio::sync::Mutex<()>>>>,
+    /// One reload (or a retired device's replacement) at a time.
+    reloading: tokio::sync::Mutex<()>,
 }
 
 impl Daemon {
-    pub fn devices(&self) -> &[Arc<Device>] {
-        &self.devices
+    /// The devices serving now.
+    pub fn devices(&self) -> Vec<Arc<Device>> {
+        self.devices.read().map(|d| d.clone()).unwrap_or_default()
     }
 
     fn names(&self) -> String {
-        self.devices
+        self.devices()
             .iter()
             .map(|d| d.name.as_str())
             .collect::<Vec<_>>()
@@ -376,8 +431,9 @@ impl Daemon {
     }
 
     /// The device named, or with `None` the only one.
-    pub fn device(&self, name: Option<&str>) -> Result<&Arc<Device>, NoDevice> {
-        find_device(&self.devices, name, |d| d.name.as_str())
+    pub fn device(&self, name: Option<&str>) -> Result<Arc<Device>, NoDevice> {
+        let devices = self.devices();
+        find_device(&devices, name, |d| d.name.as_str()).cloned()
     }
 
     pub fn is_shutting_down(&self) -> bool {
@@ -391,7 +447,7 @@ impl Daemon {
     /// Stop taking jobs and ask the running ones to stop after their reading.
     pub fn begin_shutdown(&self) {
         self.bus.shutting_down.store(true, Ordering::SeqCst);
-        for device in &self.devices {
+        for device in self.devices() {
             device.emit(Event::ShuttingDown);
         }
     }
@@ -400,7 +456,7 @@ impl Daemon {
     pub async fn wait_idle(&self, timeout: Duration) -> bool {
         let deadline = tokio::time::Instant::now() + timeout;
         let mut all = true;
-        for device in &self.devices {
+        for device in self.devices() {
             all &= device.wait_idle(deadline).await;
         }
         all
@@ -408,11 +464,39 @@ impl Daemon {
 }
 
 /// Options from the command line.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct DaemonOptions {
+    /// `--config`; none: the search paths, else the built-in config.
+    pub config: Option<PathBuf>,
     pub state_dir: PathBuf,
     pub socket: Option<PathBuf>,
     pub tcp: Option<String>,
+    /// `--time-scale`: `daemon.simulated_time_scale`.
+    pub time_scale: Option<f64>,
+}
+
+impl DaemonOptions {
+    /// Read the config the options name, with the options laid over it and checked as
+    /// the daemon checks it: at the start and at every reload.
+    pub fn load_config(&self) -> Result<LoadedConfig, String> {
+        let mut loaded = crate::config::load_config_searching(
+            self.config.as_deref(),
+            &crate::config::config_search_paths(),
+        )
+        .map_err(|e| e.to_string())?;
+        let daemon = &mut loaded.config.daemon;
+        if let Some(socket) = &self.socket {
+            daemon.socket = Some(socket.clone());
+        }
+        if let Some(tcp) = &self.tcp {
+            daemon.tcp = Some(tcp.clone());
+        }
+        if let Some(scale) = self.time_scale {
+            daemon.simulated_time_scale = scale;
+        }
+        crate::config::check_config(&loaded.config)?;
+        Ok(loaded)
+    }
 }
 
 /// Bind the unix socket at `path` with mode 0600, replacing a stale one.
@@ -512,36 +596,44 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
     Ok(token)
 }
 
-/// Open every device's store (its own folder with `[[device]]`, else the state
-/// directory itself), holding each one's lock.
-fn open_devices_of(
-    configs: Vec<DeviceConfig>,
+/// Open a device's store (its own folder with `[[device]]`, else the state directory
+/// itself), holding its lock; `turns` gives devices sharing an instrument one turn.
+fn open_device(
+    config: DeviceConfig,
     keep_profiles: usize,
     state_dir: &Path,
+    turns: &Mutex<BTreeMap<String, Arc<tokio::sync::Mutex<()>>>>,
     bus: &Arc<Bus>,
-) -> Result<Vec<Arc<Device>>, DaemonError> {
-    let mut turns: std::collections::BTreeMap<String, Arc<tokio::sync::Mutex<()>>> =
-        Default::default();
-    let mut devices = Vec::new();
-    for config in configs {
-        let root = config.store_dir(state_dir);
-        std::fs::create_dir_all(&root).map_err(|source| DaemonError::Io {
-            path: root.clone(),
-            source,
-        })?;
-        let store = ProfileStore::new(&root).keeping(keep_profiles);
-        // Held while the daemon (and any job task) lives: no `calibrate` or second
-        // daemon writes this store meanwhile.
-        let lock = store.lock("chromacal daemon")?;
-        // A calibration killed while it held a window's LUT left the user's ramp.
-        crate::display::lut::restore_pending_logged(store.root());
-        let turn = config
-            .shared_instrument
-            .as_ref()
-            .map(|name| turns.entry(name.clone()).or_default().clone());
-        devices.push(Device::new(config, store, lock, turn, bus.clone()));
-    }
-    Ok(devices)
+) -> Result<Arc<Device>, DaemonError> {
+    let root = config.store_dir(state_dir);
+    std::fs::create_dir_all(&root).map_err(|source| DaemonError::Io {
+        path: root.clone(),
+        source,
+    })?;
+    let store = ProfileStore::new(&root).keeping(keep_profiles);
+    // Held while the device serves: no `calibrate` or second daemon writes this store
+    // meanwhile.
+    let lock = store.lock("chromacal daemon")?;
+    // A calibration killed while it held a window's LUT left the user's ramp.
+    crate::display::lut::restore_pending_logged(store.root());
+    let turn = config.shared_instrument.as_ref().map(|name| {
+        let mut turns = turns.lock().unwrap_or_else(|e| e.into_inner());
+        turns.entry(name.clone()).or_default().clone()
+    });
+    Ok(Device::new(config, store, lock, turn, bus.clone()))
+}
+
+/// What a device tells before the API answers: its figures from the store (metrics,
+/// MQTT), and its curves kept in the video LUT of a window device.
+fn restore_device(device: &Arc<Device>) {
+    device.restore_figures();
+    lut::start(device);
+}
+
+/// A device's jobs: the calibration a stop cut short resumed, the schedule started.
+fn start_device_jobs(device: &Arc<Device>) {
+    resume_unfinished(device);
+    tokio::spawn(jobs::scheduler(device.clone()));
 }
 
 /// Resume (or discard) the calibration a stop cut short on `device`.
@@ -575,14 +667,8 @@ fn resume_unfinished(device: &Arc<Device>) {
     }
 }
 
-/// Run the daemon until SIGTERM or SIGINT.
-pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(), DaemonError> {
-    if let Some(socket) = &options.socket {
-        loaded.config.daemon.socket = Some(socket.clone());
-    }
-    if let Some(tcp) = &options.tcp {
-        loaded.config.daemon.tcp = Some(tcp.clone());
-    }
+/// Run the daemon until SIGTERM or SIGINT, rereading its config at each SIGHUP.
+pub async fn run(loaded: LoadedConfig, options: DaemonOptions) -> Result<(), DaemonError> {
     crate::config::check_config(&loaded.config).map_err(DaemonError::Config)?;
     let config = loaded.config.daemon.clone();
     std::fs::create_dir_all(&options.state_dir).map_err(|source| DaemonError::Io {
@@ -593,12 +679,28 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     let names: Vec<String> = configs.iter().map(|d| d.name.clone()).collect();
     let metrics = Arc::new(metrics::Metrics::new(names.iter().map(String::as_str)));
     let bus = Bus::new(metrics.clone(), names.len());
-    let devices = open_devices_of(configs, config.keep_profiles, &options.state_dir, &bus)?;
+    let turns = Mutex::default();
+    let devices = configs
+        .iter()
+        .map(|c| {
+            open_device(
+                c.clone(),
+                config.keep_profiles,
+                &options.state_dir,
+                &turns,
+                &bus,
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let daemon = Arc::new(Daemon {
         loaded,
-        devices,
+        devices: RwLock::new(devices),
         bus,
         started: Instant::now(),
+        options: options.clone(),
+        wanted: Mutex::new(configs),
+        turns,
+        reloading: tokio::sync::Mutex::new(()),
     });
 
     // The TCP listener is bound and its token written before the unix socket exists:
@@ -649,19 +751,9 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
         let _ = daemon.bus.mqtt.set(mqtt.clone());
     }
     for device in daemon.devices() {
-        device.restore_figures();
+        restore_device(&device);
     }
-    // Each window device's curves kept in its video LUT.
-    let resumed: Vec<Arc<AtomicBool>> = daemon
-        .devices()
-        .iter()
-        .map(|device| {
-            let flag = Arc::new(AtomicBool::new(false));
-            lut::start(device, flag.clone());
-            flag
-        })
-        .collect();
-    tokio::spawn(lut::watch_resume(resumed));
+    tokio::spawn(lut::watch_resume(daemon.bus.clone()));
     let app = api::router(daemon.clone(), api::Access { owner, token });
     serve::raise_descriptor_limit();
     tokio::spawn(serve::serve(
@@ -687,8 +779,7 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     // Calibrations a stop cut short: on each device the newest that can be resumed.
     // The others are said, and listed in its status.
     for device in daemon.devices() {
-        resume_unfinished(device);
-        tokio::spawn(jobs::scheduler(device.clone()));
+        start_device_jobs(&device);
     }
     if let Some(interval) = notify::watchdog_interval() {
         tokio::spawn(async move {
@@ -700,7 +791,7 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     }
     notify::notify("READY=1\nSTATUS=waiting for jobs");
 
-    wait_for_stop_signal().await;
+    wait_for_stop_signal(&daemon).await;
     tracing::info!("stopping: finishing the readings under way");
     notify::notify("STOPPING=1\nSTATUS=stopping");
     daemon.begin_shutdown();
@@ -731,19 +822,27 @@ pub async fn run(mut loaded: LoadedConfig, options: DaemonOptions) -> Result<(),
     Ok(())
 }
 
-/// SIGTERM (systemd's stop) or SIGINT (Ctrl-C).
-async fn wait_for_stop_signal() {
+/// SIGTERM (systemd's stop) or SIGINT (Ctrl-C); each SIGHUP meanwhile rereads the
+/// config (systemd's `ExecReload`).
+async fn wait_for_stop_signal(daemon: &Arc<Daemon>) {
     use tokio::signal::unix::{SignalKind, signal};
     match (
         signal(SignalKind::terminate()),
         signal(SignalKind::interrupt()),
+        signal(SignalKind::hangup()),
     ) {
-        (Ok(mut term), Ok(mut int)) => {
+        (Ok(mut term), Ok(mut int), Ok(mut hup)) => loop {
             tokio::select! {
-                _ = term.recv() => {}
-                _ = int.recv() => {}
+                _ = term.recv() => return,
+                _ = int.recv() => return,
+                _ = hup.recv() => {
+                    notify::notify("RELOADING=1\nSTATUS=reloading the config");
+                    // The outcome is logged and told as an event either way.
+                    let _ = daemon.reload("SIGHUP").await;
+                    notify::notify("READY=1\nSTATUS=waiting for jobs");
+                }
             }
-        }
+        },
         _ => {
             let _ = tokio::signal::ctrl_c().await;
         }

@@ -238,13 +238,7 @@ impl Mqtt {
             options.set_credentials(user, password);
         }
         let (client, mut eventloop) = AsyncClient::new(options, config.queue);
-        let online = json!({
-            "online": true,
-            "pid": std::process::id(),
-            "version": env!("CARGO_PKG_VERSION"),
-            "devices": devices,
-        })
-        .to_string();
+        let online = online_status(devices);
         let retained = Arc::new(Mutex::new(BTreeMap::from([(status_topic, online)])));
         let connected = Arc::new(AtomicBool::new(false));
         let waiting = Arc::new(Mutex::new(Waiting::default()));
@@ -466,6 +460,46 @@ impl Mqtt {
         }
     }
 
+    /// The devices serving changed (a reload): the retained status names them.
+    pub fn set_devices(&self, devices: &[String]) {
+        self.send(
+            format!("{}/status", self.root),
+            QoS::AtLeastOnce,
+            true,
+            online_status(devices),
+        );
+    }
+
+    /// A device left the daemon: its retained state is cleared (an empty retained
+    /// message, which the broker takes as "delete").
+    pub fn forget_device(&self, device: &str) {
+        if let Ok(mut states) = self.states.lock() {
+            states.remove(device);
+        }
+        self.send(
+            format!("{}/{}/state", self.root, topic_level(device)),
+            QoS::AtLeastOnce,
+            true,
+            String::new(),
+        );
+    }
+
+    /// Publish an event of the whole daemon (a reload) under `<prefix>/<host>/event/`.
+    pub fn observe_daemon(&self, event: &Event) {
+        let mut payload = super::events::event_json("", event);
+        if let Value::Object(map) = &mut payload {
+            map.remove("device");
+            map.insert("host".into(), self.host.clone().into());
+            map.insert("at".into(), now().into());
+        }
+        self.send(
+            format!("{}/event/{}", self.root, event.name()),
+            QoS::AtLeastOnce,
+            false,
+            payload.to_string(),
+        );
+    }
+
     /// Say the daemon stopped (retained), leave the broker, and wait up to `timeout`
     /// for that to go out.
     pub async fn stop(&self, timeout: Duration) {
@@ -496,6 +530,17 @@ impl Mqtt {
             abort.abort();
         }
     }
+}
+
+/// The daemon's retained status while it runs, naming its devices.
+fn online_status(devices: &[String]) -> String {
+    json!({
+        "online": true,
+        "pid": std::process::id(),
+        "version": env!("CARGO_PKG_VERSION"),
+        "devices": devices,
+    })
+    .to_string()
 }
 
 /// The current profile as a device's state gives it: `how` it became current

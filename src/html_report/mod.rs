@@ -10,6 +10,7 @@
 //! them it says, rather than leaving a figure out in silence.
 
 pub mod figures;
+pub mod fleet;
 mod page;
 
 use std::path::Path;
@@ -37,6 +38,9 @@ pub struct ReportInput<'a> {
     pub readings_note: Option<String>,
     /// The daemon's profile history and verifications.
     pub history: Option<HistoryView>,
+    /// The daemon's device the profile is of: named on the page, with a link back to
+    /// the fleet page.
+    pub device: Option<String>,
 }
 
 /// Why a report could not be made.

@@ -34,7 +34,7 @@ figcaption { font-size: 0.85em; color: #555; max-width: 520px; }
 ";
 
 /// `s` with the five characters HTML gives meaning escaped.
-fn escape(s: &str) -> String {
+pub(crate) fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
@@ -120,10 +120,18 @@ pub fn report_html(input: &ReportInput) -> Result<String, ReportError> {
     let mut out = String::new();
     let _ = write!(
         out,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>chromacal report: {} ({})</title>\n<style>{STYLE}</style></head>\n<body>\n<h1>Calibration report: {}</h1>\n",
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>chromacal report: {device}{} ({})</title>\n<style>{STYLE}</style></head>\n<body>\n{back}<h1>Calibration report: {device}{}</h1>\n",
         escape(display),
         escape(&profile.id),
-        escape(display)
+        escape(display),
+        device = input
+            .device
+            .as_deref()
+            .map_or(String::new(), |d| format!("device {}, ", escape(d))),
+        back = match input.device {
+            Some(_) => "<p><a href=\"/\">← all devices</a></p>\n",
+            None => "",
+        },
     );
     identity(&mut out, profile);
     transfer(&mut out, input)?;
