@@ -362,3 +362,97 @@ async fn a_long_fit_neither_stalls_the_api_nor_outlives_sigterm() {
         "{status}"
     );
 }
+
+/// Send one keep-alive request on `stream` and read its answer's status (the body is
+/// read to its `content-length`).
+async fn ask(stream: &mut tokio::net::TcpStream, path: &str, token: Option<&str>) -> Option<u16> {
+    let auth = token.map_or(String::new(), |t| format!("Authorization: Bearer {t}\r\n"));
+    let request = format!("GET {path} HTTP/1.1\r\nHost: x\r\n{auth}\r\n");
+    stream.write_all(request.as_bytes()).await.ok()?;
+    let mut got = Vec::new();
+    let mut buffer = [0u8; 8192];
+    loop {
+        let n = tokio::time::timeout(Duration::from_secs(5), stream.read(&mut buffer))
+            .await
+            .ok()?
+            .ok()?;
+        if n == 0 {
+            return None;
+        }
+        got.extend_from_slice(&buffer[..n]);
+        let text = String::from_utf8_lossy(&got).to_string();
+        if let Some((head, body)) = text.split_once("\r\n\r\n") {
+            let length: usize = head
+                .lines()
+                .find_map(|l| {
+                    let (k, v) = l.split_once(':')?;
+                    k.eq_ignore_ascii_case("content-length")
+                        .then(|| v.trim().parse().ok())?
+                })
+                .unwrap_or(0);
+            if body.len() >= length {
+                return head.split(' ').nth(1)?.parse().ok();
+            }
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clients_without_the_token_holding_every_tcp_slot_do_not_keep_a_token_holder_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = common::daemon::free_port();
+    let daemon = start_daemon(
+        dir.path(),
+        &format!("[daemon]\ntcp = \"127.0.0.1:{port}\"\nidle_timeout_s = 60.0\n"),
+    );
+    let token = std::fs::read_to_string(daemon.state.join("api.token")).unwrap();
+    let token = token.trim();
+    let address = format!("127.0.0.1:{port}");
+
+    // 64 clients hold every slot of the cap with keep-alive scrapes of the open
+    // /metrics, and 64 more sit idle.
+    let mut scrapers = Vec::new();
+    for _ in 0..64 {
+        let mut stream = tokio::net::TcpStream::connect(&address).await.unwrap();
+        assert_eq!(ask(&mut stream, "/metrics", None).await, Some(200));
+        scrapers.push(stream);
+    }
+    let mut idle = Vec::new();
+    for _ in 0..64 {
+        idle.push(tokio::net::TcpStream::connect(&address).await.unwrap());
+    }
+    tokio::time::sleep(Duration::from_millis(200)).await;
+
+    // A token holder gets in, and keeps its connection while more clients without
+    // the token arrive.
+    let mut holder = tokio::net::TcpStream::connect(&address).await.unwrap();
+    assert_eq!(ask(&mut holder, "/status", Some(token)).await, Some(200));
+    for _ in 0..128 {
+        idle.push(tokio::net::TcpStream::connect(&address).await.unwrap());
+    }
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert_eq!(
+        ask(&mut holder, "/status", Some(token)).await,
+        Some(200),
+        "the token holder's connection was closed for clients without the token"
+    );
+    // Each new token holder too, ten times over.
+    for _ in 0..10 {
+        let mut again = tokio::net::TcpStream::connect(&address).await.unwrap();
+        assert_eq!(ask(&mut again, "/status", Some(token)).await, Some(200));
+        idle.push(tokio::net::TcpStream::connect(&address).await.unwrap());
+    }
+    // The scrapers, the oldest without the token, were closed to make room.
+    let mut closed = 0;
+    for stream in &mut scrapers {
+        if ask(stream, "/metrics", None).await.is_none() {
+            closed += 1;
+        }
+    }
+    assert_eq!(
+        closed,
+        64,
+        "scrapers still served past the cap: {}",
+        64 - closed
+    );
+}

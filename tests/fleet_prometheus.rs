@@ -262,3 +262,196 @@ async fn prometheus_scrapes_two_daemons_with_three_devices() {
         .unwrap();
     assert_eq!(refused.status(), 401);
 }
+
+/// The shipped rules, their `for:` scaled to the test: the devices' clocks run 500 ×
+/// fast, so the drift alert's 30 minutes is 4 s here; the others fire at once.
+fn rules_for_the_test(time_scale: f64) -> String {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/prometheus");
+    let rules = std::fs::read_to_string(dir.join("alerts.yml")).unwrap();
+    let drift_for = format!("for: {}s", (1800.0 * time_scale).ceil());
+    assert!(rules.contains("        for: 30m"));
+    rules
+        .lines()
+        .map(|line| match line.trim_start().strip_prefix("for: ") {
+            Some("30m") => format!("        {drift_for}"),
+            Some(_) => "        for: 0s".to_string(),
+            None => line.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn in_a_real_prometheus_the_drift_alert_fires_on_drift_only_and_five_faults_read_five() {
+    let dir = tempfile::tempdir().unwrap();
+    let scale = 0.002;
+    let port = free_port();
+    let missing = dir.path().join("no-such-tty");
+    let daemon = start_daemon(
+        dir.path(),
+        &format!(
+            r#"[daemon]
+simulated_time_scale = {scale}
+simulated_idle_ages = false
+tcp = "127.0.0.1:{port}"
+[[device]]
+name = "steady"
+[[device]]
+name = "drifting"
+[device.monitor.failures]
+drift_per_hour = 0.03
+[[device]]
+name = "unplugged"
+[device.instrument]
+driver = "pr670"
+port = "{}"
+[device.display]
+screen = "{}"
+"#,
+            missing.display(),
+            dir.path().join("no-such-screen").display()
+        ),
+    );
+    std::fs::write(dir.path().join("alerts.yml"), rules_for_the_test(scale)).unwrap();
+    let prometheus_port = free_port();
+    let config = dir.path().join("prometheus.yml");
+    std::fs::write(
+        &config,
+        format!(
+            "global:\n  scrape_interval: 1s\n  evaluation_interval: 1s\nrule_files: ['{}']\nscrape_configs:\n  - job_name: chromacal\n    static_configs:\n      - targets: ['127.0.0.1:{port}']\n",
+            dir.path().join("alerts.yml").display()
+        ),
+    )
+    .unwrap();
+    let log = std::fs::File::create(dir.path().join("prometheus.log")).unwrap();
+    let _prometheus = Server(
+        Command::new(installed("prometheus"))
+            .arg(format!("--config.file={}", config.display()))
+            .arg(format!(
+                "--storage.tsdb.path={}",
+                dir.path().join("tsdb").display()
+            ))
+            .arg(format!("--web.listen-address=127.0.0.1:{prometheus_port}"))
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap(),
+    );
+    wait_for_port(prometheus_port, "prometheus");
+    // The counters' zeros scraped before anything happens, as in a lab.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let scraped = || -> Option<()> {
+        let reply: serde_json::Value =
+            ureq::get(format!("http://127.0.0.1:{prometheus_port}/api/v1/query"))
+                .query(
+                    "query",
+                    r#"chromacal_instrument_faults_total{device="unplugged", kind="open"} == 0"#,
+                )
+                .call()
+                .ok()?
+                .body_mut()
+                .read_json()
+                .ok()?;
+        (!reply["data"]["result"].as_array()?.is_empty()).then_some(())
+    };
+    // (Prometheus answers 503 until its storage is ready.)
+    while scraped().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "prometheus never scraped the daemon"
+        );
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+
+    // 20 calibrations on the steady and the drifting monitor side by side; five jobs
+    // on the unplugged one, each failing at the open.
+    let api = daemon.endpoint();
+    let mut events = subscribe_json(&api, "/events");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    for round in 1..=20 {
+        let mut devices = vec!["steady", "drifting"];
+        if round <= 5 {
+            devices.push("unplugged");
+        }
+        for device in &devices {
+            let reply = post(
+                &api,
+                &format!("/devices/{device}/jobs"),
+                r#"{"kind": "calibrate"}"#,
+            )
+            .await;
+            assert_eq!(reply.status, 202, "{}", reply.text());
+        }
+        json_events_until(&mut events, Duration::from_secs(120), |seen| {
+            devices.iter().all(|d| finished_on(seen, d) == 1)
+        })
+        .await;
+    }
+    // A few scrapes and evaluations past the last reading.
+    tokio::time::sleep(Duration::from_secs(8)).await;
+
+    let fired = |alert: &str| -> Vec<String> {
+        let mut devices: Vec<String> = query(
+            prometheus_port,
+            &format!(r#"max_over_time(ALERTS{{alertname="{alert}", alertstate="firing"}}[30m])"#),
+        )
+        .iter()
+        .map(|s| s["metric"]["device"].as_str().unwrap_or("").to_string())
+        .collect();
+        devices.sort();
+        devices
+    };
+    let drift = query(
+        prometheus_port,
+        "3600 * chromacal_white_luminance_drift_cd_m2_per_second / chromacal_white_luminance_cd_m2",
+    );
+    assert_eq!(
+        fired("ChromacalWhiteLuminanceDrifting"),
+        ["drifting"],
+        "drift now, per hour: {drift:?}\n{}",
+        std::fs::read_to_string(dir.path().join("prometheus.log")).unwrap_or_default()
+    );
+    // The drifting monitor's estimate is near its 3 %/h.
+    let rate = drift
+        .iter()
+        .find(|s| s["metric"]["device"] == "drifting")
+        .and_then(|s| s["value"][1].as_str()?.parse::<f64>().ok())
+        .unwrap();
+    assert!((0.02..0.04).contains(&rate), "{rate}");
+
+    // Five faults read five: the counters were at 0 before the first one.
+    let faults = query(
+        prometheus_port,
+        r#"sum without (kind) (increase(chromacal_instrument_faults_total{device="unplugged"}[30m]))"#,
+    );
+    let value: f64 = faults[0]["value"][1].as_str().unwrap().parse().unwrap();
+    assert!(
+        (value - 5.0).abs() < 0.5,
+        "{value}: {:?}",
+        query(
+            prometheus_port,
+            r#"chromacal_instrument_faults_total{device="unplugged"}[30m]"#
+        )
+    );
+    assert_eq!(fired("ChromacalInstrumentFaultsClimbing"), ["unplugged"]);
+    let alerts: serde_json::Value =
+        ureq::get(&format!("http://127.0.0.1:{prometheus_port}/api/v1/alerts"))
+            .call()
+            .unwrap()
+            .body_mut()
+            .read_json()
+            .unwrap();
+    let climbing = alerts["data"]["alerts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["labels"]["alertname"] == "ChromacalInstrumentFaultsClimbing")
+        .unwrap_or_else(|| panic!("{alerts}"));
+    assert!(
+        climbing["annotations"]["summary"]
+            .as_str()
+            .unwrap()
+            .contains(": 5 device faults in the last hour"),
+        "{climbing}"
+    );
+}

@@ -266,6 +266,11 @@ async fn guard(
                     "send the API token as 'Authorization: Bearer <token>' (daemon.token_file)",
                 );
             }
+            if (holder || session)
+                && let Some(slot) = request.extensions().get::<Arc<super::serve::TcpSlot>>()
+            {
+                slot.promote();
+            }
             Some(if holder || session {
                 &state.limit_tcp
             } else {

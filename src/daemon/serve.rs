@@ -10,6 +10,14 @@
 //! `header_timeout_s`; a connection on which nothing is read or written for
 //! `idle_timeout_s` is closed; and a handler (with its request body) must be done
 //! within `request_timeout_s` (in `api.rs`).
+//!
+//! On TCP, a connection is *anonymous* until one of its requests shows the token (or
+//! a browser session): anonymous connections have a budget of their own
+//! (`max_connections`), and when it is full the oldest anonymous connection is closed
+//! to make room for the newcomer, so that clients without the token who hold every
+//! slot (idle, trickling headers, or scraping the open `/metrics`) cannot keep a
+//! token holder out: the holder's connection gets in, shows the token with its first
+//! request, and moves to the token holders' budget (another `max_connections`).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -82,9 +90,82 @@ pub fn raise_descriptor_limit() {
     }
 }
 
+/// The TCP listener's two budgets of connections.
+struct Budgets {
+    /// Anonymous connections, oldest first.
+    anonymous: std::sync::Mutex<std::collections::VecDeque<Arc<TcpSlot>>>,
+    max_anonymous: usize,
+    /// Token holders' connections.
+    holders: Arc<Semaphore>,
+}
+
+/// A TCP connection's place in the budgets; in each request's extensions, so that the
+/// API's guard can say when the connection has shown the token.
+pub struct TcpSlot {
+    budgets: Arc<Budgets>,
+    /// Told when an anonymous connection is closed to make room.
+    evicted: tokio::sync::Notify,
+    /// Its place among the token holders, once it has one.
+    holder: std::sync::Mutex<Option<OwnedSemaphorePermit>>,
+}
+
+impl TcpSlot {
+    /// The connection showed the token (or a session): it moves to the token holders'
+    /// budget when there is room there (else it stays anonymous).
+    pub fn promote(self: &Arc<Self>) {
+        let Ok(mut holder) = self.holder.lock() else {
+            return;
+        };
+        if holder.is_some() {
+            return;
+        }
+        if let Ok(permit) = self.budgets.holders.clone().try_acquire_owned() {
+            *holder = Some(permit);
+            drop(holder);
+            self.leave_anonymous();
+        }
+    }
+
+    fn leave_anonymous(self: &Arc<Self>) {
+        if let Ok(mut anonymous) = self.budgets.anonymous.lock() {
+            anonymous.retain(|s| !Arc::ptr_eq(s, self));
+        }
+    }
+}
+
+impl Budgets {
+    /// A slot for a new connection, closing the oldest anonymous one if the budget is
+    /// full (true in the second value when it did).
+    fn admit(self: &Arc<Self>) -> (Arc<TcpSlot>, bool) {
+        let slot = Arc::new(TcpSlot {
+            budgets: self.clone(),
+            evicted: tokio::sync::Notify::new(),
+            holder: std::sync::Mutex::new(None),
+        });
+        let mut evicted = false;
+        if let Ok(mut anonymous) = self.anonymous.lock() {
+            while anonymous.len() >= self.max_anonymous.max(1) {
+                if let Some(oldest) = anonymous.pop_front() {
+                    // A permit is stored: the connection's loop sees it even if it is
+                    // not waiting right now.
+                    oldest.evicted.notify_one();
+                    evicted = true;
+                }
+            }
+            anonymous.push_back(slot.clone());
+        }
+        (slot, evicted)
+    }
+}
+
 /// Accept and serve connections until the process ends.
 pub async fn serve(listener: Listener, app: Router, limits: ConnectionLimits) {
     let slots = Arc::new(Semaphore::new(limits.max_connections));
+    let budgets = Arc::new(Budgets {
+        anonymous: Default::default(),
+        max_anonymous: limits.max_connections,
+        holders: Arc::new(Semaphore::new(limits.max_connections)),
+    });
     let mut refused = LogThrottle::default();
     loop {
         let admitted = match &listener {
@@ -94,10 +175,16 @@ pub async fn serve(listener: Listener, app: Router, limits: ConnectionLimits) {
                 };
                 admit(stream, peer, &app, limits, &slots)
             }),
-            Listener::Tcp(l) => l
-                .accept()
-                .await
-                .map(|(stream, addr)| admit(stream, Peer::Tcp(addr), &app, limits, &slots)),
+            Listener::Tcp(l) => l.accept().await.map(|(stream, addr)| {
+                let (slot, evicted) = budgets.admit();
+                let app = app.clone();
+                tokio::spawn(async move {
+                    serve_connection(stream, Peer::Tcp(addr), app, limits, Some(slot.clone()))
+                        .await;
+                    slot.leave_anonymous();
+                });
+                !evicted
+            }),
         };
         match admitted {
             Ok(true) => {}
@@ -107,7 +194,7 @@ pub async fn serve(listener: Listener, app: Router, limits: ConnectionLimits) {
                         listener = listener.name(),
                         cap = limits.max_connections,
                         refused = count,
-                        "connections over the cap were closed (this one and those since the last such line)"
+                        "connections over the cap were closed (on TCP: the oldest without the token; this one and those since the last such line)"
                     );
                 }
             }
@@ -138,7 +225,7 @@ where
     };
     let app = app.clone();
     tokio::spawn(async move {
-        serve_connection(io, peer, app, limits).await;
+        serve_connection(io, peer, app, limits, None).await;
         drop::<OwnedSemaphorePermit>(permit);
     });
     true
@@ -172,8 +259,13 @@ impl LogThrottle {
 
 /// Serve one connection's requests (HTTP/1.1, keep-alive) until the client closes it,
 /// it breaks a limit, or it is idle too long.
-async fn serve_connection<I>(io: I, peer: Peer, app: Router, limits: ConnectionLimits)
-where
+async fn serve_connection<I>(
+    io: I,
+    peer: Peer,
+    app: Router,
+    limits: ConnectionLimits,
+    slot: Option<Arc<TcpSlot>>,
+) where
     I: AsyncRead + AsyncWrite + Unpin + Send + 'static,
 {
     let activity = Arc::new(Activity::new());
@@ -184,8 +276,12 @@ where
     });
     let service = {
         let activity = activity.clone();
+        let slot = slot.clone();
         hyper::service::service_fn(move |mut request: hyper::Request<Incoming>| {
             request.extensions_mut().insert(ConnectInfo(peer));
+            if let Some(slot) = &slot {
+                request.extensions_mut().insert(slot.clone());
+            }
             // A request being answered is not idleness (the request timeout bounds it).
             let busy = Busy::start(activity.clone());
             let answer = app.clone().oneshot(request);
@@ -202,8 +298,19 @@ where
         .serve_connection(io, service);
     tokio::pin!(connection);
     let check_every = (limits.idle_timeout / 4).max(Duration::from_millis(50));
+    let evicted = async {
+        match &slot {
+            Some(slot) => slot.evicted.notified().await,
+            None => std::future::pending().await,
+        }
+    };
+    tokio::pin!(evicted);
     loop {
         tokio::select! {
+            () = &mut evicted => {
+                tracing::debug!(?peer, "closing the oldest API connection without the token, to make room");
+                return;
+            }
             result = connection.as_mut() => {
                 if let Err(e) = result {
                     tracing::debug!(error = %e, "API connection ended");
