@@ -16,6 +16,7 @@ use chromacal::crf::scene::{
     Placement, XyzImage, read_exr, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
 };
 use chromacal::crf::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
+use chromacal::crf::spectral_image::SpectralImage;
 use chromacal::crf::spectral_table::standard_methods;
 use chromacal::crf::tone::{TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
 use chromacal::crf::{
@@ -513,12 +514,9 @@ fn read_source(
         });
     }
     if let Some(dir) = &args.spectral_image {
-        let (width, height, spectra) = read_spectral_stack(dir)?;
-        return Ok(Source::Spectra {
-            spectra,
-            light: None,
+        return Ok(Source::SpectralImage {
+            image: SpectralImage::read(dir).map_err(|e| e.to_string())?,
             scale: absolute_spectra("--spectral-image")?,
-            size: Some((width, height)),
             white,
         });
     }
@@ -541,6 +539,12 @@ enum Source {
         size: Option<(usize, usize)>,
         white: Option<Xyz>,
     },
+    /// A spectral image, integrated pixel by pixel.
+    SpectralImage {
+        image: SpectralImage,
+        scale: f64,
+        white: Option<Xyz>,
+    },
 }
 
 impl Source {
@@ -548,6 +552,15 @@ impl Source {
     fn scene(&self, method: &MethodKind, placement: &Placement) -> Result<ReadScene, Failure> {
         let (spectra, light, scale, size, white) = match self {
             Source::Colours(read) => return Ok(read.clone()),
+            Source::SpectralImage {
+                image,
+                scale,
+                white,
+            } => {
+                let xyz = image.integrate(method).map_err(|e| e.to_string())?;
+                let spectral = Some(format!("{} ({})", method.name(), method.parameter()));
+                return Ok(image_scene(&xyz, placement, *scale, *white, spectral));
+            }
             Source::Spectra {
                 spectra,
                 light,
@@ -623,53 +636,6 @@ fn read_spectra(path: &Path) -> Result<Vec<Vec<f64>>, Failure> {
     Ok((1..table.header.len())
         .map(|k| onto_grid(&wavelengths, &table.column(k)))
         .collect())
-}
-
-/// A directory of `<nm>.pfm` single-channel images: each pixel's spectrum on the grid.
-fn read_spectral_stack(dir: &Path) -> Result<(usize, usize, Vec<Vec<f64>>), Failure> {
-    let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let mut planes: Vec<(f64, PathBuf)> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("pfm")))
-        .filter_map(|p| {
-            let nm = p.file_stem()?.to_str()?.parse::<f64>().ok()?;
-            Some((nm, p))
-        })
-        .collect();
-    planes.sort_by(|a, b| a.0.total_cmp(&b.0));
-    if planes.len() < 2 {
-        return Err(Failure::from(format!(
-            "{}: a spectral image needs at least two planes named by wavelength (e.g. 450.pfm, 550.pfm)",
-            dir.display()
-        )));
-    }
-    let grey = Xyz::new(1.0, 1.0, 1.0);
-    let mut images = Vec::new();
-    for (nm, path) in &planes {
-        let image = read_pfm(path, &grey).map_err(|e| e.to_string())?;
-        if let Some((_, first)) = images.first().map(|(n, i): &(f64, XyzImage)| (*n, i))
-            && (first.width, first.height) != (image.width, image.height)
-        {
-            return Err(Failure::from(format!(
-                "{}: {} × {} where the first plane is {} × {}",
-                path.display(),
-                image.width,
-                image.height,
-                first.width,
-                first.height
-            )));
-        }
-        images.push((*nm, image));
-    }
-    let (width, height) = (images[0].1.width, images[0].1.height);
-    let wavelengths: Vec<f64> = images.iter().map(|(nm, _)| *nm).collect();
-    let spectra = (0..width * height)
-        .map(|k| {
-            let values: Vec<f64> = images.iter().map(|(_, i)| i.xyz[k].y).collect();
-            onto_grid(&wavelengths, &values)
-        })
-        .collect();
-    Ok((width, height, spectra))
 }
 
 /// XYZ (in units of ∫ S f dλ) of each spectrum, or of each reflectance under `light`

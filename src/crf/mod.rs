@@ -22,6 +22,7 @@ pub mod gamut;
 pub mod inverse_table;
 pub mod scene;
 pub mod spectral;
+pub mod spectral_image;
 pub mod spectral_table;
 pub mod tone;
 
