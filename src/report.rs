@@ -323,16 +323,18 @@ pub fn describe_model(model: &MonitorModel, units: &str) -> String {
         "XYZ(d, p) = K(p) · M · E(d) + black   (XYZ in {units})\n"
     );
     let _ = writeln!(out, "white  Y {:.4}  x {:.4}  y {:.4}", white.y, w.x, w.y);
+    // A black of 0 (an OLED, a model without a black term) has no finite ratio.
+    let contrast = white.y / model.black.y;
     let _ = writeln!(
         out,
-        "black  Y {:.5}  x {:.4}  y {:.4}   contrast {:.0}:1",
+        "black  Y {:.5}  x {:.4}  y {:.4}   contrast {}",
         model.black.y,
         b.x,
         b.y,
-        if model.black.y > 0.0 {
-            white.y / model.black.y
+        if model.black.y > 0.0 && contrast.is_finite() {
+            format!("{contrast:.0}:1")
         } else {
-            f64::INFINITY
+            "not finite (black is 0)".to_string()
         }
     );
     let rows: Vec<Vec<String>> = (0..3)

@@ -323,3 +323,58 @@ fn a_fifo_given_as_an_input_is_refused_not_waited_on() {
         );
     }
 }
+
+/// Issue 28, item 7: numbers of the command line that would be printed back as NaN or
+/// infinity with success (`render --display-contrast inf` gave "mean NaN, max -inf",
+/// exit 0) are refused by clap, naming the argument (exit 2).
+#[test]
+fn command_line_numbers_that_make_nan_or_infinity_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write(dir.path(), "x.csv", "X,Y,Z\n20,20,20\n");
+    let profile = dir.path().join("crt.toml");
+    let (code, _, stderr) = run(
+        &[
+            "fit",
+            common::fixture("ti3/crt-default.ti3").to_str().unwrap(),
+            "-o",
+            profile.to_str().unwrap(),
+        ],
+        Duration::from_secs(120),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    let profile = profile.to_str().unwrap();
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", profile, "--xyz", &scene, "-o", "-"];
+        args.extend_from_slice(extra);
+        run(&args, Duration::from_secs(30))
+    };
+    for (argument, value) in [
+        ("--display-contrast", "inf"),
+        ("--display-contrast", "nan"),
+        ("--display-contrast", "-1"),
+        ("--display-contrast", "1"),
+        ("--white-luminance", "1e308"),
+        ("--white-luminance", "0"),
+        ("--scb-outside", "2"),
+        ("--max-de00", "NaN"),
+    ] {
+        let pair = format!("{argument}={value}");
+        let (code, stdout, stderr) = render(&["--tone", "tumblin-rushmeier", &pair]);
+        assert_eq!(code, Some(2), "{pair}: {stdout}{stderr}");
+        assert!(stderr.contains(argument), "{pair}: {stderr}");
+        assert!(stdout.is_empty(), "{pair}: {stdout}");
+    }
+    // The same scene with sane numbers renders, and prints no NaN.
+    let (code, stdout, stderr) =
+        render(&["--tone", "tumblin-rushmeier", "--display-contrast", "50"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(!stdout.contains("NaN") && !stderr.contains("NaN") && !stderr.contains("inf"));
+    for args in [
+        ["daemon", "--time-scale", "inf"],
+        ["emulate", "--time-scale=-0.5", "--instrument=pr670"],
+    ] {
+        let (code, _, stderr) = run(&args, Duration::from_secs(10));
+        assert_eq!(code, Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains("--time-scale"), "{args:?}: {stderr}");
+    }
+}

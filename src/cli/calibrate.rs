@@ -43,7 +43,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     realtime: bool,
     /// Real seconds per simulated second with --realtime.
-    #[arg(long, default_value_t = 1.0, requires = "realtime")]
+    #[arg(long, default_value_t = 1.0, requires = "realtime", value_parser = super::shared::positive_number)]
     time_scale: f64,
     /// Print JSON instead of the summary: run_id, profile_id, profile_path, journal,
     /// published (and not_published_because), readings, instrument_s, fit_s, and the

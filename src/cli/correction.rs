@@ -65,7 +65,7 @@ struct MakeArgs {
     #[arg(long)]
     screen: Option<PathBuf>,
     /// Multiplies the instruments' protocol timeouts (for emulators run faster).
-    #[arg(long)]
+    #[arg(long, value_parser = super::shared::positive_number)]
     timing_scale: Option<f64>,
     /// Print the fit as JSON.
     #[arg(long)]

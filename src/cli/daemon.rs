@@ -47,7 +47,7 @@ pub struct DaemonArgs {
     tcp: Option<String>,
     /// Real seconds per simulated second for the simulated monitor and instrument
     /// (`daemon.simulated_time_scale`; 0.01 runs a 5-minute calibration in 3 s).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", value_parser = super::shared::positive_number)]
     time_scale: Option<f64>,
 }
 

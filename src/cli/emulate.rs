@@ -61,7 +61,7 @@ pub struct EmulateArgs {
     #[arg(long)]
     pub record: Option<PathBuf>,
     /// Real seconds per instrument second (0.01 answers a hundred times faster).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::shared::positive_number)]
     pub time_scale: f64,
     /// Where to put the screen socket [default: a file in the temporary directory].
     #[arg(long)]

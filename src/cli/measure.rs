@@ -15,7 +15,7 @@ pub struct MeasureArgs {
     #[arg(long, default_value_t = 1)]
     count: usize,
     /// Multiplies the protocol's timeouts (for emulators run faster than real time).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::shared::positive_number)]
     timing_scale: f64,
     /// Print each reading (XYZ, spectrum, the instrument's code and reply) as JSON.
     #[arg(long)]

@@ -29,7 +29,9 @@ use chromacal::model::target::{WhiteTarget, daylight_xy, parse_white};
 use chromacal::numeric_csv::NumericTable;
 use chromacal::profile::Profile;
 
-use super::shared::{Failure, IlluminantArg};
+use super::shared::{
+    Failure, IlluminantArg, contrast_ratio, non_negative_number, positive_number, share,
+};
 
 /// Render a scene for a calibrated display: XYZ (a CSV list or a PFM image) or
 /// spectra (emission, reflectance under an illuminant, or a stack of per-wavelength
@@ -67,7 +69,7 @@ pub struct RenderArgs {
     units: UnitsArg,
     /// Luminance (cd/m²) of Y = 100 in a relative scene and of the white of a
     /// reflectance scene [default: the display's white].
-    #[arg(long)]
+    #[arg(long, value_parser = positive_number)]
     white_luminance: Option<f64>,
     /// Illuminant of --reflectance.
     #[arg(long, value_enum, ignore_case = true, default_value = "d65")]
@@ -88,14 +90,14 @@ pub struct RenderArgs {
     #[arg(long, value_enum, ignore_case = true, default_value = "colorimetric")]
     tone: ToneArg,
     /// Usable contrast of the display for Tumblin–Rushmeier (the survey's 35).
-    #[arg(long, default_value_t = TUMBLIN_RUSHMEIER_CONTRAST)]
+    #[arg(long, default_value_t = TUMBLIN_RUSHMEIER_CONTRAST, value_parser = contrast_ratio)]
     display_contrast: f64,
     /// Gamut mapping of colours the display cannot show where they are.
     #[arg(long, value_enum, ignore_case = true, default_value = "clip")]
     gamut: GamutArg,
     /// Stone–Cowan–Beatty: the share of colours its transform may leave outside
     /// (then projected).
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.01, value_parser = share)]
     scb_outside: f64,
     /// Bits per channel of the codes.
     #[arg(long, default_value_t = 8)]
@@ -123,7 +125,7 @@ pub struct RenderArgs {
     #[arg(long)]
     explain: bool,
     /// Largest ΔE00 (over the scene's pixels) a part may cost and still be dropped.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = non_negative_number)]
     max_de00: f64,
 }
 

@@ -23,6 +23,57 @@ impl<E: std::fmt::Display> From<E> for Failure {
     }
 }
 
+/// A number of the command line: finite, and what `check` allows. clap names the
+/// argument when one is refused (exit 2), so no NaN or infinity goes on to be printed
+/// as a result.
+fn number(text: &str, check: impl Fn(f64) -> bool, what: &str) -> Result<f64, String> {
+    let value: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{text}' is not a number"))?;
+    if value.is_finite() && check(value) {
+        Ok(value)
+    } else {
+        Err(format!("'{text}': {what}"))
+    }
+}
+
+/// Above zero (a time scale, a luminance).
+pub fn positive_number(text: &str) -> Result<f64, String> {
+    number(
+        text,
+        |v| v > 0.0 && v <= 1e9,
+        "give a finite number above 0 (at most 1e9)",
+    )
+}
+
+/// Zero or more (a tolerance).
+pub fn non_negative_number(text: &str) -> Result<f64, String> {
+    number(
+        text,
+        |v| (0.0..=1e9).contains(&v),
+        "give a finite number of 0 or more (at most 1e9)",
+    )
+}
+
+/// A share, 0 to 1.
+pub fn share(text: &str) -> Result<f64, String> {
+    number(
+        text,
+        |v| (0.0..=1.0).contains(&v),
+        "give a share from 0 to 1",
+    )
+}
+
+/// A contrast ratio: above 1.
+pub fn contrast_ratio(text: &str) -> Result<f64, String> {
+    number(
+        text,
+        |v| v > 1.0 && v <= 1e9,
+        "give a contrast ratio above 1 (at most 1e9)",
+    )
+}
+
 /// The exit codes, for `--help`.
 pub const EXIT_CODES: &str = "Exit codes: 0 done; 1 failed (the message says why); 2 the command line is wrong; \
 3 a profile was made but missed the [publish] limits (kept, not made current); \
@@ -77,7 +128,7 @@ pub struct DeviceArgs {
     #[arg(long)]
     screen: Option<PathBuf>,
     /// Multiplies the instrument protocol's timeouts (for emulators run faster than real time).
-    #[arg(long)]
+    #[arg(long, value_parser = positive_number)]
     timing_scale: Option<f64>,
     /// Where patches go: window[:OUTPUT] (chromacal's full-screen window on an X11
     /// output, the primary by default; see `chromacal displays`), resolve (a pattern

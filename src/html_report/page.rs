@@ -94,7 +94,10 @@ fn parameter(name: &str, value: f64) -> String {
 }
 
 fn seconds(s: f64) -> String {
-    if s >= 60.0 {
+    if !(s.is_finite() && s >= 0.0) {
+        // A run's cost read from a file written by hand, say: nothing to print.
+        "–".to_string()
+    } else if s >= 60.0 {
         format!("{:.0} min {:.0} s", (s / 60.0).floor(), s % 60.0)
     } else if s >= 1.0 {
         format!("{s:.1} s")
