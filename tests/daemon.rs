@@ -67,6 +67,10 @@ async fn a_calibration_started_through_the_api_measures_an_emulated_instrument_a
             .all(|p| p.last.is_some_and(|l| l.luminance.is_some()))
     );
     assert!(progress.iter().skip(5).all(|p| p.eta_s.is_some()));
+    // The phase says what the job does: measuring while patches are left, fitting
+    // once the last is read.
+    assert!(progress[..total - 1].iter().all(|p| p.phase == "measuring"));
+    assert_eq!(progress.last().unwrap().phase, "fitting");
     let published = seen.iter().find_map(|e| match e {
         Event::Published { profile_id, .. } => Some(profile_id.clone()),
         _ => None,
@@ -140,6 +144,17 @@ async fn history_rollback_and_a_verification_are_recorded() {
     assert_eq!(record.delta_e00.len(), 8);
     let mean = record.stats.unwrap().mean;
     assert!(mean < 0.5, "a fresh profile verifies well: {mean}");
+    let phases: Vec<String> = seen
+        .iter()
+        .filter_map(|e| match e {
+            Event::Progress { job } => Some(job.phase.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        phases.last().map(String::as_str),
+        Some("comparing with the profile")
+    );
     assert!(!record.escalated);
 
     let history = get(&api, "/history").await.json().unwrap();

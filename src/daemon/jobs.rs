@@ -369,10 +369,13 @@ pub(crate) fn current_profile(device: &Device) -> Option<Profile> {
 
 /// A progress handler that updates the job status (with an ETA from this job's pace
 /// and the ΔE00 against the current profile) and tells subscribers.
+/// What a job's progress events tell; `after_last` is the phase once every planned
+/// patch is read (the job then fits, or compares), until another is planned.
 fn progress_handler<'a>(
     device: &'a Arc<Device>,
     current: Option<&'a MonitorModel>,
     clock: Arc<dyn TimeSource>,
+    after_last: &'static str,
 ) -> impl FnMut(&Progress) + Send + 'a {
     let started = Instant::now();
     let mut measured_here = 0usize;
@@ -408,7 +411,10 @@ fn progress_handler<'a>(
             delta_e00,
         };
         if let Some(job) = device.update_job(|j| {
-            j.phase = "measuring".into();
+            j.phase = match p.total > 0 && p.done >= p.total {
+                true => after_last.into(),
+                false => "measuring".into(),
+            };
             j.done = p.done;
             j.total = p.total;
             j.eta_s = Some(per_patch * p.total.saturating_sub(p.done) as f64);
@@ -444,6 +450,7 @@ async fn calibrate(
         device,
         current.as_ref().map(|p| &p.model),
         devices.clock.clone(),
+        "fitting",
     );
     let mut hooks = RunHooks {
         progress: &mut progress,
@@ -524,7 +531,11 @@ async fn measure_plan(
         .join(id)
         .join("journal.jsonl");
     let mut journal = Journal::create(&path, header).map_err(|e| e.to_string())?;
-    let mut progress = progress_handler(device, Some(current), devices.clock.clone());
+    let after_last = match folder {
+        "verifications" => "comparing with the profile",
+        _ => "fitting",
+    };
+    let mut progress = progress_handler(device, Some(current), devices.clock.clone(), after_last);
     let mut hooks = RunHooks {
         progress: &mut progress,
         prompt: None,

@@ -413,14 +413,28 @@ impl Mqtt {
 
     /// Publish an event of `device`, and its new state when the event changes it.
     pub fn observe(&self, device: &str, event: &Event) {
-        if matches!(event, Event::Progress { .. }) && !self.progress {
-            return;
-        }
         let now = now();
+        if !(matches!(event, Event::Progress { .. }) && !self.progress) {
+            self.publish_event(device, event, &now);
+        }
+        // Changed and sent under one lock, so that two events of one device cannot
+        // leave the older state retained.
+        let Ok(mut states) = self.states.lock() else {
+            return;
+        };
+        let state = states
+            .entry(device.to_string())
+            .or_insert_with(|| json!({"device": device}));
+        if update_state(state, event, &now) {
+            self.send_state(device, state);
+        }
+    }
+
+    fn publish_event(&self, device: &str, event: &Event, now: &str) {
         let mut payload = super::events::event_json(device, event);
         if let Value::Object(map) = &mut payload {
             map.insert("host".into(), self.host.clone().into());
-            map.insert("at".into(), now.clone().into());
+            map.insert("at".into(), now.into());
         }
         let topic = format!(
             "{}/{}/event/{}",
@@ -446,17 +460,6 @@ impl Mqtt {
                 }
                 self.send(topic, QoS::AtLeastOnce, false, payload.to_string())
             }
-        }
-        // Changed and sent under one lock, so that two events of one device cannot
-        // leave the older state retained.
-        let Ok(mut states) = self.states.lock() else {
-            return;
-        };
-        let state = states
-            .entry(device.to_string())
-            .or_insert_with(|| json!({"device": device}));
-        if update_state(state, event, &now) {
-            self.send_state(device, state);
         }
     }
 
@@ -603,6 +606,24 @@ fn update_state(state: &mut Value, event: &Event, now: &str) -> bool {
             ("last_verification", Value::Null),
         ],
         Event::Verification { record } => vec![("last_verification", verification_state(record))],
+        // A running job's state is republished when its phase changes (not at every
+        // reading: the counts are in the progress events).
+        Event::Progress { job }
+            if map
+                .get("job")
+                .is_some_and(|j| j.is_object() && j["phase"] != job.phase.as_str()) =>
+        {
+            vec![("job", json!(job))]
+        }
+        Event::Warmup { job_id, .. }
+            if map
+                .get("job")
+                .is_some_and(|j| j["id"] == job_id.as_str() && j["phase"] != "warming up") =>
+        {
+            let mut job = map.get("job").cloned().unwrap_or_default();
+            job["phase"] = "warming up".into();
+            vec![("job", job)]
+        }
         Event::DeviceLost { message, fault } => vec![(
             "device_lost",
             json!({"at": now, "fault": fault, "message": message}),
@@ -686,8 +707,29 @@ mod tests {
         assert!(update_state(&mut state, &finished("ok"), "t5"));
         assert!(state["device_lost"].is_null());
         assert_eq!(state["updated"], "t5");
-        // Progress changes nothing that is republished.
-        assert!(!update_state(&mut state, &Event::Progress { job }, "t6"));
+        // Progress changes nothing that is republished, but a job's new phase is.
+        assert!(!update_state(
+            &mut state,
+            &Event::Progress { job: job.clone() },
+            "t6"
+        ));
+        let mut measuring = job.clone();
+        measuring.phase = "measuring".into();
+        assert!(update_state(&mut state, &Event::JobStarted { job }, "t7"));
+        assert!(update_state(
+            &mut state,
+            &Event::Progress {
+                job: measuring.clone()
+            },
+            "t8"
+        ));
+        assert_eq!(state["job"]["phase"], "measuring");
+        measuring.done += 1;
+        assert!(!update_state(
+            &mut state,
+            &Event::Progress { job: measuring },
+            "t9"
+        ));
     }
 
     #[test]
