@@ -414,7 +414,7 @@ impl Mqtt {
     /// Publish an event of `device`, and its new state when the event changes it.
     pub fn observe(&self, device: &str, event: &Event) {
         let now = now();
-        if !(matches!(event, Event::Progress { .. }) && !self.progress) {
+        if self.progress || !matches!(event, Event::Progress { .. }) {
             self.publish_event(device, event, &now);
         }
         // Changed and sent under one lock, so that two events of one device cannot
