@@ -201,6 +201,19 @@ pub struct MqttConfig {
     pub progress: bool,
 }
 
+/// Longest MQTT prefix, host level or client id taken: topics of a device's events
+/// stay far within MQTT's 65,535 bytes, and brokers take client ids this long
+/// (MQTT 3.1.1 promises only 23).
+pub const MAX_MQTT_NAME: usize = 256;
+
+/// A value as an error message quotes it: at most 40 characters.
+fn short(value: &str) -> String {
+    match value.char_indices().nth(40) {
+        Some((at, _)) => format!("{}…", &value[..at]),
+        None => value.to_string(),
+    }
+}
+
 impl Default for MqttConfig {
     fn default() -> Self {
         MqttConfig {
@@ -234,6 +247,29 @@ impl MqttConfig {
                 "mqtt.prefix = \"{}\" must be a topic without wildcards (+, #)",
                 self.prefix
             ));
+        }
+        // Topics starting with `$` are the broker's own (`$SYS/…`, MQTT 3.1.1 §4.7.2):
+        // a client's publications there are refused or never reach subscribers.
+        if self.prefix.starts_with('$') {
+            return Err(format!(
+                "mqtt.prefix = \"{}\" starts with '$': such topics are the broker's own",
+                short(&self.prefix)
+            ));
+        }
+        for (key, value) in [
+            ("mqtt.prefix", Some(&self.prefix)),
+            ("mqtt.host", self.host.as_ref()),
+            ("mqtt.client_id", self.client_id.as_ref()),
+        ] {
+            if let Some(value) = value
+                && (value.is_empty() || value.len() > MAX_MQTT_NAME)
+            {
+                return Err(format!(
+                    "{key} = \"{}\" has {} bytes: give 1 to {MAX_MQTT_NAME}",
+                    short(value),
+                    value.len()
+                ));
+            }
         }
         Ok(())
     }

@@ -151,16 +151,51 @@ pub fn host_name() -> String {
 
 /// A user name on the first line and a password on the second; the file must not be
 /// readable by others.
+/// What a broker's refusal of the connection (its CONNACK code, MQTT 3.1.1 §3.2.2.3)
+/// means for the config; `None` when the broker was not reached at all.
+fn refusal_reason(error: &rumqttc::ConnectionError) -> Option<&'static str> {
+    use rumqttc::ConnectReturnCode as Code;
+    let rumqttc::ConnectionError::ConnectionRefused(code) = error else {
+        return None;
+    };
+    Some(match code {
+        Code::BadUserNamePassword => "wrong user name or password (mqtt.credentials_file)",
+        Code::NotAuthorized => {
+            "not authorised: the broker wants credentials (mqtt.credentials_file) or its ACL refuses this client"
+        }
+        Code::BadClientId => "it refuses the client id (mqtt.client_id)",
+        Code::RefusedProtocolVersion => "it does not speak MQTT 3.1.1",
+        Code::ServiceUnavailable => "it is unavailable",
+        Code::Success => "no reason given",
+    })
+}
+
+/// The uid this process runs as: the owner of its `/proc/self`.
+fn own_uid() -> Option<u32> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata("/proc/self").ok().map(|m| m.uid())
+}
+
 fn read_credentials(path: &Path) -> Result<(String, String), MqttError> {
     use std::os::unix::fs::PermissionsExt;
     let error = |message: String| MqttError::Credentials {
         path: path.display().to_string(),
         message,
     };
-    let mode = std::fs::metadata(path)
-        .map_err(|e| error(e.to_string()))?
-        .permissions()
-        .mode();
+    let metadata = std::fs::metadata(path).map_err(|e| error(e.to_string()))?;
+    let mode = metadata.permissions().mode();
+    {
+        // A secret in a file another user owns is theirs to change or read.
+        use std::os::unix::fs::MetadataExt;
+        if let Some(me) = own_uid()
+            && metadata.uid() != me
+        {
+            return Err(error(format!(
+                "it belongs to uid {}, not to the daemon's user (uid {me}): give the daemon its own copy, mode 0600",
+                metadata.uid()
+            )));
+        }
+    }
     if mode & 0o077 != 0 {
         return Err(error(format!(
             "others can read it (mode {:o}): make it 0600",
@@ -271,7 +306,14 @@ impl Mqtt {
                         Err(e) => {
                             connected.store(false, Ordering::SeqCst);
                             if let Some(n) = failures.note() {
-                                tracing::warn!(%broker, error = %e, failures = n, "MQTT broker unreachable; trying again every second (outcome events wait, progress is coalesced)");
+                                match refusal_reason(&e) {
+                                    Some(why) => {
+                                        tracing::error!(%broker, error = %e, failures = n, "the MQTT broker refused the connection: {why}; trying again every second (outcome events wait, progress is coalesced)")
+                                    }
+                                    None => {
+                                        tracing::warn!(%broker, error = %e, failures = n, "MQTT broker unreachable; trying again every second (outcome events wait, progress is coalesced)")
+                                    }
+                                }
                             }
                             tokio::time::sleep(Duration::from_secs(1)).await;
                         }
@@ -758,6 +800,34 @@ mod tests {
                 },
                 "mqtt.prefix",
             ),
+            (
+                MqttConfig {
+                    prefix: "$SYS/lab".into(),
+                    ..ok.clone()
+                },
+                "the broker's own",
+            ),
+            (
+                MqttConfig {
+                    prefix: "p".repeat(70_000),
+                    ..ok.clone()
+                },
+                "mqtt.prefix = \"pppppppppppppppppppppppppppppppppppppppp…\" has 70000 bytes",
+            ),
+            (
+                MqttConfig {
+                    client_id: Some("c".repeat(300)),
+                    ..ok.clone()
+                },
+                "mqtt.client_id",
+            ),
+            (
+                MqttConfig {
+                    host: Some(String::new()),
+                    ..ok.clone()
+                },
+                "mqtt.host",
+            ),
         ] {
             let error = config.check().unwrap_err();
             assert!(error.contains(said), "{error}");
@@ -783,5 +853,23 @@ mod tests {
         );
         std::fs::write(&path, "lab\n").unwrap();
         assert!(read_credentials(&path).is_err());
+        // Another user's file is refused, naming the owner (as root: chown it).
+        if own_uid() == Some(0) {
+            std::fs::write(&path, "lab\nsecret\n").unwrap();
+            std::os::unix::fs::chown(&path, Some(65534), None).unwrap();
+            let error = read_credentials(&path).unwrap_err().to_string();
+            assert!(error.contains("uid 65534"), "{error}");
+        }
+    }
+
+    #[test]
+    fn a_broker_refusing_the_login_is_named_as_such() {
+        let refused = |code| rumqttc::ConnectionError::ConnectionRefused(code);
+        let why = refusal_reason(&refused(rumqttc::ConnectReturnCode::BadUserNamePassword));
+        assert!(why.unwrap().contains("password"));
+        let why = refusal_reason(&refused(rumqttc::ConnectReturnCode::NotAuthorized));
+        assert!(why.unwrap().contains("not authorised"));
+        let io = rumqttc::ConnectionError::Io(std::io::Error::other("refused"));
+        assert_eq!(refusal_reason(&io), None);
     }
 }
