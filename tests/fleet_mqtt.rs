@@ -448,3 +448,76 @@ async fn with_the_broker_down_a_calibration_completes_and_the_dropped_events_are
         p["current_profile"]["id"] == profile && p["last_job"]["result"] == "ok"
     });
 }
+
+/// Issue 28, item 7: a broker that refuses the login is named as such ("wrong user
+/// name or password", "not authorised"), not as "unreachable"; with the right
+/// credentials the daemon connects.
+#[test]
+fn a_broker_refusing_the_password_is_named_not_called_unreachable() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    // Mosquitto drops to its own user: it must read its password file.
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let passwords = dir.path().join("passwords");
+    let made = Command::new("mosquitto_passwd")
+        .args(["-b", "-c"])
+        .arg(&passwords)
+        .args(["lab", "right-password"])
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{made:?}");
+    std::fs::set_permissions(&passwords, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let port = free_port();
+    let config = dir.path().join("mosquitto.conf");
+    std::fs::write(
+        &config,
+        format!(
+            "listener {port} 127.0.0.1\nallow_anonymous false\npassword_file {}\npersistence false\n",
+            passwords.display()
+        ),
+    )
+    .unwrap();
+    let _broker = Server(
+        Command::new(installed("mosquitto"))
+            .arg("-c")
+            .arg(&config)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_for_port(port, "mosquitto");
+    for (password, said) in [
+        ("wrong-password", "the MQTT broker refused the connection"),
+        ("right-password", "MQTT connected"),
+    ] {
+        let run = tempfile::tempdir().unwrap();
+        let credentials = run.path().join("mqtt.credentials");
+        std::fs::write(&credentials, format!("lab\n{password}\n")).unwrap();
+        std::fs::set_permissions(&credentials, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let mut daemon = start_daemon(
+            run.path(),
+            &format!(
+                "[mqtt]\nbroker = \"127.0.0.1:{port}\"\ncredentials_file = \"mqtt.credentials\"\n"
+            ),
+        );
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while !daemon.log_text().contains(said) {
+            assert!(
+                Instant::now() < deadline,
+                "{password}: no \"{said}\" in\n{}",
+                daemon.log_text()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let log = daemon.log_text();
+        assert!(!log.contains("unreachable"), "{log}");
+        if password == "wrong-password" {
+            assert!(
+                log.contains("wrong user name or password") || log.contains("not authorised"),
+                "{log}"
+            );
+        }
+        daemon.terminate();
+    }
+}
