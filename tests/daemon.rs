@@ -647,3 +647,42 @@ async fn a_daemon_calibration_with_a_target_publishes_curves_measured_into_place
             .contains("TARGET_DESCRIPTION \"white x 0.3127 y 0.3290, sRGB tone")
     );
 }
+
+/// Issue 28, item 7: `runs/` is pruned. With `keep_profiles = 2`, after five
+/// calibrations the store holds the two profiles and their runs, the newest two runs
+/// whose profiles it let go, and nothing older.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn spent_calibration_runs_past_the_newest_few_are_removed() {
+    let dir = tempfile::tempdir().unwrap();
+    let daemon = start_daemon(
+        dir.path(),
+        "[daemon]\nsimulated_time_scale = 0.002\nsimulated_idle_ages = false\nkeep_profiles = 2\n",
+    );
+    let api = daemon.endpoint();
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let mut runs = Vec::new();
+    for _ in 0..5 {
+        let id = start_job(&api, "calibrate").await;
+        let (_, outcome) = events_of_job(&mut events, &id, Duration::from_secs(60)).await;
+        assert!(outcome.published, "{outcome:?}");
+        runs.push(outcome.profile_id.unwrap());
+    }
+    let left: Vec<String> = common::daemon_runs(&daemon.state)
+        .iter()
+        .map(|p| {
+            p.parent()
+                .unwrap()
+                .file_name()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    let mut expected = runs[1..].to_vec();
+    expected.sort();
+    let mut left_sorted = left.clone();
+    left_sorted.sort();
+    assert_eq!(left_sorted, expected, "runs left: {left:?}, made: {runs:?}");
+    assert!(daemon.log_text().contains("removed old job folders"));
+}

@@ -4,6 +4,7 @@ pub mod correction;
 pub mod devices;
 pub mod displays;
 pub mod refine;
+pub mod retention;
 pub mod rig;
 pub mod run;
 pub mod sequential;

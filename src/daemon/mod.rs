@@ -343,6 +343,15 @@ impl Device {
         let id = status.id.clone();
         tokio::spawn(async move {
             let outcome = jobs::run_job(&device, kind, &id, resume, &cancel).await;
+            // Old job folders go once the job is over (none of this device's runs).
+            {
+                let device = device.clone();
+                let keep = device.loaded.config.daemon.keep_profiles;
+                let _ = tokio::task::spawn_blocking(move || {
+                    crate::calibrate::retention::prune_finished(device.store(), keep)
+                })
+                .await;
+            }
             if let Ok(mut idle) = device.idle_since.lock() {
                 *idle = Instant::now();
             }

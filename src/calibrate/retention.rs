@@ -1,0 +1,174 @@
+//! What a store keeps of finished jobs, so that a daemon left running for years does
+//! not fill its disk: `runs/` (calibration journals), `verifications/` and
+//! `uniformity/` (the journals of those jobs) would otherwise grow by one folder a job.
+//!
+//! The rule, applied after each daemon job:
+//! * a calibration run that is not finished (no `profile` marker) is never touched:
+//!   it may still be resumed;
+//! * a finished run whose profile is still in the store is kept: the report reads
+//!   its readings;
+//! * a finished run whose profile the store has let go (past `daemon.keep_profiles`),
+//!   or that was discarded, is *spent*: the newest `keep` of those are kept, for a
+//!   look back, the older ones removed;
+//! * of the verification and uniformity journals, the newest [`JOB_JOURNALS_KEPT`] of
+//!   each kind are kept (each verification's numbers stay in `verifications.jsonl`).
+
+use std::path::{Path, PathBuf};
+
+use crate::profile::store::ProfileStore;
+
+/// Verification and uniformity journals kept, of each kind.
+pub const JOB_JOURNALS_KEPT: usize = 50;
+
+/// The marker a finished run has (see `session`): the profile's path, or `discarded`.
+const DONE_MARKER: &str = "profile";
+
+/// Folders removed, by kind.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Pruned {
+    pub runs: usize,
+    pub job_journals: usize,
+}
+
+/// The folders under `dir`, oldest first: by when they last changed (a run's marker
+/// is its last write), then by name. (Ids begin with their second, but two started in
+/// one second sort by their random part.)
+fn folders(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut found: Vec<(Option<std::time::SystemTime>, PathBuf)> = entries
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .map(|e| (e.metadata().and_then(|m| m.modified()).ok(), e.path()))
+        .collect();
+    found.sort();
+    found.into_iter().map(|(_, path)| path).collect()
+}
+
+/// A finished run whose profile is gone from the store's `profiles/`, or that was
+/// discarded. (The marker names the profile's path as it was written, perhaps
+/// relative to another directory: its file name is looked for in the store.)
+fn spent(store: &ProfileStore, run: &Path) -> bool {
+    match std::fs::read_to_string(run.join(DONE_MARKER)) {
+        Ok(marker) => {
+            let marker = marker.trim();
+            marker == "discarded"
+                || Path::new(marker)
+                    .file_name()
+                    .is_some_and(|name| !store.root().join("profiles").join(name).exists())
+        }
+        // Unfinished (or unreadable): kept.
+        Err(_) => false,
+    }
+}
+
+fn remove_oldest(found: &[PathBuf], keep: usize) -> usize {
+    let excess = found.len().saturating_sub(keep);
+    found[..excess]
+        .iter()
+        .filter(|dir| match std::fs::remove_dir_all(dir) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::warn!(dir = %dir.display(), error = %e, "cannot remove an old job folder");
+                false
+            }
+        })
+        .count()
+}
+
+/// Apply the rule to `store`, keeping the newest `keep` spent runs.
+pub fn prune_finished(store: &ProfileStore, keep: usize) -> Pruned {
+    let spent_runs: Vec<PathBuf> = folders(&store.runs_dir())
+        .into_iter()
+        .filter(|run| spent(store, run))
+        .collect();
+    let runs = remove_oldest(&spent_runs, keep);
+    let job_journals = ["verifications", "uniformity"]
+        .iter()
+        .map(|kind| remove_oldest(&folders(&store.root().join(kind)), JOB_JOURNALS_KEPT))
+        .sum();
+    let pruned = Pruned { runs, job_journals };
+    if pruned != Pruned::default() {
+        tracing::info!(
+            store = %store.root().display(),
+            runs,
+            job_journals,
+            "removed old job folders (spent calibration runs, old verification and uniformity journals)"
+        );
+    }
+    pruned
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(store: &ProfileStore, id: &str, marker: Option<&str>) -> PathBuf {
+        let dir = store.runs_dir().join(id);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("journal.jsonl"), "{}\n").unwrap();
+        if let Some(marker) = marker {
+            std::fs::write(dir.join(DONE_MARKER), marker).unwrap();
+        }
+        dir
+    }
+
+    #[test]
+    fn spent_runs_beyond_the_newest_few_go_and_nothing_that_may_be_read_or_resumed_does() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = ProfileStore::new(dir.path());
+        let profiles = dir.path().join("profiles");
+        std::fs::create_dir_all(&profiles).unwrap();
+        let kept_profile = profiles.join("20260102T000000-aaaa.toml");
+        std::fs::write(&kept_profile, "").unwrap();
+        // Oldest first: a discarded run, a run whose profile was let go, a run whose
+        // profile is kept, an unfinished one, then three more discarded.
+        let discarded_old = run(&store, "20260101T000000-0001", Some("discarded\n"));
+        let gone = run(
+            &store,
+            "20260101T000000-0002",
+            Some(
+                &profiles
+                    .join("20260101T000000-gone.toml")
+                    .display()
+                    .to_string(),
+            ),
+        );
+        let referenced = run(
+            &store,
+            "20260101T000000-0003",
+            Some(&kept_profile.display().to_string()),
+        );
+        let unfinished = run(&store, "20260101T000000-0004", None);
+        let newer: Vec<PathBuf> = (5..8)
+            .map(|k| {
+                run(
+                    &store,
+                    &format!("20260101T000000-000{k}"),
+                    Some("discarded"),
+                )
+            })
+            .collect();
+        for k in 0..(JOB_JOURNALS_KEPT + 3) {
+            std::fs::create_dir_all(dir.path().join(format!("verifications/verify-{k:04}")))
+                .unwrap();
+        }
+        let pruned = prune_finished(&store, 2);
+        assert_eq!(
+            pruned,
+            Pruned {
+                runs: 3,
+                job_journals: 3
+            }
+        );
+        assert!(!discarded_old.exists() && !gone.exists() && !newer[0].exists());
+        assert!(referenced.exists() && unfinished.exists());
+        assert!(newer[1].exists() && newer[2].exists());
+        let left = folders(&dir.path().join("verifications"));
+        assert_eq!(left.len(), JOB_JOURNALS_KEPT);
+        assert!(left[0].ends_with("verify-0003"));
+        // Applied again, nothing more goes.
+        assert_eq!(prune_finished(&store, 2), Pruned::default());
+    }
+}
