@@ -26,6 +26,11 @@ fn mosquitto_on(dir: &Path, port: u16) -> Server {
 /// restarted by its service manager does. (Mosquitto started as root drops to its own
 /// user: `dir` must let that user write.)
 fn mosquitto_with(dir: &Path, port: u16, persistent: bool) -> Server {
+    mosquitto_configured(dir, port, persistent, "allow_anonymous true\n")
+}
+
+/// Mosquitto on loopback `port` with `access` (its authentication lines).
+fn mosquitto_configured(dir: &Path, port: u16, persistent: bool, access: &str) -> Server {
     let config = dir.join(format!("mosquitto-{port}.conf"));
     let persistence = if persistent {
         use std::os::unix::fs::PermissionsExt;
@@ -39,7 +44,7 @@ fn mosquitto_with(dir: &Path, port: u16, persistent: bool) -> Server {
     };
     std::fs::write(
         &config,
-        format!("listener {port} 127.0.0.1\nallow_anonymous true\n{persistence}"),
+        format!("listener {port} 127.0.0.1\n{access}{persistence}"),
     )
     .unwrap();
     Server(
@@ -468,23 +473,14 @@ fn a_broker_refusing_the_password_is_named_not_called_unreachable() {
     assert!(made.status.success(), "{made:?}");
     std::fs::set_permissions(&passwords, std::fs::Permissions::from_mode(0o644)).unwrap();
     let port = free_port();
-    let config = dir.path().join("mosquitto.conf");
-    std::fs::write(
-        &config,
-        format!(
-            "listener {port} 127.0.0.1\nallow_anonymous false\npassword_file {}\npersistence false\n",
+    let _broker = mosquitto_configured(
+        dir.path(),
+        port,
+        false,
+        &format!(
+            "allow_anonymous false\npassword_file {}\n",
             passwords.display()
         ),
-    )
-    .unwrap();
-    let _broker = Server(
-        Command::new(installed("mosquitto"))
-            .arg("-c")
-            .arg(&config)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
     );
     wait_for_port(port, "mosquitto");
     for (password, said) in [

@@ -66,6 +66,41 @@ fn the_shipped_scrape_config_and_alert_rules_pass_promtool() {
     assert!(said.contains("ChromacalWhiteLuminanceDrifting"), "{said}");
 }
 
+/// A real Prometheus (its config, storage and log in `dir`) scraping the daemons on
+/// loopback `ports` every second and evaluating `rules` as often; it and its port.
+fn prometheus(dir: &Path, ports: &[u16], rules: Option<&Path>) -> (Server, u16) {
+    let port = free_port();
+    let config = dir.join("prometheus.yml");
+    let targets: Vec<String> = ports.iter().map(|p| format!("'127.0.0.1:{p}'")).collect();
+    let rule_files = rules.map_or(String::new(), |r| {
+        format!("rule_files: ['{}']\n", r.display())
+    });
+    std::fs::write(
+        &config,
+        format!(
+            "global:\n  scrape_interval: 1s\n  evaluation_interval: 1s\n{rule_files}scrape_configs:\n  - job_name: chromacal\n    static_configs:\n      - targets: [{}]\n",
+            targets.join(", ")
+        ),
+    )
+    .unwrap();
+    let log = std::fs::File::create(dir.join("prometheus.log")).unwrap();
+    let server = Server(
+        Command::new(installed("prometheus"))
+            .arg(format!("--config.file={}", config.display()))
+            .arg(format!(
+                "--storage.tsdb.path={}",
+                dir.join("tsdb").display()
+            ))
+            .arg(format!("--web.listen-address=127.0.0.1:{port}"))
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap(),
+    );
+    wait_for_port(port, "prometheus");
+    (server, port)
+}
+
 /// Prometheus's answer to `query` (the `data.result` array).
 fn query(port: u16, query: &str) -> Vec<serde_json::Value> {
     let url = format!("http://127.0.0.1:{port}/api/v1/query");
@@ -99,30 +134,7 @@ async fn prometheus_scrapes_two_daemons_with_three_devices() {
     let b = start_daemon(&b_dir, &format!("{fast}tcp = \"127.0.0.1:{port_b}\"\n"));
 
     // Prometheus, scraping both every second.
-    let prometheus_port = free_port();
-    let config = dir.path().join("prometheus.yml");
-    std::fs::write(
-        &config,
-        format!(
-            "global:\n  scrape_interval: 1s\n  evaluation_interval: 1s\nscrape_configs:\n  - job_name: chromacal\n    static_configs:\n      - targets: ['127.0.0.1:{port_a}', '127.0.0.1:{port_b}']\n"
-        ),
-    )
-    .unwrap();
-    let log = std::fs::File::create(dir.path().join("prometheus.log")).unwrap();
-    let _prometheus = Server(
-        Command::new(installed("prometheus"))
-            .arg(format!("--config.file={}", config.display()))
-            .arg(format!(
-                "--storage.tsdb.path={}",
-                dir.path().join("tsdb").display()
-            ))
-            .arg(format!("--web.listen-address=127.0.0.1:{prometheus_port}"))
-            .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .unwrap(),
-    );
-    wait_for_port(prometheus_port, "prometheus");
+    let (_prometheus, prometheus_port) = prometheus(dir.path(), &[port_a, port_b], None);
 
     // A calibration on each of the three devices.
     let (api_a, api_b) = (a.endpoint(), b.endpoint());
@@ -312,32 +324,9 @@ screen = "{}"
             dir.path().join("no-such-screen").display()
         ),
     );
-    std::fs::write(dir.path().join("alerts.yml"), rules_for_the_test(scale)).unwrap();
-    let prometheus_port = free_port();
-    let config = dir.path().join("prometheus.yml");
-    std::fs::write(
-        &config,
-        format!(
-            "global:\n  scrape_interval: 1s\n  evaluation_interval: 1s\nrule_files: ['{}']\nscrape_configs:\n  - job_name: chromacal\n    static_configs:\n      - targets: ['127.0.0.1:{port}']\n",
-            dir.path().join("alerts.yml").display()
-        ),
-    )
-    .unwrap();
-    let log = std::fs::File::create(dir.path().join("prometheus.log")).unwrap();
-    let _prometheus = Server(
-        Command::new(installed("prometheus"))
-            .arg(format!("--config.file={}", config.display()))
-            .arg(format!(
-                "--storage.tsdb.path={}",
-                dir.path().join("tsdb").display()
-            ))
-            .arg(format!("--web.listen-address=127.0.0.1:{prometheus_port}"))
-            .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .unwrap(),
-    );
-    wait_for_port(prometheus_port, "prometheus");
+    let rules = dir.path().join("alerts.yml");
+    std::fs::write(&rules, rules_for_the_test(scale)).unwrap();
+    let (_prometheus, prometheus_port) = prometheus(dir.path(), &[port], Some(&rules));
     // The counters' zeros scraped before anything happens, as in a lab.
     let deadline = Instant::now() + Duration::from_secs(60);
     let scraped = || -> Option<()> {
