@@ -22,7 +22,8 @@ use super::shared::Failure;
 /// (server-sent events), GET /profile[?format=toml|json|icc4|icc2|ti3|cal|psychopy],
 /// GET /history, GET /report (HTML), POST /rollback; with several devices
 /// ([[device]] in the config) each under /devices/NAME/…; GET /devices, GET /metrics
-/// (Prometheus).
+/// (Prometheus), GET / (the fleet page; over TCP a browser logs in at /login), POST
+/// /reload.
 /// Stops on SIGTERM after the reading under way; an interrupted calibration
 /// resumes at the next start. SIGHUP (or `chromacal daemon reload`) rereads the
 /// config.
