@@ -56,6 +56,8 @@ name = "b"
 name = "d"
 [device.monitor]
 preset = "lcd"
+[device.schedule]
+verify_every_s = 0.2
 "#,
     );
     let mut daemon = start_daemon(dir.path(), &v1);
@@ -160,6 +162,12 @@ preset = "lcd"
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     assert_eq!(device_names(&api).await, ["a", "b", "c"]);
+    // Its schedule ended with it: no verification was tried on it once retired.
+    let log = daemon.log_text();
+    assert!(
+        !log.contains("d is leaving the daemon"),
+        "the retired device's schedule went on: {log}"
+    );
     let store = chromacal::profile::store::ProfileStore::new(&state.join("d"));
     let lock = store.lock("the test");
     assert!(lock.is_ok(), "d's store is still held: {lock:?}");

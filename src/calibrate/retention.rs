@@ -8,20 +8,18 @@
 //! * a finished run whose profile is still in the store is kept: the report reads
 //!   its readings;
 //! * a finished run whose profile the store has let go (past `daemon.keep_profiles`),
-//!   or that was discarded, is *spent*: the newest `keep` of those are kept, for a
-//!   look back, the older ones removed;
+//!   or that was discarded, is *spent*: as many of those as the store keeps profiles
+//!   (the newest) stay, for a look back, the older ones are removed;
 //! * of the verification and uniformity journals, the newest [`JOB_JOURNALS_KEPT`] of
 //!   each kind are kept (each verification's numbers stay in `verifications.jsonl`).
 
 use std::path::{Path, PathBuf};
 
+use super::session::DONE_MARKER;
 use crate::profile::store::ProfileStore;
 
 /// Verification and uniformity journals kept, of each kind.
 pub const JOB_JOURNALS_KEPT: usize = 50;
-
-/// The marker a finished run has (see `session`): the profile's path, or `discarded`.
-const DONE_MARKER: &str = "profile";
 
 /// Folders removed, by kind.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
@@ -77,13 +75,13 @@ fn remove_oldest(found: &[PathBuf], keep: usize) -> usize {
         .count()
 }
 
-/// Apply the rule to `store`, keeping the newest `keep` spent runs.
-pub fn prune_finished(store: &ProfileStore, keep: usize) -> Pruned {
+/// Apply the rule to `store`, keeping as many spent runs as it keeps profiles.
+pub fn prune_finished(store: &ProfileStore) -> Pruned {
     let spent_runs: Vec<PathBuf> = folders(&store.runs_dir())
         .into_iter()
         .filter(|run| spent(store, run))
         .collect();
-    let runs = remove_oldest(&spent_runs, keep);
+    let runs = remove_oldest(&spent_runs, store.kept());
     let job_journals = ["verifications", "uniformity"]
         .iter()
         .map(|kind| remove_oldest(&folders(&store.root().join(kind)), JOB_JOURNALS_KEPT))
@@ -117,7 +115,7 @@ mod tests {
     #[test]
     fn spent_runs_beyond_the_newest_few_go_and_nothing_that_may_be_read_or_resumed_does() {
         let dir = tempfile::tempdir().unwrap();
-        let store = ProfileStore::new(dir.path());
+        let store = ProfileStore::new(dir.path()).keeping(2);
         let profiles = dir.path().join("profiles");
         std::fs::create_dir_all(&profiles).unwrap();
         let kept_profile = profiles.join("20260102T000000-aaaa.toml");
@@ -154,7 +152,7 @@ mod tests {
             std::fs::create_dir_all(dir.path().join(format!("verifications/verify-{k:04}")))
                 .unwrap();
         }
-        let pruned = prune_finished(&store, 2);
+        let pruned = prune_finished(&store);
         assert_eq!(
             pruned,
             Pruned {
@@ -169,6 +167,6 @@ mod tests {
         assert_eq!(left.len(), JOB_JOURNALS_KEPT);
         assert!(left[0].ends_with("verify-0003"));
         // Applied again, nothing more goes.
-        assert_eq!(prune_finished(&store, 2), Pruned::default());
+        assert_eq!(prune_finished(&store), Pruned::default());
     }
 }

@@ -22,8 +22,9 @@ use crate::profile::store::ProfileStore;
 use crate::profile::{Cost, Profile, ProfileError, Provenance, SCHEMA_VERSION};
 use crate::sim::monitor::SimError;
 
-/// Name of the file in a run's directory that says the run ended in a profile.
-const DONE_MARKER: &str = "profile";
+/// Name of the file in a run's directory that says the run ended: the profile's
+/// path, or `discarded`.
+pub(crate) const DONE_MARKER: &str = "profile";
 
 /// The command that resumes the run whose journal is `journal`
 /// (`<state>/runs/<run>/journal.jsonl`): with the state directory it was given, which

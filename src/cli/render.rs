@@ -501,7 +501,6 @@ fn read_source(
             spectra: read_spectra(path)?,
             light: None,
             scale: absolute_spectra("--spectra")?,
-            size: None,
             white,
         });
     }
@@ -511,7 +510,6 @@ fn read_source(
             spectra: read_spectra(path)?,
             light: Some(onto_grid(illuminant.wavelengths_nm(), illuminant.values())),
             scale: relative_scale,
-            size: None,
             white,
         });
     }
@@ -537,11 +535,9 @@ enum Source {
         light: Option<Vec<f64>>,
         /// From the method's integral to the profile's units.
         scale: f64,
-        /// A spectral image's size (pixels row by row, placed by --at).
-        size: Option<(usize, usize)>,
         white: Option<Xyz>,
     },
-    /// A spectral image, integrated pixel by pixel.
+    /// A spectral image, integrated pixel by pixel (placed by --at).
     SpectralImage {
         image: SpectralImage,
         scale: f64,
@@ -552,7 +548,7 @@ enum Source {
 impl Source {
     /// The scene, spectra turned into XYZ by `method`.
     fn scene(&self, method: &MethodKind, placement: &Placement) -> Result<ReadScene, Failure> {
-        let (spectra, light, scale, size, white) = match self {
+        let (spectra, light, scale, white) = match self {
             Source::Colours(read) => return Ok(read.clone()),
             Source::SpectralImage {
                 image,
@@ -567,28 +563,17 @@ impl Source {
                 spectra,
                 light,
                 scale,
-                size,
                 white,
-            } => (spectra, light, *scale, *size, *white),
+            } => (spectra, light, *scale, *white),
         };
         let xyz = integrate_all(method, spectra, light.as_ref())?;
-        let spectral = Some(format!("{} ({})", method.name(), method.parameter()));
-        Ok(match size {
-            Some((width, height)) => image_scene(
-                &XyzImage { width, height, xyz },
-                placement,
-                scale,
+        Ok(ReadScene {
+            scene: Scene {
+                pixels: at_centre(xyz, scale),
                 white,
-                spectral,
-            ),
-            None => ReadScene {
-                scene: Scene {
-                    pixels: at_centre(xyz, scale),
-                    white,
-                },
-                size: None,
-                spectral,
             },
+            size: None,
+            spectral: Some(format!("{} ({})", method.name(), method.parameter())),
         })
     }
 }

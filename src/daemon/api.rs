@@ -425,7 +425,7 @@ pub struct CurrentProfile {
 }
 
 /// The current profile and its text; an error says why it does not read.
-fn read_current(device: &Device) -> Result<Option<(Profile, String)>, String> {
+pub(crate) fn read_current(device: &Device) -> Result<Option<(Profile, String)>, String> {
     let path = device.store().current_path();
     let text = match crate::durable::read_text_limited(&path, crate::durable::limits::PROFILE) {
         Ok(t) => t,
@@ -438,10 +438,7 @@ fn read_current(device: &Device) -> Result<Option<(Profile, String)>, String> {
 }
 
 /// A device's status.
-pub(crate) async fn device_status(
-    daemon: &Daemon,
-    device: &Arc<Device>,
-) -> Result<StatusReply, String> {
+async fn device_status(daemon: &Daemon, device: &Arc<Device>) -> Result<StatusReply, String> {
     // Listing the runs reads their journals: off the async workers.
     let unfinished_runs = {
         let device = device.clone();

@@ -173,24 +173,20 @@ fn form_value(body: &[u8], key: &str) -> Option<String> {
         .map(|(_, v)| v.into_owned())
 }
 
-/// `GET /`: the fleet page.
+/// `GET /`: the fleet page. (Only what the page shows is read: the current profile
+/// and the verifications, not the unfinished runs' journals a status lists.)
 pub async fn fleet_page(daemon: &Daemon, logout: bool) -> Response {
     let mut rows = Vec::new();
     for device in daemon.devices() {
-        let status = super::api::device_status(daemon, &device).await.ok();
+        let profile = super::api::read_current(&device)
+            .ok()
+            .flatten()
+            .map(|(p, _)| p);
         let metrics = &daemon.bus.metrics;
         let (whites, drift) = metrics.whites(&device.name);
-        let verification = device
-            .store()
-            .verifications()
-            .ok()
-            .and_then(|v| v.last().cloned())
-            .filter(|v| {
-                status
-                    .as_ref()
-                    .and_then(|s| s.current_profile.as_ref())
-                    .is_some_and(|p| p.id == v.profile_id)
-            })
+        let verification = profile
+            .as_ref()
+            .and_then(|p| device.last_verification_of(&p.id))
             .map(|v| FleetVerification {
                 at: v.at,
                 mean: v.stats.map(|s| s.mean),
@@ -207,12 +203,11 @@ pub async fn fleet_page(daemon: &Daemon, logout: bool) -> Response {
                 text
             }),
             retiring: device.is_retired(),
-            profile: status
-                .as_ref()
-                .and_then(|s| s.current_profile.as_ref())
-                .map(|p| (p.id.clone(), p.held_out.map(|h| h.mean))),
+            profile: profile.map(|p| (p.id, p.report.held_out.map(|h| h.mean))),
             verification,
-            next_verification: status.and_then(|s| s.next_verification),
+            next_verification: device
+                .next_verification()
+                .map(|t| humantime::format_rfc3339_seconds(t).to_string()),
             whites,
             drift,
         });

@@ -368,9 +368,9 @@ pub(crate) fn current_profile(device: &Device) -> Option<Profile> {
 }
 
 /// A progress handler that updates the job status (with an ETA from this job's pace
-/// and the ΔE00 against the current profile) and tells subscribers.
-/// What a job's progress events tell; `after_last` is the phase once every planned
-/// patch is read (the job then fits, or compares), until another is planned.
+/// and the ΔE00 against the current profile) and tells subscribers; `after_last` is
+/// the phase once every planned patch is read (the job then fits, or compares), until
+/// another is planned.
 fn progress_handler<'a>(
     device: &'a Arc<Device>,
     current: Option<&'a MonitorModel>,
@@ -777,7 +777,7 @@ async fn uniformity(
 }
 
 /// Start a verification every `schedule.verify_every_s`, skipping a turn while a job
-/// runs.
+/// runs; ends when the daemon stops or a reload retires the device.
 pub(crate) async fn scheduler(device: Arc<Device>) {
     let Some(every) = device.loaded.config.schedule.verify_every_s else {
         return;
@@ -787,7 +787,15 @@ pub(crate) async fn scheduler(device: Arc<Device>) {
         if let Ok(mut next) = device.next_verification.lock() {
             *next = Some(SystemTime::now() + every);
         }
-        tokio::time::sleep(every).await;
+        // Made before the flag is read: a retirement in between still wakes it.
+        let retired = device.retired_notify.notified();
+        if device.is_retired() {
+            return;
+        }
+        tokio::select! {
+            () = tokio::time::sleep(every) => {}
+            () = retired => return,
+        }
         if device.is_shutting_down() {
             return;
         }

@@ -396,40 +396,33 @@ impl Metrics {
 
     /// A device's series, its counters at 0 (at start, and when a reload adds it).
     pub fn add_device(&self, device: &str) {
-        let metrics = self;
-        {
-            metrics.up.get_or_create(&label(device)).set(1);
-            metrics.job_running.get_or_create(&label(device)).set(0);
-            metrics.progress.get_or_create(&label(device)).set(0.0);
-            metrics
-                .lut_overwritten
-                .get_or_create(&label(device))
-                .inc_by(0);
-            for kind in JOB_KINDS {
-                for outcome in JOB_OUTCOMES {
-                    metrics
-                        .jobs
-                        .get_or_create(&JobLabels {
-                            device: device.into(),
-                            kind: kind.into(),
-                            outcome: outcome.into(),
-                        })
-                        .inc_by(0);
-                }
+        self.up.get_or_create(&label(device)).set(1);
+        self.job_running.get_or_create(&label(device)).set(0);
+        self.progress.get_or_create(&label(device)).set(0.0);
+        self.lut_overwritten.get_or_create(&label(device)).inc_by(0);
+        for kind in JOB_KINDS {
+            for outcome in JOB_OUTCOMES {
+                self.jobs
+                    .get_or_create(&JobLabels {
+                        device: device.into(),
+                        kind: kind.into(),
+                        outcome: outcome.into(),
+                    })
+                    .inc_by(0);
             }
-            let kinds = |family: &Family<KindLabels, Counter>, kinds: &[&str]| {
-                for kind in kinds {
-                    family
-                        .get_or_create(&KindLabels {
-                            device: device.into(),
-                            kind: (*kind).into(),
-                        })
-                        .inc_by(0);
-                }
-            };
-            kinds(&metrics.readings, &READING_STATUSES);
-            kinds(&metrics.faults, &FAULTS);
         }
+        let kinds = |family: &Family<KindLabels, Counter>, kinds: &[&str]| {
+            for kind in kinds {
+                family
+                    .get_or_create(&KindLabels {
+                        device: device.into(),
+                        kind: (*kind).into(),
+                    })
+                    .inc_by(0);
+            }
+        };
+        kinds(&self.readings, &READING_STATUSES);
+        kinds(&self.faults, &FAULTS);
     }
 
     /// A device a reload removed: its series go (a scrape no longer shows it).

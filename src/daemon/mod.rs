@@ -166,7 +166,7 @@ pub struct Device {
     /// its running job ends it leaves the daemon (and a changed one starts again).
     retired: AtomicBool,
     /// Told when the device is retired: its scheduler stops waiting.
-    retired_notify: tokio::sync::Notify,
+    pub(crate) retired_notify: tokio::sync::Notify,
     /// The store's lock: held while the device serves, given back when a reload
     /// retires it (so that its successor can take it).
     store_lock: Mutex<Option<crate::profile::store::StoreLock>>,
@@ -260,6 +260,19 @@ impl Device {
         self.next_verification.lock().ok().and_then(|n| *n)
     }
 
+    /// The store's last verification, if it is of profile `id` (one of an earlier
+    /// profile says nothing of this one).
+    pub fn last_verification_of(
+        &self,
+        id: &str,
+    ) -> Option<crate::profile::store::VerificationRecord> {
+        self.store
+            .verifications()
+            .ok()
+            .and_then(|v| v.last().cloned())
+            .filter(|v| v.profile_id == id)
+    }
+
     /// Give the metrics and MQTT what the store holds: the current profile, the last
     /// calibration, and the last verification if it is of the current profile.
     fn restore_figures(&self) {
@@ -270,12 +283,9 @@ impl Device {
             let entry = h.entries.iter().rev().find(|e| e.how == "calibration")?;
             humantime::parse_rfc3339_weak(&entry.at).ok()
         });
-        let verification = self
-            .store
-            .verifications()
-            .ok()
-            .and_then(|v| v.last().cloned())
-            .filter(|v| profile.as_ref().is_some_and(|p| p.id == v.profile_id));
+        let verification = profile
+            .as_ref()
+            .and_then(|p| self.last_verification_of(&p.id));
         let held_out = profile.as_ref().and_then(|p| p.report.held_out);
         self.bus.metrics.restore(
             &self.name,
@@ -346,9 +356,8 @@ impl Device {
             // Old job folders go once the job is over (none of this device's runs).
             {
                 let device = device.clone();
-                let keep = device.loaded.config.daemon.keep_profiles;
                 let _ = tokio::task::spawn_blocking(move || {
-                    crate::calibrate::retention::prune_finished(device.store(), keep)
+                    crate::calibrate::retention::prune_finished(device.store())
                 })
                 .await;
             }

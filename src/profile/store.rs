@@ -200,6 +200,11 @@ impl ProfileStore {
         self
     }
 
+    /// How many current profiles it keeps.
+    pub fn kept(&self) -> usize {
+        self.keep
+    }
+
     pub fn root(&self) -> &Path {
         &self.root
     }
