@@ -176,7 +176,7 @@ preset = "lcd"
     let metrics = get(&api, "/metrics").await.text();
     assert!(!metrics.contains("device=\"d\""), "{metrics}");
     assert!(
-        metrics.contains("chromacal_instrument_faults_total{device=\"c\",kind=\"open\"} 0"),
+        metrics.contains("chromacal_device_faults_total{device=\"c\",fault=\"open\"} 0"),
         "{metrics}"
     );
     assert_eq!(

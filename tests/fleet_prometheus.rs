@@ -215,7 +215,7 @@ async fn prometheus_scrapes_two_daemons_with_three_devices() {
     assert_eq!(whites.len(), 3, "{whites:?}");
     let readings = query(
         prometheus_port,
-        r#"sum by (instance) (chromacal_readings_total{kind="ok"})"#,
+        r#"sum by (instance) (chromacal_readings_total{status="ok"})"#,
     );
     assert_eq!(readings.len(), 2, "{readings:?}");
     let since = query(
@@ -334,7 +334,7 @@ screen = "{}"
             ureq::get(format!("http://127.0.0.1:{prometheus_port}/api/v1/query"))
                 .query(
                     "query",
-                    r#"chromacal_instrument_faults_total{device="unplugged", kind="open"} == 0"#,
+                    r#"chromacal_device_faults_total{device="unplugged", fault="open"} == 0"#,
                 )
                 .call()
                 .ok()?
@@ -411,7 +411,7 @@ screen = "{}"
     // Five faults read five: the counters were at 0 before the first one.
     let faults = query(
         prometheus_port,
-        r#"sum without (kind) (increase(chromacal_instrument_faults_total{device="unplugged"}[30m]))"#,
+        r#"sum without (fault) (increase(chromacal_device_faults_total{device="unplugged"}[30m]))"#,
     );
     let value: f64 = faults[0]["value"][1].as_str().unwrap().parse().unwrap();
     assert!(
@@ -419,10 +419,10 @@ screen = "{}"
         "{value}: {:?}",
         query(
             prometheus_port,
-            r#"chromacal_instrument_faults_total{device="unplugged"}[30m]"#
+            r#"chromacal_device_faults_total{device="unplugged"}[30m]"#
         )
     );
-    assert_eq!(fired("ChromacalInstrumentFaultsClimbing"), ["unplugged"]);
+    assert_eq!(fired("ChromacalDeviceFaultsClimbing"), ["unplugged"]);
     let alerts: serde_json::Value =
         ureq::get(&format!("http://127.0.0.1:{prometheus_port}/api/v1/alerts"))
             .call()
@@ -434,7 +434,7 @@ screen = "{}"
         .as_array()
         .unwrap()
         .iter()
-        .find(|a| a["labels"]["alertname"] == "ChromacalInstrumentFaultsClimbing")
+        .find(|a| a["labels"]["alertname"] == "ChromacalDeviceFaultsClimbing")
         .unwrap_or_else(|| panic!("{alerts}"));
     assert!(
         climbing["annotations"]["summary"]

@@ -256,6 +256,27 @@ fn outputs_are_never_nan_with_success() {
     assert_eq!(code, Some(1), "{stdout}");
     assert!(stderr.contains("patch 0"), "{stderr}");
     assert!(!stdout.contains("NaN"), "{stdout}");
+    // `fit` on it names the reading, not a NaN found later in what it made (it
+    // used to fit, then fail to save a profile whose held-out mean was NaN).
+    let (code, stdout, stderr) = run(
+        &[
+            "fit",
+            &huge,
+            "-o",
+            dir.path().join("huge.toml").to_str().unwrap(),
+        ],
+        Duration::from_secs(60),
+    );
+    assert_eq!(code, Some(1), "{stdout}{stderr}");
+    assert!(
+        stderr.contains("patch 0") && stderr.contains("beyond what any display emits"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("NaN") && !stderr.contains("not a finite"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("huge.toml").exists());
     // One that overflows when scaled to cd/m² is named at the line it is on.
     let overflow = write(
         dir.path(),

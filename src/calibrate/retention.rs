@@ -10,6 +10,11 @@
 //! * a finished run whose profile the store has let go (past `daemon.keep_profiles`),
 //!   or that was discarded, is *spent*: as many of those as the store keeps profiles
 //!   (the newest) stay, for a look back, the older ones are removed;
+//! * a profile kept but never published (a calibration the daemon would not make
+//!   current: worse than the one it had, or failing its threshold) is kept among the
+//!   newest of its like, as many as the store keeps profiles; older ones go (a
+//!   published profile is the history's to let go). The run that made it is then
+//!   spent, and goes by the rule above;
 //! * of the verification and uniformity journals, the newest [`JOB_JOURNALS_KEPT`] of
 //!   each kind are kept (each verification's numbers stay in `verifications.jsonl`).
 
@@ -24,6 +29,7 @@ pub const JOB_JOURNALS_KEPT: usize = 50;
 /// Folders removed, by kind.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub struct Pruned {
+    pub profiles: usize,
     pub runs: usize,
     pub job_journals: usize,
 }
@@ -75,8 +81,53 @@ fn remove_oldest(found: &[PathBuf], keep: usize) -> usize {
         .count()
 }
 
-/// Apply the rule to `store`, keeping as many spent runs as it keeps profiles.
+/// The profile files in `store` that its history does not name, oldest first. A
+/// history that cannot be read names nothing for certain: then none are listed.
+fn unpublished_profiles(store: &ProfileStore) -> Vec<PathBuf> {
+    let Ok(history) = store.history() else {
+        return Vec::new();
+    };
+    let dir = store.root().join("profiles");
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return Vec::new();
+    };
+    let mut found: Vec<(Option<std::time::SystemTime>, PathBuf)> = entries
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+        .map(|e| e.path())
+        .filter(|path| {
+            let id = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+            path.extension().is_some_and(|x| x == "toml")
+                && id.is_some_and(|id| {
+                    crate::profile::store::is_valid_id(&id)
+                        && history.current.as_deref() != Some(id.as_str())
+                        && !history.entries.iter().any(|e| e.id == id)
+                })
+        })
+        .map(|path| (path.metadata().and_then(|m| m.modified()).ok(), path))
+        .collect();
+    found.sort();
+    found.into_iter().map(|(_, path)| path).collect()
+}
+
+fn remove_oldest_files(found: &[PathBuf], keep: usize) -> usize {
+    let excess = found.len().saturating_sub(keep);
+    found[..excess]
+        .iter()
+        .filter(|file| match std::fs::remove_file(file) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::warn!(file = %file.display(), error = %e, "cannot remove an old unpublished profile");
+                false
+            }
+        })
+        .count()
+}
+
+/// Apply the rule to `store`, keeping as many spent runs, and as many unpublished
+/// profiles, as it keeps profiles.
 pub fn prune_finished(store: &ProfileStore) -> Pruned {
+    let profiles = remove_oldest_files(&unpublished_profiles(store), store.kept());
     let spent_runs: Vec<PathBuf> = folders(&store.runs_dir())
         .into_iter()
         .filter(|run| spent(store, run))
@@ -86,13 +137,18 @@ pub fn prune_finished(store: &ProfileStore) -> Pruned {
         .iter()
         .map(|kind| remove_oldest(&folders(&store.root().join(kind)), JOB_JOURNALS_KEPT))
         .sum();
-    let pruned = Pruned { runs, job_journals };
+    let pruned = Pruned {
+        profiles,
+        runs,
+        job_journals,
+    };
     if pruned != Pruned::default() {
         tracing::info!(
             store = %store.root().display(),
+            profiles,
             runs,
             job_journals,
-            "removed old job folders (spent calibration runs, old verification and uniformity journals)"
+            "removed old job folders and profiles (unpublished profiles, spent calibration runs, old verification and uniformity journals)"
         );
     }
     pruned
@@ -156,6 +212,7 @@ mod tests {
         assert_eq!(
             pruned,
             Pruned {
+                profiles: 0,
                 runs: 3,
                 job_journals: 3
             }
@@ -168,5 +225,43 @@ mod tests {
         assert!(left[0].ends_with("verify-0003"));
         // Applied again, nothing more goes.
         assert_eq!(prune_finished(&store), Pruned::default());
+    }
+
+    #[test]
+    fn unpublished_profiles_beyond_the_newest_few_go_with_their_runs_and_published_ones_stay() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = ProfileStore::new(dir.path()).keeping(2);
+        // Two published, then four kept but not published, a run for each.
+        let ids: Vec<String> = (0..6).map(|k| format!("20260101T00000{k}-abcd")).collect();
+        let mut runs = Vec::new();
+        for (k, id) in ids.iter().enumerate() {
+            let path = if k < 2 {
+                store.publish(id, "published", None, "test").unwrap()
+            } else {
+                store.keep(id, "not published").unwrap()
+            };
+            runs.push(run(&store, id, Some(&path.display().to_string())));
+            // Distinct modification times, oldest first.
+            let at = std::time::SystemTime::UNIX_EPOCH
+                + std::time::Duration::from_secs(1_000 + k as u64);
+            std::fs::File::options()
+                .write(true)
+                .open(&path)
+                .unwrap()
+                .set_modified(at)
+                .unwrap();
+        }
+        let pruned = prune_finished(&store);
+        assert_eq!(pruned.profiles, 2, "{pruned:?}");
+        let profile = |id: &str| store.profile_path(id).unwrap();
+        assert!(
+            profile(&ids[0]).exists() && profile(&ids[1]).exists(),
+            "published stay"
+        );
+        assert!(!profile(&ids[2]).exists() && !profile(&ids[3]).exists());
+        assert!(profile(&ids[4]).exists() && profile(&ids[5]).exists());
+        // The runs of the removed profiles are now spent: within the number kept.
+        assert!(runs[4].exists() && runs[5].exists() && runs[0].exists() && runs[1].exists());
+        assert_eq!(prune_finished(&store).profiles, 0);
     }
 }

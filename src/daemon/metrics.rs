@@ -94,10 +94,19 @@ struct JobLabels {
     outcome: String,
 }
 
+/// A reading's status (`ok`, `below_range`, `overload`).
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
-struct KindLabels {
+struct StatusLabels {
     device: String,
-    kind: String,
+    status: String,
+}
+
+/// The part of a device that failed a job: opening the instrument, its warm-up, the
+/// instrument during the job, or the display.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct FaultLabels {
+    device: String,
+    fault: String,
 }
 
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
@@ -151,8 +160,8 @@ pub struct Metrics {
     jobs: Family<JobLabels, Counter>,
     job_running: Family<DeviceLabel, Gauge>,
     progress: Family<DeviceLabel, FloatGauge>,
-    readings: Family<KindLabels, Counter>,
-    faults: Family<KindLabels, Counter>,
+    readings: Family<StatusLabels, Counter>,
+    faults: Family<FaultLabels, Counter>,
     events: Family<EventLabels, Counter>,
     lut_loaded: Family<DeviceLabel, Gauge>,
     lut_overwritten: Family<DeviceLabel, Counter>,
@@ -174,6 +183,20 @@ fn stat(device: &str, stat: &str) -> StatLabels {
 fn label(device: &str) -> DeviceLabel {
     DeviceLabel {
         device: device.into(),
+    }
+}
+
+fn status_labels(device: &str, status: &str) -> StatusLabels {
+    StatusLabels {
+        device: device.into(),
+        status: status.into(),
+    }
+}
+
+fn fault_labels(device: &str, fault: &str) -> FaultLabels {
+    FaultLabels {
+        device: device.into(),
+        fault: fault.into(),
     }
 }
 
@@ -324,8 +347,8 @@ impl Metrics {
             metrics.readings.clone(),
         );
         r.register(
-            "instrument_faults",
-            "Jobs the devices failed, by kind of fault (open, warmup, instrument, display)",
+            "device_faults",
+            "Jobs the devices failed, by the fault (open, warmup, instrument, display)",
             metrics.faults.clone(),
         );
         r.register(
@@ -411,18 +434,16 @@ impl Metrics {
                     .inc_by(0);
             }
         }
-        let kinds = |family: &Family<KindLabels, Counter>, kinds: &[&str]| {
-            for kind in kinds {
-                family
-                    .get_or_create(&KindLabels {
-                        device: device.into(),
-                        kind: (*kind).into(),
-                    })
-                    .inc_by(0);
-            }
-        };
-        kinds(&self.readings, &READING_STATUSES);
-        kinds(&self.faults, &FAULTS);
+        for status in READING_STATUSES {
+            self.readings
+                .get_or_create(&status_labels(device, status))
+                .inc_by(0);
+        }
+        for fault in FAULTS {
+            self.faults
+                .get_or_create(&fault_labels(device, fault))
+                .inc_by(0);
+        }
     }
 
     /// A device a reload removed: its series go (a scrape no longer shows it).
@@ -453,16 +474,11 @@ impl Metrics {
                 });
             }
         }
-        for (family, kinds) in [
-            (&self.readings, &READING_STATUSES[..]),
-            (&self.faults, &FAULTS[..]),
-        ] {
-            for kind in kinds {
-                family.remove(&KindLabels {
-                    device: device.into(),
-                    kind: (*kind).into(),
-                });
-            }
+        for status in READING_STATUSES {
+            self.readings.remove(&status_labels(device, status));
+        }
+        for fault in FAULTS {
+            self.faults.remove(&fault_labels(device, fault));
         }
         let Ok(mut times) = self.times.lock() else {
             return;
@@ -578,10 +594,7 @@ impl Metrics {
             Event::DeviceLost { fault, .. } => {
                 self.up.get_or_create(&label(device)).set(0);
                 self.faults
-                    .get_or_create(&KindLabels {
-                        device: device.into(),
-                        kind: fault.clone(),
-                    })
+                    .get_or_create(&fault_labels(device, fault))
                     .inc();
             }
             _ => {}
@@ -597,10 +610,7 @@ impl Metrics {
             ReadingStatus::Overload => "overload",
         };
         self.readings
-            .get_or_create(&KindLabels {
-                device: device.into(),
-                kind: status.into(),
-            })
+            .get_or_create(&status_labels(device, status))
             .inc();
         let Some(y) = white.filter(|y| y.is_finite() && *y > 0.0) else {
             return;
@@ -775,7 +785,7 @@ mod tests {
         assert!(
             line(
                 &text,
-                "chromacal_readings_total{device=\"b\",kind=\"overload\"} 1"
+                "chromacal_readings_total{device=\"b\",status=\"overload\"} 1"
             )
             .is_some()
         );
@@ -937,10 +947,10 @@ mod tests {
         let metrics = Metrics::new(["a"]);
         let text = metrics.render().unwrap();
         for series in [
-            "chromacal_instrument_faults_total{device=\"a\",kind=\"instrument\"} 0",
-            "chromacal_instrument_faults_total{device=\"a\",kind=\"display\"} 0",
+            "chromacal_device_faults_total{device=\"a\",fault=\"instrument\"} 0",
+            "chromacal_device_faults_total{device=\"a\",fault=\"display\"} 0",
             "chromacal_jobs_total{device=\"a\",kind=\"calibrate\",outcome=\"failed\"} 0",
-            "chromacal_readings_total{device=\"a\",kind=\"overload\"} 0",
+            "chromacal_readings_total{device=\"a\",status=\"overload\"} 0",
             "chromacal_lut_overwritten_total{device=\"a\"} 0",
             "chromacal_build_info{version=",
         ] {

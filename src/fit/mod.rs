@@ -127,6 +127,69 @@ pub enum FitError {
     IllConditioned { condition: f64, limit: f64 },
     #[error("the fit was stopped before its end (a cancelled job, or the daemon stopping)")]
     Stopped,
+    #[error(
+        "{file}: patch {index} (counting from 0, in the order of the file) reads {component} = {value:.4e}, beyond what any display emits or any instrument reads (at most {limit:e} in magnitude): the file is damaged or in another unit; remove or correct that reading"
+    )]
+    ReadingOutOfRange {
+        file: String,
+        index: usize,
+        component: &'static str,
+        value: f64,
+        limit: f64,
+    },
+    #[error(
+        "{file}: the fit came out with {figure} not a finite number although every reading is in range; please report this with the file"
+    )]
+    NotFinite { file: String, figure: &'static str },
+}
+
+/// The largest reading magnitude the fit accepts, cd/m² (or Y = 100 units). The
+/// brightest displays peak near 10⁴ cd/m² and the widest-ranging meter in
+/// PROTOCOLS.md (the CS-100A) stops at 299,900 cd/m²; a finite reading far beyond
+/// that is a damaged file, and fed to the fit its squares overflow into NaN that
+/// would surface, much later, as a profile that cannot be saved.
+pub const MAX_READING_MAGNITUDE: f64 = 1e7;
+
+/// Refuse, by patch and component, a usable reading beyond `MAX_READING_MAGNITUDE`.
+fn check_reading_range(set: &MeasurementSet) -> Result<(), FitError> {
+    for m in &set.measurements {
+        let Some(xyz) = m.usable_xyz() else { continue };
+        for (component, value) in ["X", "Y", "Z"].into_iter().zip(xyz.iter().copied()) {
+            if value.abs() > MAX_READING_MAGNITUDE {
+                return Err(FitError::ReadingOutOfRange {
+                    file: set.source.clone(),
+                    index: m.index,
+                    component,
+                    value,
+                    limit: MAX_READING_MAGNITUDE,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The figures a profile is judged by, each finite, or the first that is not.
+fn check_fit_finite(set: &MeasurementSet, fitted: &FittedModel) -> Result<(), FitError> {
+    let r = &fitted.report;
+    let mut figures: Vec<(&'static str, f64)> = vec![("the condition number", r.condition_number)];
+    if let Some(h) = &r.held_out {
+        figures.extend([
+            ("the held-out mean", h.mean),
+            ("the held-out 95th percentile", h.p95),
+            ("the held-out maximum", h.max),
+        ]);
+    }
+    for p in &r.primaries {
+        figures.extend(p.xyz.iter().map(|v| ("a primary's XYZ", *v)));
+    }
+    match figures.into_iter().find(|(_, v)| !v.is_finite()) {
+        Some((figure, _)) => Err(FitError::NotFinite {
+            file: set.source.clone(),
+            figure,
+        }),
+        None => Ok(()),
+    }
 }
 
 /// A primary as fitted.
@@ -224,6 +287,7 @@ fn code_step(set: &MeasurementSet) -> f64 {
 /// A stop check set with `cancel::with_stop` ends the fit early with
 /// `FitError::Stopped`: its iterative parts look at it between steps.
 pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedModel, FitError> {
+    check_reading_range(set)?;
     let fitted = if light_meter::is_luminance_only(set) {
         light_meter::fit_luminance_only(set, options, fit_measurements)
     } else {
@@ -233,6 +297,7 @@ pub fn fit_monitor(set: &MeasurementSet, options: &FitOptions) -> Result<FittedM
         return Err(FitError::Stopped);
     }
     if let Ok(f) = &fitted {
+        check_fit_finite(set, f)?;
         let r = &f.report;
         tracing::debug!(
             readings = r.counts.readings,
