@@ -279,7 +279,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', ignore_case = true)]
     laws: Option<Vec<LawArg>>,
     /// Only these tables (comma-separated): fit-time, budget, sequential, argyll,
-    /// spectral, render, fleet, corrections.
+    /// spectral, render, fleet, corrections, law-rule.
     #[arg(long, value_delimiter = ',', value_parser = TABLES, ignore_case = true)]
     only: Vec<String>,
     /// The same as --only, as words: `chromacal bench spectral`.
@@ -288,7 +288,7 @@ pub struct BenchArgs {
 }
 
 /// The tables `bench` prints.
-const TABLES: [&str; 8] = [
+const TABLES: [&str; 9] = [
     "fit-time",
     "budget",
     "sequential",
@@ -297,6 +297,7 @@ const TABLES: [&str; 8] = [
     "render",
     "fleet",
     "corrections",
+    "law-rule",
 ];
 
 /// The shared reference data: `../shared/data` from the project chromacal was built
@@ -343,6 +344,9 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
     }
     if wanted("corrections") {
         super::bench_corrections::corrections_table(&data, args.quick)?;
+    }
+    if wanted("law-rule") {
+        super::bench_laws::law_rule_table(&data, args.quick)?;
     }
     Ok(())
 }

@@ -7,7 +7,9 @@
 //!
 //! When some law cannot be cross-validated (too few levels to leave one out), the laws
 //! are compared by Akaike's criterion instead, so the comparison stays like with like.
-//! The simplest law within noise of the best is kept (`select`).
+//! By default the law of lowest cross-validated error is kept (ties go to the
+//! simpler); `LawRule::SimplestWithinNoise` keeps the simplest within noise of the
+//! best instead (`select`).
 //!
 //! One law family is kept for all three channels, so the profile says one thing.
 
@@ -274,12 +276,19 @@ fn fold_errors_with(
     (ramp_errors, grey_errors)
 }
 
+/// The candidate laws and the rule that picks among them.
+#[derive(Debug, Clone, Copy)]
+pub struct LawChoice<'a> {
+    pub kinds: &'a [LawKind],
+    pub rule: super::LawRule,
+}
+
 /// Fit every law in `kinds` to every channel, score each on held-out readings (see the
 /// module documentation), and keep the simplest within noise of the best. `greys` are
 /// (drive level, XYZ) of grey readings below full drive. `None` when no law fits all
 /// three channels.
 pub fn choose_law(
-    kinds: &[LawKind],
+    choice: LawChoice<'_>,
     ramps: &[ChannelRamp; 3],
     greys: &[(f64, Xyz)],
     black: &Xyz,
@@ -295,7 +304,7 @@ pub fn choose_law(
         noise,
         toe,
     };
-    let mut kinds = kinds.to_vec();
+    let mut kinds = choice.kinds.to_vec();
     kinds.sort();
     kinds.dedup();
     let mut candidates: Vec<LawCandidate> = kinds
@@ -305,7 +314,17 @@ pub fn choose_law(
     let (basis, held) = score_candidates(&mut candidates, ramps, greys);
     let scores: Vec<Option<Vec<f64>>> = candidates.iter().map(|c| c.score.clone()).collect();
     let tolerance = noise_delta_e00(&held, noise, white);
-    let (chosen, rule) = match simplest_within_noise(&scores, tolerance) {
+    let picked = match choice.rule {
+        super::LawRule::SimplestWithinNoise => simplest_within_noise(&scores, tolerance),
+        super::LawRule::LowestError => simplest_within(&scores, 0.0, 0.0),
+    };
+    let (chosen, rule) = match picked {
+        Some(k) if choice.rule == super::LawRule::LowestError => (
+            candidates[k].kind,
+            format!(
+                "the law of lowest mean ΔE00 on {basis} (a simpler one only when equal; noise alone: {tolerance:.3})"
+            ),
+        ),
         Some(k) => (
             candidates[k].kind,
             format!(
