@@ -67,14 +67,20 @@ fn spent(store: &ProfileStore, run: &Path) -> bool {
     }
 }
 
-fn remove_oldest(found: &[PathBuf], keep: usize) -> usize {
+/// Remove all but the newest `keep` of `found` (oldest first) with `remove`; how many
+/// went. One that cannot be removed is logged and left.
+fn remove_oldest(
+    found: &[PathBuf],
+    keep: usize,
+    remove: fn(&Path) -> std::io::Result<()>,
+) -> usize {
     let excess = found.len().saturating_sub(keep);
     found[..excess]
         .iter()
-        .filter(|dir| match std::fs::remove_dir_all(dir) {
+        .filter(|path| match remove(path) {
             Ok(()) => true,
             Err(e) => {
-                tracing::warn!(dir = %dir.display(), error = %e, "cannot remove an old job folder");
+                tracing::warn!(path = %path.display(), error = %e, "cannot remove an old job folder or profile");
                 false
             }
         })
@@ -110,32 +116,24 @@ fn unpublished_profiles(store: &ProfileStore) -> Vec<PathBuf> {
     found.into_iter().map(|(_, path)| path).collect()
 }
 
-fn remove_oldest_files(found: &[PathBuf], keep: usize) -> usize {
-    let excess = found.len().saturating_sub(keep);
-    found[..excess]
-        .iter()
-        .filter(|file| match std::fs::remove_file(file) {
-            Ok(()) => true,
-            Err(e) => {
-                tracing::warn!(file = %file.display(), error = %e, "cannot remove an old unpublished profile");
-                false
-            }
-        })
-        .count()
-}
-
 /// Apply the rule to `store`, keeping as many spent runs, and as many unpublished
 /// profiles, as it keeps profiles.
 pub fn prune_finished(store: &ProfileStore) -> Pruned {
-    let profiles = remove_oldest_files(&unpublished_profiles(store), store.kept());
+    let profiles = remove_oldest(&unpublished_profiles(store), store.kept(), |p| {
+        std::fs::remove_file(p)
+    });
     let spent_runs: Vec<PathBuf> = folders(&store.runs_dir())
         .into_iter()
         .filter(|run| spent(store, run))
         .collect();
-    let runs = remove_oldest(&spent_runs, store.kept());
+    let runs = remove_oldest(&spent_runs, store.kept(), |p| std::fs::remove_dir_all(p));
     let job_journals = ["verifications", "uniformity"]
         .iter()
-        .map(|kind| remove_oldest(&folders(&store.root().join(kind)), JOB_JOURNALS_KEPT))
+        .map(|kind| {
+            remove_oldest(&folders(&store.root().join(kind)), JOB_JOURNALS_KEPT, |p| {
+                std::fs::remove_dir_all(p)
+            })
+        })
         .sum();
     let pruned = Pruned {
         profiles,
