@@ -34,20 +34,25 @@ pub struct Pruned {
     pub job_journals: usize,
 }
 
-/// The folders under `dir`, oldest first: by when they last changed (a run's marker
-/// is its last write), then by name. (Ids begin with their second, but two started in
-/// one second sort by their random part.)
-fn folders(dir: &Path) -> Vec<PathBuf> {
+/// The entries under `dir` that `wanted` takes, oldest first: by when they last
+/// changed (a run's marker is its last write), then by name. (Ids begin with their
+/// second, but two started in one second sort by their random part.)
+fn oldest_first(dir: &Path, wanted: impl Fn(&std::fs::DirEntry) -> bool) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Vec::new();
     };
     let mut found: Vec<(Option<std::time::SystemTime>, PathBuf)> = entries
         .filter_map(|e| e.ok())
-        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .filter(|e| wanted(e))
         .map(|e| (e.metadata().and_then(|m| m.modified()).ok(), e.path()))
         .collect();
     found.sort();
     found.into_iter().map(|(_, path)| path).collect()
+}
+
+/// The folders under `dir`, oldest first.
+fn folders(dir: &Path) -> Vec<PathBuf> {
+    oldest_first(dir, |e| e.file_type().is_ok_and(|t| t.is_dir()))
 }
 
 /// A finished run whose profile is gone from the store's `profiles/`, or that was
@@ -93,27 +98,16 @@ fn unpublished_profiles(store: &ProfileStore) -> Vec<PathBuf> {
     let Ok(history) = store.history() else {
         return Vec::new();
     };
-    let dir = store.root().join("profiles");
-    let Ok(entries) = std::fs::read_dir(&dir) else {
-        return Vec::new();
+    let published = |id: &str| {
+        history.current.as_deref() == Some(id) || history.entries.iter().any(|e| e.id == id)
     };
-    let mut found: Vec<(Option<std::time::SystemTime>, PathBuf)> = entries
-        .filter_map(|e| e.ok())
-        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
-        .map(|e| e.path())
-        .filter(|path| {
-            let id = path.file_stem().map(|s| s.to_string_lossy().into_owned());
-            path.extension().is_some_and(|x| x == "toml")
-                && id.is_some_and(|id| {
-                    crate::profile::store::is_valid_id(&id)
-                        && history.current.as_deref() != Some(id.as_str())
-                        && !history.entries.iter().any(|e| e.id == id)
-                })
-        })
-        .map(|path| (path.metadata().and_then(|m| m.modified()).ok(), path))
-        .collect();
-    found.sort();
-    found.into_iter().map(|(_, path)| path).collect()
+    oldest_first(&store.root().join("profiles"), |e| {
+        let path = e.path();
+        let id = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        e.file_type().is_ok_and(|t| t.is_file())
+            && path.extension().is_some_and(|x| x == "toml")
+            && id.is_some_and(|id| crate::profile::store::is_valid_id(&id) && !published(&id))
+    })
 }
 
 /// Apply the rule to `store`, keeping as many spent runs, and as many unpublished

@@ -203,7 +203,7 @@ fn run_seconds(set: &MeasurementSet, settle_s: f64) -> f64 {
 }
 
 /// Measure a simulated run into a journal under `dir` and return its measurements.
-fn simulate(config: &Config, dir: &Path, tag: &str) -> Result<MeasurementSet, String> {
+pub(super) fn simulate(config: &Config, dir: &Path, tag: &str) -> Result<MeasurementSet, String> {
     let path = dir.join(format!("{tag}.jsonl"));
     let _ = std::fs::remove_file(&path);
     let journal = block_on(measure_simulated(config, "", Path::new("."), &path))

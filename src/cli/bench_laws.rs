@@ -8,7 +8,6 @@
 
 use std::path::{Path, PathBuf};
 
-use chromacal::calibrate::session::{block_on, measure_simulated};
 use chromacal::cgats::read_ti3;
 use chromacal::config::parse_config;
 use chromacal::fit::{FitOptions, LawRule, fit_monitor};
@@ -118,12 +117,8 @@ fn simulate(
         monitor.section
     );
     let config = parse_config(&text, &monitor.name).map_err(|e| e.to_string())?;
-    let path = dir.join(format!("run-{budget}-{seed}.jsonl"));
-    let _ = std::fs::remove_file(&path);
-    let journal = block_on(measure_simulated(&config, "", Path::new("."), &path))
-        .map_err(|e| e.to_string())?
-        .map_err(|e| format!("{}: {e}", monitor.name))?;
-    Ok(journal.measurement_set())
+    super::bench::simulate(&config, dir, &format!("run-{budget}-{seed}"))
+        .map_err(|e| format!("{}: {e}", monitor.name))
 }
 
 /// Print the table; `quick` takes two seeds instead of five.

@@ -284,7 +284,7 @@ pub struct LawChoice<'a> {
 }
 
 /// Fit every law in `kinds` to every channel, score each on held-out readings (see the
-/// module documentation), and keep the simplest within noise of the best. `greys` are
+/// module documentation), and keep one by `choice.rule`. `greys` are
 /// (drive level, XYZ) of grey readings below full drive. `None` when no law fits all
 /// three channels.
 pub fn choose_law(
@@ -314,23 +314,22 @@ pub fn choose_law(
     let (basis, held) = score_candidates(&mut candidates, ramps, greys);
     let scores: Vec<Option<Vec<f64>>> = candidates.iter().map(|c| c.score.clone()).collect();
     let tolerance = noise_delta_e00(&held, noise, white);
-    let picked = match choice.rule {
-        super::LawRule::SimplestWithinNoise => simplest_within_noise(&scores, tolerance),
-        super::LawRule::LowestError => simplest_within(&scores, 0.0, 0.0),
-    };
-    let (chosen, rule) = match picked {
-        Some(k) if choice.rule == super::LawRule::LowestError => (
-            candidates[k].kind,
-            format!(
-                "the law of lowest mean ΔE00 on {basis} (a simpler one only when equal; noise alone: {tolerance:.3})"
-            ),
-        ),
-        Some(k) => (
-            candidates[k].kind,
+    let (picked, rule) = match choice.rule {
+        super::LawRule::SimplestWithinNoise => (
+            simplest_within_noise(&scores, tolerance),
             format!(
                 "simplest law whose ΔE00 on {basis} exceeds the best's by no more than one standard error (paired) or than noise alone ({tolerance:.3})"
             ),
         ),
+        super::LawRule::LowestError => (
+            simplest_within(&scores, 0.0, 0.0),
+            format!(
+                "the law of lowest mean ΔE00 on {basis} (a simpler one only when equal; noise alone: {tolerance:.3})"
+            ),
+        ),
+    };
+    let (chosen, rule) = match picked {
+        Some(k) => (candidates[k].kind, rule),
         None => (
             simplest_by_akaike(&candidates)?,
             "too few levels to cross-validate and no greys: the simplest law within 2 of the lowest Akaike criterion (χ² + 2k)"
