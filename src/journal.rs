@@ -250,6 +250,15 @@ impl Journal {
 }
 
 /// A measurement set from a journal's header and entries.
+/// A journal's path as a profile stores it: absolute (not resolving links), so that a
+/// report made from another directory finds the readings.
+pub fn stored_path(path: &Path) -> String {
+    std::path::absolute(path)
+        .unwrap_or_else(|_| path.to_path_buf())
+        .display()
+        .to_string()
+}
+
 pub fn to_measurement_set(
     path: &Path,
     header: &JournalHeader,

@@ -95,6 +95,7 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(f) if f.is_output_closed() => ExitCode::SUCCESS,
         Err(f) => {
             eprintln!("chromacal: {}", f.message);
             ExitCode::from(f.code)

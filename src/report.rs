@@ -403,7 +403,7 @@ pub fn describe_model(model: &MonitorModel, units: &str) -> String {
 pub fn calibration_summary(c: &crate::profile::StoredCalibration) -> String {
     let mut out = format!(
         "\ncalibration curves to {} ({} correction passes, {} readings, {}):\n",
-        c.curves.target.describe(),
+        c.curves.describe(),
         c.passes,
         c.readings,
         duration(c.instrument_s)

@@ -595,7 +595,7 @@ pub async fn finish_run(
         units: Units::Absolute,
         model: fitted.model.clone(),
         provenance: Provenance {
-            source: journal.path().display().to_string(),
+            source: crate::journal::stored_path(journal.path()),
             display: Some(header.display.clone()),
             instrument: Some(header.instrument.clone()),
             config_digest: Some(header.config_digest.clone()),

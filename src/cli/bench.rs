@@ -10,6 +10,7 @@
 //! Every simulated run uses realistic noise (0.2 % gain, 0.2 % per band, 0.0005 cd/m²
 //! floor) and is repeated over seeds; the table gives the mean over seeds.
 
+use super::shared::{out, outln};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -108,7 +109,7 @@ fn plan_config(monitor: &Monitor, plan: &str, seed: u64) -> Result<Config, Strin
 
 /// Held-out ΔE00 against counted patches for fixed plans and for the sequential plan,
 /// on each virtual monitor, beside the instrument's repeatability.
-fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
+fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), Failure> {
     let dir = std::env::temp_dir().join(format!("chromacal-sequential-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let plans: Vec<(String, String)> = [16usize, 24, 32, 48]
@@ -133,10 +134,10 @@ fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
                 .to_string(),
         )))
         .collect();
-    println!(
+    outln!(
         "\nfixed against sequential plans: held-out ΔE00 on 24 verification patches (mean over {} seeds), counted patches and instrument seconds (all patches, settling included):",
         seeds.len()
-    );
+    )?;
     for monitor in monitors(data) {
         let mut rows = Vec::new();
         let mut floor = Vec::new();
@@ -171,12 +172,12 @@ fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
             ]);
         }
         let floor = ErrorStats::of(&floor).map_or(f64::NAN, |f| f.mean);
-        println!(
+        outln!(
             "\n{}: the instrument's repeatability (consecutive reference whites) {floor:.3}, 1.5 × that {:.3}",
             monitor.name,
             1.5 * floor
-        );
-        print!(
+        )?;
+        out!(
             "{}",
             table(
                 &[
@@ -187,7 +188,7 @@ fn sequential_table(data: &Path, seeds: &[u64]) -> Result<(), String> {
                 ],
                 &rows
             )
-        );
+        )?;
     }
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
@@ -351,7 +352,7 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
     Ok(())
 }
 
-fn bench(quick: bool, data: &Path, fit_time: bool, budget: bool) -> Result<(), String> {
+fn bench(quick: bool, data: &Path, fit_time: bool, budget: bool) -> Result<(), Failure> {
     let repeats = if quick { 5 } else { 30 };
     let seeds: Vec<u64> = if quick {
         vec![1, 2]
@@ -361,8 +362,8 @@ fn bench(quick: bool, data: &Path, fit_time: bool, budget: bool) -> Result<(), S
 
     // 1. Fit time per law against readings.
     if fit_time {
-        fit_time_table(repeats);
-        whole_fit_times(data, if quick { 3 } else { 11 });
+        fit_time_table(repeats)?;
+        whole_fit_times(data, if quick { 3 } else { 11 })?;
     }
     if !budget {
         return Ok(());
@@ -371,10 +372,10 @@ fn bench(quick: bool, data: &Path, fit_time: bool, budget: bool) -> Result<(), S
 }
 
 /// Fit time per law against readings per channel.
-fn fit_time_table(repeats: usize) {
-    println!(
+fn fit_time_table(repeats: usize) -> Result<(), Failure> {
+    outln!(
         "fit time per channel, microseconds (median of {repeats}), against readings per channel:"
-    );
+    )?;
     let sizes = [6usize, 12, 24, 48, 96];
     let mut rows = Vec::new();
     for kind in LawKind::ALL {
@@ -397,12 +398,12 @@ fn fit_time_table(repeats: usize) {
         .chain(sizes.iter().map(|n| format!("n={n}")))
         .collect();
     let header_refs: Vec<&str> = headers.iter().map(String::as_str).collect();
-    print!("{}", table(&header_refs, &rows));
+    out!("{}", table(&header_refs, &rows))
 }
 
 /// Time of the whole fit (black, drift, every law cross-validated, the additivity
 /// terms, the spatial map, the checks) on each real measurement set as it is.
-fn whole_fit_times(data: &Path, repeats: usize) {
+fn whole_fit_times(data: &Path, repeats: usize) -> Result<(), Failure> {
     let sets: Vec<(String, MeasurementSet)> = real_sets(data)
         .into_iter()
         .map(|(name, set)| match set {
@@ -410,9 +411,9 @@ fn whole_fit_times(data: &Path, repeats: usize) {
         })
         .collect();
     if sets.is_empty() {
-        return;
+        return Ok(());
     }
-    println!("\nwhole fit on one core, every reading of each real set (median of {repeats}):");
+    outln!("\nwhole fit on one core, every reading of each real set (median of {repeats}):")?;
     let mut rows = Vec::new();
     for (name, set) in sets {
         let mut times: Vec<f64> = (0..repeats)
@@ -429,11 +430,11 @@ fn whole_fit_times(data: &Path, repeats: usize) {
             chromacal::report::duration(times[times.len() / 2]),
         ]);
     }
-    print!("{}", table(&["display", "readings", "fit time"], &rows));
+    out!("{}", table(&["display", "readings", "fit time"], &rows))
 }
 
 /// Held-out ΔE00 against budget, per law and for the law chosen, on each monitor.
-fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
+fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), Failure> {
     let dir = std::env::temp_dir().join(format!("chromacal-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let budgets = [12usize, 24, 48, 96];
@@ -443,11 +444,11 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
         .collect();
     choices.push(("chosen by CV".into(), LawKind::ALL.to_vec()));
     for monitor in monitors(data) {
-        println!(
+        outln!(
             "\n{}: held-out ΔE00 on 24 verification patches, mean / p95 (mean over {} seeds), and fit time, against counted patches:",
             monitor.name,
             seeds.len()
-        );
+        )?;
         let mut rows: Vec<Vec<String>> = choices.iter().map(|c| vec![c.0.clone()]).collect();
         let mut chosen_names = Vec::new();
         let mut instrument_time = Vec::new();
@@ -508,8 +509,8 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
             .chain(budgets.iter().map(|b| format!("{b} patches")))
             .collect();
         let header_refs: Vec<&str> = headers.iter().map(String::as_str).collect();
-        print!("{}", table(&header_refs, &rows));
-        println!(
+        out!("{}", table(&header_refs, &rows))?;
+        outln!(
             "  chosen: {}",
             budgets
                 .iter()
@@ -517,14 +518,16 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
                 .map(|(b, c)| format!("{b}: {c}"))
                 .collect::<Vec<_>>()
                 .join(", ")
-        );
+        )?;
         if let Some(floor) = ErrorStats::of(&repeat_differences) {
-            println!(
+            outln!(
                 "  the instrument's repeatability, the floor: ΔE00 between consecutive readings of the reference white, mean {:.3} / p95 {:.3} ({} pairs)",
-                floor.mean, floor.p95, floor.n
-            );
+                floor.mean,
+                floor.p95,
+                floor.n
+            )?;
         }
-        println!(
+        outln!(
             "  instrument time per run (all patches incl. held-out and grid): {}",
             budgets
                 .iter()
@@ -532,7 +535,7 @@ fn budget_tables(data: &Path, seeds: &[u64]) -> Result<(), String> {
                 .map(|(b, t)| format!("{b}: {}", chromacal::report::duration(*t)))
                 .collect::<Vec<_>>()
                 .join(", ")
-        );
+        )?;
     }
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
@@ -581,16 +584,16 @@ pub fn real_sets(data: &Path) -> Vec<(String, RealSet)> {
 
 /// chromacal against ArgyllCMS's `colprof -qm -as` on every real set, one split, one
 /// judge (`comparison`).
-fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
+fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), Failure> {
     let sets = real_sets(data);
     if sets.is_empty() {
-        println!("\nno real measurement sets under {}", data.display());
+        outln!("\nno real measurement sets under {}", data.display())?;
         return Ok(());
     }
     let (first, last) = (RESCALINGS.start(), RESCALINGS.end());
-    println!(
+    outln!(
         "\nreal displays: held-out ΔE00 mean (train: black, greys and single-channel ramps, at most {MAX_TRAIN}; test: every mixture), judged by ArgyllCMS profcheck -k on each tool's ICC profile; colprof -qm -as run on the rows as measured and rescaled by 1 + k·10⁻⁴, k = {first}…{last}:"
-    );
+    )?;
     let work = std::env::temp_dir().join(format!("chromacal-argyll-{}", std::process::id()));
     let rescalings: Vec<i32> = RESCALINGS.collect();
     let mut rows = Vec::new();
@@ -638,7 +641,7 @@ fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
         ]);
     }
     let _ = std::fs::remove_dir_all(&work);
-    print!(
+    out!(
         "{}",
         table(
             &[
@@ -655,14 +658,14 @@ fn against_argyll(data: &Path, options: &FitOptions) -> Result<(), String> {
             ],
             &rows
         )
-    );
+    )?;
     let median = |v: Vec<f64>| chromacal::fit::stats::percentile(&v, 50.0);
     if !ratios.is_empty() {
-        println!(
+        outln!(
             "  median ratio chromacal ICC / colprof's median run: {:.2}; to colprof's best run: {:.2}",
             median(ratios),
             median(best_ratios)
-        );
+        )?;
     }
     Ok(())
 }

@@ -3,6 +3,7 @@
 //! ISETBio's measured CRT, LCD and OLED spectra (from the shared data), beside the
 //! colorimeter's repeatability, and what a run costs.
 
+use super::shared::{Failure, outln};
 use std::path::Path;
 use std::time::Instant;
 
@@ -13,13 +14,13 @@ use chromacal::instrument::devices::DeviceKind;
 use chromacal::report::table;
 
 /// Print the table; `quick` takes one seed instead of three.
-pub fn corrections_table(data: &Path, quick: bool) -> Result<(), String> {
+pub fn corrections_table(data: &Path, quick: bool) -> Result<(), Failure> {
     let seeds: Vec<u64> = if quick { vec![1] } else { vec![1, 2, 3] };
     let patches = correction_patches().len();
-    println!(
+    outln!(
         "colorimeter corrections made against an emulated PR-670 ({patches} patches read by both, 6 held out; mean over {} seed(s)):",
         seeds.len()
-    );
+    )?;
     let mut rows = Vec::new();
     for (name, stem) in [
         ("CRT (ISETBio Dell)", "isetbio_crt_dell"),
@@ -29,7 +30,7 @@ pub fn corrections_table(data: &Path, quick: bool) -> Result<(), String> {
         let spd = data.join(format!("displays/spd/{stem}_spd.csv"));
         let gamma = data.join(format!("displays/gamma/{stem}_gamma.csv"));
         if !spd.is_file() || !gamma.is_file() {
-            println!("  ({name}: {} is missing; skipped)", spd.display());
+            outln!("  ({name}: {} is missing; skipped)", spd.display())?;
             continue;
         }
         let text = format!(
@@ -66,7 +67,7 @@ pub fn corrections_table(data: &Path, quick: bool) -> Result<(), String> {
             ]);
         }
     }
-    println!(
+    outln!(
         "{}",
         table(
             &[
@@ -80,6 +81,6 @@ pub fn corrections_table(data: &Path, quick: bool) -> Result<(), String> {
             ],
             &rows,
         )
-    );
+    )?;
     Ok(())
 }

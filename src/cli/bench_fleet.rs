@@ -10,6 +10,7 @@
 //! sent, and each device's time per patch (between its first and last reading, as
 //! the client saw them) — the per-patch overhead.
 
+use super::shared::{Failure, out, outln};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -226,11 +227,11 @@ fn run_fleet(devices: usize, dir: &Path, mqtt: Option<u16>) -> Result<Run, Strin
 }
 
 /// The fleet table; `quick` stops at 8 devices.
-pub fn fleet_table(quick: bool) -> Result<(), String> {
+pub fn fleet_table(quick: bool) -> Result<(), Failure> {
     let dir = tempfile_dir()?;
     let broker = broker(&dir)?;
     let port = broker.as_ref().map(|(_, p)| *p);
-    println!(
+    outln!(
         "one daemon, N simulated devices calibrating at once (time scale 1e-6: the per-patch time is the daemon's own work), {} cores{}:",
         std::thread::available_parallelism().map_or(0, |n| n.get()),
         if port.is_some() {
@@ -238,7 +239,7 @@ pub fn fleet_table(quick: bool) -> Result<(), String> {
         } else {
             " (Mosquitto not installed: no MQTT)"
         }
-    );
+    )?;
     let mut rows = Vec::new();
     for devices in SIZES.into_iter().filter(|n| !quick || *n <= 8) {
         let run = run_fleet(devices, &dir, port)?;
@@ -261,7 +262,7 @@ pub fn fleet_table(quick: bool) -> Result<(), String> {
             }),
         ]);
     }
-    print!(
+    out!(
         "{}",
         table(
             &[
@@ -275,7 +276,7 @@ pub fn fleet_table(quick: bool) -> Result<(), String> {
             ],
             &rows
         )
-    );
+    )?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }

@@ -6,6 +6,7 @@
 //! real spectra, at a sparse and a dense fixed plan, over seeds, scored on 24 mixtures
 //! held out of every fit.
 
+use super::shared::{Failure, out, outln};
 use std::path::{Path, PathBuf};
 
 use chromacal::cgats::read_ti3;
@@ -122,7 +123,7 @@ fn simulate(
 }
 
 /// Print the table; `quick` takes two seeds instead of five.
-pub fn law_rule_table(data: &Path, quick: bool) -> Result<(), String> {
+pub fn law_rule_table(data: &Path, quick: bool) -> Result<(), Failure> {
     let dir = std::env::temp_dir().join(format!("chromacal-bench-laws-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let seeds: Vec<u64> = if quick { vec![1, 2] } else { (1..=5).collect() };
@@ -130,10 +131,10 @@ pub fn law_rule_table(data: &Path, quick: bool) -> Result<(), String> {
         ("simplest within noise", LawRule::SimplestWithinNoise),
         ("lowest error", LawRule::LowestError),
     ];
-    println!(
+    outln!(
         "law rule: held-out ΔE00 on 24 mixtures (mean over {} seeds; the laws chosen), fixed plans of {BUDGETS:?} patches:",
         seeds.len()
-    );
+    )?;
     let mut rows = Vec::new();
     let mut totals = vec![[0.0; 2]; BUDGETS.len()];
     let monitors = monitors(data, &dir)?;
@@ -178,7 +179,7 @@ pub fn law_rule_table(data: &Path, quick: bool) -> Result<(), String> {
         )
         .collect();
     let refs: Vec<&str> = headers.iter().map(String::as_str).collect();
-    print!("{}", table(&refs, &rows));
+    out!("{}", table(&refs, &rows))?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }

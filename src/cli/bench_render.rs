@@ -10,6 +10,7 @@
 //! codes (16 bits) are judged by chromacal's exact model: the ΔE00 between the colour
 //! asked for and what the display shows for them.
 
+use super::shared::{Failure, outln};
 use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::Instant;
@@ -152,7 +153,7 @@ fn error_of(
     })
 }
 
-pub fn render_table(quick: bool) -> Result<(), String> {
+pub fn render_table(quick: bool) -> Result<(), Failure> {
     let profile = default_profile()?;
     let full = profile.model.clone();
     let centre_only = MonitorModel {
@@ -296,12 +297,12 @@ pub fn render_table(quick: bool) -> Result<(), String> {
             ]
         })
         .collect();
-    println!(
+    outln!(
         "XYZ → display codes (16 bits), {SIDE} × {SIDE} = {:.1} megapixels, colours inside the gamut; each tool timed beside chromacal on one core, interleaved over {rounds} rounds (the median, and each ratio's spread over the rounds); ΔE00 judged by chromacal's exact model on {} pixels\n",
         n as f64 / 1e6,
         ERROR_SAMPLE.min(n)
-    );
-    println!(
+    )?;
+    outln!(
         "{}",
         table(
             &[
@@ -313,14 +314,14 @@ pub fn render_table(quick: bool) -> Result<(), String> {
             ],
             &cells
         )
-    );
+    )?;
     code_choice_table(&full, rounds)
 }
 
 /// What choosing the nearest of the 8 codes around each drive costs and gains over
 /// rounding each channel, at 8 bits, through `render` (the whole chain, gamut test and
 /// summary included), timed alternately over `ROUNDS` rounds.
-fn code_choice_table(model: &MonitorModel, rounds: usize) -> Result<(), String> {
+fn code_choice_table(model: &MonitorModel, rounds: usize) -> Result<(), Failure> {
     let crf = ColourReproduction::new(model).map_err(|e| e.to_string())?;
     let n = 100_000;
     let scene = Scene {
@@ -383,14 +384,14 @@ fn code_choice_table(model: &MonitorModel, rounds: usize) -> Result<(), String> 
             ]
         })
         .collect();
-    println!(
+    outln!(
         "codes at 8 bits, {n} in-gamut colours through `render` ({rounds} rounds, alternating); {better} colours ({:.1} %) nearer by more than 0.1 ΔE00 with the nearest codes\n",
         better as f64 / n as f64 * 100.0
-    );
-    println!(
+    )?;
+    outln!(
         "{}",
         table(&["codes", "µs a pixel", "ΔE00 mean / p95 / max"], &cells)
-    );
+    )?;
     Ok(())
 }
 

@@ -3,6 +3,7 @@
 //! against the direct weighted-ordinate reference, with the survey's own figures
 //! beside; then, per family, the cheapest method under a mean ΔE00 of 0.5 and of 0.1.
 
+use super::shared::{Failure, outln};
 use std::path::Path;
 
 use chromacal::color::spectrum::{Illuminant, Observer};
@@ -14,7 +15,7 @@ use chromacal::crf::spectral_table::{
 use chromacal::report::table;
 
 /// Print the tables; the display primaries come from `data/displays/spd` when there.
-pub fn spectral_tables(data: &Path, quick: bool) -> Result<(), String> {
+pub fn spectral_tables(data: &Path, quick: bool) -> Result<(), Failure> {
     let repeats = if quick { 200 } else { 2000 };
     let mut families = vec![
         (colorchecker_family(Illuminant::A, "A"), true),
@@ -31,16 +32,16 @@ pub fn spectral_tables(data: &Path, quick: bool) -> Result<(), String> {
             displays.display()
         );
     }
-    println!(
+    outln!(
         "Spectral methods (seed §3): spectra on {}, CIE 1931 2°; error against the direct sum on that grid; time per conversion on one core\n",
         grid_description()
-    );
+    )?;
     let methods = standard_methods();
     let mut summary = Vec::new();
     for (family, reflective) in &families {
         let rows = family_table(family, &methods, Observer::default(), repeats)
             .map_err(|e| e.to_string())?;
-        print_family(family, *reflective, &rows);
+        print_family(family, *reflective, &rows)?;
         let pick = |limit: f64| {
             cheapest_below(&rows, *reflective, limit).map_or("none".to_string(), |r| {
                 format!(
@@ -53,18 +54,18 @@ pub fn spectral_tables(data: &Path, quick: bool) -> Result<(), String> {
         };
         summary.push(vec![family.name.clone(), pick(0.5), pick(0.1)]);
     }
-    println!(
+    outln!(
         "Cheapest method per conversion (operations: product and integration for reflected light)"
-    );
-    println!(
+    )?;
+    outln!(
         "{}",
         table(&["family", "mean ΔE00 < 0.5", "mean ΔE00 < 0.1"], &summary)
-    );
+    )?;
     Ok(())
 }
 
-fn print_family(family: &Family, reflective: bool, rows: &[Row]) {
-    println!(
+fn print_family(family: &Family, reflective: bool, rows: &[Row]) -> Result<(), Failure> {
+    outln!(
         "{} ({} spectra{})",
         family.name,
         family.cases.len(),
@@ -73,7 +74,7 @@ fn print_family(family: &Family, reflective: bool, rows: &[Row]) {
         } else {
             ", integration alone"
         }
-    );
+    )?;
     let cells: Vec<Vec<String>> = rows
         .iter()
         .map(|r| {
@@ -96,7 +97,7 @@ fn print_family(family: &Family, reflective: bool, rows: &[Row]) {
             ]
         })
         .collect();
-    println!(
+    outln!(
         "{}",
         table(
             &[
@@ -111,7 +112,7 @@ fn print_family(family: &Family, reflective: bool, rows: &[Row]) {
             ],
             &cells
         )
-    );
+    )
 }
 
 /// The survey's figure, shown once per method (on its first parameter).

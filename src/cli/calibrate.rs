@@ -1,6 +1,7 @@
 //! `chromacal calibrate`: plan, measure, fit, validate and publish, with a progress bar
 //! and a summary.
 
+use super::shared::{out, outln};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -178,7 +179,7 @@ fn calibrate(
             "fit_s": outcome.fit_seconds,
             "report": outcome.profile.report,
         });
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        outln!("{}", serde_json::to_string_pretty(&summary)?)?;
     } else {
         let mut out = format!(
             "chromacal: calibrated {} with {}\n",
@@ -243,7 +244,7 @@ fn calibrate(
                 )
             }
         }
-        print!("{out}");
+        out!("{out}")?;
     }
     match outcome.rejection {
         None => Ok(()),
@@ -318,15 +319,15 @@ pub fn run_runs(args: RunsArgs) -> Result<(), Failure> {
     );
     let runs = unfinished_runs(&store);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&runs)?);
+        outln!("{}", serde_json::to_string_pretty(&runs)?)?;
         return Ok(());
     }
     if runs.is_empty() {
-        println!("no unfinished runs in {}", store.runs_dir().display());
+        outln!("no unfinished runs in {}", store.runs_dir().display())?;
         return Ok(());
     }
     let newest = newest_resumable(&runs).map(|r| &r.id);
-    println!("{:<30} {:>9}  state", "run", "readings");
+    outln!("{:<30} {:>9}  state", "run", "readings")?;
     for run in &runs {
         let state = if !run.resumable() {
             format!(
@@ -338,7 +339,7 @@ pub fn run_runs(args: RunsArgs) -> Result<(), Failure> {
         } else {
             "resume with `calibrate --resume <run>`".to_string()
         };
-        println!("{:<30} {:>9}  {state}", run.id, run.readings);
+        outln!("{:<30} {:>9}  {state}", run.id, run.readings)?;
     }
     Ok(())
 }

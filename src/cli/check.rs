@@ -1,5 +1,6 @@
 //! `chromacal check`: predict every measured patch from a profile.
 
+use super::shared::{out, outln};
 use std::path::{Path, PathBuf};
 
 use chromacal::crf::explain::{SceneWeighted, scene_weighted};
@@ -131,7 +132,7 @@ fn check(
             /// The profile's assumption checks, each with the ΔE00 it costs.
             assumptions: &'a AssumptionChecks,
         }
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&Output {
                 scene_weighted: scene_weighted.as_ref(),
@@ -141,24 +142,27 @@ fn check(
                 evaluation: &evaluation,
                 assumptions: &profile.report.checks,
             })?
-        );
+        )?;
     } else {
-        println!(
+        outln!(
             "chromacal: {} against {} ({} usable readings of {})",
             profile_path.display(),
             measurements.display(),
             evaluation.patches.len(),
             set.measurements.len()
-        );
+        )?;
         if let Some(n) = note {
-            println!("  note: {n}");
+            outln!("  note: {n}")?;
         }
-        print!("{}", report::check_summary(&evaluation, worst));
+        out!("{}", report::check_summary(&evaluation, worst))?;
         if let Some(w) = &scene_weighted {
-            println!(
+            outln!(
                 "  weighted by the scene's {} colours ({} of the patches nearest them): mean ΔE00 {:.3}, max {:.3}",
-                w.colours, w.patches_used, w.mean, w.max
-            );
+                w.colours,
+                w.patches_used,
+                w.mean,
+                w.max
+            )?;
         }
     }
     Ok(())

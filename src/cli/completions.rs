@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use super::shared::Failure;
+use super::shared::{Failure, write_stdout};
 
 /// Print a completion script for a shell, e.g.
 /// `chromacal completions bash > ~/.local/share/bash-completion/completions/chromacal`.
@@ -25,19 +25,19 @@ pub struct ManArgs {
 }
 
 pub fn run_completions(args: CompletionsArgs, mut command: clap::Command) -> Result<(), Failure> {
-    clap_complete::generate(
-        args.shell,
-        &mut command,
-        "chromacal",
-        &mut std::io::stdout(),
-    );
-    Ok(())
+    // Made in memory, then written: `generate` panics when its writer fails, and a
+    // reader that stops early (`| head`) is not a failure.
+    let mut script = Vec::new();
+    clap_complete::generate(args.shell, &mut command, "chromacal", &mut script);
+    write_stdout(&script)
 }
 
 pub fn run_man(args: ManArgs, command: clap::Command) -> Result<(), Failure> {
     match args.output {
         None => {
-            clap_mangen::Man::new(command).render(&mut std::io::stdout())?;
+            let mut page = Vec::new();
+            clap_mangen::Man::new(command).render(&mut page)?;
+            write_stdout(&page)?;
         }
         Some(dir) => {
             std::fs::create_dir_all(&dir)

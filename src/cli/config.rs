@@ -1,5 +1,6 @@
 //! `chromacal config show`: the configuration in effect, and where it came from.
 
+use super::shared::out;
 use std::path::PathBuf;
 
 use chromacal::config::{check_config, config_search_paths, device_configs, load_config_searching};
@@ -63,7 +64,7 @@ fn show(config: Option<PathBuf>) -> Result<(), Failure> {
     if let Some(why) = &refused {
         out += &format!("# It would be refused: {why}\n");
     }
-    print!("{out}\n{text}");
+    out!("{out}\n{text}")?;
     match refused {
         Some(why) => Err(Failure::from(format!(
             "this configuration would be refused: {why}"

@@ -1,6 +1,7 @@
 //! `chromacal correction make`: a colorimeter correction (.ccmx) made on a display
 //! against a reference spectroradiometer.
 
+use super::shared::outln;
 use std::io::BufRead;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -150,24 +151,26 @@ fn make(args: MakeArgs) -> Result<(), Failure> {
         }
     };
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&fit)?);
+        outln!("{}", serde_json::to_string_pretty(&fit)?)?;
         return Ok(());
     }
-    println!(
+    outln!(
         "{} corrected against {} on {}",
-        ccmx.instrument, ccmx.reference, ccmx.display
-    );
-    println!("{}", fit_table(&fit));
-    println!("matrix (reference XYZ = M · colorimeter XYZ):");
+        ccmx.instrument,
+        ccmx.reference,
+        ccmx.display
+    )?;
+    outln!("{}", fit_table(&fit))?;
+    outln!("matrix (reference XYZ = M · colorimeter XYZ):")?;
     for r in 0..3 {
-        println!(
+        outln!(
             "  {:>9.5} {:>9.5} {:>9.5}",
             fit.matrix[(r, 0)],
             fit.matrix[(r, 1)],
             fit.matrix[(r, 2)]
-        );
+        )?;
     }
-    println!("wrote {}", args.output.display());
+    outln!("wrote {}", args.output.display())?;
     Ok(())
 }
 

@@ -2,6 +2,7 @@
 //! `status`, `job start|watch|cancel`, `history`, `rollback` (and `profile current`,
 //! whose arguments are with `profile`).
 
+use super::shared::{out, outln};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -137,7 +138,7 @@ fn daemon(options: chromacal::daemon::DaemonOptions) -> Result<(), Failure> {
 
 pub fn run(args: DaemonArgs) -> Result<(), Failure> {
     if let Some(DaemonCommand::Reload { api }) = &args.command {
-        return reload(api).map_err(Failure::from);
+        return reload(api);
     }
     daemon(chromacal::daemon::DaemonOptions {
         config: args.config,
@@ -149,7 +150,7 @@ pub fn run(args: DaemonArgs) -> Result<(), Failure> {
 }
 
 /// `chromacal daemon reload`: `POST /reload`, and what it changed.
-fn reload(api: &ApiArgs) -> Result<(), String> {
+fn reload(api: &ApiArgs) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
         let reply = post(&endpoint, "/reload", serde_json::json!({})).await?;
@@ -166,45 +167,40 @@ fn reload(api: &ApiArgs) -> Result<(), String> {
                 false => names.join(", "),
             }
         };
-        println!(
+        outln!(
             "config reloaded: added {}; removed {}; changed {}",
             list("added"),
             list("removed"),
             list("changed")
-        );
+        )?;
         if value["restart_needed"]
             .as_array()
             .is_some_and(|a| !a.is_empty())
         {
-            println!(
+            outln!(
                 "changes to {} take effect at the next restart",
                 list("restart_needed")
-            );
+            )?;
         }
         Ok(())
     })
 }
 
 pub fn run_status(args: StatusArgs) -> Result<(), Failure> {
-    status(&args.api, args.json).map_err(Failure::from)
-}
+    status(&args.api, args.json)}
 
 pub fn run_job(args: JobArgs) -> Result<(), Failure> {
     match args.command {
         JobCommand::Start { kind, watch } => job_start(&args.api, &kind, watch),
         JobCommand::Watch => job_watch(&args.api),
         JobCommand::Cancel => job_cancel(&args.api),
-    }
-    .map_err(Failure::from)
-}
+    }}
 
 pub fn run_history(args: HistoryArgs) -> Result<(), Failure> {
-    history(&args.api, args.json).map_err(Failure::from)
-}
+    history(&args.api, args.json)}
 
 pub fn run_rollback(args: RollbackArgs) -> Result<(), Failure> {
-    rollback(&args.api, args.to).map_err(Failure::from)
-}
+    rollback(&args.api, args.to)}
 
 /// How to reach the daemon.
 #[derive(clap::Args, Debug, Clone, Default)]
@@ -324,7 +320,7 @@ fn describe_outcome(outcome: &JobOutcome) -> String {
     format!("{}: {}", outcome.result, outcome.message)
 }
 
-pub fn status(api: &ApiArgs, json: bool) -> Result<(), String> {
+pub fn status(api: &ApiArgs, json: bool) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
         // One device's status, or every device's.
@@ -355,13 +351,13 @@ pub fn status(api: &ApiArgs, json: bool) -> Result<(), String> {
             }
         };
         if json {
-            println!("{}", reply.text());
+            outln!("{}", reply.text())?;
             return Ok(());
         }
         let Some(first) = statuses.first() else {
             return Err("the daemon has no devices".into());
         };
-        println!(
+        outln!(
             "chromacal daemon {} (pid {}), up {}{}",
             first.version,
             first.pid,
@@ -371,32 +367,32 @@ pub fn status(api: &ApiArgs, json: bool) -> Result<(), String> {
             } else {
                 ""
             }
-        );
+        )?;
         for status in &statuses {
-            print_device_status(status, statuses.len() > 1);
+            print_device_status(status, statuses.len() > 1)?;
         }
         Ok(())
     })
 }
 
 /// One device's part of `chromacal status`; `named` puts its name first.
-fn print_device_status(status: &StatusReply, named: bool) {
+fn print_device_status(status: &StatusReply, named: bool) -> Result<(), Failure> {
     let indent = if named {
-        println!("device {}: state {}", status.device, status.state_dir);
+        outln!("device {}: state {}", status.device, status.state_dir)?;
         "    "
     } else {
-        println!("  state {}", status.state_dir);
+        outln!("  state {}", status.state_dir)?;
         "  "
     };
     match &status.job {
-        Some(job) => println!("{indent}job: {}", describe_job(job)),
-        None => println!("{indent}job: none running"),
+        Some(job) => outln!("{indent}job: {}", describe_job(job))?,
+        None => outln!("{indent}job: none running")?,
     }
     if let Some((job, outcome)) = &status.last_job {
-        println!("{indent}last job: {} {}", job.id, describe_outcome(outcome));
+        outln!("{indent}last job: {} {}", job.id, describe_outcome(outcome))?;
     }
     match &status.current_profile {
-        Some(p) => println!(
+        Some(p) => outln!(
             "{indent}current profile: {} (made {}{}) at {}",
             p.id,
             p.created,
@@ -405,14 +401,14 @@ fn print_device_status(status: &StatusReply, named: bool) {
                 h.mean
             )),
             p.path
-        ),
-        None => println!("{indent}current profile: none yet"),
+        )?,
+        None => outln!("{indent}current profile: none yet")?,
     }
     if let Some(next) = &status.next_verification {
-        println!("{indent}next verification: {next}");
+        outln!("{indent}next verification: {next}")?;
     }
     for run in &status.unfinished_runs {
-        println!(
+        outln!(
             "{indent}unfinished run: {} ({} readings{})",
             run.id,
             run.readings,
@@ -424,8 +420,9 @@ fn print_device_status(status: &StatusReply, named: bool) {
                     run.fit_failures
                 )
             }
-        );
+        )?;
     }
+    Ok(())
 }
 
 /// Follow the events of job `id` (or of whatever job runs, if `None`) to its end,
@@ -526,16 +523,16 @@ fn subscribe(api: &ApiArgs, endpoint: &Endpoint) -> tokio::sync::mpsc::Unbounded
     rx
 }
 
-fn finish(outcome: JobOutcome) -> Result<(), String> {
-    println!("{}", describe_outcome(&outcome));
+fn finish(outcome: JobOutcome) -> Result<(), Failure> {
+    outln!("{}", describe_outcome(&outcome))?;
     if outcome.result == "ok" {
         Ok(())
     } else {
-        Err(format!("the job ended {}", outcome.result))
+        Err(format!("the job ended {}", outcome.result).into())
     }
 }
 
-pub fn job_start(api: &ApiArgs, kind: &str, watch: bool) -> Result<(), String> {
+pub fn job_start(api: &ApiArgs, kind: &str, watch: bool) -> Result<(), Failure> {
     let kind = JobKind::parse(kind)?;
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
@@ -554,7 +551,7 @@ pub fn job_start(api: &ApiArgs, kind: &str, watch: bool) -> Result<(), String> {
             .map_err(|e| format!("the daemon's answer does not read: {e}"))?;
         match events {
             None => {
-                println!("started {}", job.id);
+                outln!("started {}", job.id)?;
                 Ok(())
             }
             Some(events) => finish(watch_job(events, Some(job.id)).await?),
@@ -562,7 +559,7 @@ pub fn job_start(api: &ApiArgs, kind: &str, watch: bool) -> Result<(), String> {
     })
 }
 
-pub fn job_watch(api: &ApiArgs) -> Result<(), String> {
+pub fn job_watch(api: &ApiArgs) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
         let events = subscribe(api, &endpoint);
@@ -573,14 +570,12 @@ pub fn job_watch(api: &ApiArgs) -> Result<(), String> {
             Some(job) => finish(watch_job(events, Some(job.id)).await?),
             None => {
                 match status.last_job {
-                    Some((job, outcome)) => {
-                        println!(
-                            "no job is running; the last, {}, ended {}",
-                            job.id,
-                            describe_outcome(&outcome)
-                        )
-                    }
-                    None => println!("no job is running"),
+                    Some((job, outcome)) => outln!(
+                        "no job is running; the last, {}, ended {}",
+                        job.id,
+                        describe_outcome(&outcome)
+                    )?,
+                    None => outln!("no job is running")?,
                 }
                 Ok(())
             }
@@ -588,31 +583,31 @@ pub fn job_watch(api: &ApiArgs) -> Result<(), String> {
     })
 }
 
-pub fn job_cancel(api: &ApiArgs) -> Result<(), String> {
+pub fn job_cancel(api: &ApiArgs) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
         let reply = post(&endpoint, &api.route("/jobs/cancel"), serde_json::json!({})).await?;
         let job: JobStatus = serde_json::from_slice(&reply.body)
             .map_err(|e| format!("the daemon's answer does not read: {e}"))?;
-        println!("cancelling {} after the reading under way", job.id);
+        outln!("cancelling {} after the reading under way", job.id)?;
         Ok(())
     })
 }
 
-pub fn history(api: &ApiArgs, json: bool) -> Result<(), String> {
+pub fn history(api: &ApiArgs, json: bool) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
         let reply = get(&endpoint, &api.route("/history")).await?;
         if json {
-            println!("{}", reply.text());
+            outln!("{}", reply.text())?;
             return Ok(());
         }
         let value = reply.json()?;
         let current = value["current"].as_str().unwrap_or("");
-        println!("profiles made current, oldest first:");
+        outln!("profiles made current, oldest first:")?;
         for p in value["profiles"].as_array().into_iter().flatten() {
             let id = p["id"].as_str().unwrap_or("?");
-            println!(
+            outln!(
                 "  {} {:<10} {}{}{}",
                 p["at"].as_str().unwrap_or("?"),
                 p["how"].as_str().unwrap_or("?"),
@@ -621,15 +616,15 @@ pub fn history(api: &ApiArgs, json: bool) -> Result<(), String> {
                     .as_f64()
                     .map_or(String::new(), |m| format!("  held-out mean ΔE00 {m:.3}")),
                 if id == current { "  ← current" } else { "" }
-            );
+            )?;
         }
         let verifications = value["verifications"]
             .as_array()
             .cloned()
             .unwrap_or_default();
-        println!("verifications ({}):", verifications.len());
+        outln!("verifications ({}):", verifications.len())?;
         for v in verifications {
-            println!(
+            outln!(
                 "  {} {}  mean ΔE00 {}  max {}{}",
                 v["at"].as_str().unwrap_or("?"),
                 v["profile_id"].as_str().unwrap_or("?"),
@@ -644,13 +639,13 @@ pub fn history(api: &ApiArgs, json: bool) -> Result<(), String> {
                 } else {
                     ""
                 }
-            );
+            )?;
         }
         Ok(())
     })
 }
 
-pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), String> {
+pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
         let body = match &to {
@@ -659,10 +654,10 @@ pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), String> {
         };
         let reply = post(&endpoint, &api.route("/rollback"), body).await?;
         let entry = reply.json()?;
-        println!(
+        outln!(
             "current profile is now {}",
             entry["id"].as_str().unwrap_or("?")
-        );
+        )?;
         Ok(())
     })
 }
@@ -686,7 +681,7 @@ pub fn current_profile(
     format: Option<&str>,
     target: [(&str, Option<String>); 3],
     output: Option<&std::path::Path>,
-) -> Result<(), String> {
+) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     let format = format.unwrap_or(if json { "json" } else { "toml" });
     let mut query = api.route(&format!("/profile?format={}", query_value(format)));
@@ -701,16 +696,16 @@ pub fn current_profile(
             Some(path) => {
                 std::fs::write(path, &reply.body)
                     .map_err(|e| format!("{}: {e}", path.display()))?;
-                println!(
+                outln!(
                     "wrote {} ({format}, {} bytes)",
                     path.display(),
                     reply.body.len()
-                );
+                )?;
             }
             None if matches!(format, "icc4" | "icc2") => {
-                return Err(format!("{format} is binary: give -o FILE"));
+                return Err(format!("{format} is binary: give -o FILE").into());
             }
-            None => print!("{}", reply.text()),
+            None => out!("{}", reply.text())?,
         }
         Ok(())
     })

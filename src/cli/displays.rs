@@ -1,6 +1,7 @@
 //! `chromacal displays`: the X display's outputs, with their monitors' EDID identity,
 //! mode, video LUT and the configured device on each.
 
+use super::shared::{out, outln};
 use std::path::PathBuf;
 
 use chromacal::calibrate::displays::{describe_displays, list_displays};
@@ -36,9 +37,9 @@ pub fn run(args: DisplaysArgs) -> Result<(), Failure> {
     let state_dir = args.state_dir.unwrap_or_else(default_state_dir);
     let entries = list_displays(&x, loaded.as_ref(), &state_dir)?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&entries)?);
+        outln!("{}", serde_json::to_string_pretty(&entries)?)?;
     } else {
-        print!("{}", describe_displays(x.name(), &entries));
+        out!("{}", describe_displays(x.name(), &entries))?;
     }
     Ok(())
 }

@@ -7,7 +7,7 @@ use chromacal::export::{ExportOptions, Format};
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
 
-use super::shared::{COLORD_UNAVAILABLE, Failure, TargetArgs};
+use super::shared::{COLORD_UNAVAILABLE, Failure, TargetArgs, is_stdout, outln, write_stdout};
 
 /// Write a profile for other tools: ICC v4 or v2 display profiles (with vcgt when a
 /// target is given), ArgyllCMS .ti3 (the run's measurements) and .cal (calibration
@@ -60,7 +60,7 @@ fn export(
 ) -> Result<(), Failure> {
     let profile = Profile::read(profile_path).map_err(Failure::from)?;
     let format = Format::parse(format).map_err(|e| Failure::from(e.to_string()))?;
-    if register_colord.is_some() && output == Path::new("-") {
+    if register_colord.is_some() && is_stdout(output) {
         return Err(Failure::from(
             "--register-colord needs the profile in a file (-o FILE), not on standard output"
                 .to_string(),
@@ -83,19 +83,17 @@ fn export(
     let exported = chromacal::export::export(&profile, format, &options)
         .map_err(|e| Failure::from(e.to_string()))?;
     // What was written goes to standard output, unless the file itself does.
-    let to_stdout = output == Path::new("-");
+    let to_stdout = is_stdout(output);
     let say = |line: String| {
         if to_stdout {
             eprintln!("{line}");
+            Ok(())
         } else {
-            println!("{line}");
+            outln!("{line}")
         }
     };
     if to_stdout {
-        use std::io::Write as _;
-        let mut stdout = std::io::stdout().lock();
-        stdout.write_all(&exported.bytes)?;
-        stdout.flush()?;
+        write_stdout(&exported.bytes)?;
     } else {
         std::fs::write(output, &exported.bytes)
             .map_err(|e| Failure::from(format!("{}: {e}", output.display())))?;
@@ -104,29 +102,29 @@ fn export(
             output.display(),
             format.name(),
             exported.bytes.len()
-        ));
+        ))?;
     }
     let curves = exported.calibration.as_ref();
     match (&options.target, &profile.calibration, curves) {
         (Some(_), _, Some(k)) if !format.carries_curves() => eprintln!(
             "not carried: calibration curves to {} (a {} file has no place for them: icc4, icc2 and cal do)",
-            k.target.describe(),
+            k.describe(),
             format.name()
         ),
         (None, _, _) if !format.carries_curves() => {}
         (None, Some(stored), Some(_)) => say(format!(
             "calibration curves to {} (the profile's, measured into place): measured white ΔE00 {:.3}, tone within {:.2} % at {} levels",
-            stored.curves.target.describe(),
+            stored.curves.describe(),
             stored.measured_white_de00,
             100.0 * stored.measured_tone_error,
             stored.levels.len()
-        )),
+        ))?,
         (_, _, Some(k)) => say(format!(
             "calibration curves to {} (from the model): predicted white ΔE00 {:.3}, tone within {:.2} % at 9 levels",
-            k.target.describe(),
+            k.describe(),
             k.predicted_white_de00,
             100.0 * k.predicted_tone_error
-        )),
+        ))?,
         _ => {}
     }
     for note in &exported.not_carried {
@@ -155,7 +153,7 @@ fn export(
             } else {
                 ", a device chromacal created"
             }
-        ));
+        ))?;
     }
     Ok(())
 }

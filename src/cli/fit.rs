@@ -11,7 +11,7 @@ use chromacal::model::transfer::LawKind;
 use chromacal::profile::{Cost, Profile, Provenance, SCHEMA_VERSION};
 use chromacal::report;
 
-use super::shared::Failure;
+use super::shared::{Failure, absolute_path, is_stdout, out, outln, write_stdout};
 
 /// Fit a profile to recorded measurements: a run journal or an ArgyllCMS .ti3.
 #[derive(clap::Args)]
@@ -19,7 +19,8 @@ pub struct FitArgs {
     /// The measurements: a run journal (`<state>/runs/<run>/journal.jsonl`) or an
     /// ArgyllCMS .ti3.
     measurements: PathBuf,
-    /// Where to write the profile (TOML).
+    /// Where to write the profile (TOML); `-` writes it to standard output (and what
+    /// is said, to standard error).
     #[arg(short, long)]
     output: PathBuf,
     /// Take the [fit] options from this configuration file [default: $XDG_CONFIG_HOME/chromacal/config.toml, else
@@ -89,9 +90,11 @@ fn fit(
     let started = std::time::Instant::now();
     let fitted = fit_monitor(&set, &options)?;
     let fit_seconds = started.elapsed().as_secs_f64();
-    let id = output
-        .file_stem()
-        .map_or_else(|| "profile".into(), |s| s.to_string_lossy().into_owned());
+    let to_stdout = is_stdout(output);
+    let id = match output.file_stem() {
+        Some(stem) if !to_stdout => stem.to_string_lossy().into_owned(),
+        _ => "profile".into(),
+    };
     let profile = Profile {
         schema_version: SCHEMA_VERSION,
         id,
@@ -99,7 +102,8 @@ fn fit(
         units: set.units,
         model: fitted.model.clone(),
         provenance: Provenance {
-            source: measurements.display().to_string(),
+            // Absolute, so that `report` run from another directory finds the readings.
+            source: absolute_path(measurements).display().to_string(),
             display: set.display.clone(),
             instrument: set.instrument.clone(),
             config_digest: None,
@@ -115,15 +119,21 @@ fn fit(
             fit_s: fit_seconds,
         }),
     };
-    profile.write(output)?;
+    if to_stdout {
+        write_stdout(profile.to_toml()?.as_bytes())?;
+    } else {
+        profile.write(output)?;
+    }
     if let Some(path) = report_path {
         super::report::write_for(&profile, Some(&set), path)?;
     }
-    if json {
-        println!("{}", serde_json::to_string_pretty(&fitted.report)?);
+    if json && to_stdout {
+        eprintln!("{}", serde_json::to_string_pretty(&fitted.report)?);
+    } else if json {
+        outln!("{}", serde_json::to_string_pretty(&fitted.report)?)?;
     } else {
         let c = &fitted.report.counts;
-        print!(
+        let text = format!(
             "chromacal: fitted {} ({} readings, {} usable; {} in the fit's budgeted kinds, {} held out, {} uniformity; XYZ {})\n  fit time {}\n\n{}\nprofile: {}\n",
             measurements.display(),
             c.readings,
@@ -134,8 +144,18 @@ fn fit(
             set.units,
             report::duration(fit_seconds),
             report::fit_summary(&fitted.report),
-            output.display()
+            if to_stdout {
+                "standard output".into()
+            } else {
+                output.display().to_string()
+            }
         );
+        // With the profile on standard output, what is said goes to standard error.
+        if to_stdout {
+            eprint!("{text}");
+        } else {
+            out!("{text}")?;
+        }
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! `chromacal instruments`: list serial ports and identify the instruments on them, and
 //! the instruments ArgyllCMS sees.
 
+use super::shared::outln;
 use chromacal::instrument::argyll::driver::list_ports;
 use chromacal::instrument::argyll::transport::spotread_program;
 use chromacal::instrument::scan::{PortFinding, candidate_ports, scan};
@@ -57,34 +58,34 @@ fn instruments(extra: &[String], json: bool, argyll: bool) -> Result<(), Failure
             Some(Err(why)) => rows.push(serde_json::json!({"instrument": "argyll", "error": why})),
             None => {}
         }
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        outln!("{}", serde_json::to_string_pretty(&rows)?)?;
         return Ok(());
     }
     if findings.is_empty() {
-        println!("no serial ports found (pseudo-terminals must be named with --port)");
+        outln!("no serial ports found (pseudo-terminals must be named with --port)")?;
     }
     for (port, finding) in findings {
         match finding {
             PortFinding::Found { kind, identity } => {
-                println!("{port}: {identity}  (--instrument {kind}:{port})")
+                outln!("{port}: {identity}  (--instrument {kind}:{port})")?
             }
-            PortFinding::Silent => println!("{port}: no known instrument answered"),
-            PortFinding::Unopenable(why) => println!("{port}: cannot open: {why}"),
+            PortFinding::Silent => outln!("{port}: no known instrument answered")?,
+            PortFinding::Unopenable(why) => outln!("{port}: cannot open: {why}")?,
         }
     }
     match argyll_ports {
-        Some(Ok(ports)) if ports.is_empty() => println!("ArgyllCMS sees no instrument"),
+        Some(Ok(ports)) if ports.is_empty() => outln!("ArgyllCMS sees no instrument")?,
         Some(Ok(ports)) => {
             for p in ports {
-                println!(
+                outln!(
                     "{}: {}  (--instrument argyll:{}, through ArgyllCMS)",
                     p.path,
                     p.instrument.as_deref().unwrap_or("not identified"),
                     p.number
-                );
+                )?;
             }
         }
-        Some(Err(why)) => println!("ArgyllCMS: {why}"),
+        Some(Err(why)) => outln!("ArgyllCMS: {why}")?,
         None => {}
     }
     Ok(())

@@ -1,6 +1,7 @@
 //! `chromacal lut`: the video LUT of an X11 output (its CRTC gamma ramp): load a
 //! profile's calibration curves into it, show it, reset it, save it as a `.cal`.
 
+use super::shared::{out, outln};
 use std::path::PathBuf;
 
 use clap::Subcommand;
@@ -104,13 +105,13 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
                     "chromacal: note: {loader} also loads curves into the video LUT and may replace these"
                 );
             }
-            println!(
+            outln!(
                 "loaded the curves of {} ({}) into the video LUT of {} ({} entries)",
                 path.display(),
-                curves.target.describe(),
+                curves.describe(),
                 output.name,
                 output.gamma_size
-            );
+            )?;
         }
         LutCommand::Show { json } => {
             let current = Profile::read(&store.current_path())
@@ -118,14 +119,14 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
                 .and_then(|p| p.calibration.map(|c| c.curves));
             let status = lut_status(&x, &output, current.as_ref())?;
             if json {
-                println!("{}", serde_json::to_string_pretty(&status)?);
+                outln!("{}", serde_json::to_string_pretty(&status)?)?;
             } else {
-                print!("{}", chromacal::report::describe_lut(&status));
+                out!("{}", chromacal::report::describe_lut(&status))?;
             }
         }
         LutCommand::Reset => {
             x.set_gamma(&output, &GammaRamp::identity(output.gamma_size))?;
-            println!("the video LUT of {} is straight", output.name);
+            outln!("the video LUT of {} is straight", output.name)?;
         }
         LutCommand::Save { file } => {
             let ramp = x.gamma(&output)?;
@@ -137,12 +138,12 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
                 &created,
             );
             std::fs::write(&file, text).map_err(|e| format!("{}: {e}", file.display()))?;
-            println!(
+            outln!(
                 "wrote the video LUT of {} ({} entries) to {}",
                 output.name,
                 ramp.len(),
                 file.display()
-            );
+            )?;
         }
     }
     Ok(())

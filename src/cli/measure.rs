@@ -1,5 +1,6 @@
 //! `chromacal measure`: read what the screen shows now with a serial instrument.
 
+use super::shared::outln;
 use chromacal::color::spaces::xyz_to_xyy;
 use chromacal::instrument::driver::DriverOptions;
 
@@ -52,11 +53,11 @@ fn measure(
     let mut instrument = address.open(options, base_dir)?;
     let info = instrument.info().clone();
     if !json {
-        println!(
+        outln!(
             "{} (serial {}), {address}",
             info.name,
             info.serial.as_deref().unwrap_or("unknown")
-        );
+        )?;
     }
     let mut readings = Vec::new();
     for _ in 0..count.max(1) {
@@ -66,7 +67,7 @@ fn measure(
             match (reading.xyz, reading.luminance()) {
                 (Some(xyz), _) => {
                     let xyy = xyz_to_xyy(&xyz, [0.0, 0.0]);
-                    println!(
+                    outln!(
                         "  XYZ {:.4} {:.4} {:.4}  x {:.4} y {:.4}  [{status}, code {}]",
                         xyz.x,
                         xyz.y,
@@ -74,23 +75,23 @@ fn measure(
                         xyy.x,
                         xyy.y,
                         reading.device_code.as_deref().unwrap_or("-")
-                    )
+                    )?
                 }
-                (None, Some(y)) => println!(
+                (None, Some(y)) => outln!(
                     "  Y {y:.4} cd/m²  [{status}, code {}]",
                     reading.device_code.as_deref().unwrap_or("-")
-                ),
-                (None, None) => println!(
+                )?,
+                (None, None) => outln!(
                     "  no value  [{status}, code {}]",
                     reading.device_code.as_deref().unwrap_or("-")
-                ),
+                )?,
             }
         }
         readings.push(reading);
     }
     instrument.close();
     if json {
-        println!("{}", serde_json::to_string_pretty(&readings)?);
+        outln!("{}", serde_json::to_string_pretty(&readings)?)?;
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! `chromacal profile show` (a profile in words and numbers) and `profile current` (a
 //! running daemon's, in any export format).
 
+use super::shared::out;
 use std::path::PathBuf;
 
 use clap::Subcommand;
@@ -49,9 +50,10 @@ enum ProfileCommand {
 
 pub fn run(args: ProfileArgs) -> Result<(), Failure> {
     match args.command {
-        ProfileCommand::Show { profile } => Profile::read(&profile)
-            .map(|p| print!("{}", report::describe_profile(&p)))
-            .map_err(Failure::from),
+        ProfileCommand::Show { profile } => {
+            let profile = Profile::read(&profile)?;
+            out!("{}", report::describe_profile(&profile))
+        }
         ProfileCommand::Current {
             api,
             json,
@@ -68,7 +70,6 @@ pub fn run(args: ProfileArgs) -> Result<(), Failure> {
                 ("luminance", target.luminance),
             ],
             output.as_deref(),
-        )
-        .map_err(Failure::from),
+        ),
     }
 }

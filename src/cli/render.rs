@@ -1,7 +1,6 @@
 //! `chromacal render`: a scene through a profile, the colour reproduction function
 //! (seed §4). XYZ or spectra in, the codes a calibrated display must be sent out.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use clap::ValueEnum;
@@ -32,6 +31,7 @@ use chromacal::profile::Profile;
 use super::shared::{
     Failure, IlluminantArg, contrast_ratio, non_negative_number, positive_number, share,
 };
+use super::shared::{is_stdout, outln, write_stdout};
 
 /// Render a scene for a calibrated display: XYZ (a CSV list or a PFM image) or
 /// spectra (emission, reflectance under an illuminant, or a stack of per-wavelength
@@ -224,11 +224,10 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
         lines.join("\n")
     };
     // The codes may be on standard output: the summary then goes to standard error.
-    if args.output.as_os_str() == "-" {
+    if is_stdout(&args.output) {
         eprintln!("{text}");
     } else {
-        let mut out = std::io::stdout().lock();
-        writeln!(out, "{text}").map_err(|e| format!("standard output: {e}"))?;
+        outln!("{text}")?;
     }
     Ok(())
 }
@@ -328,13 +327,11 @@ fn write_codes(
         return write_png16(&args.output, width, height, &rendering.pixels, args.bits)
             .map_err(|e| Failure::from(e.to_string()));
     }
-    if args.output.as_os_str() == "-" {
-        let mut out = std::io::stdout().lock();
-        return write_codes_csv(&mut out, &read.scene.pixels, &rendering.pixels)
-            .map_err(|e| Failure::from(format!("standard output: {e}")));
-    }
     let mut text = Vec::new();
     write_codes_csv(&mut text, &read.scene.pixels, &rendering.pixels).map_err(|e| e.to_string())?;
+    if is_stdout(&args.output) {
+        return write_stdout(&text);
+    }
     std::fs::write(&args.output, text)
         .map_err(|e| Failure::from(format!("{}: {e}", args.output.display())))
 }
@@ -672,7 +669,7 @@ fn describe(summary: &RenderSummary, spectral: Option<&str>, output: &Path) -> S
     let mut lines = vec![format!(
         "rendered {} pixels to {}",
         summary.pixels,
-        if output.as_os_str() == "-" {
+        if is_stdout(output) {
             "standard output".to_string()
         } else {
             output.display().to_string()

@@ -2,7 +2,6 @@
 //! (`chromacal::html_report`). `calibrate --report` and `fit --report` write the same
 //! page through [`write_page`].
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use chromacal::html_report::{ReportInput, readings_of, report_html};
@@ -10,7 +9,7 @@ use chromacal::measurement::MeasurementSet;
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
 
-use super::shared::Failure;
+use super::shared::{Failure, is_stdout, write_stdout};
 
 /// Write an HTML report of a profile: transfer curves with the measured points, the
 /// primaries on the u′v′ diagram, the uniformity map, the held-out error with the
@@ -57,11 +56,8 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
 /// standard error so that a page sent to standard output stays clean.
 pub fn write_page(input: &ReportInput, output: &Path) -> Result<(), Failure> {
     let page = report_html(input)?;
-    if output == Path::new("-") {
-        let mut stdout = std::io::stdout().lock();
-        stdout.write_all(page.as_bytes())?;
-        stdout.flush()?;
-        return Ok(());
+    if is_stdout(output) {
+        return write_stdout(page.as_bytes());
     }
     chromacal::durable::write_atomic(output, page.as_bytes())
         .map_err(|e| Failure::from(format!("cannot write {}: {e}", output.display())))?;

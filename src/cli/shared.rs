@@ -14,6 +14,83 @@ pub struct Failure {
     pub code: u8,
 }
 
+impl Failure {
+    /// The reader of standard output went away (`chromacal check --json | head`): not a
+    /// failure of the command. `main` ends quietly with success on it, as ripgrep does:
+    /// what was asked for was read as far as the reader wanted.
+    pub fn output_closed() -> Failure {
+        Failure {
+            message: String::new(),
+            code: 0,
+        }
+    }
+
+    /// Whether this is the closed output of `output_closed`.
+    pub fn is_output_closed(&self) -> bool {
+        self.code == 0
+    }
+
+    /// A write to standard output that failed: a closed pipe ends the command quietly,
+    /// anything else is a failure that says it was the output.
+    pub fn from_output(e: std::io::Error) -> Failure {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            Failure::output_closed()
+        } else {
+            Failure {
+                message: format!("cannot write to standard output: {e}"),
+                code: 1,
+            }
+        }
+    }
+}
+
+/// `println!` that returns a `Failure` instead of panicking when standard output
+/// cannot be written (a closed pipe, a full disk): `outln!("{x}")?;`.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout().lock(), $($arg)*)
+            .map_err($crate::cli::shared::Failure::from_output)
+    }};
+}
+pub(crate) use outln;
+
+/// `print!` that returns a `Failure`, as `outln!`.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let mut stdout = std::io::stdout().lock();
+        write!(stdout, $($arg)*)
+            .and_then(|()| stdout.flush())
+            .map_err($crate::cli::shared::Failure::from_output)
+    }};
+}
+pub(crate) use out;
+
+/// Whether an output path names standard output: `-`, as for every command that writes
+/// a file.
+pub fn is_stdout(path: &std::path::Path) -> bool {
+    path.as_os_str() == "-"
+}
+
+/// `path` made absolute against the working directory (not resolving links), for paths
+/// that are stored and read again from elsewhere; as given if there is no working
+/// directory.
+pub fn absolute_path(path: &std::path::Path) -> PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// Write `bytes` whole to standard output and flush it (a closed pipe is
+/// `Failure::output_closed`).
+pub fn write_stdout(bytes: &[u8]) -> Result<(), Failure> {
+    use std::io::Write as _;
+    let mut stdout = std::io::stdout().lock();
+    stdout
+        .write_all(bytes)
+        .and_then(|()| stdout.flush())
+        .map_err(Failure::from_output)
+}
+
 impl<E: std::fmt::Display> From<E> for Failure {
     fn from(e: E) -> Self {
         Failure {

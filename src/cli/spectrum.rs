@@ -1,5 +1,6 @@
 //! `chromacal spectrum`: spectra to XYZ, xyY, u′v′, L*a*b* and L*u*v*.
 
+use super::shared::{out, outln};
 use std::path::{Path, PathBuf};
 
 use chromacal::color::spaces::{Xyz, xyz_to_luv, xyz_to_uv_prime, xyz_to_xyy};
@@ -194,7 +195,7 @@ fn spectrum(
         )));
     }
     if json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        outln!("{}", serde_json::to_string_pretty(&out)?)?;
         return Ok(());
     }
     let mode = if reflectance {
@@ -204,11 +205,11 @@ fn spectrum(
     } else {
         "emission, absolute (Y in cd/m² for radiance in W·sr⁻¹·m⁻²·nm⁻¹)".into()
     };
-    println!(
+    outln!(
         "{} ({mode}; {} observer; L*a*b*/L*u*v* against {illuminant:?} white, Y = {white_luminance:.4})",
         file.display(),
         observer
-    );
+    )?;
     let rows: Vec<Vec<String>> = out
         .iter()
         .map(|r| {
@@ -229,7 +230,7 @@ fn spectrum(
             ]
         })
         .collect();
-    print!(
+    out!(
         "{}",
         report::table(
             &[
@@ -237,11 +238,11 @@ fn spectrum(
             ],
             &rows
         )
-    );
+    )?;
     if out.iter().any(|r| r.scotopic_cd_m2.is_some()) {
         for r in &out {
             if let Some(s) = r.scotopic_cd_m2 {
-                println!("  {}: scotopic luminance {s:.4} scotopic cd/m²", r.sample);
+                outln!("  {}: scotopic luminance {s:.4} scotopic cd/m²", r.sample)?;
             }
         }
     }

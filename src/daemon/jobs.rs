@@ -732,7 +732,7 @@ async fn uniformity(
     updated.model.spatial = map;
     updated.report.spatial = report;
     updated.provenance = Provenance {
-        source: journal.path().display().to_string(),
+        source: crate::journal::stored_path(journal.path()),
         program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
         ..profile.provenance.clone()
     };

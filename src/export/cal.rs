@@ -11,7 +11,7 @@ pub fn cal_text(curves: &CalibrationCurves, created: &str) -> String {
         curves.white[0],
         curves.white[1],
         curves.white[2],
-        curves.target.describe()
+        curves.describe()
     );
     // Resampled, so that curves of another length read from a profile file cannot
     // index past their end (for chromacal's own curves this is the identity).

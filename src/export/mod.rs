@@ -272,7 +272,7 @@ fn details(profile: &Profile, notes: &[String], calibration: Option<&Calibration
         text += &format!(", held-out mean dE00 {:.2}", held.mean);
     }
     if let Some(k) = calibration {
-        text += &format!(", calibrated to {}", k.target.describe());
+        text += &format!(", calibrated to {}", k.describe());
     }
     if !notes.is_empty() {
         text += "; not carried: ";

@@ -664,7 +664,7 @@ fn calibration(out: &mut String, profile: &Profile) -> Result<(), ReportError> {
         &svg,
         &format!(
             "Curves to {} after {} measured passes: predicted white ΔE00 {:.3}, measured tone error {:.2} %.",
-            stored.curves.target.describe(),
+            stored.curves.describe(),
             stored.passes,
             stored.curves.predicted_white_de00,
             stored.measured_tone_error * 100.0

@@ -233,19 +233,42 @@ impl ToneCurve {
 }
 
 impl Target {
+    /// The target as asked for (`CalibrationCurves::describe` says what was reached).
     pub fn describe(&self) -> String {
+        let luminance = self
+            .luminance
+            .map_or("the most the white allows".to_string(), |l| format!("{l}"));
+        self.describe_at(&luminance)
+    }
+
+    fn describe_at(&self, luminance: &str) -> String {
         let white = match self.white {
             WhiteTarget::Native => "native white".to_string(),
             WhiteTarget::Chromaticity([x, y]) => format!("white x {x:.4} y {y:.4}"),
             WhiteTarget::Daylight(k) => format!("white daylight {k:.0} K"),
         };
-        let luminance = self
-            .luminance
-            .map_or("the most the white allows".to_string(), |l| format!("{l}"));
         format!(
             "{white}, {} tone, luminance {luminance}",
             self.tone.describe()
         )
+    }
+}
+
+impl CalibrationCurves {
+    /// The target as the curves reach it, for every place that states a calibration
+    /// (the `.cal`'s `TARGET_DESCRIPTION`, the ICC description, reports): the luminance
+    /// is the one the curves give, and a luminance asked for beyond what the white
+    /// point allows is named beside it rather than stated as reached.
+    pub fn describe(&self) -> String {
+        let reached = self.white[1];
+        let luminance = match self.target.luminance {
+            Some(asked) if self.luminance_limited => {
+                format!("{reached:.2} (the most the white allows; {asked} was asked)")
+            }
+            Some(asked) => format!("{asked}"),
+            None => format!("{reached:.2} (the most the white allows)"),
+        };
+        self.target.describe_at(&luminance)
     }
 }
 
