@@ -527,6 +527,22 @@ fn config_show_says_what_is_in_effect_and_the_user_config_is_found() {
             .join("\n")
     };
     assert_eq!(body(&again), body(&built_in));
+    // Given by a relative name, the config's folder is said in full (it used to read
+    // "taken from ." with the folder empty).
+    let relative = chromacal()
+        .env("XDG_CONFIG_HOME", dir.path())
+        .args(["config", "show", "--config", "printed.toml"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let relative = String::from_utf8_lossy(&relative.stdout);
+    assert!(
+        relative.contains(&format!(
+            "# Relative paths are taken from {}.\n",
+            dir.path().display()
+        )),
+        "{relative}"
+    );
 
     // A user config in $XDG_CONFIG_HOME/chromacal/ is found and used by the commands.
     let user = dir.path().join("chromacal/config.toml");

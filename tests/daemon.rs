@@ -101,7 +101,7 @@ async fn a_calibration_started_through_the_api_measures_an_emulated_instrument_a
     assert_eq!(json["id"], profile.id.as_str());
     let status = get(&api, "/status").await.json().unwrap();
     assert_eq!(status["current_profile"]["id"], profile.id.as_str());
-    assert_eq!(status["last_job"][1]["result"], "ok");
+    assert_eq!(status["last_job"]["outcome"]["result"], "ok");
     // The stable path other tools read.
     let current = Profile::read(&daemon.state.join("current.toml")).unwrap();
     assert_eq!(current.id, profile.id);
@@ -232,6 +232,32 @@ async fn refusals_are_clear_and_name_what_was_wrong() {
             .error_message()
             .contains("no such endpoint: GET /no/such/thing")
     );
+    // The 404 lists the endpoints, as the README says, and each one it lists is there
+    // (a POST with a body that does not read is refused by the endpoint, not as
+    // unknown; the event stream is left out: it would not end).
+    let listed = reply.error_message();
+    for endpoint in chromacal::daemon::api::DEVICE_ENDPOINTS
+        .iter()
+        .chain(&chromacal::daemon::api::DAEMON_ENDPOINTS)
+    {
+        assert!(
+            listed.contains(endpoint),
+            "the 404 leaves out {endpoint}: {listed}"
+        );
+        let (method, path) = endpoint.split_once(' ').unwrap();
+        if path == "/events" || path == "/reload" {
+            continue;
+        }
+        let reply = match method {
+            "GET" => get(&api, path).await,
+            _ => post(&api, path, "{").await,
+        };
+        assert!(
+            !reply.error_message().contains("no such endpoint"),
+            "{endpoint} is listed but not there: {}",
+            reply.error_message()
+        );
+    }
     let reply = request_raw(&api, "DELETE", "/status").await;
     assert_eq!(reply.status, 405);
     assert!(
@@ -456,8 +482,8 @@ async fn sigterm_finishes_the_reading_exits_zero_and_the_run_resumes() {
     tokio::time::sleep(Duration::from_millis(100)).await;
     wait_idle(&api, Duration::from_secs(30)).await;
     let status = get(&api, "/status").await.json().unwrap();
-    assert_eq!(status["last_job"][0]["origin"], "resume", "{status}");
-    assert_eq!(status["last_job"][1]["result"], "ok", "{status}");
+    assert_eq!(status["last_job"]["job"]["origin"], "resume", "{status}");
+    assert_eq!(status["last_job"]["outcome"]["result"], "ok", "{status}");
     let (header, after, _) = chromacal::journal::Journal::read(&runs[0]).unwrap();
     assert_eq!(&after[..before.len()], &before[..]);
     common::assert_each_planned_patch_once(&header, &after);

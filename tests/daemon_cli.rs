@@ -111,3 +111,50 @@ async fn start_watch_status_history_rollback_and_cancel_from_the_command_line() 
         text(&out)
     );
 }
+
+/// Off a terminal (a pipe, a log), `job watch` writes a line a step as the job goes,
+/// not only its outcome at the end: the first progress line is read while the job is
+/// still running.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn job_watch_off_a_terminal_streams_a_line_a_step() {
+    use std::io::BufRead as _;
+    let dir = tempfile::tempdir().unwrap();
+    // A calibration of about two simulated minutes takes some 2.4 s here.
+    let daemon = start_daemon(dir.path(), "[daemon]\nsimulated_time_scale = 0.02\n");
+    let mut watcher = chromacal()
+        .args(["job", "start", "calibrate", "--watch", "--socket"])
+        .arg(&daemon.socket)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(watcher.stdout.take().unwrap()).lines();
+    let first_step = loop {
+        let line = lines
+            .next()
+            .expect("job watch ended before any step")
+            .unwrap();
+        if line.starts_with("calibrate ") && line.contains('/') {
+            break line;
+        }
+    };
+    let status = run(&daemon.socket, &["status", "--json"]);
+    let status: serde_json::Value = serde_json::from_slice(&status.stdout).unwrap();
+    assert!(
+        !status["job"].is_null(),
+        "the first step ({first_step}) came only after the job ended: {status}"
+    );
+    let rest: Vec<String> = lines.map(|l| l.unwrap()).collect();
+    let steps = rest.iter().filter(|l| l.starts_with("calibrate ")).count();
+    assert!(steps >= 10, "{steps} step lines: {rest:?}");
+    assert!(
+        rest.last().is_some_and(|l| l.contains("ok: published")),
+        "{rest:?}"
+    );
+    assert!(watcher.wait().unwrap().success());
+    // The last job is an object that names its parts.
+    let status = run(&daemon.socket, &["status", "--json"]);
+    let status: serde_json::Value = serde_json::from_slice(&status.stdout).unwrap();
+    assert_eq!(status["last_job"]["outcome"]["result"], "ok", "{status}");
+    assert_eq!(status["last_job"]["job"]["kind"], "calibrate", "{status}");
+}

@@ -345,10 +345,13 @@ preset = "lcd"
             .as_array()
             .unwrap()
             .iter()
-            .all(|d| d["status"]["job"].is_null() && d["status"]["last_job"].is_array());
+            .all(|d| d["status"]["job"].is_null() && d["status"]["last_job"].is_object());
         if done {
             for d in devices["devices"].as_array().unwrap() {
-                let (job, outcome) = (&d["status"]["last_job"][0], &d["status"]["last_job"][1]);
+                let (job, outcome) = (
+                    &d["status"]["last_job"]["job"],
+                    &d["status"]["last_job"]["outcome"],
+                );
                 assert_eq!(job["origin"], "resume", "{d}");
                 assert_eq!(outcome["result"], "ok", "{d}");
                 assert_eq!(outcome["published"], true, "{d}");

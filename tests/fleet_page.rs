@@ -76,7 +76,7 @@ preset = "lcd"
         loop {
             let status = get(&api, "/devices/crt/status").await.json().unwrap();
             if status["job"].is_null() {
-                assert_eq!(status["last_job"][1]["result"], "ok", "{status}");
+                assert_eq!(status["last_job"]["outcome"]["result"], "ok", "{status}");
                 break;
             }
             assert!(Instant::now() < deadline, "{kind} never ended");

@@ -127,7 +127,7 @@ async fn a_run_whose_fit_failed_twice_is_kept_but_not_resumed_unless_named() {
     tokio::time::sleep(Duration::from_millis(300)).await;
     wait_idle(&api, Duration::from_secs(120)).await;
     let status = get(&api, "/status").await.json().unwrap();
-    assert_eq!(status["last_job"][1]["result"], "ok", "{status}");
+    assert_eq!(status["last_job"]["outcome"]["result"], "ok", "{status}");
     let good_id = Journal::read(&state.join("runs").join(GOOD).join("journal.jsonl"))
         .unwrap()
         .0

@@ -206,6 +206,12 @@ fn a_run_that_loses_its_instrument_keeps_its_journal_and_resumes() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // The instrument's own time, not a simulation's, is what was spent.
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        said.contains("  instrument time") && !said.contains("simulated"),
+        "{said}"
+    );
     let (header, entries, _) = Journal::read(&journal_path).unwrap();
     common::assert_each_planned_patch_once(&header, &entries);
     assert!(entries.len() >= planned, "{} of {planned}", entries.len());

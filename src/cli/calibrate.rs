@@ -213,8 +213,17 @@ fn calibrate(
                 outcome.run.already_measured, outcome.run.measured_now
             );
         }
+        // "Simulated" only when the instrument was: an emulated or real serial one
+        // spent (or reported) this time itself.
+        let simulated = outcome
+            .profile
+            .provenance
+            .instrument
+            .as_ref()
+            .is_some_and(|i| i.name.starts_with("simulated"));
         out += &format!(
-            "  simulated instrument time {} (integration and settling), fit time {}\n\n",
+            "  {}instrument time {} (integration and settling), fit time {}\n\n",
+            if simulated { "simulated " } else { "" },
             report::duration(outcome.instrument_seconds),
             report::duration(outcome.fit_seconds)
         );

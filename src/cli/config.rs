@@ -1,11 +1,10 @@
 //! `chromacal config show`: the configuration in effect, and where it came from.
 
-use super::shared::out;
 use std::path::PathBuf;
 
 use chromacal::config::{check_config, config_search_paths, device_configs, load_config_searching};
 
-use super::shared::Failure;
+use super::shared::{Failure, absolute_path, out};
 
 /// Show the configuration chromacal would use: the file given, else the first of
 /// $XDG_CONFIG_HOME/chromacal/config.toml (~/.config/chromacal/config.toml) and
@@ -55,7 +54,7 @@ fn show(config: Option<PathBuf>) -> Result<(), Failure> {
     }
     out += &format!(
         "# Relative paths are taken from {}.\n",
-        loaded.base_dir.display()
+        absolute_path(&loaded.base_dir).display()
     );
     // The daemon's own checks, in its order: the whole config, then each device.
     let refused = check_config(&loaded.config)

@@ -187,20 +187,24 @@ fn reload(api: &ApiArgs) -> Result<(), Failure> {
 }
 
 pub fn run_status(args: StatusArgs) -> Result<(), Failure> {
-    status(&args.api, args.json)}
+    status(&args.api, args.json)
+}
 
 pub fn run_job(args: JobArgs) -> Result<(), Failure> {
     match args.command {
         JobCommand::Start { kind, watch } => job_start(&args.api, &kind, watch),
         JobCommand::Watch => job_watch(&args.api),
         JobCommand::Cancel => job_cancel(&args.api),
-    }}
+    }
+}
 
 pub fn run_history(args: HistoryArgs) -> Result<(), Failure> {
-    history(&args.api, args.json)}
+    history(&args.api, args.json)
+}
 
 pub fn run_rollback(args: RollbackArgs) -> Result<(), Failure> {
-    rollback(&args.api, args.to)}
+    rollback(&args.api, args.to)
+}
 
 /// How to reach the daemon.
 #[derive(clap::Args, Debug, Clone, Default)]
@@ -388,8 +392,12 @@ fn print_device_status(status: &StatusReply, named: bool) -> Result<(), Failure>
         Some(job) => outln!("{indent}job: {}", describe_job(job))?,
         None => outln!("{indent}job: none running")?,
     }
-    if let Some((job, outcome)) = &status.last_job {
-        outln!("{indent}last job: {} {}", job.id, describe_outcome(outcome))?;
+    if let Some(last) = &status.last_job {
+        outln!(
+            "{indent}last job: {} {}",
+            last.job.id,
+            describe_outcome(&last.outcome)
+        )?;
     }
     match &status.current_profile {
         Some(p) => outln!(
@@ -430,14 +438,8 @@ fn print_device_status(status: &StatusReply, named: bool) -> Result<(), Failure>
 async fn watch_job(
     mut events: tokio::sync::mpsc::UnboundedReceiver<Event>,
     mut id: Option<String>,
-) -> Result<JobOutcome, String> {
-    let bar = indicatif::ProgressBar::new(0);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} {prefix} [{bar:40}] {pos}/{len}  {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
-    );
-    bar.enable_steady_tick(Duration::from_millis(200));
+) -> Result<JobOutcome, Failure> {
+    let progress = Progress::new();
     let ours = |job: &JobStatus, id: &mut Option<String>| match id {
         Some(id) => job.id == *id,
         None => {
@@ -448,9 +450,6 @@ async fn watch_job(
     while let Some(event) = events.recv().await {
         match event {
             Event::JobStarted { job } | Event::Progress { job } if ours(&job, &mut id) => {
-                bar.set_prefix(job.kind.name());
-                bar.set_length(job.total as u64);
-                bar.set_position(job.done as u64);
                 let mut message = job.phase.clone();
                 if let Some(last) = &job.last {
                     if let Some(y) = last.luminance {
@@ -463,31 +462,31 @@ async fn watch_job(
                 if let Some(eta) = job.eta_s {
                     message += &format!("  ETA {}", chromacal::report::duration(eta));
                 }
-                bar.set_message(message);
+                progress.job(&job, message)?;
             }
             Event::Warmup { job_id, step } if id.as_deref() == Some(job_id.as_str()) => {
-                bar.set_message(format!(
+                progress.message(format!(
                     "warming up: Y {:.3} cd/m², slope {}",
                     step.luminance,
                     step.slope_per_min
                         .map_or("…".into(), |s| format!("{:+.4} %/min", s * 100.0))
-                ));
+                ))?;
             }
-            Event::Verification { record } => bar.println(format!(
+            Event::Verification { record } => progress.line(format!(
                 "verification of {}: mean ΔE00 {:.3} (threshold {})",
                 record.profile_id,
                 record.stats.map_or(f64::NAN, |s| s.mean),
                 record.threshold
-            )),
+            ))?,
             Event::Published {
                 profile_id, how, ..
-            } => bar.println(format!("published {profile_id} ({how})")),
+            } => progress.line(format!("published {profile_id} ({how})"))?,
             Event::JobFinished { job, outcome } if ours(&job, &mut id) => {
-                bar.finish_and_clear();
+                progress.finish();
                 return Ok(outcome);
             }
             Event::ShuttingDown => {
-                bar.finish_and_clear();
+                progress.finish();
                 return Err(
                     "the daemon is shutting down; the job resumes when it starts again".into(),
                 );
@@ -495,8 +494,77 @@ async fn watch_job(
             _ => {}
         }
     }
-    bar.finish_and_clear();
+    progress.finish();
     Err("the daemon closed the event stream".into())
+}
+
+/// How `job watch` shows a job: a bar on a terminal; off one (a log, a pipe, CI), a
+/// line a step on standard output, written as it comes, since a bar is not drawn there
+/// and nothing would show until the job ended.
+enum Progress {
+    Bar(indicatif::ProgressBar),
+    Lines,
+}
+
+impl Progress {
+    fn new() -> Progress {
+        use std::io::IsTerminal as _;
+        if !std::io::stderr().is_terminal() {
+            return Progress::Lines;
+        }
+        let bar = indicatif::ProgressBar::new(0);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} {prefix} [{bar:40}] {pos}/{len}  {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        bar.enable_steady_tick(Duration::from_millis(200));
+        Progress::Bar(bar)
+    }
+
+    /// The job's step and what its last reading said.
+    fn job(&self, job: &JobStatus, message: String) -> Result<(), Failure> {
+        match self {
+            Progress::Bar(bar) => {
+                bar.set_prefix(job.kind.name());
+                bar.set_length(job.total as u64);
+                bar.set_position(job.done as u64);
+                bar.set_message(message);
+                Ok(())
+            }
+            Progress::Lines => outln!("{} {}/{}  {message}", job.kind.name(), job.done, job.total),
+        }
+    }
+
+    /// A passing state (warming up): the bar's message, or a line.
+    fn message(&self, message: String) -> Result<(), Failure> {
+        match self {
+            Progress::Bar(bar) => {
+                bar.set_message(message);
+                Ok(())
+            }
+            Progress::Lines => outln!("{message}"),
+        }
+    }
+
+    /// Something that happened (a verification, a profile published).
+    fn line(&self, line: String) -> Result<(), Failure> {
+        match self {
+            Progress::Bar(bar) => {
+                bar.println(line);
+                Ok(())
+            }
+            Progress::Lines => outln!("{line}"),
+        }
+    }
+
+    fn finish(&self) {
+        if let Progress::Bar(bar) = self {
+            bar.finish_and_clear();
+        }
+    }
 }
 
 /// Open the event stream, forwarding parsed events to a channel.
@@ -570,10 +638,10 @@ pub fn job_watch(api: &ApiArgs) -> Result<(), Failure> {
             Some(job) => finish(watch_job(events, Some(job.id)).await?),
             None => {
                 match status.last_job {
-                    Some((job, outcome)) => outln!(
+                    Some(last) => outln!(
                         "no job is running; the last, {}, ended {}",
-                        job.id,
-                        describe_outcome(&outcome)
+                        last.job.id,
+                        describe_outcome(&last.outcome)
                     )?,
                     None => outln!("no job is running")?,
                 }

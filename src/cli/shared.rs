@@ -77,6 +77,12 @@ pub fn is_stdout(path: &std::path::Path) -> bool {
 /// that are stored and read again from elsewhere; as given if there is no working
 /// directory.
 pub fn absolute_path(path: &std::path::Path) -> PathBuf {
+    // An empty path (the folder of a file named without one) is the working directory.
+    let path = if path.as_os_str().is_empty() {
+        std::path::Path::new(".")
+    } else {
+        path
+    };
     std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
 }
 

@@ -20,7 +20,8 @@
 //! device's events (each names its `device`).
 //!
 //! Every refusal is JSON `{"error": "…"}` with a status that says which: 401 (no or
-//! wrong token), 403 (not the socket's owner), 404 (no such endpoint), 405, 409, 413
+//! wrong token), 403 (not the socket's owner), 404 (no such endpoint, listing the real
+//! ones), 405, 409, 413
 //! (body over `daemon.max_body_bytes`), 429 (over `daemon.requests_per_s` on TCP, where
 //! token holders and clients without a token each have their own bucket; the owner's
 //! unix socket has none), 503 (too many event streams, or shutting down).
@@ -338,13 +339,39 @@ fn is_json(headers: &HeaderMap) -> bool {
         .is_some_and(|v| v.starts_with("application/json"))
 }
 
+/// A device's endpoints (`router`'s `device_routes`), answered at the top for the only
+/// device and under `/devices/NAME` for any; listed in a 404.
+pub const DEVICE_ENDPOINTS: [&str; 8] = [
+    "GET /status",
+    "POST /jobs",
+    "POST /jobs/cancel",
+    "GET /events",
+    "GET /profile",
+    "GET /history",
+    "GET /report",
+    "POST /rollback",
+];
+
+/// The daemon's own endpoints, listed in a 404.
+pub const DAEMON_ENDPOINTS: [&str; 7] = [
+    "GET /devices",
+    "GET /metrics",
+    "POST /reload",
+    "GET /",
+    "GET /login",
+    "POST /login",
+    "POST /logout",
+];
+
 async fn not_found(request: Request) -> Response {
     refusal(
         StatusCode::NOT_FOUND,
         format!(
-            "no such endpoint: {} {} (see the list in `chromacal daemon --help`)",
+            "no such endpoint: {} {}; the endpoints are {} (a device's also under /devices/NAME), {}",
             request.method(),
-            request.uri().path()
+            request.uri().path(),
+            DEVICE_ENDPOINTS.join(", "),
+            DAEMON_ENDPOINTS.join(", ")
         ),
     )
 }
@@ -390,6 +417,13 @@ impl FromRequestParts<Shared> for Dev {
     }
 }
 
+/// The job that ended last on a device, and how it ended.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LastJob {
+    pub job: JobStatus,
+    pub outcome: JobOutcome,
+}
+
 /// `GET /status`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct StatusReply {
@@ -406,7 +440,7 @@ pub struct StatusReply {
     #[serde(default)]
     pub retiring: bool,
     pub job: Option<JobStatus>,
-    pub last_job: Option<(JobStatus, JobOutcome)>,
+    pub last_job: Option<LastJob>,
     pub current_profile: Option<CurrentProfile>,
     /// RFC 3339.
     pub next_verification: Option<String>,
@@ -463,7 +497,9 @@ async fn device_status(daemon: &Daemon, device: &Arc<Device>) -> Result<StatusRe
         shutting_down: daemon.is_shutting_down(),
         retiring: device.is_retired(),
         job: device.job(),
-        last_job: device.last_outcome(),
+        last_job: device
+            .last_outcome()
+            .map(|(job, outcome)| LastJob { job, outcome }),
         current_profile: current,
         next_verification: device
             .next_verification()
