@@ -738,3 +738,43 @@ fn config_show_refuses_what_the_daemon_refuses() {
     assert_eq!(daemon.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&daemon.stderr).contains("named twice"));
 }
+
+/// The example configs in `config/examples/` (virtual monitors built from real
+/// displays' measured spectra and transfer tables) each run a calibration as the
+/// README says, reading the shared data by their own relative paths.
+#[test]
+fn the_example_configs_calibrate_virtual_monitors_from_real_displays() {
+    let examples = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/examples");
+    let mut configs: Vec<std::path::PathBuf> = std::fs::read_dir(&examples)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    configs.sort();
+    assert!(configs.len() >= 3, "{configs:?}");
+    for config in configs {
+        let state = tempfile::tempdir().unwrap();
+        // From another working directory: the paths are the config's own.
+        let out = chromacal()
+            .args(["calibrate", "--json", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(state.path())
+            .current_dir(state.path())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}: {}",
+            config.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let held_out = summary["report"]["held_out"]["mean"].as_f64().unwrap();
+        assert!(
+            summary["published"].as_bool().unwrap() && held_out < 0.5,
+            "{}: held-out {held_out}",
+            config.display()
+        );
+    }
+}

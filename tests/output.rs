@@ -194,3 +194,34 @@ fn a_luminance_the_white_cannot_give_is_stated_as_reached_not_as_asked() {
         );
     }
 }
+
+#[test]
+fn bench_says_where_it_looked_for_the_reference_data() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let missing = dir.path().join("no-data-here");
+    let out = succeed(
+        chromacal()
+            .args(["bench", "fit-time", "--quick", "--data"])
+            .arg(&missing),
+    );
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains(&format!("no reference data at {}", missing.display()))
+            && said.contains("--data"),
+        "{said}"
+    );
+    let data = std::fs::canonicalize(shared_path("")).expect("the shared data");
+    let out = succeed(
+        chromacal()
+            .args(["bench", "fit-time", "--quick", "--data"])
+            .arg(&data),
+    );
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains(&format!(
+            "reference data (real displays, measured tables) from {}",
+            data.display()
+        )),
+        "{said}"
+    );
+}

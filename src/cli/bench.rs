@@ -32,7 +32,7 @@ use chromacal::model::transfer::{GainOffsetGamma, LawKind};
 use chromacal::report::table;
 
 use super::fit::LawArg;
-use super::shared::Failure;
+use super::shared::{Failure, absolute_path};
 
 /// A virtual monitor to measure, as a `[monitor]` config section.
 struct Monitor {
@@ -304,16 +304,50 @@ const TABLES: [&str; 9] = [
 /// The shared reference data: `../shared/data` from the project chromacal was built
 /// in, so that `bench` finds it from any working directory; else from the working
 /// directory (a binary moved elsewhere); the first that exists.
-fn shared_data() -> PathBuf {
-    let built_in = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
-    if built_in.is_dir() {
-        return built_in;
-    }
-    PathBuf::from("../shared/data")
+fn shared_data() -> Result<PathBuf, Vec<PathBuf>> {
+    let places = [
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"),
+        absolute_path(Path::new("../shared/data")),
+    ];
+    places
+        .iter()
+        .find(|p| p.is_dir())
+        .cloned()
+        .ok_or_else(|| places.to_vec())
 }
 
 pub fn run(args: BenchArgs) -> Result<(), Failure> {
-    let data = args.data.unwrap_or_else(shared_data);
+    // Said first, on standard error: the tables differ with and without the data, and
+    // a table left out must not pass for one measured.
+    let looked = match args.data {
+        Some(data) => Ok(data).and_then(|d| if d.is_dir() { Ok(d) } else { Err(vec![d]) }),
+        None => shared_data(),
+    };
+    let data = match looked {
+        Ok(data) => {
+            eprintln!(
+                "chromacal: reference data (real displays, measured tables) from {}",
+                std::fs::canonicalize(&data)
+                    .unwrap_or_else(|_| absolute_path(&data))
+                    .display()
+            );
+            data
+        }
+        Err(places) => {
+            let places: Vec<String> = places
+                .iter()
+                .map(|p| absolute_path(p).display().to_string())
+                .collect();
+            eprintln!(
+                "chromacal: no reference data at {}: the tables use the simulated presets only and leave out the real displays and measured tables (give --data DIR, the shared data's folder)",
+                places.join(" nor at ")
+            );
+            places
+                .first()
+                .map(PathBuf::from)
+                .unwrap_or_else(|| PathBuf::from("../shared/data"))
+        }
+    };
     let only: Vec<&String> = args.only.iter().chain(&args.tables).collect();
     let wanted = |table: &str| only.is_empty() || only.iter().any(|o| *o == table);
     if wanted("fit-time") || wanted("budget") {
