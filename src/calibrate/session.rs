@@ -171,14 +171,12 @@ pub struct CalibrationOutcome {
 }
 
 pub(crate) fn now_rfc3339() -> String {
-    humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
+    crate::time::now_rfc3339()
 }
 
 /// A new run id: the UTC time and a few random-ish hex digits.
 pub fn new_run_id() -> String {
-    let stamp = humantime::format_rfc3339_seconds(SystemTime::now())
-        .to_string()
-        .replace([':', '-'], "");
+    let stamp = crate::time::now_rfc3339().replace([':', '-'], "");
     let nanos = SystemTime::now()
         .duration_since(SystemTime::UNIX_EPOCH)
         .map_or(0, |d| d.subsec_nanos());

@@ -98,7 +98,7 @@ fn fit(
     let profile = Profile {
         schema_version: SCHEMA_VERSION,
         id,
-        created: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
+        created: chromacal::time::now_rfc3339(),
         units: set.units,
         model: fitted.model.clone(),
         provenance: Provenance {

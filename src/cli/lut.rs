@@ -130,8 +130,7 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
         }
         LutCommand::Save { file } => {
             let ramp = x.gamma(&output)?;
-            let created =
-                humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
+            let created = chromacal::time::now_rfc3339();
             let text = curves_cal_text(
                 |v| [ramp.output(0, v), ramp.output(1, v), ramp.output(2, v)],
                 &format!("video LUT of {} on {}", output.name, x.name()),

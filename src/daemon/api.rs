@@ -501,9 +501,7 @@ async fn device_status(daemon: &Daemon, device: &Arc<Device>) -> Result<StatusRe
             .last_outcome()
             .map(|(job, outcome)| LastJob { job, outcome }),
         current_profile: current,
-        next_verification: device
-            .next_verification()
-            .map(|t| humantime::format_rfc3339_seconds(t).to_string()),
+        next_verification: device.next_verification().map(crate::time::rfc3339_seconds),
         unfinished_runs,
     })
 }

@@ -205,9 +205,7 @@ pub async fn fleet_page(daemon: &Daemon, logout: bool) -> Response {
             retiring: device.is_retired(),
             profile: profile.map(|p| (p.id, p.report.held_out.map(|h| h.mean))),
             verification,
-            next_verification: device
-                .next_verification()
-                .map(|t| humantime::format_rfc3339_seconds(t).to_string()),
+            next_verification: device.next_verification().map(crate::time::rfc3339_seconds),
             whites,
             drift,
         });

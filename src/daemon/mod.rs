@@ -281,7 +281,7 @@ impl Device {
         // map of it, or one rolled back to).
         let calibrated = self.store.history().ok().and_then(|h| {
             let entry = h.entries.iter().rev().find(|e| e.how == "calibration")?;
-            humantime::parse_rfc3339_weak(&entry.at).ok()
+            crate::time::parse_rfc3339(&entry.at)
         });
         let verification = profile
             .as_ref()
@@ -293,7 +293,7 @@ impl Device {
             calibrated,
             verification
                 .as_ref()
-                .and_then(|v| Some((humantime::parse_rfc3339_weak(&v.at).ok()?, v.stats))),
+                .and_then(|v| Some((crate::time::parse_rfc3339(&v.at)?, v.stats))),
             self.loaded.config.schedule.threshold_de00,
         );
         if let Some(mqtt) = self.bus.mqtt.get() {
@@ -332,7 +332,7 @@ impl Device {
             id: jobs::new_job_id(kind),
             kind,
             origin: origin.to_string(),
-            started: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
+            started: crate::time::now_rfc3339(),
             phase: "starting".into(),
             done: 0,
             total: 0,

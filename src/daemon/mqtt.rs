@@ -608,7 +608,7 @@ fn verification_state(record: &VerificationRecord) -> Value {
 }
 
 fn now() -> String {
-    humantime::format_rfc3339_millis(std::time::SystemTime::now()).to_string()
+    crate::time::now_rfc3339_millis()
 }
 
 /// Update a device's state with `event`; true if it changed what the state says

@@ -320,8 +320,7 @@ pub struct HistoryView {
 }
 
 fn epoch_seconds(rfc3339: &str) -> Option<f64> {
-    humantime::parse_rfc3339_weak(rfc3339)
-        .ok()?
+    crate::time::parse_rfc3339(rfc3339)?
         .duration_since(std::time::UNIX_EPOCH)
         .ok()
         .map(|d| d.as_secs_f64())

@@ -114,7 +114,7 @@ pub struct VerificationRecord {
 }
 
 fn now_rfc3339() -> String {
-    humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string()
+    crate::time::now_rfc3339()
 }
 
 /// Profiles kept in the history unless configured otherwise.
