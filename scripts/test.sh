@@ -64,5 +64,10 @@ command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || need_package mo
 command -v mosquitto_sub >/dev/null || need_package mosquitto-clients
 command -v prometheus >/dev/null || need_package prometheus
 command -v promtool >/dev/null || need_package prometheus
+# The Debian package is built by cargo-deb and installed by dpkg into a scratch root.
+cargo deb --version >/dev/null 2>&1 || {
+    echo "scripts/test.sh: installing cargo-deb for the package test" >&2
+    cargo install --locked --quiet cargo-deb
+}
 
 cargo test --locked "$@"
