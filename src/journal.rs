@@ -253,10 +253,19 @@ impl Journal {
 /// A journal's path as a profile stores it: absolute (not resolving links), so that a
 /// report made from another directory finds the readings.
 pub fn stored_path(path: &Path) -> String {
-    std::path::absolute(path)
-        .unwrap_or_else(|_| path.to_path_buf())
-        .display()
-        .to_string()
+    absolute_path(path).display().to_string()
+}
+
+/// `path` made absolute against the working directory (not resolving links), for paths
+/// that are stored or shown and read again from elsewhere; an empty path (the folder
+/// of a file named without one) is the working directory; as given if there is none.
+pub fn absolute_path(path: &Path) -> PathBuf {
+    let path = if path.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        path
+    };
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
 }
 
 pub fn to_measurement_set(

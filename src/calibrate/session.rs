@@ -170,9 +170,7 @@ pub struct CalibrationOutcome {
     pub lut: Option<String>,
 }
 
-pub(crate) fn now_rfc3339() -> String {
-    crate::time::now_rfc3339()
-}
+pub(crate) use crate::time::now_rfc3339;
 
 /// A new run id: the UTC time and a few random-ish hex digits.
 pub fn new_run_id() -> String {

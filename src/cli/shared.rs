@@ -73,18 +73,7 @@ pub fn is_stdout(path: &std::path::Path) -> bool {
     path.as_os_str() == "-"
 }
 
-/// `path` made absolute against the working directory (not resolving links), for paths
-/// that are stored and read again from elsewhere; as given if there is no working
-/// directory.
-pub fn absolute_path(path: &std::path::Path) -> PathBuf {
-    // An empty path (the folder of a file named without one) is the working directory.
-    let path = if path.as_os_str().is_empty() {
-        std::path::Path::new(".")
-    } else {
-        path
-    };
-    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
-}
+pub use chromacal::journal::absolute_path;
 
 /// Write `bytes` whole to standard output and flush it (a closed pipe is
 /// `Failure::output_closed`).
