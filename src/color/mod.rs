@@ -5,9 +5,11 @@
 
 pub mod adaptation;
 pub mod difference;
+pub mod gamut;
 pub mod spaces;
 pub mod spectrum;
 pub mod tables;
+pub mod temperature;
 
 pub use difference::delta_e_2000;
 pub use spaces::{Lab, Luv, UvPrime, Xyy, Xyz, xyz_to_lab};
