@@ -143,6 +143,12 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
             State::ArgBlock => {
                 if line.starts_with("END_ARGYLL_") {
                     state = State::Header;
+                } else if let Some((_, arguments)) =
+                    table.as_mut().and_then(|t| t.keywords.last_mut())
+                {
+                    // The block's lines, kept as the value of its keyword.
+                    arguments.push_str(line);
+                    arguments.push(' ');
                 }
             }
             State::Header => {
@@ -151,7 +157,12 @@ pub fn parse_cgats(text: &str, path: &str) -> Result<Vec<CgatsTable>, CgatsError
                     continue;
                 };
                 match t.first().map(String::as_str) {
-                    Some(k) if k.starts_with("BEGIN_ARGYLL_") => state = State::ArgBlock,
+                    Some(k) if k.starts_with("BEGIN_ARGYLL_") => {
+                        // BEGIN_ARGYLL_COLPROF_ARGS … END_…: held as ARGYLL_COLPROF_ARGS.
+                        let name = k.trim_start_matches("BEGIN_").to_string();
+                        table.keywords.push((name, String::new()));
+                        state = State::ArgBlock;
+                    }
                     Some("BEGIN_DATA_FORMAT") => state = State::Format,
                     Some("BEGIN_DATA") => {
                         if table.fields.is_empty() {
@@ -392,10 +403,44 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
     Ok(MeasurementSet {
         source: name.into(),
         units,
-        instrument: None,
-        display: table.keyword("DISPLAY").map(str::to_string),
+        display: display_name(table),
+        measured_at: table.keyword("CREATED").map(str::to_string),
+        instrument: table.keyword("TARGET_INSTRUMENT").map(|name| {
+            crate::instrument::InstrumentInfo {
+                name: name.to_string(),
+                serial: None,
+                capability: if spectral.is_empty() {
+                    crate::instrument::Capability::Tristimulus
+                } else {
+                    crate::instrument::Capability::Spectral
+                },
+            }
+        }),
         measurements,
     })
+}
+
+/// The display a .ti3 is of: its `DISPLAY` keyword, or the manufacturer and model
+/// that DisplayCAL passes to `colprof` (`-A "Dell" -M "DELL U2713HM"`) in the
+/// file's `ARGYLL_COLPROF_ARGS` block.
+fn display_name(table: &CgatsTable) -> Option<String> {
+    if let Some(d) = table.keyword("DISPLAY") {
+        return Some(d.to_string());
+    }
+    let arguments = tokens(table.keyword("ARGYLL_COLPROF_ARGS")?).ok()?;
+    let after = |flag: &str| {
+        let i = arguments.iter().position(|a| a == flag)?;
+        arguments.get(i + 1).filter(|v| !v.is_empty()).cloned()
+    };
+    match (after("-A"), after("-M")) {
+        (Some(maker), Some(model)) if model.to_uppercase().starts_with(&maker.to_uppercase()) => {
+            Some(model)
+        }
+        (Some(maker), Some(model)) => Some(format!("{maker} {model}")),
+        (None, Some(model)) => Some(model),
+        (Some(maker), None) => Some(maker),
+        (None, None) => None,
+    }
 }
 
 /// ArgyllCMS writes a display's spectra in mW·sr⁻¹·m⁻²·nm⁻¹ (its `spec2cie` gives the

@@ -278,6 +278,7 @@ pub fn to_measurement_set(
         units: header.units,
         instrument: Some(header.instrument.clone()),
         display: Some(header.display.clone()),
+        measured_at: None,
         measurements: entries,
     }
 }

@@ -45,4 +45,5 @@ pub mod report;
 pub mod screen;
 pub mod sim;
 pub mod time;
+pub mod verification;
 pub mod x11;

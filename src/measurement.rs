@@ -121,6 +121,9 @@ pub struct MeasurementSet {
     pub instrument: Option<InstrumentInfo>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub display: Option<String>,
+    /// When the readings were taken, as the file says it (a .ti3's `CREATED`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_at: Option<String>,
     pub measurements: Vec<Measurement>,
 }
 

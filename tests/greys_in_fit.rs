@@ -90,6 +90,7 @@ fn measurement_set(source: &str, measurements: Vec<Measurement>) -> MeasurementS
         units: Units::Absolute,
         instrument: None,
         display: None,
+        measured_at: None,
         measurements,
     }
 }

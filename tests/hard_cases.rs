@@ -33,6 +33,7 @@ fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
             source: "test".into(),
             display: None,
             instrument: None,
+            measured_at: None,
             config_digest: None,
             program: "test".into(),
             settings_at_resume: None,

@@ -43,6 +43,8 @@ const LAYERS: &[&[&str]] = &[
     &["export"],
     &["config"],
     &["calibrate"],
+    // A profile verified against readings, in the terms calibration people use.
+    &["verification"],
     // The HTML report: a profile, its readings and its history as a page.
     &["html_report"],
     // The service, the text a command prints, and comparisons with other tools.

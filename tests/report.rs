@@ -311,6 +311,18 @@ async fn the_daemon_serves_the_report_with_its_history() {
     assert_eq!(white, profiles);
     let (_, _, errors) = figure_shape(&mut browser, "fig-history-error").unwrap();
     assert_eq!(errors, profiles + 1);
+    // The time axis is in dates (UTC), not seconds since the first profile: today's
+    // month and day, and a time of day, on its ticks.
+    let labels = browser.evaluate("document.querySelector('#fig-history-white svg').textContent");
+    let labels = labels.as_str().unwrap();
+    let today = chromacal::time::now_rfc3339();
+    let month_day = &today[5..10];
+    assert!(labels.contains("date and time (UTC)"), "{labels}");
+    assert!(
+        labels.contains(&format!("{month_day} ")),
+        "no {month_day} on the axis: {labels}"
+    );
+    assert!(!labels.contains("since the first"), "{labels}");
 }
 
 /// The browser check can fail: a page with a script error and an image that does not

@@ -207,6 +207,7 @@ fn without_uniformity(set: &MeasurementSet) -> MeasurementSet {
         units: set.units,
         instrument: set.instrument.clone(),
         display: set.display.clone(),
+        measured_at: set.measured_at.clone(),
         measurements: set
             .measurements
             .iter()

@@ -164,7 +164,9 @@ fn calibrate(
     })?;
     if let Some(path) = report_path {
         let readings = chromacal::measurement_file::read_measurements(&outcome.journal_path)?;
-        super::report::write_for(&outcome.profile, Some(&readings), path)?;
+        // Judged by the limits the run publishes by.
+        let criteria = chromacal::verification::Criteria::from_publish(&loaded.config.publish);
+        super::report::write_for(&outcome.profile, Some(&readings), criteria, path)?;
     }
     if json {
         let summary = serde_json::json!({

@@ -1,18 +1,20 @@
 //! `chromacal check`: predict every measured patch from a profile.
 
 use super::shared::{out, outln};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use chromacal::crf::explain::{SceneWeighted, scene_weighted};
 use chromacal::crf::scene::read_xyz_csv;
 use chromacal::fit::checks::AssumptionChecks;
 use chromacal::fit::validate::{Evaluation, evaluate};
+use chromacal::html_report::{ReportInput, readings_of};
 use chromacal::measurement::Units;
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
 use chromacal::report;
+use chromacal::verification::Criteria;
 
-use super::shared::Failure;
+use super::shared::{Failure, is_stdout};
 
 /// Predict every measured patch from a profile and report the ΔE00.
 #[derive(clap::Args)]
@@ -32,25 +34,23 @@ pub struct CheckArgs {
     /// CIELAB.
     #[arg(long)]
     scene: Option<PathBuf>,
+    /// Also write the verification report (`chromacal report`, its verification
+    /// sections judging these measurements) to this file; `-` for standard output.
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
+    /// What the patches must achieve in the report: `strict`, `nominal`, `loose`, or
+    /// limits as `mean=1,p95=2,max=4` [default: the default [publish] limits].
+    #[arg(long, requires = "report")]
+    criteria: Option<Criteria>,
 }
 
 pub fn run(args: CheckArgs) -> Result<(), Failure> {
-    check(
-        &args.profile,
-        &args.measurements,
-        args.json,
-        args.worst,
-        args.scene.as_deref(),
-    )
+    check(&args)
 }
 
-fn check(
-    profile_path: &Path,
-    measurements: &Path,
-    json: bool,
-    worst: usize,
-    scene: Option<&Path>,
-) -> Result<(), Failure> {
+fn check(args: &CheckArgs) -> Result<(), Failure> {
+    let (profile_path, measurements) = (args.profile.as_path(), args.measurements.as_path());
+    let (json, worst, scene) = (args.json, args.worst, args.scene.as_deref());
     let profile = Profile::read(profile_path)?;
     let set = read_measurements(measurements)?;
     let mut model = profile.model.clone();
@@ -119,6 +119,37 @@ fn check(
             scene_weighted(&patches, &colours, &model.white())
         }
     };
+    if let Some(path) = &args.report {
+        // The page shows the profile as it was compared: scaled to the readings' units.
+        let compared = Profile {
+            model: model.clone(),
+            ..profile.clone()
+        };
+        let (readings, readings_note) = match readings_of(&profile) {
+            Ok(_) if note.is_some() => (
+                None,
+                Some("the profile was scaled to the measurements' units, so its own readings are not drawn".to_string()),
+            ),
+            Ok(set) => (Some(set), None),
+            Err(why) => (None, Some(why)),
+        };
+        super::report::write_page(
+            &ReportInput {
+                profile: &compared,
+                readings: readings.as_ref(),
+                readings_note,
+                history: None,
+                device: None,
+                checked: Some(&set),
+                criteria: args.criteria.clone().unwrap_or_default(),
+            },
+            path,
+        )?;
+        if is_stdout(path) {
+            // The page is standard output: the summary would corrupt it.
+            return Ok(());
+        }
+    }
     if json {
         #[derive(serde::Serialize)]
         struct Output<'a> {

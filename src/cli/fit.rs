@@ -106,6 +106,7 @@ fn fit(
             source: absolute_path(measurements).display().to_string(),
             display: set.display.clone(),
             instrument: set.instrument.clone(),
+            measured_at: set.measured_at.clone(),
             config_digest: None,
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
             settings_at_resume: None,
@@ -125,7 +126,7 @@ fn fit(
         profile.write(output)?;
     }
     if let Some(path) = report_path {
-        super::report::write_for(&profile, Some(&set), path)?;
+        super::report::write_for(&profile, Some(&set), Default::default(), path)?;
     }
     if json && to_stdout {
         eprintln!("{}", serde_json::to_string_pretty(&fitted.report)?);

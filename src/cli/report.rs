@@ -8,6 +8,7 @@ use chromacal::html_report::{ReportInput, readings_of, report_html};
 use chromacal::measurement::MeasurementSet;
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
+use chromacal::verification::Criteria;
 
 use super::shared::{Failure, is_stdout, write_stdout};
 
@@ -26,6 +27,10 @@ pub struct ReportArgs {
     /// measured points [default: the source the profile names, if it is still there].
     #[arg(long)]
     readings: Option<PathBuf>,
+    /// What the verified patches must achieve: `strict`, `nominal`, `loose`, or limits
+    /// as `mean=1,p95=2,max=4` [default: the default [publish] limits].
+    #[arg(long)]
+    criteria: Option<Criteria>,
 }
 
 pub fn run(args: ReportArgs) -> Result<(), Failure> {
@@ -47,6 +52,8 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
             readings_note: note,
             history: None,
             device: None,
+            checked: None,
+            criteria: args.criteria.unwrap_or_default(),
         },
         &args.output,
     )
@@ -65,10 +72,12 @@ pub fn write_page(input: &ReportInput, output: &Path) -> Result<(), Failure> {
     Ok(())
 }
 
-/// The report of a profile just made from `readings`, for `calibrate` and `fit`.
+/// The report of a profile just made from `readings`, for `calibrate` and `fit`, its
+/// held-out patches judged by `criteria`.
 pub fn write_for(
     profile: &Profile,
     readings: Option<&MeasurementSet>,
+    criteria: Criteria,
     output: &Path,
 ) -> Result<(), Failure> {
     write_page(
@@ -78,6 +87,8 @@ pub fn write_for(
             readings_note: None,
             history: None,
             device: None,
+            checked: None,
+            criteria,
         },
         output,
     )

@@ -782,6 +782,7 @@ async fn profile(
 /// and the store's history of profiles and verifications.
 async fn report(Dev(device): Dev) -> Response {
     use crate::html_report::{HistoryView, ReportInput, readings_of, report_html};
+    use crate::verification::Criteria;
     let profile = match read_current(&device) {
         Ok(Some((profile, _))) => profile,
         Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
@@ -800,6 +801,9 @@ async fn report(Dev(device): Dev) -> Response {
             readings_note,
             history: Some(HistoryView::from_store(device.store())),
             device: Some(device.name.clone()),
+            checked: None,
+            // Judged by the limits the device publishes by.
+            criteria: Criteria::from_publish(&device.loaded.config.publish),
         })
     })
     .await;

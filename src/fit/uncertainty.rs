@@ -59,6 +59,7 @@ pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> 
                 units: set.units,
                 instrument: set.instrument.clone(),
                 display: set.display.clone(),
+                measured_at: set.measured_at.clone(),
             };
             fit_monitor(&kept, &options).ok().map(|f| f.model)
         })

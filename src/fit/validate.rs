@@ -144,6 +144,7 @@ pub fn ramps_and_greys_split(
         units: set.units,
         instrument: set.instrument.clone(),
         display: set.display.clone(),
+        measured_at: set.measured_at.clone(),
         measurements,
     };
     (part(train, "train"), part(test, "test"))

@@ -236,6 +236,142 @@ pub fn greys(model: &Curve, measured: &[(f64, f64)]) -> Result<String, FigureErr
     })
 }
 
+/// The tone response on log–log axes: relative luminance (above black) against
+/// drive, measured and as the model predicts it, and the target where there is one.
+/// A power law is a straight line here whose slope is its exponent, and the dark end,
+/// flat on linear axes, is spread out.
+pub fn tone_log(
+    measured: &Curve,
+    model: &Curve,
+    target: Option<(&str, &Curve)>,
+) -> Result<String, FigureError> {
+    svg("tone", (460, 360), |root| {
+        let positive = |c: &Curve| -> Curve {
+            c.iter()
+                .copied()
+                .filter(|p| p.0 > 0.0 && p.1 > 0.0 && p.0.is_finite() && p.1.is_finite())
+                .collect()
+        };
+        let (measured, model) = (positive(measured), positive(model));
+        let target = target.map(|(name, c)| (name, positive(c)));
+        let x_lo = measured
+            .iter()
+            .chain(&model)
+            .map(|p| p.0)
+            .fold(1.0_f64, f64::min)
+            .clamp(1e-3, 0.5);
+        let y_lo = measured
+            .iter()
+            .map(|p| p.1)
+            .chain(model.iter().filter(|p| p.0 >= x_lo).map(|p| p.1))
+            .fold(1.0_f64, f64::min)
+            .clamp(1e-6, 0.5);
+        let mut chart = ChartBuilder::on(root)
+            .caption("Tone response, log–log", (FONT, 16))
+            .margin(8)
+            .x_label_area_size(34)
+            .y_label_area_size(54)
+            .build_cartesian_2d(
+                (x_lo * 0.9..1.05).log_scale(),
+                (y_lo * 0.7..1.3).log_scale(),
+            )
+            .map_err(text)?;
+        chart
+            .configure_mesh()
+            .x_desc("drive (log)")
+            .y_desc("(Y − Y black) / (Y white − Y black) (log)")
+            .x_label_formatter(&|v| format!("{v:.3}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .light_line_style(RGBColor(238, 238, 238))
+            .draw()
+            .map_err(text)?;
+        chart
+            .draw_series(LineSeries::new(
+                model.iter().copied().filter(|p| p.0 >= x_lo * 0.9),
+                BLACK.stroke_width(2),
+            ))
+            .map_err(text)?
+            .label("model")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK.stroke_width(2)));
+        if let Some((name, curve)) = &target {
+            let colour = CANDIDATE_COLOURS[0];
+            chart
+                .draw_series(DashedLineSeries::new(
+                    curve.iter().copied().filter(|p| p.0 >= x_lo * 0.9),
+                    5,
+                    3,
+                    colour.stroke_width(2),
+                ))
+                .map_err(text)?
+                .label(*name)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+        }
+        chart
+            .draw_series(
+                measured
+                    .iter()
+                    .map(|&p| Circle::new(p, 3, RGBColor(90, 90, 90).filled())),
+            )
+            .map_err(text)?
+            .label("measured greys")
+            .legend(|(x, y)| Circle::new((x + 8, y), 3, RGBColor(90, 90, 90).filled()));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(200, 200, 200))
+            .label_font((FONT, 11))
+            .draw()
+            .map_err(text)
+    })
+}
+
+/// Grey balance along the ramp: each grey's a* and b* against the white, and its
+/// distance Δu′v′ × 1000 from the white's chromaticity.
+pub fn grey_balance(
+    a: &Curve,
+    b: &Curve,
+    delta_uv_thousandths: &Curve,
+) -> Result<String, FigureError> {
+    svg("grey-balance", (460, 360), |root| {
+        let (lo, hi) = padded_range(
+            a.iter()
+                .chain(b)
+                .chain(delta_uv_thousandths)
+                .map(|p| p.1)
+                .chain([-1.0, 1.0]),
+            0.1,
+        );
+        let mut chart = titled(root, "Grey balance", 0.0..1.0, lo..hi, 44)?;
+        axes(&mut chart, "drive", "a*, b*, Δu′v′ × 1000")?;
+        chart
+            .draw_series(LineSeries::new(
+                [(0.0, 0.0), (1.0, 0.0)],
+                RGBColor(160, 160, 160).stroke_width(1),
+            ))
+            .map_err(text)?;
+        let series: [(&str, &Curve, RGBColor); 3] = [
+            ("a*", a, RGBColor(200, 30, 90)),
+            ("b*", b, RGBColor(200, 160, 0)),
+            ("Δu′v′ × 1000", delta_uv_thousandths, RGBColor(60, 60, 60)),
+        ];
+        for (name, curve, colour) in series {
+            chart
+                .draw_series(LineSeries::new(
+                    curve.iter().copied(),
+                    colour.stroke_width(2),
+                ))
+                .map_err(text)?
+                .label(name)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+            chart
+                .draw_series(curve.iter().map(|&p| Circle::new(p, 3, colour.filled())))
+                .map_err(text)?;
+        }
+        legend(&mut chart, SeriesLabelPosition::UpperRight)
+    })
+}
+
 /// What the chromaticity diagram shows, all in CIE 1976 u′v′.
 pub struct Chromaticities {
     /// The spectrum locus, shortest wavelength first.
@@ -270,7 +406,7 @@ pub fn chromaticity(c: &Chromaticities) -> Result<String, FigureError> {
             .label("spectrum locus")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
         for (i, (name, primaries)) in c.references.iter().enumerate() {
-            let colour = CANDIDATE_COLOURS[(i + 1) % CANDIDATE_COLOURS.len()];
+            let colour = CANDIDATE_COLOURS[i % CANDIDATE_COLOURS.len()];
             let mut triangle = primaries.to_vec();
             triangle.push(primaries[0]);
             chart
@@ -402,6 +538,9 @@ pub fn uniformity(surface: &[Vec<f64>], points: &[GridPoint]) -> Result<String, 
             .configure_mesh()
             .disable_mesh()
             .disable_x_axis()
+            // A mesh's default label size is a share of its area's height: on this
+            // narrow bar that came out at under 2 px, unreadable.
+            .y_label_style((FONT, 11))
             .y_label_formatter(&|v| format!("{v:.1} %"))
             .draw()
             .map_err(text)?;
@@ -477,24 +616,31 @@ pub fn calibration(curves: &[Curve; 3]) -> Result<String, FigureError> {
     })
 }
 
-/// One series over time: (days since the first point, value) with its name.
+/// One series over time: (seconds since the Unix epoch, value) with its name.
 pub struct TimeSeries {
     pub name: String,
     pub points: Vec<(f64, f64)>,
 }
 
-/// Values over time (the daemon's history): each series as a line with points.
-pub fn over_time(
-    title: &str,
-    y_label: &str,
-    x_label: &str,
-    series: &[TimeSeries],
-) -> Result<String, FigureError> {
+/// A time on the history axis, as a date (and the time of day when the span is
+/// under a few days): UTC, as the profiles' own dates are written.
+fn date_label(epoch_s: f64, with_time: bool) -> String {
+    let Ok(at) = jiff::Timestamp::from_second(epoch_s.round() as i64) else {
+        return String::new();
+    };
+    at.strftime(if with_time { "%m-%d %H:%M" } else { "%Y-%m-%d" })
+        .to_string()
+}
+
+/// Values over time (the daemon's history): each series as a line with points, the
+/// time axis in dates (UTC).
+pub fn over_time(title: &str, y_label: &str, series: &[TimeSeries]) -> Result<String, FigureError> {
     svg("history", (640, 300), |root| {
         let (x0, x1) = padded_range(
             series.iter().flat_map(|s| s.points.iter().map(|p| p.0)),
             0.05,
         );
+        let with_time = x1 - x0 < 4.0 * 86_400.0;
         let (_, y1) = padded_range(
             series
                 .iter()
@@ -503,7 +649,19 @@ pub fn over_time(
             0.1,
         );
         let mut chart = titled(root, title, x0..x1, 0.0..y1, 54)?;
-        axes(&mut chart, x_label, y_label)?;
+        chart
+            .configure_mesh()
+            .x_desc(if with_time {
+                "date and time (UTC)"
+            } else {
+                "date (UTC)"
+            })
+            .y_desc(y_label)
+            .x_labels(5)
+            .x_label_formatter(&|v| date_label(*v, with_time))
+            .light_line_style(RGBColor(238, 238, 238))
+            .draw()
+            .map_err(text)?;
         for (i, s) in series.iter().enumerate() {
             let colour = CANDIDATE_COLOURS[i % CANDIDATE_COLOURS.len()];
             chart
@@ -520,4 +678,16 @@ pub fn over_time(
         }
         legend(&mut chart, SeriesLabelPosition::LowerRight)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn history_dates_read_as_dates() {
+        // 2026-12-04T10:30:00Z.
+        assert_eq!(date_label(1_796_380_200.0, false), "2026-12-04");
+        assert_eq!(date_label(1_796_380_200.0, true), "12-04 10:30");
+    }
 }

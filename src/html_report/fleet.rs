@@ -4,9 +4,7 @@
 //! device's report. Plain data in, one self-contained page out: no script, no network,
 //! refreshed by the browser every 30 s.
 
-use std::fmt::Write;
-
-use super::page::escape;
+use maud::{DOCTYPE, Markup, PreEscaped, html};
 
 /// One device as the fleet page shows it.
 #[derive(Debug, Clone, Default)]
@@ -60,98 +58,99 @@ form.inline { display: inline; }
 /// The fleet page of the daemon on `host`: one row a device. `logout` adds a button
 /// ending the browser session (over TCP).
 pub fn fleet_html(host: &str, version: &str, devices: &[FleetDevice], logout: bool) -> String {
-    let mut out = String::new();
-    let _ = write!(
-        out,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n\
-         <meta http-equiv=\"refresh\" content=\"30\">\n\
-         <title>chromacal on {host}</title>\n<style>{STYLE}</style></head>\n<body>\n\
-         <h1>chromacal on {host}</h1>\n<p class=\"muted\">version {version}, {n} device{s}; \
-         this page refreshes every 30 s.",
-        host = escape(host),
-        version = escape(version),
-        n = devices.len(),
-        s = if devices.len() == 1 { "" } else { "s" },
-    );
-    if logout {
-        out.push_str(
-            " <form class=\"inline\" method=\"post\" action=\"/logout\"><button>Log out</button></form>",
-        );
+    let n = devices.len();
+    html! {
+        (DOCTYPE)
+        html lang="en" {
+            head {
+                meta charset="utf-8";
+                meta http-equiv="refresh" content="30";
+                title { "chromacal on " (host) }
+                style { (PreEscaped(STYLE)) }
+            }
+            body {
+                h1 { "chromacal on " (host) }
+                p.muted {
+                    "version " (version) ", " (n) " device" @if n != 1 { "s" } "; this page refreshes every 30 s."
+                    @if logout {
+                        " " form.inline method="post" action="/logout" { button { "Log out" } }
+                    }
+                }
+                table #devices {
+                    thead {
+                        tr {
+                            th { "device" } th { "state" } th { "current profile (held-out mean ΔE00)" }
+                            th { "last verification" } th { "next verification" } th { "white luminance" } th { "report" }
+                        }
+                    }
+                    tbody { @for d in devices { (row(d)) } }
+                }
+            }
+        }
     }
-    out.push_str(
-        "</p>\n<table id=\"devices\">\n<thead><tr><th>device</th><th>state</th>\
-         <th>current profile (held-out mean ΔE00)</th><th>last verification</th>\
-         <th>next verification</th><th>white luminance</th><th>report</th></tr></thead>\n<tbody>\n",
-    );
-    for device in devices {
-        row(&mut out, device);
-    }
-    out.push_str("</tbody></table>\n</body></html>\n");
-    out
+    .into_string()
 }
 
-fn row(out: &mut String, d: &FleetDevice) {
-    let name = escape(&d.name);
-    let state = match (&d.job, d.retiring, d.up) {
-        (Some(job), true, _) => format!("{}; leaving after it", escape(job)),
-        (Some(job), false, _) => escape(job),
-        (None, true, _) => "leaving".to_string(),
-        (None, false, true) => "idle".to_string(),
-        (None, false, false) => {
-            "<span class=\"down\">instrument or display failed its last job</span>".to_string()
+fn row(d: &FleetDevice) -> Markup {
+    html! {
+        tr data-device=(d.name) {
+            td.name { (d.name) }
+            td.state {
+                @match (&d.job, d.retiring, d.up) {
+                    (Some(job), true, _) => { (job) "; leaving after it" },
+                    (Some(job), false, _) => { (job) },
+                    (None, true, _) => "leaving",
+                    (None, false, true) => "idle",
+                    (None, false, false) => span.down { "instrument or display failed its last job" },
+                }
+            }
+            td.profile {
+                @match &d.profile {
+                    Some((id, held_out)) => { (id) @if let Some(m) = held_out { (format!(" ({m:.3})")) } },
+                    None => span.muted { "none yet" },
+                }
+            }
+            td.verification {
+                @match &d.verification {
+                    Some(v) => {
+                        @let word = if v.passed() { "pass" } else { "fail" };
+                        span class=(word) { (word) }
+                        " " (v.mean.map_or("–".to_string(), |m| format!("{m:.3}"))) " against " (v.threshold) " "
+                        span.muted { (v.at) }
+                    },
+                    None => span.muted { "none of this profile" },
+                }
+            }
+            td.next {
+                @match &d.next_verification {
+                    Some(at) => (at),
+                    None => span.muted { "not scheduled" },
+                }
+            }
+            td.white { (white_cell(&d.whites, d.drift)) }
+            td {
+                @if d.profile.is_some() { a href={ "/devices/" (d.name) "/report" } { "report" } }
+                @else { span.muted { "–" } }
+            }
         }
-    };
-    let profile = match &d.profile {
-        Some((id, held_out)) => format!(
-            "{}{}",
-            escape(id),
-            held_out.map_or(String::new(), |m| format!(" ({m:.3})"))
-        ),
-        None => "<span class=\"muted\">none yet</span>".into(),
-    };
-    let verification = match &d.verification {
-        Some(v) => format!(
-            "<span class=\"{class}\">{word}</span> {mean} against {threshold} <span class=\"muted\">{at}</span>",
-            class = if v.passed() { "pass" } else { "fail" },
-            word = if v.passed() { "pass" } else { "fail" },
-            mean = v.mean.map_or("–".to_string(), |m| format!("{m:.3}")),
-            threshold = v.threshold,
-            at = escape(&v.at),
-        ),
-        None => "<span class=\"muted\">none of this profile</span>".into(),
-    };
-    let next = d.next_verification.as_deref().map_or(
-        "<span class=\"muted\">not scheduled</span>".to_string(),
-        escape,
-    );
-    let report = match &d.profile {
-        Some(_) => format!("<a href=\"/devices/{name}/report\">report</a>"),
-        None => "<span class=\"muted\">–</span>".into(),
-    };
-    let _ = writeln!(
-        out,
-        "<tr data-device=\"{name}\"><td class=\"name\">{name}</td><td class=\"state\">{state}</td>\
-         <td class=\"profile\">{profile}</td><td class=\"verification\">{verification}</td>\
-         <td class=\"next\">{next}</td><td class=\"white\">{white}</td><td>{report}</td></tr>",
-        white = white_cell(&d.whites, d.drift),
-    );
+    }
 }
 
 /// The newest white, its drift in % an hour with its standard error, and a sparkline
 /// of the recent whites.
-fn white_cell(whites: &[(f64, f64)], drift: Option<(f64, f64)>) -> String {
+fn white_cell(whites: &[(f64, f64)], drift: Option<(f64, f64)>) -> Markup {
     let Some(&(_, last)) = whites.last() else {
-        return "<span class=\"muted\">no white measured since start</span>".into();
+        return html! { span.muted { "no white measured since start" } };
     };
     let drift = drift.map_or(String::new(), |(per_s, se)| {
         let per_hour = |v: f64| v * 3600.0 / last * 100.0;
         format!(", drift {:+.2} ± {:.2} %/h", per_hour(per_s), per_hour(se))
     });
-    format!("{last:.2} cd/m²{drift} {}", sparkline(whites))
+    html! { (format!("{last:.2} cd/m²{drift} ")) (sparkline(whites)) }
 }
 
 /// An inline SVG line of `points` (x, y), scaled to 120 × 24 px; titled with the range.
-pub fn sparkline(points: &[(f64, f64)]) -> String {
+pub fn sparkline(points: &[(f64, f64)]) -> Markup {
     let (w, h) = (120.0, 24.0);
     let range = |f: fn(&(f64, f64)) -> f64| {
         points
@@ -164,10 +163,10 @@ pub fn sparkline(points: &[(f64, f64)]) -> String {
     let (x0, x1) = range(|p| p.0);
     let (y0, y1) = range(|p| p.1);
     if points.len() < 2 || !(x1 > x0) {
-        return String::new();
+        return html! {};
     }
     // A flat series is drawn in the middle, not blown up from its noise.
-    let (y0, y1) = if y1 - y0 < 1e-9 * y1.abs().max(1.0) {
+    let (lo, hi) = if y1 - y0 < 1e-9 * y1.abs().max(1.0) {
         (y0 - 1.0, y1 + 1.0)
     } else {
         (y0, y1)
@@ -178,40 +177,46 @@ pub fn sparkline(points: &[(f64, f64)]) -> String {
             format!(
                 "{:.1},{:.1}",
                 (x - x0) / (x1 - x0) * w,
-                h - (y - y0) / (y1 - y0) * h
+                h - (y - lo) / (hi - lo) * h
             )
         })
         .collect();
-    format!(
-        "<svg class=\"sparkline\" width=\"{w}\" height=\"{h}\" viewBox=\"-1 -1 {} {}\" role=\"img\"><title>{} whites, {:.2} to {:.2} cd/m²</title><polyline fill=\"none\" stroke=\"#36c\" stroke-width=\"1.5\" points=\"{}\"/></svg>",
-        w + 2.0,
-        h + 2.0,
-        points.len(),
-        range(|p| p.1).0,
-        range(|p| p.1).1,
-        coordinates.join(" ")
-    )
+    html! {
+        svg.sparkline width=(w) height=(h) viewBox={ "-1 -1 " (w + 2.0) " " (h + 2.0) } role="img" {
+            title { (points.len()) " whites, " (format!("{y0:.2} to {y1:.2}")) " cd/m²" }
+            polyline fill="none" stroke="#36c" stroke-width="1.5" points=(coordinates.join(" ")) {}
+        }
+    }
 }
 
 /// The login page of the TCP listener: the API token, once, for a session cookie.
 pub fn login_html(host: &str, error: Option<&str>) -> String {
-    format!(
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n\
-         <title>chromacal on {host}: log in</title>\n<style>{STYLE}</style></head>\n<body>\n\
-         <h1>chromacal on {host}</h1>\n{error}\
-         <form method=\"post\" action=\"/login\">\n\
-         <p><label>API token (the daemon's <code>daemon.token_file</code>, by default \
-         <code>&lt;state&gt;/api.token</code>)<br>\
-         <input type=\"password\" name=\"token\" autocomplete=\"current-password\" size=\"70\" autofocus></label></p>\n\
-         <p><button type=\"submit\">Log in</button></p>\n</form>\n\
-         <p class=\"muted\">The session lets this browser look (GET) for 12 hours; \
-         starting or cancelling jobs needs the token itself.</p>\n</body></html>\n",
-        host = escape(host),
-        error = error.map_or(String::new(), |e| format!(
-            "<p class=\"fail\" id=\"error\">{}</p>\n",
-            escape(e)
-        )),
-    )
+    html! {
+        (DOCTYPE)
+        html lang="en" {
+            head {
+                meta charset="utf-8";
+                title { "chromacal on " (host) ": log in" }
+                style { (PreEscaped(STYLE)) }
+            }
+            body {
+                h1 { "chromacal on " (host) }
+                @if let Some(e) = error { p.fail #error { (e) } }
+                form method="post" action="/login" {
+                    p {
+                        label {
+                            "API token (the daemon's " code { "daemon.token_file" } ", by default " code { "<state>/api.token" } ")"
+                            br;
+                            input type="password" name="token" autocomplete="current-password" size="70" autofocus;
+                        }
+                    }
+                    p { button type="submit" { "Log in" } }
+                }
+                p.muted { "The session lets this browser look (GET) for 12 hours; starting or cancelling jobs needs the token itself." }
+            }
+        }
+    }
+    .into_string()
 }
 
 #[cfg(test)]
@@ -245,7 +250,10 @@ mod tests {
         assert!(page.contains("chromacal on lab&amp;1"));
         assert!(page.contains("<tr data-device=\"crt\">"));
         assert!(page.contains("href=\"/devices/crt/report\""));
-        assert!(page.contains("class=\"fail\">fail</span> 1.500 against 1"));
+        assert!(
+            page.contains("class=\"fail\">fail</span> 1.500 against 1 "),
+            "{page}"
+        );
         assert!(page.contains("p1 (0.123)"));
         // 1/60 cd/m² a second at 102 cd/m²: 58.8 %/h.
         assert!(page.contains("drift +58.82 ± 3.53 %/h"), "{page}");
@@ -258,13 +266,13 @@ mod tests {
 
     #[test]
     fn a_sparkline_spans_its_box_and_a_flat_one_sits_in_the_middle() {
-        let line = sparkline(&[(0.0, 1.0), (1.0, 3.0), (2.0, 2.0)]);
+        let line = sparkline(&[(0.0, 1.0), (1.0, 3.0), (2.0, 2.0)]).into_string();
         assert!(
             line.contains("points=\"0.0,24.0 60.0,0.0 120.0,12.0\""),
             "{line}"
         );
-        let flat = sparkline(&[(0.0, 5.0), (1.0, 5.0)]);
+        let flat = sparkline(&[(0.0, 5.0), (1.0, 5.0)]).into_string();
         assert!(flat.contains("points=\"0.0,12.0 120.0,12.0\""), "{flat}");
-        assert_eq!(sparkline(&[(0.0, 5.0)]), "");
+        assert_eq!(sparkline(&[(0.0, 5.0)]).into_string(), "");
     }
 }

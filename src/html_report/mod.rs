@@ -16,7 +16,8 @@ mod page;
 use std::path::Path;
 
 use crate::color::adaptation::{AdaptationTransform, adapt};
-use crate::color::spaces::{Xyy, xy_to_uv_prime, xyy_to_xyz, xyz_to_srgb8, xyz_to_uv_prime};
+use crate::color::gamut::{REFERENCE_SPACES, space_uv};
+use crate::color::spaces::{Xyy, xyy_to_xyz, xyz_to_srgb8, xyz_to_uv_prime};
 use crate::color::spectrum::Observer;
 use crate::color::{UvPrime, Xyz};
 use crate::measurement::{MeasurementSet, Role};
@@ -24,6 +25,7 @@ use crate::model::transfer::{Cowan, GainOffsetGamma, LawKind, Power, ThreeTerm, 
 use crate::model::{MonitorModel, ScreenPosition};
 use crate::profile::Profile;
 use crate::profile::store::ProfileStore;
+use crate::verification::Criteria;
 
 use figures::{Chromaticities, Curve, FigureError, GridPoint, TimeSeries};
 
@@ -41,6 +43,12 @@ pub struct ReportInput<'a> {
     /// The daemon's device the profile is of: named on the page, with a link back to
     /// the fleet page.
     pub device: Option<String>,
+    /// Readings measured to verify the profile (`check --report`): the verification
+    /// sections judge these. Without them they judge the patches of `readings` held
+    /// out of the fit.
+    pub checked: Option<&'a MeasurementSet>,
+    /// What the verified patches must achieve.
+    pub criteria: Criteria,
 }
 
 /// Why a report could not be made.
@@ -49,14 +57,6 @@ pub enum ReportError {
     #[error(transparent)]
     Figure(#[from] FigureError),
 }
-
-/// Reference gamuts drawn for scale, CIE 1931 xy of R, G, B: ITU-R BT.709 (sRGB),
-/// SMPTE RP 431-2 (DCI-P3) and ITU-R BT.2020.
-pub const REFERENCE_GAMUTS: [(&str, [[f64; 2]; 3]); 3] = [
-    ("sRGB", [[0.64, 0.33], [0.30, 0.60], [0.15, 0.06]]),
-    ("DCI-P3", [[0.680, 0.320], [0.265, 0.690], [0.150, 0.060]]),
-    ("BT.2020", [[0.708, 0.292], [0.170, 0.797], [0.131, 0.046]]),
-];
 
 /// CIE 1931 xy of D65 (CIE 15:2004 Table T.3), the white the swatches are shown at.
 const D65_XY: [f64; 2] = [0.3127, 0.3290];
@@ -208,9 +208,9 @@ fn chromaticities(model: &MonitorModel, set: Option<&MeasurementSet>) -> Chromat
     });
     Chromaticities {
         locus: spectrum_locus(),
-        references: REFERENCE_GAMUTS
+        references: REFERENCE_SPACES
             .iter()
-            .map(|(name, xy)| (*name, xy.map(|[x, y]| uv(xy_to_uv_prime(x, y)))))
+            .map(|space| (space.name, space_uv(space)))
             .collect(),
         primaries,
         white: uv(xyz_to_uv_prime(&model.white(), origin)),
@@ -362,36 +362,21 @@ impl HistoryView {
         }
     }
 
-    /// The two history figures' series, in time since the first point, and the unit
-    /// of that time: seconds, minutes, hours or days, whichever the span reads best in.
-    fn series(&self) -> (Vec<TimeSeries>, Vec<TimeSeries>, &'static str) {
-        let times = || {
-            self.profiles
-                .iter()
-                .map(|p| p.at_s)
-                .chain(self.verifications.iter().map(|v| v.0))
-        };
-        let start = times().fold(f64::INFINITY, f64::min);
-        let span = times().fold(start, f64::max) - start;
-        let (unit, seconds) = match span {
-            s if s < 120.0 => ("seconds", 1.0),
-            s if s < 2.0 * 3600.0 => ("minutes", 60.0),
-            s if s < 2.0 * 86_400.0 => ("hours", 3600.0),
-            _ => ("days", 86_400.0),
-        };
-        let day = |s: f64| (s - start) / seconds;
+    /// The two history figures' series, in seconds since the Unix epoch: each
+    /// profile's held-out error and each verification's, and each profile's white.
+    fn series(&self) -> (Vec<TimeSeries>, Vec<TimeSeries>) {
         let errors = vec![
             TimeSeries {
                 name: "held-out mean (each profile)".into(),
                 points: self
                     .profiles
                     .iter()
-                    .filter_map(|p| Some((day(p.at_s), p.held_out_mean?)))
+                    .filter_map(|p| Some((p.at_s, p.held_out_mean?)))
                     .collect(),
             },
             TimeSeries {
                 name: "verification mean".into(),
-                points: self.verifications.iter().map(|v| (day(v.0), v.1)).collect(),
+                points: self.verifications.clone(),
             },
         ];
         let white = vec![TimeSeries {
@@ -399,10 +384,10 @@ impl HistoryView {
             points: self
                 .profiles
                 .iter()
-                .filter_map(|p| Some((day(p.at_s), p.white_luminance?)))
+                .filter_map(|p| Some((p.at_s, p.white_luminance?)))
                 .collect(),
         }];
-        (errors, white, unit)
+        (errors, white)
     }
 }
 

@@ -1,20 +1,27 @@
 //! The report page: sections in the order a reader checks a calibration (who and what
-//! it cost, the curves, the primaries, the screen, the error, the assumptions), each a
-//! heading, a figure or two and the table behind them.
+//! it cost; the verification: patches, white and contrast, gamut, greys; then the
+//! model: curves, primaries, the screen, the error, the assumptions), each a heading,
+//! a figure or two and the table behind them.
+//!
+//! The page is a `maud` template: every value put in it is escaped unless it is
+//! marked as markup (`PreEscaped`), which only the figures' SVG is.
 
-use std::fmt::Write as _;
+use maud::{DOCTYPE, Markup, PreEscaped, html};
 
 use super::figures::{self, Curve};
 use super::{
     ReportError, ReportInput, candidate_curve, chromaticities, measured_greys, measured_shares,
     sampled, smallest_drive, swatch, uniformity_data,
 };
+use crate::color::Xyz;
 use crate::color::spaces::xyz_to_xyy;
 use crate::fit::checks::Verdict;
 use crate::fit::stats::ErrorStats;
 use crate::model::CHANNELS;
 use crate::model::spatial::SpatialMap;
+use crate::model::transfer::LawKind;
 use crate::profile::Profile;
+use crate::verification::{PatchUse, Verification, verify};
 
 const STYLE: &str = "
 body { font-family: sans-serif; max-width: 1100px; margin: 1.5em auto; padding: 0 1em; color: #222; }
@@ -24,54 +31,54 @@ table { border-collapse: collapse; margin: 0.6em 0; font-size: 0.9em; }
 th, td { border: 1px solid #ddd; padding: 0.25em 0.6em; text-align: right; }
 th:first-child, td:first-child, td.text { text-align: left; }
 th { background: #f4f4f4; }
+tr.fit td { color: #888; }
 figure { display: inline-block; margin: 0.4em; vertical-align: top; }
 figure svg { max-width: 100%; height: auto; }
 figcaption { font-size: 0.85em; color: #555; max-width: 520px; }
 .swatch { display: inline-block; width: 2.2em; height: 1.2em; border: 1px solid #888; vertical-align: middle; }
 .note { color: #6a4a00; background: #fff8e0; padding: 0.3em 0.6em; border-left: 3px solid #e0b000; }
 .fails { color: #a00; font-weight: bold; }
+.passes { color: #060; font-weight: bold; }
 @media print { body { max-width: none; } section { break-inside: avoid; } figure { break-inside: avoid; } }
 ";
 
-/// `s` with the five characters HTML gives meaning escaped.
-pub(crate) fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-        .replace('\'', "&#39;")
-}
-
-fn figure(out: &mut String, id: &str, svg: &str, caption: &str) {
-    let _ = writeln!(
-        out,
-        "<figure id=\"{id}\">{svg}<figcaption>{}</figcaption></figure>",
-        escape(caption)
-    );
-}
-
-fn note(out: &mut String, text: &str) {
-    let _ = writeln!(out, "<p class=\"note\">{}</p>", escape(text));
-}
-
-/// An HTML table; cells are escaped.
-fn table(out: &mut String, headers: &[&str], rows: &[Vec<String>]) {
-    out.push_str("<table><tr>");
-    for h in headers {
-        let _ = write!(out, "<th>{}</th>", escape(h));
+fn figure(id: &str, svg: &str, caption: &str) -> Markup {
+    html! {
+        figure id=(id) { (PreEscaped(svg)) figcaption { (caption) } }
     }
-    out.push_str("</tr>\n");
-    for row in rows {
-        out.push_str("<tr>");
-        for cell in row {
-            // Figures to the right, so that their decimals line up; words to the left.
-            let numeric = cell.trim_end_matches(" %").parse::<f64>().is_ok() || cell == "–";
-            let class = if numeric { "" } else { " class=\"text\"" };
-            let _ = write!(out, "<td{class}>{}</td>", escape(cell));
+}
+
+fn note(text: &str) -> Markup {
+    html! { p.note { (text) } }
+}
+
+/// Figures to the right, so that their decimals line up; words to the left.
+fn is_numeric(cell: &str) -> bool {
+    let trimmed = cell.trim_end_matches(" %").trim_end_matches(" K");
+    trimmed.parse::<f64>().is_ok() || cell == "–"
+}
+
+/// A table with a header row.
+fn table(headers: &[&str], rows: &[Vec<String>]) -> Markup {
+    html! {
+        table {
+            tr { @for h in headers { th { (h) } } }
+            @for row in rows {
+                tr { @for cell in row { td.text[!is_numeric(cell)] { (cell) } } }
+            }
         }
-        out.push_str("</tr>\n");
     }
-    out.push_str("</table>\n");
+}
+
+/// A two-column table of names and values.
+fn facts(rows: &[(&str, String)]) -> Markup {
+    html! {
+        table {
+            @for (name, value) in rows {
+                tr { th { (name) } td style="text-align:left" { (value) } }
+            }
+        }
+    }
 }
 
 fn stats_cells(stats: Option<&ErrorStats>) -> [String; 3] {
@@ -93,6 +100,17 @@ fn parameter(name: &str, value: f64) -> String {
     }
 }
 
+/// `v` with its sign and `decimals` decimals, and a value that rounds to zero as an
+/// unsigned zero (not "-0.00").
+fn signed(v: f64, decimals: usize) -> String {
+    let text = format!("{v:+.decimals$}");
+    if text[1..].chars().all(|c| c == '0' || c == '.') {
+        text[1..].to_string()
+    } else {
+        text
+    }
+}
+
 fn seconds(s: f64) -> String {
     if !(s.is_finite() && s >= 0.0) {
         // A run's cost read from a file written by hand, say: nothing to print.
@@ -104,6 +122,41 @@ fn seconds(s: f64) -> String {
     } else {
         format!("{:.1} ms", s * 1000.0)
     }
+}
+
+/// `#rrggbb` of a swatch showing `xyz` against `white`.
+fn hex(xyz: &Xyz, white: &Xyz) -> String {
+    let [r, g, b] = swatch(xyz, white);
+    format!("#{r:02x}{g:02x}{b:02x}")
+}
+
+fn swatch_span(xyz: &Xyz, white: &Xyz) -> Markup {
+    html! { span.swatch style={ "background:" (hex(xyz, white)) } {} }
+}
+
+/// The verification of the profile: against the readings measured to verify it, or
+/// else its own readings with the held-out patches judged; `None` without readings.
+fn verification_of(input: &ReportInput) -> Option<(Verification, String)> {
+    let profile = input.profile;
+    if let Some(set) = input.checked {
+        let what = format!("the readings of {} measured to verify it", set.source);
+        return Some((verify(&profile.model, set, None, &input.criteria), what));
+    }
+    let set = input.readings?;
+    let held: Vec<usize> = profile
+        .report
+        .held_out_patches
+        .iter()
+        .map(|p| p.index)
+        .collect();
+    let what = format!(
+        "the readings it was fitted on, judged on the {} patches held out of the fit",
+        held.len()
+    );
+    Some((
+        verify(&profile.model, set, Some(&held), &input.criteria),
+        what,
+    ))
 }
 
 /// The report of `input` as a self-contained HTML page.
@@ -119,108 +172,305 @@ pub fn report_html(input: &ReportInput) -> Result<String, ReportError> {
         .clone()
         .or(source_name)
         .unwrap_or_else(|| profile.id.clone());
-    let display = display.as_str();
-    let mut out = String::new();
-    let _ = write!(
-        out,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>chromacal report: {device}{} ({})</title>\n<style>{STYLE}</style></head>\n<body>\n{back}<h1>Calibration report: {device}{}</h1>\n",
-        escape(display),
-        escape(&profile.id),
-        escape(display),
-        device = input
-            .device
-            .as_deref()
-            .map_or(String::new(), |d| format!("device {}, ", escape(d))),
-        back = match input.device {
-            Some(_) => "<p><a href=\"/\">← all devices</a></p>\n",
-            None => "",
-        },
-    );
-    identity(&mut out, profile);
-    transfer(&mut out, input)?;
-    laws(&mut out, profile);
-    primaries(&mut out, input)?;
-    uniformity(&mut out, input)?;
-    held_out(&mut out, profile)?;
-    checks(&mut out, profile);
-    calibration(&mut out, profile)?;
-    history(&mut out, input)?;
-    let _ = write!(
-        out,
-        "<footer><p>Made by {} from profile {}.</p></footer>\n</body></html>\n",
-        escape(&profile.provenance.program),
-        escape(&profile.id)
-    );
-    Ok(out)
+    let verification = verification_of(input);
+    let verified = verification.as_ref().map(|(v, what)| (v, what.as_str()));
+    let sections = [
+        identity(profile),
+        summary(profile, verified),
+        patches(verified.map(|v| v.0)),
+        greys(profile, verified.map(|v| v.0))?,
+        transfer(input)?,
+        laws(profile),
+        primaries(input)?,
+        gamut(verified.map(|v| v.0)),
+        uniformity(input, verified.map(|v| v.0))?,
+        held_out(profile)?,
+        checks(profile),
+        calibration(profile)?,
+        history(input)?,
+    ];
+    let device = input.device.as_deref();
+    let page = html! {
+        (DOCTYPE)
+        html lang="en" {
+            head {
+                meta charset="utf-8";
+                title {
+                    "chromacal report: " @if let Some(d) = device { "device " (d) ", " }
+                    (display) " (" (profile.id) ")"
+                }
+                style { (PreEscaped(STYLE)) }
+            }
+            body {
+                @if device.is_some() { p { a href="/" { "← all devices" } } }
+                h1 { "Calibration report: " @if let Some(d) = device { "device " (d) ", " } (display) }
+                @for section in &sections { (section) }
+                footer { p { "Made by " (profile.provenance.program) " from profile " (profile.id) "." } }
+            }
+        }
+    };
+    Ok(page.into_string())
 }
 
-fn identity(out: &mut String, profile: &Profile) {
-    out.push_str("<section id=\"identity\"><h2>Run and cost</h2>\n");
+fn identity(profile: &Profile) -> Markup {
     let p = &profile.provenance;
     let c = &profile.report.counts;
-    let mut rows = vec![
-        vec!["profile".into(), profile.id.clone()],
-        vec!["made".into(), profile.created.clone()],
-        vec!["display".into(), p.display.clone().unwrap_or("–".into())],
-        vec![
-            "instrument".into(),
+    let mut rows: Vec<(&str, String)> = vec![
+        ("profile", profile.id.clone()),
+        ("made", profile.created.clone()),
+        ("display", p.display.clone().unwrap_or("–".into())),
+        (
+            "instrument",
             p.instrument
                 .as_ref()
                 .map_or("–".into(), |i| match &i.serial {
                     Some(s) => format!("{} (serial {s})", i.name),
                     None => i.name.clone(),
                 }),
-        ],
-        vec!["readings from".into(), p.source.clone()],
-        vec!["units".into(), profile.units.to_string()],
-        vec![
-            "readings".into(),
+        ),
+        (
+            "readings taken",
+            p.measured_at
+                .clone()
+                .unwrap_or_else(|| "– (not said in the file)".into()),
+        ),
+        ("readings from", p.source.clone()),
+        ("units", profile.units.to_string()),
+        (
+            "readings",
             format!(
                 "{} ({} usable; {} in the fit's kinds, {} held out, {} uniformity)",
                 c.readings, c.usable, c.budget_readings, c.held_out, c.uniformity
             ),
-        ],
+        ),
     ];
     match &profile.cost {
         Some(cost) => {
-            rows.push(vec![
-                "instrument time".into(),
+            rows.push((
+                "instrument time",
                 cost.instrument_s
                     .map_or("not recorded in the file".into(), seconds),
-            ]);
-            rows.push(vec!["fit time".into(), seconds(cost.fit_s)]);
+            ));
+            rows.push(("fit time", seconds(cost.fit_s)));
         }
-        None => rows.push(vec![
-            "cost".into(),
+        None => rows.push((
+            "cost",
             "not recorded (a profile made before chromacal recorded it)".into(),
-        ]),
+        )),
     }
-    rows.push(vec!["program".into(), p.program.clone()]);
-    out.push_str("<table>\n");
-    for row in rows {
-        let _ = writeln!(
-            out,
-            "<tr><th>{}</th><td style=\"text-align:left\">{}</td></tr>",
-            escape(&row[0]),
-            escape(&row[1])
-        );
+    rows.push(("program", p.program.clone()));
+    html! {
+        section #identity {
+            h2 { "Run and cost" }
+            (facts(&rows))
+            @if let Some(why) = &profile.report.luminance_only { (note(why)) }
+        }
     }
-    out.push_str("</table>\n");
-    if let Some(why) = &profile.report.luminance_only {
-        note(out, why);
-    }
-    out.push_str("</section>\n");
 }
 
-fn transfer(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
+/// The verdict against the criteria, the white, the black and the contrast.
+fn summary(profile: &Profile, verified: Option<(&Verification, &str)>) -> Markup {
+    let Some((v, what)) = verified else {
+        return html! {
+            section #verification {
+                h2 { "Verification" }
+                (note("Without the readings nothing can be verified: give them with --readings, or measure a verification set and run `chromacal check --report`."))
+            }
+        };
+    };
+    let j = &v.judgement;
+    let w = &v.white;
+    let unit = profile.units.to_string();
+    let judged = v.patches.iter().filter(|p| p.judged).count();
+    let white_from = if w.white_measured {
+        "measured"
+    } else {
+        "the model's (no white reading)"
+    };
+    let black_from = if w.black_measured {
+        "measured"
+    } else {
+        "the model's (no black reading)"
+    };
+    html! {
+        section #verification {
+            h2 { "Verification" }
+            p { "Of " (what) ". Criteria: " (j.criteria.describe()) "." }
+            @match &j.stats {
+                Some(s) => p {
+                    (judged) " patches judged: mean ΔE00 "
+                    span #judged-mean { (format!("{:.3}", s.mean)) }
+                    ", 95th percentile " (format!("{:.3}", s.p95))
+                    ", max " (format!("{:.3}", s.max)) "; "
+                    (j.failing_patches) " above the patch limit. "
+                    @if j.passes { span.passes #verdict { "Passes." } }
+                    @else { span.fails #verdict { "Fails." } }
+                },
+                None => (note("No patch to judge: every reading was in the fit.")),
+            }
+            h3 { "White, black and contrast" }
+            table {
+                tr { th { "white luminance" } td #white-luminance { (format!("{:.2}", w.white.y)) } td.text { (unit) ", " (white_from) } }
+                tr { th { "white x, y" } td #white-xy { (format!("{:.4}, {:.4}", w.white_xy[0], w.white_xy[1])) } td.text { "CIE 1931" } }
+                tr {
+                    th { "correlated colour temperature" }
+                    td #white-cct { (w.temperature.map_or("–".into(), |t| format!("{:.0} K", t.cct_k))) }
+                    td.text { "nearest Planckian point in CIE 1960 u, v (CIE 15:2004 §9.5)" }
+                }
+                tr {
+                    th { "Duv" }
+                    td #white-duv { (w.temperature.map_or("–".into(), |t| format!("{:+.4}", t.duv))) }
+                    td.text { "distance from the Planckian locus, positive above it" }
+                }
+                tr { th { "black luminance" } td #black-luminance { (format!("{:.4}", w.black.y)) } td.text { (unit) ", " (black_from) } }
+                tr {
+                    th { "contrast ratio" }
+                    td #contrast { (w.contrast.map_or("–".into(), |c| format!("{c:.0}:1"))) }
+                    td.text { "white luminance over black luminance" }
+                }
+            }
+        }
+    }
+}
+
+/// Every patch: nominal (the profile's prediction) and measured, side by side.
+fn patches(verified: Option<&Verification>) -> Markup {
+    let Some(v) = verified else {
+        return html! {};
+    };
+    let white = v.white.white;
+    let lab = |l: &crate::color::Lab| format!("{:.2} {} {}", l.l, signed(l.a, 2), signed(l.b, 2));
+    html! {
+        section #patches {
+            h2 { "Patches" }
+            p {
+                "Every usable reading against what the profile predicts for its drive (the nominal), in CIELAB against the model's white: "
+                "ΔL*, ΔC*ab and ΔH*ab (CIE 15:2004 §8.2.2, measured less nominal) and ΔE00. "
+                "Patches in the fit are shown grey and not judged; the result is against the patch limit of " (v.judgement.criteria.max_patch) "."
+            }
+            table #patch-table {
+                tr {
+                    th { "patch" } th { "use" } th { "drive R, G, B" } th { "nominal" } th { "measured" }
+                    th { "nominal L* a* b*" } th { "measured L* a* b*" }
+                    th { "ΔL*" } th { "ΔC*" } th { "ΔH*" } th { "ΔE00" } th { "result" }
+                }
+                @for p in &v.patches {
+                    tr.fit[p.used == PatchUse::Fit] data-patch=(p.index) {
+                        td { (p.index) }
+                        td.text { (p.used.name()) }
+                        td { (format!("{:.3}, {:.3}, {:.3}", p.drive[0], p.drive[1], p.drive[2])) }
+                        td { (swatch_span(&p.nominal, &white)) }
+                        td { (swatch_span(&p.measured, &white)) }
+                        td { (lab(&p.nominal_lab)) }
+                        td { (lab(&p.measured_lab)) }
+                        td { (signed(p.delta_l, 2)) }
+                        td { (signed(p.delta_c, 2)) }
+                        td { (signed(p.delta_h, 2)) }
+                        td.de { (format!("{:.3}", p.delta_e00)) }
+                        @if !p.judged { td { "–" } }
+                        @else if p.passes { td.text.passes { "pass" } }
+                        @else { td.text.fails { "fail" } }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The tone response on log axes and the grey balance along the grey ramp.
+fn greys(profile: &Profile, verified: Option<&Verification>) -> Result<Markup, ReportError> {
+    let Some(v) = verified.filter(|v| !v.greys.is_empty()) else {
+        return Ok(html! {});
+    };
+    let measured: Curve = v.greys.iter().map(|g| (g.drive, g.relative)).collect();
+    let model = &profile.model;
+    let span = model.white().y - model.black.y;
+    let model_curve: Curve = (1..=200)
+        .map(|i| {
+            let d = i as f64 / 200.0;
+            (d, (model.forward_centre([d; 3]).y - model.black.y) / span)
+        })
+        .collect();
+    let target: Option<Curve> = profile.calibration.as_ref().and_then(|c| {
+        let black = c.levels.iter().find(|l| l.input == 0.0)?.target_luminance;
+        let white = c.levels.iter().find(|l| l.input == 1.0)?.target_luminance;
+        (white > black).then(|| {
+            c.levels
+                .iter()
+                .map(|l| (l.input, (l.target_luminance - black) / (white - black)))
+                .collect()
+        })
+    });
+    let tone = figures::tone_log(
+        &measured,
+        &model_curve,
+        target.as_ref().map(|t| ("calibration target", t)),
+    )?;
+    let a: Curve = v.greys.iter().map(|g| (g.drive, g.a)).collect();
+    let b: Curve = v.greys.iter().map(|g| (g.drive, g.b)).collect();
+    let duv: Curve = v
+        .greys
+        .iter()
+        .map(|g| (g.drive, 1000.0 * g.delta_uv))
+        .collect();
+    let balance = figures::grey_balance(&a, &b, &duv)?;
+    let gamma = |g: Option<f64>| g.map_or("–".into(), |g| format!("{g:.3}"));
+    let rows: Vec<Vec<String>> = v
+        .greys
+        .iter()
+        .map(|g| {
+            vec![
+                format!("{:.3}", g.drive),
+                format!("{:.4}", g.luminance),
+                format!("{:.5}", g.relative),
+                format!("{:.5}", g.model_relative),
+                gamma(g.effective_gamma),
+                gamma(g.model_effective_gamma),
+                signed(g.a, 2),
+                signed(g.b, 2),
+                format!("{:.4}", g.delta_uv),
+                g.temperature
+                    .map_or("–".into(), |t| format!("{:.0} K", t.cct_k)),
+            ]
+        })
+        .collect();
+    Ok(html! {
+        section #greys {
+            h2 { "Tone response and grey balance" }
+            (figure("fig-tone", &tone, "The greys' luminance above black, relative to the white's, against drive on log–log axes: a power law is a straight line whose slope is its exponent, and the dark end is spread out."))
+            (figure("fig-grey-balance", &balance, "Each grey's a* and b* against the white, and its distance from the white's chromaticity: a neutral ramp stays at zero."))
+            (table(&["drive", "Y", "relative", "model relative", "effective gamma", "model's", "a*", "b*", "Δu′v′", "CCT"], &rows))
+            p { "Effective gamma is ln(relative) / ln(drive), the exponent of the power law through that grey, with luminance taken above black." }
+        }
+    })
+}
+
+/// How a channel's law is named on its panel: the law the selection chose, and, when
+/// a correction at the measured levels or codes turned it into a table, that too.
+fn law_title(profile: &Profile, channel: usize) -> (String, Option<LawKind>) {
+    let law = &profile.model.laws[channel];
+    let chosen = profile.report.chosen_law();
+    match chosen {
+        Some(kind) if kind != LawKind::Table && law.kind() == LawKind::Table => {
+            let how = match (
+                &profile.report.code_correction,
+                &profile.report.law_correction,
+            ) {
+                (Some(c), _) if c.kept => "corrected at the measured codes",
+                _ => "corrected at the measured levels",
+            };
+            (format!("{kind}, {how}"), Some(kind))
+        }
+        _ => (law.kind().to_string(), None),
+    }
+}
+
+fn transfer(input: &ReportInput) -> Result<Markup, ReportError> {
     let profile = input.profile;
     let model = &profile.model;
-    out.push_str("<section id=\"transfer\"><h2>Transfer curves</h2>\n");
-    if let Some(why) = &input.readings_note {
-        note(out, why);
-    }
     let chosen_kind = profile.report.chosen_law();
     let mut residuals: [Curve; 3] = Default::default();
+    let mut panels = Vec::new();
     for (channel, name) in CHANNELS.iter().enumerate() {
         let law = &model.laws[channel];
         let measured = input
@@ -231,14 +481,25 @@ fn transfer(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
             .readings
             .map(|set| smallest_drive(set, channel))
             .unwrap_or(1.0 / 255.0);
+        let (title, corrected) = law_title(profile, channel);
+        let candidate = |kind: LawKind, params: &[crate::fit::laws::FittedParameter]| {
+            candidate_curve(kind, params, toe)
+        };
         let candidates: Vec<(String, Curve)> = profile
             .report
             .laws
             .iter()
-            .filter(|l| Some(l.law) != chosen_kind)
             .filter_map(|l| {
-                let curve = candidate_curve(l.law, &l.parameters[channel], toe)?;
-                Some((l.law.name().to_string(), curve))
+                if Some(l.law) == chosen_kind {
+                    // The chosen law as fitted, before its correction, when corrected.
+                    corrected?;
+                    let curve = candidate(l.law, &l.parameters[channel])?;
+                    return Some((format!("{} before correction", l.law.name()), curve));
+                }
+                Some((
+                    l.law.name().to_string(),
+                    candidate(l.law, &l.parameters[channel])?,
+                ))
             })
             .collect();
         residuals[channel] = measured
@@ -247,8 +508,8 @@ fn transfer(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
             .collect();
         let svg = figures::transfer(
             channel,
-            &format!("{name}: {}", law.kind()),
-            (law.kind().name(), &sampled(law)),
+            &format!("{name}: {title}"),
+            (&title, &sampled(law)),
             &candidates,
             &measured,
         )?;
@@ -257,18 +518,17 @@ fn transfer(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
             .iter()
             .map(|(n, v)| parameter(n, *v))
             .collect();
-        figure(
-            out,
+        panels.push(figure(
             &format!("fig-transfer-{name}"),
             &svg,
             &format!(
-                "{name}: the chosen law ({}; {}), the other candidates dashed, and the {} single-channel readings at the centre.",
-                law.kind(),
+                "{name}: the chosen law ({title}; {}), the other candidates dashed, and the {} single-channel readings at the centre.",
                 params.join(", "),
                 measured.len()
             ),
-        );
+        ));
     }
+    let mut extra = Vec::new();
     if let Some(set) = input.readings {
         let greys = measured_greys(model, set);
         let white = model.white().y - model.black.y;
@@ -279,31 +539,33 @@ fn transfer(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
             })
             .collect();
         let svg = figures::greys(&curve, &greys)?;
-        figure(
-            out,
+        extra.push(figure(
             "fig-greys",
             &svg,
             &format!(
                 "{} greys against the whole model (matrix, laws and any terms kept): where the greys leave the line, additivity fails.",
                 greys.len()
             ),
-        );
+        ));
         let svg = figures::residuals(&residuals)?;
-        figure(
-            out,
+        extra.push(figure(
             "fig-residuals",
             &svg,
             "Each single-channel reading's share of full drive less the chosen law's.",
-        );
+        ));
     }
-    out.push_str("</section>\n");
-    Ok(())
+    Ok(html! {
+        section #transfer {
+            h2 { "Transfer curves" }
+            @if let Some(why) = &input.readings_note { (note(why)) }
+            @for p in &panels { (p) }
+            @for p in &extra { (p) }
+        }
+    })
 }
 
-fn laws(out: &mut String, profile: &Profile) {
+fn laws(profile: &Profile) -> Markup {
     let r = &profile.report;
-    out.push_str("<section id=\"laws\"><h2>Law selection</h2>\n");
-    let _ = writeln!(out, "<p>{}</p>", escape(&r.law_rule));
     let rows: Vec<Vec<String>> = r
         .laws
         .iter()
@@ -331,72 +593,52 @@ fn laws(out: &mut String, profile: &Profile) {
             ]
         })
         .collect();
-    table(
-        out,
-        &[
-            "law",
-            "CV mean ΔE00",
-            "p95",
-            "max",
-            "greys mean",
-            "parameters",
-        ],
-        &rows,
-    );
-    if !r.terms.is_empty() {
-        let _ = writeln!(out, "<p>{}</p>", escape(&r.terms_rule));
-        let rows: Vec<Vec<String>> = r
-            .terms
-            .iter()
-            .map(|t| {
-                let [mean, p95, max] = stats_cells(t.cross_validation.as_ref());
-                vec![
-                    format!("{}{}", t.terms.name(), if t.kept { " (kept)" } else { "" }),
-                    mean,
-                    p95,
-                    max,
-                ]
-            })
-            .collect();
-        table(out, &["terms", "CV mean ΔE00", "p95", "max"], &rows);
+    let terms: Vec<Vec<String>> = r
+        .terms
+        .iter()
+        .map(|t| {
+            let [mean, p95, max] = stats_cells(t.cross_validation.as_ref());
+            vec![
+                format!("{}{}", t.terms.name(), if t.kept { " (kept)" } else { "" }),
+                mean,
+                p95,
+                max,
+            ]
+        })
+        .collect();
+    let kept = |k: bool| if k { "kept" } else { "not kept" };
+    html! {
+        section #laws {
+            h2 { "Law selection" }
+            p { (r.law_rule) }
+            (table(&["law", "CV mean ΔE00", "p95", "max", "greys mean", "parameters"], &rows))
+            @if !terms.is_empty() {
+                p { (r.terms_rule) }
+                (table(&["terms", "CV mean ΔE00", "p95", "max"], &terms))
+            }
+            @if let Some(c) = &r.law_correction {
+                p {
+                    "Correction of the " (c.law) " law at the measured levels: CV mean "
+                    (stats_cells(c.law_cv.as_ref())[0]) " alone, " (stats_cells(c.corrected_cv.as_ref())[0])
+                    " corrected; " (kept(c.kept)) ". " (c.rule)
+                }
+            }
+            @if let Some(c) = &r.code_correction {
+                p {
+                    "Correction at the measured codes (" (c.codes) " codes, " (c.replicates)
+                    " measured both as a ramp reading and as a grey): replicates predicted with mean ΔE00 "
+                    (stats_cells(c.uncorrected.as_ref())[0]) " uncorrected, " (stats_cells(c.corrected.as_ref())[0])
+                    " corrected; " (kept(c.kept)) ". " (c.rule)
+                }
+            }
+        }
     }
-    if let Some(c) = &r.law_correction {
-        let [law, _, _] = stats_cells(c.law_cv.as_ref());
-        let [corrected, _, _] = stats_cells(c.corrected_cv.as_ref());
-        let _ = writeln!(
-            out,
-            "<p>Correction of the {} law at the measured levels: CV mean {law} alone, {corrected} corrected; {}. {}</p>",
-            c.law,
-            if c.kept { "kept" } else { "not kept" },
-            escape(&c.rule)
-        );
-    }
-    if let Some(c) = &r.code_correction {
-        let [uncorrected, _, _] = stats_cells(c.uncorrected.as_ref());
-        let [corrected, _, _] = stats_cells(c.corrected.as_ref());
-        let _ = writeln!(
-            out,
-            "<p>Correction at the measured codes ({} codes, {} measured both as a ramp reading and as a grey): replicates predicted with mean ΔE00 {uncorrected} uncorrected, {corrected} corrected; {}. {}</p>",
-            c.codes,
-            c.replicates,
-            if c.kept { "kept" } else { "not kept" },
-            escape(&c.rule)
-        );
-    }
-    out.push_str("</section>\n");
 }
 
-fn primaries(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
+fn primaries(input: &ReportInput) -> Result<Markup, ReportError> {
     let profile = input.profile;
-    out.push_str("<section id=\"primaries\"><h2>Primaries and white</h2>\n");
     let data = chromaticities(&profile.model, input.readings);
     let svg = figures::chromaticity(&data)?;
-    figure(
-        out,
-        "fig-chromaticity",
-        &svg,
-        "The display's primaries (circles) and white (cross), each channel's chromaticity at every measured level (dots; a spread shows chromaticity that moves with drive), with sRGB, DCI-P3 and BT.2020 for scale.",
-    );
     let model = &profile.model;
     let mut rows: Vec<Vec<String>> = profile
         .report
@@ -412,71 +654,85 @@ fn primaries(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
             ]
         })
         .collect();
-    let white = xyz_to_xyy(&model.white(), [0.3127, 0.3290]);
-    rows.push(vec![
-        "white".into(),
-        format!("{:.4}", white.x),
-        format!("{:.4}", white.y),
-        format!("{:.3}", white.big_y),
-        "".into(),
-    ]);
-    let black = xyz_to_xyy(&model.black, [0.3127, 0.3290]);
-    rows.push(vec![
-        "black".into(),
-        format!("{:.4}", black.x),
-        format!("{:.4}", black.y),
-        format!("{:.4}", black.big_y),
-        "".into(),
-    ]);
-    table(out, &["", "x", "y", "Y", "levels"], &rows);
-    let _ = writeln!(
-        out,
-        "<p>Condition number of the primary matrix: {:.2}.</p>",
-        profile.report.condition_number
-    );
-    if let (Some(edid), Some(comparison)) = (&profile.provenance.edid, profile.edid_comparison()) {
-        let _ = writeln!(
-            out,
-            "<h3 id=\"edid\">What the monitor's EDID states</h3>\n<p>{}</p>",
-            escape(&edid.describe())
-        );
-        let rows = comparison.table_rows();
-        table(out, &["", "EDID xy", "measured xy", "apart"], &rows);
-        if comparison.mismatch() {
-            note(
-                out,
-                &format!(
-                    "The EDID's chromaticities are up to {:.3} from the measured ones: is this the display you meant?",
-                    comparison.worst
-                ),
-            );
-        }
+    for (name, xyz, digits) in [("white", model.white(), 3), ("black", model.black, 4)] {
+        let xyy = xyz_to_xyy(&xyz, [0.3127, 0.3290]);
+        rows.push(vec![
+            name.into(),
+            format!("{:.4}", xyy.x),
+            format!("{:.4}", xyy.y),
+            format!("{:.digits$}", xyy.big_y),
+            "".into(),
+        ]);
     }
-    out.push_str("</section>\n");
-    Ok(())
+    let edid = profile
+        .provenance
+        .edid
+        .as_ref()
+        .zip(profile.edid_comparison());
+    Ok(html! {
+        section #primaries {
+            h2 { "Primaries and white" }
+            (figure("fig-chromaticity", &svg, "The display's primaries (circles) and white (cross), each channel's chromaticity at every measured level (dots; a spread shows chromaticity that moves with drive), with sRGB, Adobe RGB, Display P3 and Rec. 2020 for scale."))
+            (table(&["", "x", "y", "Y", "levels"], &rows))
+            p { "Condition number of the primary matrix: " (format!("{:.2}", profile.report.condition_number)) "." }
+            @if let Some((edid, comparison)) = edid {
+                h3 #edid { "What the monitor's EDID states" }
+                p { (edid.describe()) }
+                (table(&["", "EDID xy", "measured xy", "apart"], &comparison.table_rows()))
+                @if comparison.mismatch() {
+                    (note(&format!("The EDID's chromaticities are up to {:.3} from the measured ones: is this the display you meant?", comparison.worst)))
+                }
+            }
+        }
+    })
 }
 
-fn uniformity(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
+/// Coverage and relative volume of the reference spaces.
+fn gamut(verified: Option<&Verification>) -> Markup {
+    let Some(v) = verified.filter(|v| !v.gamut.is_empty()) else {
+        return html! {};
+    };
+    let percent = |f: f64| format!("{:.1} %", 100.0 * f);
+    html! {
+        section #gamut {
+            h2 { "Gamut" }
+            p {
+                "The model's colour solid in CIELAB (D50, each gamut relative to its own white, as an ICC profile's relative colorimetric rendering places it): "
+                span #gamut-volume { (v.volume.map_or("–".into(), |x| format!("{x:.0}"))) } " cubic ΔE*ab. "
+                "Coverage is the share of the reference's volume the display reaches too; the u′v′ figures are the triangles of the chromaticity diagram above."
+            }
+            table {
+                tr { th { "reference" } th { "coverage (CIELAB)" } th { "relative volume" } th { "coverage (u′v′ area)" } th { "relative area (u′v′)" } }
+                @for g in &v.gamut {
+                    tr data-reference=(g.reference) {
+                        td { (g.reference) }
+                        td.coverage { (percent(g.coverage)) }
+                        td { (percent(g.relative_volume)) }
+                        td.uv-coverage { (percent(g.uv_coverage)) }
+                        td { (percent(g.uv_relative_area)) }
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn uniformity(input: &ReportInput, verified: Option<&Verification>) -> Result<Markup, ReportError> {
     let profile = input.profile;
     let spatial = &profile.report.spatial;
-    out.push_str("<section id=\"uniformity\"><h2>Uniformity</h2>\n");
     let (surface, points) = uniformity_data(&profile.model, input.readings);
-    if points.is_empty() && profile.model.spatial == SpatialMap::Uniform {
-        note(
-            out,
-            &format!(
-                "No uniformity grid was measured{}: the model is uniform over the screen.",
-                if spatial.positions > 0 {
-                    " that the page can show"
-                } else {
-                    ""
-                }
-            ),
-        );
+    let map = if points.is_empty() && profile.model.spatial == SpatialMap::Uniform {
+        note(&format!(
+            "No uniformity grid was measured{}: the model is uniform over the screen.",
+            if spatial.positions > 0 {
+                " that the page can show"
+            } else {
+                ""
+            }
+        ))
     } else {
         let svg = figures::uniformity(&surface, &points)?;
         figure(
-            out,
             "fig-uniformity",
             &svg,
             &format!(
@@ -484,79 +740,107 @@ fn uniformity(out: &mut String, input: &ReportInput) -> Result<(), ReportError> 
                 profile.model.spatial.describe(),
                 points.len()
             ),
-        );
-    }
-    if !spatial.candidates.is_empty() {
-        let rows: Vec<Vec<String>> = spatial
-            .candidates
-            .iter()
-            .map(|c| {
-                let [mean, p95, max] = stats_cells(c.cross_validation.as_ref());
-                vec![
-                    format!("{}{}", c.name, if c.chosen { " (chosen)" } else { "" }),
-                    mean,
-                    p95,
-                    max,
-                    c.note.clone().unwrap_or_default(),
-                ]
-            })
-            .collect();
-        table(out, &["map", "CV mean ΔE00", "p95", "max", "note"], &rows);
-    }
-    out.push_str("</section>\n");
-    Ok(())
+        )
+    };
+    let cells = verified
+        .map(|v| v.uniformity.as_slice())
+        .unwrap_or_default();
+    let drive = |d: [f64; 3]| match d {
+        [1.0, 1.0, 1.0] => "white".to_string(),
+        [1.0, 0.0, 0.0] => "red".to_string(),
+        [0.0, 1.0, 0.0] => "green".to_string(),
+        [0.0, 0.0, 1.0] => "blue".to_string(),
+        d => format!("{:.2}, {:.2}, {:.2}", d[0], d[1], d[2]),
+    };
+    let rows: Vec<Vec<String>> = cells
+        .iter()
+        .map(|c| {
+            vec![
+                format!("{:.3}, {:.3}", c.position.x, c.position.y),
+                drive(c.drive),
+                format!("{:.1} %", c.luminance_percent),
+                format!("{:.4}", c.delta_uv),
+                format!("{:.2}", c.delta_e00),
+            ]
+        })
+        .collect();
+    let worst = |f: fn(&crate::verification::UniformityCell) -> f64| {
+        cells.iter().map(f).fold(0.0_f64, f64::max)
+    };
+    let candidates: Vec<Vec<String>> = spatial
+        .candidates
+        .iter()
+        .map(|c| {
+            let [mean, p95, max] = stats_cells(c.cross_validation.as_ref());
+            vec![
+                format!("{}{}", c.name, if c.chosen { " (chosen)" } else { "" }),
+                mean,
+                p95,
+                max,
+                c.note.clone().unwrap_or_default(),
+            ]
+        })
+        .collect();
+    Ok(html! {
+        section #uniformity {
+            h2 { "Uniformity" }
+            (map)
+            @if !rows.is_empty() {
+                p {
+                    "Each measured position against the centre at the same drive, as ISO 12646 and DisplayCAL's uniformity report compare them: luminance, Δu′v′, and ΔE00 in CIELAB relative to the centre's reading. "
+                    "Worst: Δu′v′ " span #uniformity-worst-uv { (format!("{:.4}", worst(|c| c.delta_uv))) }
+                    ", ΔE00 " (format!("{:.2}", worst(|c| c.delta_e00))) "."
+                }
+                (table(&["position x, y", "drive", "luminance of the centre's", "Δu′v′", "ΔE00"], &rows))
+            }
+            @if !candidates.is_empty() {
+                (table(&["map", "CV mean ΔE00", "p95", "max", "note"], &candidates))
+            }
+        }
+    })
 }
 
-fn held_out(out: &mut String, profile: &Profile) -> Result<(), ReportError> {
+fn held_out(profile: &Profile) -> Result<Markup, ReportError> {
     let r = &profile.report;
-    out.push_str("<section id=\"held-out\"><h2>Error on patches held out of the fit</h2>\n");
     let Some(stats) = &r.held_out else {
-        note(
-            out,
-            "No patch was held out of the fit, so there is no honest error to show.",
-        );
-        out.push_str("</section>\n");
-        return Ok(());
+        return Ok(html! {
+            section #held-out {
+                h2 { "Error on patches held out of the fit" }
+                (note("No patch was held out of the fit, so there is no honest error to show."))
+            }
+        });
     };
     let values: Vec<f64> = r.held_out_patches.iter().map(|p| p.delta_e00).collect();
     let svg = figures::histogram(&values, "Held-out ΔE00")?;
-    figure(
-        out,
-        "fig-held-out",
-        &svg,
-        &format!(
-            "{} patches held out of every fit: mean ΔE00 {:.3}, p95 {:.3}, max {:.3}.",
-            stats.n, stats.mean, stats.p95, stats.max
-        ),
-    );
     let white = profile.model.white();
     let mut worst: Vec<_> = r.held_out_patches.iter().collect();
     worst.sort_by(|a, b| b.delta_e00.total_cmp(&a.delta_e00));
-    out.push_str("<h3>Worst patches</h3>\n<table><tr><th>patch</th><th>drive R, G, B</th><th>measured</th><th>predicted</th><th>ΔE00</th></tr>\n");
-    for p in worst.iter().take(10) {
-        let hex = |xyz| {
-            let [r, g, b] = swatch(xyz, &white);
-            format!("#{r:02x}{g:02x}{b:02x}")
-        };
-        let _ = writeln!(
-            out,
-            "<tr><td>{}</td><td>{:.3}, {:.3}, {:.3}</td><td><span class=\"swatch\" style=\"background:{}\"></span></td><td><span class=\"swatch\" style=\"background:{}\"></span></td><td>{:.3}</td></tr>",
-            p.index,
-            p.drive[0],
-            p.drive[1],
-            p.drive[2],
-            hex(&p.measured),
-            hex(&p.predicted),
-            p.delta_e00
-        );
-    }
-    out.push_str("</table>\n</section>\n");
-    Ok(())
+    Ok(html! {
+        section #held-out {
+            h2 { "Error on patches held out of the fit" }
+            (figure("fig-held-out", &svg, &format!(
+                "{} patches held out of every fit: mean ΔE00 {:.3}, p95 {:.3}, max {:.3}.",
+                stats.n, stats.mean, stats.p95, stats.max
+            )))
+            h3 { "Worst patches" }
+            table {
+                tr { th { "patch" } th { "drive R, G, B" } th { "measured" } th { "predicted" } th { "ΔE00" } }
+                @for p in worst.iter().take(10) {
+                    tr {
+                        td { (p.index) }
+                        td { (format!("{:.3}, {:.3}, {:.3}", p.drive[0], p.drive[1], p.drive[2])) }
+                        td { (swatch_span(&p.measured, &white)) }
+                        td { (swatch_span(&p.predicted, &white)) }
+                        td { (format!("{:.3}", p.delta_e00)) }
+                    }
+                }
+            }
+        }
+    })
 }
 
-fn checks(out: &mut String, profile: &Profile) {
+fn checks(profile: &Profile) -> Markup {
     let c = &profile.report.checks;
-    out.push_str("<section id=\"checks\"><h2>Assumption checks</h2>\n");
     let constancy = c
         .primary_constancy
         .iter()
@@ -617,39 +901,32 @@ fn checks(out: &mut String, profile: &Profile) {
         ),
         ("monotonicity", &c.monotonicity_verdict, monotonicity),
     ];
-    out.push_str("<table><tr><th>assumption</th><th>verdict</th><th>figures</th></tr>\n");
-    for (assumption, verdict, figures) in rows {
-        let class = if *verdict == Verdict::Fails {
-            " class=\"fails\""
-        } else {
-            ""
-        };
-        let _ = writeln!(
-            out,
-            "<tr><td>{}</td><td{class}>{}</td><td style=\"text-align:left\">{}</td></tr>",
-            escape(assumption),
-            escape(&verdict.to_string()),
-            escape(&figures)
-        );
-    }
-    out.push_str("</table>\n");
     let noise = &profile.report.noise;
-    let _ = writeln!(
-        out,
-        "<p>Noise: {:.3} % of the reading ({}), floor {:.4} ({}).</p>",
-        noise.relative * 100.0,
-        escape(&noise.relative_from),
-        noise.floor,
-        escape(&noise.floor_from)
-    );
-    out.push_str("</section>\n");
+    html! {
+        section #checks {
+            h2 { "Assumption checks" }
+            table {
+                tr { th { "assumption" } th { "verdict" } th { "figures" } }
+                @for (assumption, verdict, figures) in &rows {
+                    tr {
+                        td { (assumption) }
+                        td.fails[**verdict == Verdict::Fails] { (verdict.to_string()) }
+                        td style="text-align:left" { (figures) }
+                    }
+                }
+            }
+            p {
+                "Noise: " (format!("{:.3}", noise.relative * 100.0)) " % of the reading (" (noise.relative_from)
+                "), floor " (format!("{:.4}", noise.floor)) " (" (noise.floor_from) ")."
+            }
+        }
+    }
 }
 
-fn calibration(out: &mut String, profile: &Profile) -> Result<(), ReportError> {
+fn calibration(profile: &Profile) -> Result<Markup, ReportError> {
     let Some(stored) = &profile.calibration else {
-        return Ok(());
+        return Ok(html! {});
     };
-    out.push_str("<section id=\"calibration\"><h2>Calibration curves</h2>\n");
     let curves = stored.curves.curves.clone().map(|c| {
         let n = c.len().max(2) - 1;
         c.iter()
@@ -658,18 +935,6 @@ fn calibration(out: &mut String, profile: &Profile) -> Result<(), ReportError> {
             .collect::<Curve>()
     });
     let svg = figures::calibration(&curves)?;
-    figure(
-        out,
-        "fig-calibration",
-        &svg,
-        &format!(
-            "Curves to {} after {} measured passes: predicted white ΔE00 {:.3}, measured tone error {:.2} %.",
-            stored.curves.describe(),
-            stored.passes,
-            stored.curves.predicted_white_de00,
-            stored.measured_tone_error * 100.0
-        ),
-    );
     let rows: Vec<Vec<String>> = stored
         .levels
         .iter()
@@ -685,37 +950,37 @@ fn calibration(out: &mut String, profile: &Profile) -> Result<(), ReportError> {
             ]
         })
         .collect();
-    table(out, &["input", "target Y", "measured Y", "error"], &rows);
-    out.push_str("</section>\n");
-    Ok(())
+    Ok(html! {
+        section #calibration {
+            h2 { "Calibration curves" }
+            (figure("fig-calibration", &svg, &format!(
+                "Curves to {} after {} measured passes.",
+                stored.curves.describe(),
+                stored.passes,
+            )))
+            p {
+                "Measured through the curves: white ΔE00 "
+                span #calibration-white-de00 { (format!("{:.2}", stored.measured_white_de00)) }
+                " from the target white (the model predicted " (format!("{:.3}", stored.curves.predicted_white_de00))
+                "), tone error up to " (format!("{:.2}", stored.measured_tone_error * 100.0)) " %."
+            }
+            (table(&["input", "target Y", "measured Y", "error"], &rows))
+        }
+    })
 }
 
-fn history(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
+fn history(input: &ReportInput) -> Result<Markup, ReportError> {
     let Some(history) = &input.history else {
-        return Ok(());
+        return Ok(html! {});
     };
-    out.push_str("<section id=\"history\"><h2>History</h2>\n");
     if history.profiles.is_empty() && history.verifications.is_empty() {
-        note(out, "The daemon has no history yet.");
-        out.push_str("</section>\n");
-        return Ok(());
+        return Ok(html! {
+            section #history { h2 { "History" } (note("The daemon has no history yet.")) }
+        });
     }
-    let (errors, white, unit) = history.series();
-    let since = format!("{unit} since the first");
-    let svg = figures::over_time("ΔE00 over time", "mean ΔE00", &since, &errors)?;
-    figure(
-        out,
-        "fig-history-error",
-        &svg,
-        "Each profile's held-out mean ΔE00 when it was made, and each verification's mean ΔE00 against the profile current then.",
-    );
-    let svg = figures::over_time("White luminance over time", "Y", &since, &white)?;
-    figure(
-        out,
-        "fig-history-white",
-        &svg,
-        "The white luminance of each profile in the history (the profile's units).",
-    );
+    let (errors, white) = history.series();
+    let error_svg = figures::over_time("ΔE00 over time", "mean ΔE00", &errors)?;
+    let white_svg = figures::over_time("White luminance over time", "Y", &white)?;
     let rows: Vec<Vec<String>> = history
         .profiles
         .iter()
@@ -728,7 +993,25 @@ fn history(out: &mut String, input: &ReportInput) -> Result<(), ReportError> {
             ]
         })
         .collect();
-    table(out, &["profile", "how", "held-out mean", "white Y"], &rows);
-    out.push_str("</section>\n");
-    Ok(())
+    Ok(html! {
+        section #history {
+            h2 { "History" }
+            (figure("fig-history-error", &error_svg, "Each profile's held-out mean ΔE00 when it was made, and each verification's mean ΔE00 against the profile current then."))
+            (figure("fig-history-white", &white_svg, "The white luminance of each profile in the history (the profile's units)."))
+            (table(&["profile", "how", "held-out mean", "white Y"], &rows))
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_value_that_rounds_to_zero_has_no_sign() {
+        assert_eq!(signed(-0.001, 2), "0.00");
+        assert_eq!(signed(0.004, 2), "0.00");
+        assert_eq!(signed(-0.006, 2), "-0.01");
+        assert_eq!(signed(1.5, 1), "+1.5");
+    }
 }

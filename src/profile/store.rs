@@ -488,6 +488,7 @@ mod tests {
                 source: "test".into(),
                 display: None,
                 instrument: None,
+                measured_at: None,
                 config_digest: None,
                 program: "test".into(),
                 settings_at_resume: None,
