@@ -8,14 +8,15 @@
 #                                   SIGKILLs (CHROMACAL_SOAK_SEED=S picks the kill
 #                                   times), and the parser fuzz with 20 × N cases
 #                                   per parser
-#   scripts/test.sh ARGS...         passed to `cargo test --locked`
+#   scripts/test.sh ARGS...         passed to `cargo test --locked --features
+#                                   peer-engines`
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 if [ "${1:-}" = "--soak" ]; then
     kills="${2:?--soak needs a number of kills}"
-    CHROMACAL_SOAK_KILLS="$kills" cargo test --locked --test daemon_kill -- --nocapture
-    CHROMACAL_FUZZ_CASES="$((kills * 20))" exec cargo test --locked --test parser_fuzz -- --nocapture
+    CHROMACAL_SOAK_KILLS="$kills" cargo test --locked --features peer-engines --test daemon_kill -- --nocapture
+    CHROMACAL_FUZZ_CASES="$((kills * 20))" exec cargo test --locked --features peer-engines --test parser_fuzz -- --nocapture
 fi
 
 updated=""
@@ -72,4 +73,5 @@ cargo deb --version >/dev/null 2>&1 || {
         echo "scripts/test.sh: cargo-deb could not be installed; tests/package.rs will fail" >&2
 }
 
-cargo test --locked "$@"
+# The suite is built with the peer engines, for `bench render`'s own test.
+cargo test --locked --features peer-engines "$@"

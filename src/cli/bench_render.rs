@@ -12,17 +12,16 @@
 
 use super::shared::{Failure, outln};
 use std::cell::RefCell;
+#[cfg(feature = "peer-engines")]
 use std::rc::Rc;
 use std::time::Instant;
 
 use rayon::prelude::*;
 
 use chromacal::color::Xyz;
-use chromacal::color::adaptation::{AdaptationTransform, adaptation_matrix};
 use chromacal::crf::gamut::GamutMapping;
 use chromacal::crf::tone::ToneOperator;
 use chromacal::crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
-use chromacal::export::{ExportOptions, Format, export};
 use chromacal::fit::stats::ErrorStats;
 use chromacal::fit::validate::delta_e00_xyz;
 use chromacal::model::spatial::SpatialMap;
@@ -35,6 +34,8 @@ const SIDE: usize = 2048;
 /// Pixels whose error is computed (a spread sample; the time covers them all).
 const ERROR_SAMPLE: usize = 20_000;
 
+/// The ICC profile connection space's white (ISO 15076-1 §7.2.16).
+#[cfg(feature = "peer-engines")]
 const D50: [f64; 3] = [0.9642, 1.0, 0.8249];
 
 /// Calibrate the simulated default into a temporary state directory and return its
@@ -245,32 +246,7 @@ pub fn render_table(quick: bool) -> Result<(), Failure> {
         error: Box::new(|| judged(&buffers[4], &asked_screen, true)),
     });
 
-    // The same colours as the ICC profile's connection space sees them: relative to
-    // the display's white, adapted to D50 (Bradford), as the v4 profile's chad says.
-    let exported = export(
-        &Profile {
-            model: centre_only.clone(),
-            ..profile.clone()
-        },
-        Format::Icc4,
-        &ExportOptions {
-            target: None,
-            measurements: None,
-        },
-    )
-    .map_err(|e| e.to_string())?;
-    let white = centre_only.white();
-    let chad = adaptation_matrix(
-        AdaptationTransform::Bradford,
-        &(white / white.y),
-        &Xyz::from(D50),
-    );
-    let pcs: Vec<[f64; 3]> = asked_centre
-        .iter()
-        .map(|x| (chad * (x / white.y)).into())
-        .collect();
-    tools.push(moxcms_tool(&exported.bytes, &pcs, &full, &asked_centre)?);
-    tools.push(lcms_tool(&exported.bytes, &pcs, &full, &asked_centre)?);
+    tools.extend(peer_tools(&profile, &centre_only, &full, &asked_centre)?);
 
     let rounds = if quick { ROUNDS.min(3) } else { ROUNDS };
     let (seconds, ratios) = interleaved_rounds(&mut tools, rounds);
@@ -395,6 +371,72 @@ fn code_choice_table(model: &MonitorModel, rounds: usize) -> Result<(), Failure>
     Ok(())
 }
 
+/// Why `bench render` has no rows for moxcms and Little CMS in a build without the
+/// `peer-engines` feature, and how to get them.
+#[cfg(not(feature = "peer-engines"))]
+const PEERS_LEFT_OUT: &str = "bench render: moxcms and Little CMS are left out of this build (cargo feature `peer-engines`, off by default: lcms2 compiles Little CMS's C); for their rows run `cargo run --release --features peer-engines -- bench --only render`";
+
+/// The colour management systems beside chromacal: none in a default build.
+#[cfg(not(feature = "peer-engines"))]
+fn peer_tools<'a>(
+    _profile: &Profile,
+    _centre_only: &MonitorModel,
+    _model: &'a MonitorModel,
+    _asked: &'a [Xyz],
+) -> Result<Vec<Tool<'a>>, String> {
+    eprintln!("chromacal: {PEERS_LEFT_OUT}");
+    Ok(Vec::new())
+}
+
+/// moxcms and Little CMS, each transforming with the ICC v4 profile chromacal exports
+/// of `centre_only`, judged against `full`.
+#[cfg(feature = "peer-engines")]
+fn peer_tools<'a>(
+    profile: &Profile,
+    centre_only: &MonitorModel,
+    full: &'a MonitorModel,
+    asked_centre: &'a [Xyz],
+) -> Result<Vec<Tool<'a>>, String> {
+    use chromacal::color::adaptation::{AdaptationTransform, adaptation_matrix};
+    use chromacal::export::{ExportOptions, Format, export};
+    // The same colours as the ICC profile's connection space sees them: relative to
+    // the display's white, adapted to D50 (Bradford), as the v4 profile's chad says.
+    let exported = export(
+        &Profile {
+            model: centre_only.clone(),
+            ..profile.clone()
+        },
+        Format::Icc4,
+        &ExportOptions {
+            target: None,
+            measurements: None,
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    // The white the ICC profile is relative to: the measured one, where the fit kept
+    // it (`export`'s rule); relative to the model's own white instead, every colour
+    // would be off by the white's difference (0.06 ΔE00 on the simulated default).
+    let white = profile
+        .report
+        .white_anchor
+        .as_ref()
+        .map_or(centre_only.white(), |w| w.measured);
+    let chad = adaptation_matrix(
+        AdaptationTransform::Bradford,
+        &(white / white.y),
+        &Xyz::from(D50),
+    );
+    let pcs: Vec<[f64; 3]> = asked_centre
+        .iter()
+        .map(|x| (chad * (x / white.y)).into())
+        .collect();
+    Ok(vec![
+        moxcms_tool(&exported.bytes, &pcs, full, asked_centre)?,
+        lcms_tool(&exported.bytes, &pcs, full, asked_centre)?,
+    ])
+}
+
+#[cfg(feature = "peer-engines")]
 /// moxcms: a source profile whose "RGB" is PCS XYZ itself (identity colorants,
 /// linear curves), to the display's profile, 32-bit float.
 fn moxcms_tool<'a>(
@@ -444,6 +486,7 @@ fn moxcms_tool<'a>(
     })
 }
 
+#[cfg(feature = "peer-engines")]
 /// Little CMS: its built-in XYZ profile (doubles, Y = 1 at white) to the display's
 /// profile, relative colorimetric, doubles out.
 fn lcms_tool<'a>(
