@@ -9,7 +9,7 @@ mod cli;
 
 use cli::{
     bench, calibrate, check, completions, config, correction, daemon, displays, emulate, export,
-    fit, instruments, lut, measure, profile, render, report, spectrum,
+    fit, instruments, lut, lut3d, measure, profile, render, report, spectrum,
 };
 
 #[derive(Parser)]
@@ -47,6 +47,7 @@ enum Command {
     Instruments(instruments::InstrumentsArgs),
     Displays(displays::DisplaysArgs),
     Lut(lut::LutArgs),
+    Lut3d(lut3d::Lut3dArgs),
     Export(export::ExportArgs),
     Profile(profile::ProfileArgs),
     Daemon(daemon::DaemonArgs),
@@ -81,6 +82,7 @@ fn main() -> ExitCode {
         Command::Instruments(args) => instruments::run(args),
         Command::Displays(args) => displays::run(args),
         Command::Lut(args) => lut::run(args),
+        Command::Lut3d(args) => lut3d::run(args),
         Command::Export(args) => export::run(args),
         Command::Profile(args) => profile::run(args),
         Command::Daemon(args) => daemon::run(args),

@@ -20,6 +20,7 @@ pub mod export;
 pub mod fit;
 pub mod instruments;
 pub mod lut;
+pub mod lut3d;
 pub mod measure;
 pub mod profile;
 pub mod render;

@@ -144,12 +144,27 @@ enum ToneArg {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
-enum GamutArg {
+pub(super) enum GamutArg {
     Clip,
     GreyLab,
     GreyLuv,
     Perpendicular,
     Scb,
+}
+
+impl GamutArg {
+    /// The mapping named, Stone–Cowan–Beatty leaving `scb_outside` of the colours out.
+    pub(super) fn mapping(self, scb_outside: f64) -> GamutMapping {
+        match self {
+            GamutArg::Clip => GamutMapping::Clip,
+            GamutArg::GreyLab => GamutMapping::GreyAxis(UniformSpace::Lab),
+            GamutArg::GreyLuv => GamutMapping::GreyAxis(UniformSpace::Luv),
+            GamutArg::Perpendicular => GamutMapping::Perpendicular,
+            GamutArg::Scb => GamutMapping::StoneCowanBeatty {
+                outside: scb_outside,
+            },
+        }
+    }
 }
 
 /// A scene as read: its pixels, and its image size when it is an image.
@@ -282,15 +297,7 @@ fn settings_of(args: &RenderArgs) -> Result<RenderSettings, Failure> {
             args.scb_outside
         )));
     }
-    let gamut = match args.gamut {
-        GamutArg::Clip => GamutMapping::Clip,
-        GamutArg::GreyLab => GamutMapping::GreyAxis(UniformSpace::Lab),
-        GamutArg::GreyLuv => GamutMapping::GreyAxis(UniformSpace::Luv),
-        GamutArg::Perpendicular => GamutMapping::Perpendicular,
-        GamutArg::Scb => GamutMapping::StoneCowanBeatty {
-            outside: args.scb_outside,
-        },
-    };
+    let gamut = args.gamut.mapping(args.scb_outside);
     Ok(RenderSettings {
         adaptation: args.adapt.then_some(AdaptationTransform::Bradford),
         tone,

@@ -20,6 +20,7 @@
 pub mod explain;
 pub mod gamut;
 pub mod inverse_table;
+pub mod lut3d;
 pub mod scene;
 pub mod spectral;
 pub mod spectral_image;

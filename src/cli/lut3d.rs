@@ -1,0 +1,101 @@
+//! `chromacal lut3d`: a 3D LUT from a source encoding to this display
+//! (`chromacal::crf::lut3d`), as a `.cube` or a `.3dl` file.
+
+use std::path::PathBuf;
+
+use chromacal::crf::lut3d::{LutOptions, SourceSpace, build_lut};
+use chromacal::profile::Profile;
+
+use super::render::GamutArg;
+use super::shared::{Failure, is_stdout, write_stdout};
+
+/// Write a 3D LUT that shows a source encoding (sRGB, BT.709/BT.1886, Display P3,
+/// Rec. 2020) on this display, for mpv, madVR, Resolve or ffmpeg's lut3d filter.
+#[derive(clap::Args)]
+pub struct Lut3dArgs {
+    /// The display's profile (TOML).
+    profile: PathBuf,
+    /// The encoding of the LUT's input: srgb, bt709 (gamma 2.4), bt1886 (BT.709
+    /// through BT.1886 with this display's black), p3 (Display P3), rec2020 (through
+    /// BT.1886).
+    #[arg(long)]
+    source: SourceSpace,
+    /// Points along each axis.
+    #[arg(long, default_value_t = 33)]
+    size: usize,
+    /// Gamut mapping of the source colours the display cannot show.
+    #[arg(long, value_enum, ignore_case = true, default_value = "clip")]
+    gamut: GamutArg,
+    /// Keep the source's D65 white rather than carry it to the display's white.
+    #[arg(long)]
+    absolute: bool,
+    /// The LUT will run while the profile's calibration curves are in the video LUT:
+    /// its output is taken back through them.
+    #[arg(long)]
+    through_calibration: bool,
+    /// Where to write it: a `.cube` (Adobe Cube 1.0) or a `.3dl` (Lustre, 12-bit)
+    /// file, by its extension; `-` writes a `.cube` to standard output.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
+    let profile = Profile::read(&args.profile)?;
+    let three_dl = args
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("3dl"));
+    if !three_dl
+        && !is_stdout(&args.output)
+        && !args
+            .output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("cube"))
+    {
+        return Err(Failure::from(format!(
+            "{}: name the LUT .cube or .3dl (or give - for a .cube on standard output)",
+            args.output.display()
+        )));
+    }
+    let lut = build_lut(
+        &profile.model,
+        profile.calibration.as_ref().map(|c| &c.curves),
+        &LutOptions {
+            source: args.source,
+            size: args.size,
+            gamut: args.gamut.mapping(0.01),
+            absolute: args.absolute,
+            through_calibration: args.through_calibration,
+        },
+    )
+    .map_err(|e| Failure::from(format!("{}: {e}", args.profile.display())))?;
+    let text = if three_dl {
+        lut.to_3dl()
+    } else {
+        lut.to_cube(&format!("{} to {}", args.source.name(), profile.id))
+    };
+    if is_stdout(&args.output) {
+        write_stdout(text.as_bytes())?;
+    } else {
+        chromacal::durable::write_atomic(&args.output, text.as_bytes())
+            .map_err(|e| Failure::from(format!("cannot write {}: {e}", args.output.display())))?;
+    }
+    let moved = match &lut.mapping {
+        Some(s) => format!(
+            "; {} of {} grid points were outside the display's gamut, moved by ΔE00 {:.2} on average ({:.2} at most)",
+            lut.outside,
+            lut.table.len(),
+            s.mean,
+            s.max
+        ),
+        None => "; every grid point is inside the display's gamut".into(),
+    };
+    eprintln!(
+        "chromacal: {}³ LUT from {} to {} written to {}{moved}",
+        lut.size,
+        args.source.name(),
+        profile.id,
+        args.output.display()
+    );
+    Ok(())
+}

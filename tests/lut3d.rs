@@ -1,0 +1,277 @@
+//! `chromacal lut3d` read by an independent reader: ffmpeg's `lut3d` filter applies
+//! the `.cube` (and the `.3dl`) to a 16-bit image of 1,000 source colours, and what the
+//! display shows for its output codes (the profile's forward model) is compared with
+//! the colour each source code stands for, computed here from the standards
+//! (BT.1886's EOTF, the BT.709 matrix, Bradford to the display's white).
+
+mod common;
+
+use std::path::Path;
+
+use chromacal::color::Xyz;
+use chromacal::color::adaptation::{AdaptationTransform, adapt};
+use chromacal::crf::ColourReproduction;
+use chromacal::fit::validate::delta_e00_xyz;
+use chromacal::model::{MonitorModel, ScreenPosition};
+use chromacal::profile::Profile;
+use common::{chromacal, succeed};
+
+/// The simulated LCD, calibrated with the fixed plan: its profile.
+fn lcd_profile(dir: &Path) -> std::path::PathBuf {
+    let config = dir.join("config.toml");
+    std::fs::write(
+        &config,
+        format!("[monitor]\npreset = \"lcd\"\n{}", common::FIXED_PLAN),
+    )
+    .unwrap();
+    succeed(
+        chromacal()
+            .arg("calibrate")
+            .arg("--config")
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(dir.join("state")),
+    );
+    dir.join("state/current.toml")
+}
+
+/// 1,000 source code triples: a seeded spread over the cube, its corners included.
+fn source_codes() -> Vec<[u16; 3]> {
+    let mut state = 0x2545_f491_u64;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 33) % 65536) as u16
+    };
+    let mut codes: Vec<[u16; 3]> = (0..8)
+        .map(|k| [0, 1, 2].map(|c| if k >> c & 1 == 1 { 65535 } else { 0 }))
+        .collect();
+    while codes.len() < 1000 {
+        codes.push([next(), next(), next()]);
+    }
+    codes
+}
+
+fn write_png16(path: &Path, width: u32, pixels: &[[u16; 3]]) {
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut encoder = png::Encoder::new(file, width, pixels.len() as u32 / width);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Sixteen);
+    let mut writer = encoder.write_header().unwrap();
+    let bytes: Vec<u8> = pixels
+        .iter()
+        .flat_map(|p| p.iter().flat_map(|v| v.to_be_bytes()))
+        .collect();
+    writer.write_image_data(&bytes).unwrap();
+}
+
+fn read_png16(path: &Path) -> Vec<[u16; 3]> {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buffer).unwrap();
+    assert_eq!(
+        (info.color_type, info.bit_depth),
+        (png::ColorType::Rgb, png::BitDepth::Sixteen)
+    );
+    buffer[..info.buffer_size()]
+        .chunks(6)
+        .map(|p| [0, 1, 2].map(|c| u16::from_be_bytes([p[2 * c], p[2 * c + 1]])))
+        .collect()
+}
+
+/// ffmpeg's lut3d filter (tetrahedral) applied to `input`, 16 bits in and out.
+fn ffmpeg_lut3d(input: &Path, lut: &Path, output: &Path) -> Vec<[u16; 3]> {
+    common::need_tool("ffmpeg", "ffmpeg");
+    succeed(
+        std::process::Command::new("ffmpeg")
+            .args(["-y", "-loglevel", "error", "-i"])
+            .arg(input)
+            .arg("-vf")
+            .arg(format!("lut3d=file={}:interp=tetrahedral", lut.display()))
+            .args(["-pix_fmt", "rgb48be"])
+            .arg(output),
+    );
+    read_png16(output)
+}
+
+/// What BT.709 code `rgb` stands for on this display (ITU-R BT.1886 Annex 1 with the
+/// display's white and black; the BT.709 / sRGB matrix of IEC 61966-2-1 eq. 5's
+/// inverse; Bradford from D65 to the display's white), in the model's units.
+fn bt1886_target(rgb: [u16; 3], model: &MonitorModel) -> Xyz {
+    let white = model.white();
+    let (lw, lb) = (1.0_f64, model.black.y / white.y);
+    let a = (lw.powf(1.0 / 2.4) - lb.powf(1.0 / 2.4)).powf(2.4);
+    let b = lb.powf(1.0 / 2.4) / (lw.powf(1.0 / 2.4) - lb.powf(1.0 / 2.4));
+    let linear = rgb.map(|v| a * (f64::from(v) / 65535.0 + b).max(0.0).powf(2.4));
+    let m = nalgebra::Matrix3::new(
+        0.4124, 0.3576, 0.1805, //
+        0.2126, 0.7152, 0.0722, //
+        0.0193, 0.1192, 0.9505,
+    );
+    let xyz = m * Xyz::new(linear[0], linear[1], linear[2]);
+    let d65 = m * Xyz::new(1.0, 1.0, 1.0);
+    adapt(
+        &xyz,
+        AdaptationTransform::Bradford,
+        &d65,
+        &(white / white.y),
+    ) * white.y
+}
+
+/// ΔE00 of what the display shows for each output against each target, over the
+/// targets inside the display's gamut: (mean, max, how many inside).
+fn in_gamut_errors(
+    model: &MonitorModel,
+    codes: &[[u16; 3]],
+    out: &[[u16; 3]],
+) -> (f64, f64, usize) {
+    let crf = ColourReproduction::new(model).unwrap();
+    let white = model.white();
+    let errors: Vec<f64> = codes
+        .iter()
+        .zip(out)
+        .filter_map(|(c, o)| {
+            let target = bt1886_target(*c, model);
+            let drive = crf.drive_exact_for(&target, ScreenPosition::CENTRE);
+            // Inside: the exact drive within the cube (and not at its very edge,
+            // where the target is the boundary itself).
+            if !drive.iter().all(|d| (1e-3..=1.0 - 1e-3).contains(d)) {
+                return None;
+            }
+            let shown = model.forward(o.map(|v| f64::from(v) / 65535.0), ScreenPosition::CENTRE);
+            Some(delta_e00_xyz(&target, &shown, &white))
+        })
+        .collect();
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    (
+        mean,
+        errors.iter().copied().fold(0.0, f64::max),
+        errors.len(),
+    )
+}
+
+#[test]
+fn ffmpeg_applies_the_cube_and_the_display_shows_the_bt1886_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let profile_path = lcd_profile(dir.path());
+    let model = Profile::read(&profile_path).unwrap().model;
+    let codes = source_codes();
+    let image = dir.path().join("colours.png");
+    write_png16(&image, 40, &codes);
+
+    let mut results = Vec::new();
+    for size in [65, 33] {
+        let cube = dir.path().join(format!("lcd{size}.cube"));
+        let out = succeed(
+            chromacal()
+                .arg("lut3d")
+                .arg(&profile_path)
+                .args(["--source", "bt1886", "--size", &size.to_string(), "-o"])
+                .arg(&cube),
+        );
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            said.contains(&format!("{size}³ LUT from BT.709 through BT.1886")),
+            "{said}"
+        );
+        let text = std::fs::read_to_string(&cube).unwrap();
+        assert!(text.contains(&format!("LUT_3D_SIZE {size}\n")));
+        let shown = ffmpeg_lut3d(&image, &cube, &dir.path().join(format!("out{size}.png")));
+        assert_eq!(shown.len(), codes.len());
+        results.push((size, in_gamut_errors(&model, &codes, &shown)));
+    }
+    eprintln!("in-gamut ΔE00 (mean, max, colours): {results:?}");
+    let (_, (mean65, max65, inside)) = results[0];
+    assert!(
+        inside > 300,
+        "only {inside} of 1000 colours inside the gamut"
+    );
+    assert!(
+        max65 < 0.5 && mean65 < 0.1,
+        "65³: mean {mean65}, max {max65}"
+    );
+    // The coarser grid interpolates over wider cells: worse, and not by a little.
+    let (_, (mean33, _, _)) = results[1];
+    assert!(mean33 > mean65, "33³ {mean33} against 65³ {mean65}");
+}
+
+#[test]
+fn ffmpeg_reads_the_3dl_as_the_cube_of_the_same_grid() {
+    let dir = tempfile::tempdir().unwrap();
+    let profile_path = lcd_profile(dir.path());
+    let codes = source_codes();
+    let image = dir.path().join("colours.png");
+    write_png16(&image, 40, &codes);
+    // ffmpeg reads a .3dl as 17 points a side, 12 bits (over 4096).
+    let mut outputs = Vec::new();
+    for name in ["lcd.3dl", "lcd.cube"] {
+        let lut = dir.path().join(name);
+        succeed(
+            chromacal()
+                .arg("lut3d")
+                .arg(&profile_path)
+                .args(["--source", "srgb", "--size", "17", "-o"])
+                .arg(&lut),
+        );
+        outputs.push(ffmpeg_lut3d(
+            &image,
+            &lut,
+            &dir.path().join(format!("{name}.png")),
+        ));
+    }
+    for (a, b) in outputs[0].iter().zip(&outputs[1]) {
+        for c in 0..3 {
+            // 12-bit steps, and ffmpeg's 4096 where the format's top is 4095.
+            let apart = (i32::from(a[c]) - i32::from(b[c])).abs();
+            assert!(apart <= 48, "{a:?} against {b:?}");
+        }
+    }
+}
+
+#[test]
+fn a_lut_through_calibration_needs_curves_and_a_bad_name_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let profile_path = lcd_profile(dir.path());
+    let out = chromacal()
+        .arg("lut3d")
+        .arg(&profile_path)
+        .args(["--source", "p3", "--through-calibration", "-o"])
+        .arg(dir.path().join("x.cube"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("the profile has none"), "{said}");
+    for (args, expected) in [
+        (
+            vec!["--source", "srgb", "-o", "x.lut"],
+            "name the LUT .cube or .3dl",
+        ),
+        (
+            vec!["--source", "adobe", "-o", "x.cube"],
+            "no source space 'adobe'",
+        ),
+        (
+            vec!["--source", "srgb", "--gamut", "scb", "-o", "x.cube"],
+            "Stone–Cowan–Beatty",
+        ),
+        (
+            vec!["--source", "srgb", "--size", "1", "-o", "x.cube"],
+            "a LUT of 1 points",
+        ),
+    ] {
+        let out = chromacal()
+            .current_dir(dir.path())
+            .arg("lut3d")
+            .arg(&profile_path)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?}");
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert!(said.contains(expected), "{args:?}: {said}");
+        assert!(!dir.path().join("x.cube").exists() && !dir.path().join("x.lut").exists());
+    }
+}
