@@ -45,6 +45,8 @@ command -v curl >/dev/null || need_package curl
 # and PsychoPy's loader (json_tricks with numpy, in Debian's Python).
 command -v iccdump >/dev/null || need_package argyll
 command -v transicc >/dev/null || need_package liblcms2-utils
+# 3D LUTs are applied by ffmpeg's lut3d filter.
+command -v ffmpeg >/dev/null || need_package ffmpeg
 /usr/bin/python3 -c "import json_tricks, numpy" 2>/dev/null ||
     need_package "python3-json-tricks python3-numpy"
 # The patch window, the video LUT and the emulator that looks at the screen are
