@@ -425,6 +425,12 @@ fn uniformity_cells(set: &MeasurementSet) -> Vec<UniformityCell> {
             None => groups.push((m.position, m.drive, xyz, 1)),
         }
     }
+    // Row by row, top first, as the screen reads.
+    groups.sort_by(|a, b| {
+        (a.0.y, a.0.x)
+            .partial_cmp(&(b.0.y, b.0.x))
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
     groups
         .into_iter()
         .filter_map(|(position, drive, sum, n)| {

@@ -143,7 +143,9 @@ fn the_readme_command_table_names_real_commands_and_options() {
             let mut command: Vec<&str> = Vec::new();
             let mut text = None;
             for word in &words {
-                if !word.chars().all(|c| c.is_ascii_lowercase() || c == '-')
+                if !word
+                    .chars()
+                    .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-')
                     || word.starts_with('-')
                 {
                     break;
