@@ -275,7 +275,7 @@ async fn the_daemon_serves_the_report_with_its_history() {
     let none = get(&api, "/report").await;
     assert_eq!(none.status, 404, "{}", none.text());
     let mut events = subscribe(&api);
-    for kind in ["calibrate", "verify", "calibrate"] {
+    for kind in ["calibrate", "verify", "calibrate", "verify"] {
         let id = start_job(&api, kind).await;
         let (_, outcome) = events_of_job(&mut events, &id, Duration::from_secs(120)).await;
         assert_eq!(outcome.result, "ok", "{kind}: {outcome:?}");
@@ -306,11 +306,35 @@ async fn the_daemon_serves_the_report_with_its_history() {
     .unwrap()
     .0;
     // Two profiles in the white-luminance figure (plus the legend has no circle), and
-    // two profiles and a verification in the error figure.
+    // two profiles and two verifications in the error figure.
     let (_, _, white) = figure_shape(&mut browser, "fig-history-white").unwrap();
     assert_eq!(white, profiles);
     let (_, _, errors) = figure_shape(&mut browser, "fig-history-error").unwrap();
-    assert_eq!(errors, profiles + 1);
+    assert_eq!(errors, profiles + 2);
+    // The verification sections judge the newest verification of the current
+    // profile: its patches, with the ΔE00 the daemon recorded for them.
+    let said = browser.evaluate("document.querySelector('#verification').innerText");
+    assert!(
+        said.as_str().unwrap().contains("measured to verify it"),
+        "{said}"
+    );
+    let recorded = history["verifications"].as_array().unwrap().last().unwrap()["delta_e00"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| format!("{:.3}", v.as_f64().unwrap()))
+        .collect::<Vec<_>>();
+    let shown = browser.evaluate(
+        "[...document.querySelectorAll('#patch-table tr[data-patch] td.de')].map(c => c.innerText)",
+    );
+    let shown: Vec<String> = shown
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    assert!(!recorded.is_empty());
+    assert_eq!(shown, recorded);
     // The time axis is in dates (UTC), not seconds since the first profile: today's
     // month and day, and a time of day, on its ticks.
     let labels = browser.evaluate("document.querySelector('#fig-history-white svg').textContent");

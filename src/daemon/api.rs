@@ -795,13 +795,25 @@ async fn report(Dev(device): Dev) -> Response {
             Ok(set) => (Some(set), None),
             Err(why) => (None, Some(why)),
         };
+        // The verification sections judge the newest verification of this profile,
+        // measured after it was made, when its readings are still there.
+        let checked = device
+            .store()
+            .verifications()
+            .unwrap_or_default()
+            .into_iter()
+            .rev()
+            .filter(|v| v.profile_id == profile.id)
+            .find_map(|v| {
+                crate::measurement_file::read_measurements(std::path::Path::new(&v.journal?)).ok()
+            });
         report_html(&ReportInput {
             profile: &profile,
             readings: readings.as_ref(),
             readings_note,
             history: Some(HistoryView::from_store(device.store())),
             device: Some(device.name.clone()),
-            checked: None,
+            checked: checked.as_ref(),
             // Judged by the limits the device publishes by.
             criteria: Criteria::from_publish(&device.loaded.config.publish),
         })

@@ -600,6 +600,7 @@ async fn verify(
         delta_e00: evaluation.patches.iter().map(|p| p.delta_e00).collect(),
         threshold,
         escalated: past && config.schedule.escalate,
+        journal: Some(crate::journal::stored_path(journal.path())),
     };
     device
         .store

@@ -805,6 +805,7 @@ mod tests {
                     delta_e00: vec![0.5, 1.5],
                     threshold: 1.0,
                     escalated: false,
+                    journal: None,
                 },
             },
         );

@@ -702,6 +702,7 @@ mod tests {
             delta_e00: vec![2.0],
             threshold: 1.0,
             escalated: false,
+            journal: None,
         };
         assert!(update_state(
             &mut state,

@@ -111,6 +111,10 @@ pub struct VerificationRecord {
     pub threshold: f64,
     /// A recalibration was started because of it.
     pub escalated: bool,
+    /// The verification's readings (its run journal), for the report's verification
+    /// sections.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub journal: Option<String>,
 }
 
 fn now_rfc3339() -> String {
@@ -683,6 +687,7 @@ mod tests {
             delta_e00: vec![0.5, 1.5],
             threshold: 1.0,
             escalated: true,
+            journal: None,
         };
         store.append_verification(&record).unwrap();
         // A torn line from a crash is skipped.
