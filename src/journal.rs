@@ -278,7 +278,8 @@ pub fn to_measurement_set(
         units: header.units,
         instrument: Some(header.instrument.clone()),
         display: Some(header.display.clone()),
-        measured_at: None,
+        // The run's start: its readings were taken from then on.
+        measured_at: Some(format!("from {}", header.started)),
         measurements: entries,
     }
 }

@@ -17,7 +17,7 @@ use crate::color::temperature::{ColourTemperature, xyz_to_cct_duv};
 use crate::color::{UvPrime, Xyz, delta_e_2000, xyz_to_lab};
 use crate::config::PublishConfig;
 use crate::fit::stats::ErrorStats;
-use crate::fit::validate::evaluate;
+use crate::fit::validate::{PatchError, evaluate};
 use crate::measurement::{MeasurementSet, Role};
 use crate::model::{Drive, MonitorModel, ScreenPosition};
 
@@ -63,10 +63,27 @@ impl Criteria {
 
     /// What the criteria ask, in a sentence for the page.
     pub fn describe(&self) -> String {
-        format!(
-            "{}: mean ΔE00 ≤ {}, 95th percentile ≤ {}, every patch ≤ {}",
-            self.name, self.max_mean, self.max_p95, self.max_patch
-        )
+        let limits: Vec<String> = [
+            ("mean ΔE00", self.max_mean),
+            ("95th percentile", self.max_p95),
+            ("every patch", self.max_patch),
+        ]
+        .iter()
+        .filter(|(_, limit)| limit.is_finite())
+        .map(|(what, limit)| format!("{what} ≤ {limit}"))
+        .collect();
+        format!("{}: {}", self.name, limits.join(", "))
+    }
+
+    /// The daemon's verification threshold (`[schedule] threshold_de00`) alone, the
+    /// pass mark of its `verify` jobs and its fleet page: a mean, no other limit.
+    pub fn verification_threshold(threshold: f64) -> Criteria {
+        Criteria {
+            name: "the verification threshold ([schedule] threshold_de00)".into(),
+            max_mean: threshold,
+            max_p95: f64::INFINITY,
+            max_patch: f64::INFINITY,
+        }
     }
 }
 
@@ -219,6 +236,8 @@ pub struct UniformityCell {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Verification {
     pub patches: Vec<PatchRow>,
+    /// Readings whose ΔE00 cannot be computed (a value out of all range), left out.
+    pub unscorable: usize,
     pub judgement: Judgement,
     pub white: WhiteAndBlack,
     /// The model's gamut in L*a*b* (cubic ΔE*ab), and against each reference space.
@@ -243,13 +262,14 @@ pub fn lab_differences(reference: &Lab, sample: &Lab) -> (f64, f64, f64) {
     (l2 - l1, c2 - c1, delta_h)
 }
 
-/// Verify `model` against `set`. `held_out` names the patches held out of the fit
-/// when `set` is the fit's own readings (the others are then fit patches, shown but
-/// not judged); `None` when every patch was measured to verify.
+/// Verify `model` against `set`. `held_out` gives the patches held out of the fit,
+/// as the fit scored them (on its drift-corrected readings), when `set` is the fit's
+/// own readings: those rows are the fit's own figures, and the others are fit
+/// patches, shown but not judged. `None` when every patch was measured to verify.
 pub fn verify(
     model: &MonitorModel,
     set: &MeasurementSet,
-    held_out: Option<&[usize]>,
+    held_out: Option<&[PatchError]>,
     criteria: &Criteria,
 ) -> Verification {
     let evaluation = evaluate(
@@ -259,36 +279,43 @@ pub fn verify(
             .filter_map(|m| Some((m, m.usable_xyz()?))),
     );
     let white = model.white();
-    let patches: Vec<PatchRow> = evaluation
+    let row = |p: &PatchError, used: PatchUse| {
+        let (nominal_lab, measured_lab) = (
+            xyz_to_lab(&p.predicted, &white),
+            xyz_to_lab(&p.measured, &white),
+        );
+        let (delta_l, delta_c, delta_h) = lab_differences(&nominal_lab, &measured_lab);
+        PatchRow {
+            index: p.index,
+            drive: p.drive,
+            position: p.position,
+            used,
+            nominal: p.predicted,
+            measured: p.measured,
+            nominal_lab,
+            measured_lab,
+            delta_l,
+            delta_c,
+            delta_h,
+            delta_e00: p.delta_e00,
+            judged: used != PatchUse::Fit,
+            passes: p.delta_e00 <= criteria.max_patch,
+        }
+    };
+    // A reading out of all range has no ΔE00: counted and left out, not shown as NaN.
+    let (scorable, unscorable): (Vec<&PatchError>, Vec<&PatchError>) = evaluation
         .patches
         .iter()
-        .map(|p| {
-            let used = match held_out {
-                None => PatchUse::Verification,
-                Some(list) if list.contains(&p.index) => PatchUse::HeldOut,
-                Some(_) => PatchUse::Fit,
-            };
-            let (nominal_lab, measured_lab) = (
-                xyz_to_lab(&p.predicted, &white),
-                xyz_to_lab(&p.measured, &white),
-            );
-            let (delta_l, delta_c, delta_h) = lab_differences(&nominal_lab, &measured_lab);
-            PatchRow {
-                index: p.index,
-                drive: p.drive,
-                position: p.position,
-                used,
-                nominal: p.predicted,
-                measured: p.measured,
-                nominal_lab,
-                measured_lab,
-                delta_l,
-                delta_c,
-                delta_h,
-                delta_e00: p.delta_e00,
-                judged: used != PatchUse::Fit,
-                passes: p.delta_e00 <= criteria.max_patch,
-            }
+        .partition(|p| p.delta_e00.is_finite());
+    let patches: Vec<PatchRow> = scorable
+        .into_iter()
+        .map(|p| match held_out {
+            None => row(p, PatchUse::Verification),
+            Some(list) => match list.iter().find(|h| h.index == p.index) {
+                Some(h) if h.delta_e00.is_finite() => row(h, PatchUse::HeldOut),
+                Some(_) => row(p, PatchUse::HeldOut),
+                None => row(p, PatchUse::Fit),
+            },
         })
         .collect();
     let judged: Vec<f64> = patches
@@ -304,6 +331,7 @@ pub fn verify(
     let gamut_solid = AdditiveGamut::of_display(&model.matrix, &model.black);
     Verification {
         patches,
+        unscorable: unscorable.len(),
         judgement: Judgement {
             criteria: criteria.clone(),
             stats,
@@ -426,11 +454,7 @@ fn uniformity_cells(set: &MeasurementSet) -> Vec<UniformityCell> {
         }
     }
     // Row by row, top first, as the screen reads.
-    groups.sort_by(|a, b| {
-        (a.0.y, a.0.x)
-            .partial_cmp(&(b.0.y, b.0.x))
-            .unwrap_or(std::cmp::Ordering::Equal)
-    });
+    groups.sort_by(|a, b| a.0.y.total_cmp(&b.0.y).then(a.0.x.total_cmp(&b.0.x)));
     groups
         .into_iter()
         .filter_map(|(position, drive, sum, n)| {
@@ -468,6 +492,32 @@ mod tests {
         // ΔE*ab² = ΔL² + ΔC² + ΔH² (CIE 15:2004 eq. 8.10).
         assert!((dh - 30.0 * 2.0_f64.sqrt()).abs() < 1e-9, "{dh}");
         assert!(lab_differences(&turned, &reference).2 < 0.0);
+    }
+
+    #[test]
+    fn a_hue_difference_across_zero_is_the_short_way_round() {
+        let at = |h: f64| Lab {
+            l: 50.0,
+            a: 20.0 * h.to_radians().cos(),
+            b: 20.0 * h.to_radians().sin(),
+        };
+        // 350° to 10°: +20° of hue, not −340°.
+        let (_, dc, dh) = lab_differences(&at(350.0), &at(10.0));
+        assert!(dc.abs() < 1e-9, "{dc}");
+        assert!(
+            (dh - 2.0 * 20.0 * 10.0_f64.to_radians().sin()).abs() < 1e-9,
+            "{dh}"
+        );
+        assert!(lab_differences(&at(10.0), &at(350.0)).2 < 0.0);
+    }
+
+    #[test]
+    fn a_threshold_alone_states_only_its_mean() {
+        let c = Criteria::verification_threshold(1.5);
+        assert_eq!(
+            c.describe(),
+            "the verification threshold ([schedule] threshold_de00): mean ΔE00 ≤ 1.5"
+        );
     }
 
     #[test]

@@ -206,15 +206,19 @@ fn ffmpeg_reads_the_3dl_as_the_cube_of_the_same_grid() {
     write_png16(&image, 40, &codes);
     // ffmpeg reads a .3dl as 17 points a side, 12 bits (over 4096).
     let mut outputs = Vec::new();
-    for name in ["lcd.3dl", "lcd.cube"] {
+    // The .3dl at its default size, the .cube asked for the same.
+    for (name, size) in [("lcd.3dl", &[][..]), ("lcd.cube", &["--size", "17"][..])] {
         let lut = dir.path().join(name);
-        succeed(
+        let out = succeed(
             chromacal()
                 .arg("lut3d")
                 .arg(&profile_path)
-                .args(["--source", "srgb", "--size", "17", "-o"])
+                .args(["--source", "srgb"])
+                .args(size)
+                .arg("-o")
                 .arg(&lut),
         );
+        assert!(String::from_utf8_lossy(&out.stderr).contains("17³ LUT"));
         outputs.push(ffmpeg_lut3d(
             &image,
             &lut,

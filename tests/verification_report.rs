@@ -325,6 +325,10 @@ fn a_real_ti3_s_page_carries_its_metadata_and_the_table_is_check_s() {
             .args(["--criteria", "strict"]),
     );
     let json: Value = serde_json::from_slice(&out.stdout).unwrap();
+    // The verdict is said on the terminal too.
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("judged by strict: mean ΔE00 ≤ 0.5"), "{said}");
+    assert!(said.contains(": passes"), "{said}");
     let mut browser = open(&page);
 
     // Every patch `check` scored, with its ΔE00 to the page's three decimals.
@@ -369,6 +373,39 @@ fn a_real_ti3_s_page_carries_its_metadata_and_the_table_is_check_s() {
     ] {
         assert!(identity.contains(said), "{said} missing: {identity}");
     }
+
+    // Both want standard output: refused.
+    let out = chromacal()
+        .arg("check")
+        .arg(&profile)
+        .arg(&ti3)
+        .args(["--json", "--report", "-"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(out.stdout.is_empty());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("both want standard output"));
+
+    // Checked against relative readings, the page is in their units, and says the
+    // profile was scaled to them.
+    let relative = dir.path().join("relative.html");
+    succeed(
+        chromacal()
+            .arg("check")
+            .arg(&profile)
+            .arg(shared_path(
+                "measurements/psychtoolbox/split/ptb_sony_pvm2541_oled_test.ti3",
+            ))
+            .arg("--report")
+            .arg(&relative),
+    );
+    let text = std::fs::read_to_string(&relative).unwrap();
+    assert!(text.contains("relative (white Y = 100)"), "units not said");
+    assert!(text.contains("scaled to white Y = 100"), "scaling not said");
+    assert!(
+        !text.contains("cd/m², measured"),
+        "relative figures called cd/m²"
+    );
 
     // The law is named as the selection chose it, corrected, not as the table the
     // correction made; and the chosen law is in each panel's legend.

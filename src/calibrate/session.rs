@@ -594,7 +594,7 @@ pub async fn finish_run(
             source: crate::journal::stored_path(journal.path()),
             display: Some(header.display.clone()),
             instrument: Some(header.instrument.clone()),
-            measured_at: None,
+            measured_at: Some(format!("from {}", header.started)),
             config_digest: Some(header.config_digest.clone()),
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
             settings_at_resume: run.settings_at_resume.clone(),

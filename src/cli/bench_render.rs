@@ -402,8 +402,11 @@ fn peer_tools<'a>(
     // The same colours as the ICC profile's connection space sees them: relative to
     // the display's white, adapted to D50 (Bradford), as the v4 profile's chad says.
     let exported = export(
+        // Without calibration curves, as `export` then writes the ICC relative to
+        // the measured white (below).
         &Profile {
             model: centre_only.clone(),
+            calibration: None,
             ..profile.clone()
         },
         Format::Icc4,

@@ -12,7 +12,7 @@ use chromacal::measurement::Units;
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
 use chromacal::report;
-use chromacal::verification::Criteria;
+use chromacal::verification::{Criteria, verify};
 
 use super::shared::{Failure, is_stdout};
 
@@ -120,9 +120,16 @@ fn check(args: &CheckArgs) -> Result<(), Failure> {
         }
     };
     if let Some(path) = &args.report {
+        if json && is_stdout(path) {
+            return Err(Failure::from(
+                "--json and --report - both want standard output: write the report to a file",
+            ));
+        }
+        let criteria = args.criteria.clone().unwrap_or_default();
         // The page shows the profile as it was compared: scaled to the readings' units.
         let compared = Profile {
             model: model.clone(),
+            units: set.units,
             ..profile.clone()
         };
         let (readings, readings_note) = match readings_of(&profile) {
@@ -133,6 +140,10 @@ fn check(args: &CheckArgs) -> Result<(), Failure> {
             Ok(set) => (Some(set), None),
             Err(why) => (None, Some(why)),
         };
+        let readings_note = match (readings_note, note) {
+            (Some(why), Some(scaled)) => Some(format!("{scaled}; {why}")),
+            (why, scaled) => why.or(scaled.map(str::to_string)),
+        };
         super::report::write_page(
             &ReportInput {
                 profile: &compared,
@@ -141,10 +152,20 @@ fn check(args: &CheckArgs) -> Result<(), Failure> {
                 history: None,
                 device: None,
                 checked: Some(&set),
-                criteria: args.criteria.clone().unwrap_or_default(),
+                criteria: criteria.clone(),
             },
             path,
         )?;
+        let verification = verify(&compared.model, &set, None, &criteria);
+        eprintln!(
+            "chromacal: judged by {}: {}",
+            criteria.describe(),
+            if verification.judgement.passes {
+                "passes"
+            } else {
+                "fails"
+            }
+        );
         if is_stdout(path) {
             // The page is standard output: the summary would corrupt it.
             return Ok(());

@@ -20,13 +20,16 @@ pub struct Lut3dArgs {
     /// BT.1886).
     #[arg(long)]
     source: SourceSpace,
-    /// Points along each axis.
-    #[arg(long, default_value_t = 33)]
-    size: usize,
+    /// Points along each axis (2 to 129) [default: 33 for a .cube, 17 for a .3dl, the
+    /// only size ffmpeg reads in that format].
+    #[arg(long)]
+    size: Option<usize>,
     /// Gamut mapping of the source colours the display cannot show.
     #[arg(long, value_enum, ignore_case = true, default_value = "clip")]
     gamut: GamutArg,
-    /// Keep the source's D65 white rather than carry it to the display's white.
+    /// Keep the source's D65 white rather than carry it to the display's white: a
+    /// display whose white is not D65 then cannot show the source's white at full
+    /// luminance, and it is gamut-mapped like any colour outside.
     #[arg(long)]
     absolute: bool,
     /// The LUT will run while the profile's calibration curves are in the video LUT:
@@ -57,12 +60,18 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
             args.output.display()
         )));
     }
+    let size = args.size.unwrap_or(if three_dl { 17 } else { 33 });
+    if three_dl && size != 17 {
+        eprintln!(
+            "chromacal: warning: ffmpeg reads a .3dl as 17 points a side; this one has {size}"
+        );
+    }
     let lut = build_lut(
         &profile.model,
         profile.calibration.as_ref().map(|c| &c.curves),
         &LutOptions {
             source: args.source,
-            size: args.size,
+            size,
             gamut: args.gamut.mapping(0.01),
             absolute: args.absolute,
             through_calibration: args.through_calibration,

@@ -150,7 +150,7 @@ pub struct Lut3d {
 /// Why a LUT could not be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LutError {
-    #[error("a LUT of {0} points a side (2 to 256)")]
+    #[error("a LUT of {0} points a side (2 to 129)")]
     Size(usize),
     #[error(
         "Stone–Cowan–Beatty maps a whole scene, not a LUT's grid: give clip, grey-lab, grey-luv or perpendicular"
@@ -249,7 +249,8 @@ pub fn build_lut(
     curves: Option<&CalibrationCurves>,
     options: &LutOptions,
 ) -> Result<Lut3d, LutError> {
-    if !(2..=256).contains(&options.size) {
+    // 129³ is 2.1 million points, a 60 MB .cube: enough for any player.
+    if !(2..=129).contains(&options.size) {
         return Err(LutError::Size(options.size));
     }
     if matches!(options.gamut, GamutMapping::StoneCowanBeatty { .. }) {
@@ -323,7 +324,9 @@ impl Lut3d {
     pub fn to_3dl(&self) -> String {
         let n = self.size;
         let mesh: Vec<String> = (0..n)
-            .map(|i| format!("{}", (i * 1023 + (n - 1) / 2) / (n - 1)))
+            // 0, 64, …, 960, 1023 for 17 points: steps of 1024 / (n − 1), the last
+            // at the 10-bit top.
+            .map(|i| format!("{}", (i * 1024 / (n - 1)).min(1023)))
             .collect();
         let mut out = mesh.join(" ") + "\n";
         for r in 0..n {
@@ -390,6 +393,16 @@ mod tests {
         let text = lut.to_3dl();
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(lines[0], "0 512 1023");
+        let lut17 = Lut3d {
+            size: 17,
+            table: grid(17),
+            ..lut.clone()
+        };
+        assert!(
+            lut17
+                .to_3dl()
+                .starts_with("0 64 128 192 256 320 384 448 512 576 640 704 768 832 896 960 1023\n")
+        );
         assert_eq!(lines[2], "0 0 2048", "blue second");
         assert_eq!(lines[10], "2048 0 0", "red slowest");
         let cube = lut.to_cube("t");

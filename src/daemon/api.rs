@@ -814,8 +814,10 @@ async fn report(Dev(device): Dev) -> Response {
             history: Some(HistoryView::from_store(device.store())),
             device: Some(device.name.clone()),
             checked: checked.as_ref(),
-            // Judged by the limits the device publishes by.
-            criteria: Criteria::from_publish(&device.loaded.config.publish),
+            // Judged as its verify jobs and the fleet page judge it.
+            criteria: Criteria::verification_threshold(
+                device.loaded.config.schedule.threshold_de00,
+            ),
         })
     })
     .await;

@@ -254,9 +254,11 @@ pub fn tone_log(
         };
         let (measured, model) = (positive(measured), positive(model));
         let target = target.map(|(name, c)| (name, positive(c)));
+        // The axes span what was measured (and the target): the model is drawn over
+        // that span, not down to its own first sample.
         let x_lo = measured
             .iter()
-            .chain(&model)
+            .chain(target.iter().flat_map(|(_, c)| c.iter()))
             .map(|p| p.0)
             .fold(1.0_f64, f64::min)
             .clamp(1e-3, 0.5);
@@ -624,12 +626,27 @@ pub struct TimeSeries {
 
 /// A time on the history axis, as a date (and the time of day when the span is
 /// under a few days): UTC, as the profiles' own dates are written.
-fn date_label(epoch_s: f64, with_time: bool) -> String {
+fn date_label(epoch_s: f64, span: TimeSpan) -> String {
     let Ok(at) = jiff::Timestamp::from_second(epoch_s.round() as i64) else {
         return String::new();
     };
-    at.strftime(if with_time { "%m-%d %H:%M" } else { "%Y-%m-%d" })
-        .to_string()
+    at.strftime(match span {
+        TimeSpan::Minutes => "%m-%d %H:%M:%S",
+        TimeSpan::Days => "%m-%d %H:%M",
+        TimeSpan::Longer => "%Y-%m-%d",
+    })
+    .to_string()
+}
+
+/// How long a history runs, for how its dates are written.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum TimeSpan {
+    /// Under an hour: ticks seconds or minutes apart, written to the second.
+    Minutes,
+    /// Under four days: to the minute.
+    Days,
+    /// Dates alone.
+    Longer,
 }
 
 /// Values over time (the daemon's history): each series as a line with points, the
@@ -640,7 +657,11 @@ pub fn over_time(title: &str, y_label: &str, series: &[TimeSeries]) -> Result<St
             series.iter().flat_map(|s| s.points.iter().map(|p| p.0)),
             0.05,
         );
-        let with_time = x1 - x0 < 4.0 * 86_400.0;
+        let span = match x1 - x0 {
+            s if s < 3600.0 => TimeSpan::Minutes,
+            s if s < 4.0 * 86_400.0 => TimeSpan::Days,
+            _ => TimeSpan::Longer,
+        };
         let (_, y1) = padded_range(
             series
                 .iter()
@@ -651,14 +672,14 @@ pub fn over_time(title: &str, y_label: &str, series: &[TimeSeries]) -> Result<St
         let mut chart = titled(root, title, x0..x1, 0.0..y1, 54)?;
         chart
             .configure_mesh()
-            .x_desc(if with_time {
-                "date and time (UTC)"
-            } else {
+            .x_desc(if span == TimeSpan::Longer {
                 "date (UTC)"
+            } else {
+                "date and time (UTC)"
             })
             .y_desc(y_label)
             .x_labels(5)
-            .x_label_formatter(&|v| date_label(*v, with_time))
+            .x_label_formatter(&|v| date_label(*v, span))
             .light_line_style(RGBColor(238, 238, 238))
             .draw()
             .map_err(text)?;
@@ -687,7 +708,11 @@ mod tests {
     #[test]
     fn history_dates_read_as_dates() {
         // 2026-12-04T10:30:00Z.
-        assert_eq!(date_label(1_796_380_200.0, false), "2026-12-04");
-        assert_eq!(date_label(1_796_380_200.0, true), "12-04 10:30");
+        assert_eq!(date_label(1_796_380_200.0, TimeSpan::Longer), "2026-12-04");
+        assert_eq!(date_label(1_796_380_200.0, TimeSpan::Days), "12-04 10:30");
+        assert_eq!(
+            date_label(1_796_380_207.0, TimeSpan::Minutes),
+            "12-04 10:30:07"
+        );
     }
 }

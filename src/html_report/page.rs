@@ -143,18 +143,13 @@ fn verification_of(input: &ReportInput) -> Option<(Verification, String)> {
         return Some((verify(&profile.model, set, None, &input.criteria), what));
     }
     let set = input.readings?;
-    let held: Vec<usize> = profile
-        .report
-        .held_out_patches
-        .iter()
-        .map(|p| p.index)
-        .collect();
+    let held = &profile.report.held_out_patches;
     let what = format!(
-        "the readings it was fitted on, judged on the {} patches held out of the fit",
+        "the readings it was fitted on, judged on the {} patches held out of the fit (as the fit scored them, on its drift-corrected readings)",
         held.len()
     );
     Some((
-        verify(&profile.model, set, Some(&held), &input.criteria),
+        verify(&profile.model, set, Some(held), &input.criteria),
         what,
     ))
 }
@@ -306,7 +301,14 @@ fn summary(profile: &Profile, verified: Option<(&Verification, &str)>) -> Markup
                     @if j.passes { span.passes #verdict { "Passes." } }
                     @else { span.fails #verdict { "Fails." } }
                 },
-                None => (note("No patch to judge: every reading was in the fit.")),
+                None => (note(if v.patches.is_empty() {
+                    "No patch to judge: the readings hold none that can be scored."
+                } else {
+                    "No patch to judge: every reading was in the fit."
+                })),
+            }
+            @if v.unscorable > 0 {
+                (note(&format!("{} readings are left out: their ΔE00 cannot be computed (a value out of all range).", v.unscorable)))
             }
             h3 { "White, black and contrast" }
             table {

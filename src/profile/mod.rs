@@ -61,8 +61,8 @@ pub struct Provenance {
     pub source: String,
     pub display: Option<String>,
     pub instrument: Option<InstrumentInfo>,
-    /// When the readings were taken, as their file says (a .ti3's `CREATED`); a run's
-    /// readings were taken when its profile was made.
+    /// When the readings were taken, as their file says (a .ti3's `CREATED`; a run's
+    /// journal, "from" the run's start).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measured_at: Option<String>,
     /// SHA-256 of the config of the run, when it came from a run.
