@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use chromacal::color::spectrum::{Illuminant, Observer};
 use chromacal::color::{Xyz, xyz_to_lab};
-use chromacal::crf::gamut::{GamutMapping, UniformSpace};
+use chromacal::crf::gamut::{GamutMapping, ScbOptions, UniformSpace};
 use chromacal::crf::spectral::{MethodKind, SpectralMethod};
 use chromacal::crf::spectral_table::{Case, colorchecker_family};
 use chromacal::crf::tone::ToneOperator;
@@ -328,7 +328,7 @@ fn stone_cowan_beatty_moves_the_whole_set_and_keeps_the_grey_axis() {
     };
     let settings = RenderSettings {
         adaptation: Some(chromacal::color::adaptation::AdaptationTransform::Bradford),
-        ..settings(GamutMapping::StoneCowanBeatty { outside: 0.0 }, 16)
+        ..settings(scb(0.0), 16)
     };
     let r = crf.render(&scene, &settings).unwrap();
     let scb = r.summary.stone_cowan_beatty.unwrap();
@@ -369,6 +369,153 @@ fn stone_cowan_beatty_moves_the_whole_set_and_keeps_the_grey_axis() {
         lightness.windows(2).all(|w| w[1].1 < w[0].1),
         "{lightness:?}"
     );
+}
+
+fn scb(outside: f64) -> GamutMapping {
+    GamutMapping::StoneCowanBeatty(ScbOptions {
+        outside,
+        ..ScbOptions::default()
+    })
+}
+
+/// ΔE00 from `xyz` to the display's grey axis (its black to its white at the centre).
+fn off_grey_axis(crf: &ColourReproduction, xyz: &Xyz) -> f64 {
+    let gamut = crf.gamut_at(ScreenPosition::CENTRE).unwrap();
+    let (black, white) = (gamut.black(), gamut.white());
+    (0..=4000)
+        .map(|k| black + (white - black) * (k as f64 / 4000.0))
+        .map(|g| delta_e00_xyz(xyz, &g, &crf.white()))
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn stone_cowan_beatty_keeps_neutrals_on_the_grey_axis_whatever_dark_colour_the_scene_holds() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let white = model.white().y;
+    // Greys of the scene's own white (D65, carried to the display's), and one dark,
+    // saturated colour darker than any of them: the scene's darkest colour.
+    let greys: Vec<Xyz> = [0.03, 0.1, 0.2, 0.4, 0.7, 1.0]
+        .iter()
+        .map(|k| d65_white(1.2 * white * k))
+        .collect();
+    for dark in [
+        Xyz::new(0.6, 0.2, 3.0) * (white / 100.0),
+        Xyz::new(1.2, 0.6, 0.1) * (white / 100.0),
+        Xyz::new(0.3, 0.5, 0.2) * (white / 100.0),
+    ] {
+        let mut colours = greys.clone();
+        colours.push(dark);
+        let scene = Scene {
+            white: Some(d65_white(1.2 * white)),
+            ..at_centre(&colours)
+        };
+        let settings = RenderSettings {
+            adaptation: Some(chromacal::color::adaptation::AdaptationTransform::Bradford),
+            ..settings(scb(0.01), 16)
+        };
+        let r = crf.render(&scene, &settings).unwrap();
+        for (k, p) in r.pixels[..greys.len()].iter().enumerate() {
+            let off = off_grey_axis(&crf, &Xyz::from(p.mapped));
+            assert!(
+                off < 0.5,
+                "{dark:?}: grey {k} lands {off:.2} ΔE00 off the grey axis"
+            );
+        }
+        // The contrast is not bought with a lifted black: the scene's grey axis spans
+        // most of the display's.
+        let scb = r.summary.stone_cowan_beatty.unwrap();
+        assert!(scb.lightness[0] < 20.0, "{dark:?}: {scb:?}");
+    }
+}
+
+#[test]
+fn one_highlight_does_not_darken_the_scene_under_stone_cowan_beatty() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let white = model.white().y;
+    let chart = colorchecker(white, Illuminant::D65);
+    let render = |colours: &[Xyz]| {
+        let scene = Scene {
+            white: Some(d65_white(white)),
+            ..at_centre(colours)
+        };
+        let settings = RenderSettings {
+            adaptation: Some(chromacal::color::adaptation::AdaptationTransform::Bradford),
+            ..settings(scb(0.01), 16)
+        };
+        crf.render(&scene, &settings).unwrap()
+    };
+    let plain = render(&chart);
+    let mut with_highlight = chart.clone();
+    with_highlight.push(d65_white(10.0 * white));
+    let lit = render(&with_highlight);
+    let lightness =
+        |r: &chromacal::crf::Rendering| xyz_to_lab(&Xyz::from(r.pixels[18].mapped), &crf.white()).l;
+    assert!(
+        (lightness(&plain) - lightness(&lit)).abs() < 5.0,
+        "the white patch: L* {:.1} alone, {:.1} beside a highlight",
+        lightness(&plain),
+        lightness(&lit)
+    );
+    let scb = lit.summary.stone_cowan_beatty.unwrap();
+    assert_eq!(scb.highlights, 1);
+    // The highlight itself is projected, to the display's white or next to it.
+    let top = xyz_to_lab(&Xyz::from(lit.pixels[24].mapped), &crf.white());
+    assert!(top.l > 99.0 && top.a.hypot(top.b) < 1.0, "{top:?}");
+}
+
+#[test]
+fn the_perceptual_mappings_leave_colours_inside_alone_and_beat_clipping() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let white = crf.white();
+    // The ColorChecker under a bright light, and saturated colours beyond the display.
+    let mut colours = hard_scene(&model);
+    for k in 0..24 {
+        let h = k as f64 * 15f64.to_radians();
+        let lab = chromacal::color::Lab {
+            l: 30.0 + 2.5 * k as f64,
+            a: 110.0 * h.cos(),
+            b: 110.0 * h.sin(),
+        };
+        colours.push(chromacal::color::spaces::lab_to_xyz(&lab, &white));
+    }
+    let render = |gamut| {
+        crf.render(&at_centre(&colours), &settings(gamut, 16))
+            .unwrap()
+    };
+    let clip = render(GamutMapping::Clip);
+    let lab = render(GamutMapping::PerpendicularLab);
+    let hp = render(GamutMapping::Hpminde);
+    let mean = |r: &chromacal::crf::Rendering| {
+        r.pixels.iter().map(|p| p.mapping_delta_e00).sum::<f64>() / r.pixels.len() as f64
+    };
+    assert!(clip.summary.outside > 20, "{}", clip.summary.outside);
+    assert!(
+        mean(&lab) <= mean(&clip),
+        "{} > {}",
+        mean(&lab),
+        mean(&clip)
+    );
+    for (k, x) in colours.iter().enumerate() {
+        let (c, l, h) = (&clip.pixels[k], &lab.pixels[k], &hp.pixels[k]);
+        if !c.outside {
+            assert_eq!(Xyz::from(l.mapped), *x);
+            assert_eq!(Xyz::from(h.mapped), *x);
+            continue;
+        }
+        assert!(l.mapping_delta_e00 <= c.mapping_delta_e00 + 1e-9, "{k}");
+        let (before, after) = (
+            xyz_to_lab(x, &white),
+            xyz_to_lab(&Xyz::from(h.mapped), &white),
+        );
+        if before.a.hypot(before.b) > 1.0 && after.a.hypot(after.b) > 1e-3 {
+            let hue = |l: &chromacal::color::Lab| l.b.atan2(l.a).to_degrees();
+            let turn = ((hue(&after) - hue(&before) + 540.0) % 360.0 - 180.0).abs();
+            assert!(turn < 1.0, "colour {k}: HPMINDE turned hue by {turn}°");
+        }
+    }
 }
 
 #[test]
@@ -1041,4 +1188,53 @@ fn codes_are_the_nearest_of_their_cell_in_delta_e00() {
     let (by_cli_nearest, by_cli_rounded) = (codes_of("nearest"), codes_of("rounded"));
     assert_ne!(by_cli_nearest, by_cli_rounded);
     assert_eq!(by_cli_nearest, codes_of("NEAREST"));
+}
+
+#[test]
+fn bench_gamut_prints_every_mapping_and_the_cielab_projection_is_nearest() {
+    let out = chromacal()
+        .args(["bench", "gamut", "--quick"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    // Per scene: the mean ΔE00 of each mapping, read back from the table.
+    let mean = |scene: &str, mapping: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.contains(scene) && l.contains(mapping))
+            .unwrap_or_else(|| panic!("no row for {mapping} on {scene}:\n{text}"));
+        let cell = line
+            .split("  ")
+            .map(str::trim)
+            .find(|c| c.contains(" / "))
+            .unwrap();
+        cell.split(" / ").next().unwrap().parse().unwrap()
+    };
+    for scene in ["ColorChecker", "saturated colours"] {
+        let clip = mean(scene, "  clip  ");
+        let lab = mean(scene, "perpendicular projection in CIELAB");
+        assert!(
+            lab <= clip,
+            "{scene}: CIELAB projection {lab} > clip {clip}"
+        );
+        for mapping in [
+            "HPMINDE",
+            "Smith",
+            "Stone–Cowan–Beatty",
+            "in XYZ",
+            "grey-axis",
+        ] {
+            assert!(mean(scene, mapping).is_finite());
+        }
+        let hpminde = text
+            .lines()
+            .find(|l| l.contains(scene) && l.contains("HPMINDE"))
+            .unwrap();
+        assert!(hpminde.contains(" 0.00 "), "HPMINDE turned hue: {hpminde}");
+    }
 }

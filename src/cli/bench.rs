@@ -280,7 +280,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', ignore_case = true)]
     laws: Option<Vec<LawArg>>,
     /// Only these tables (comma-separated): fit-time, budget, sequential, argyll,
-    /// spectral, render, fleet, corrections, law-rule.
+    /// spectral, render, gamut, fleet, corrections, law-rule.
     #[arg(long, value_delimiter = ',', value_parser = TABLES, ignore_case = true)]
     only: Vec<String>,
     /// The same as --only, as words: `chromacal bench spectral`.
@@ -289,13 +289,14 @@ pub struct BenchArgs {
 }
 
 /// The tables `bench` prints.
-const TABLES: [&str; 9] = [
+const TABLES: [&str; 10] = [
     "fit-time",
     "budget",
     "sequential",
     "argyll",
     "spectral",
     "render",
+    "gamut",
     "fleet",
     "corrections",
     "law-rule",
@@ -373,6 +374,9 @@ pub fn run(args: BenchArgs) -> Result<(), Failure> {
     }
     if wanted("render") {
         super::bench_render::render_table(args.quick)?;
+    }
+    if wanted("gamut") {
+        super::bench_gamut::gamut_bench_table(args.quick)?;
     }
     if wanted("fleet") {
         super::bench_fleet::fleet_table(args.quick)?;

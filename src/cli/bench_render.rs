@@ -40,7 +40,7 @@ const D50: [f64; 3] = [0.9642, 1.0, 0.8249];
 
 /// Calibrate the simulated default into a temporary state directory and return its
 /// profile (the bench runs this very program, as a user would).
-fn default_profile() -> Result<Profile, String> {
+pub(super) fn default_profile() -> Result<Profile, String> {
     let state = std::env::temp_dir().join(format!("chromacal-bench-render-{}", std::process::id()));
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let out = std::process::Command::new(exe)

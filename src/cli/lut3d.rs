@@ -8,6 +8,7 @@ use chromacal::profile::Profile;
 
 use super::render::GamutArg;
 use super::shared::{Failure, is_stdout, write_stdout};
+use chromacal::crf::gamut::ScbOptions;
 
 /// Write a 3D LUT that shows a source encoding (sRGB, BT.709/BT.1886, Display P3,
 /// Rec. 2020) on this display, for mpv, madVR, Resolve or ffmpeg's lut3d filter.
@@ -72,7 +73,7 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
         &LutOptions {
             source: args.source,
             size,
-            gamut: args.gamut.mapping(0.01),
+            gamut: args.gamut.mapping(ScbOptions::default()),
             absolute: args.absolute,
             through_calibration: args.through_calibration,
         },

@@ -5,6 +5,7 @@
 pub mod bench;
 pub mod bench_corrections;
 pub mod bench_fleet;
+mod bench_gamut;
 pub mod bench_laws;
 pub mod bench_render;
 pub mod bench_spectral;

@@ -10,7 +10,7 @@ use chromacal::color::adaptation::AdaptationTransform;
 use chromacal::color::spaces::{Xyy, xyy_to_xyz};
 use chromacal::color::spectrum::{KM_PHOTOPIC, Observer};
 use chromacal::crf::explain::explain;
-use chromacal::crf::gamut::{GamutMapping, UniformSpace};
+use chromacal::crf::gamut::{GamutMapping, ScbOptions, UniformSpace};
 use chromacal::crf::scene::{
     Placement, XyzImage, read_exr, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
 };
@@ -96,9 +96,15 @@ pub struct RenderArgs {
     #[arg(long, value_enum, ignore_case = true, default_value = "clip")]
     gamut: GamutArg,
     /// Stone–Cowan–Beatty: the share of colours its transform may leave outside
-    /// (then projected).
+    /// (then projected); colours brighter than the scene's white are highlights and
+    /// never count.
     #[arg(long, default_value_t = 0.01, value_parser = share)]
     scb_outside: f64,
+    /// Stone–Cowan–Beatty's umbrella transformation: distance from the scene's grey
+    /// axis multiplied by this before the transform (above 1 saturates, below 1
+    /// desaturates).
+    #[arg(long, default_value_t = 1.0, value_parser = positive_number)]
+    scb_umbrella: f64,
     /// Bits per channel of the codes.
     #[arg(long, default_value_t = 8)]
     bits: u32,
@@ -145,24 +151,36 @@ enum ToneArg {
 
 #[derive(Clone, Copy, ValueEnum)]
 pub(super) enum GamutArg {
+    /// Each channel clipped on its own.
     Clip,
+    /// Toward the grey axis at constant CIELAB lightness and hue.
     GreyLab,
+    /// Toward the grey axis at constant CIELUV lightness and hue.
     GreyLuv,
+    /// The nearest point of the gamut in XYZ.
     Perpendicular,
+    /// The nearest point of the gamut's boundary in ΔE00.
+    PerpendicularLab,
+    /// CIE 156's hue-preserving minimum ΔE*ab clipping.
+    Hpminde,
+    /// Smith's global transformation (the survey's α = β = 0.75, γ = 5).
+    Smith,
+    /// Stone–Cowan–Beatty's global transformation, then the CIELAB projection.
     Scb,
 }
 
 impl GamutArg {
-    /// The mapping named, Stone–Cowan–Beatty leaving `scb_outside` of the colours out.
-    pub(super) fn mapping(self, scb_outside: f64) -> GamutMapping {
+    /// The mapping named, Stone–Cowan–Beatty with `scb`.
+    pub(super) fn mapping(self, scb: ScbOptions) -> GamutMapping {
         match self {
             GamutArg::Clip => GamutMapping::Clip,
             GamutArg::GreyLab => GamutMapping::GreyAxis(UniformSpace::Lab),
             GamutArg::GreyLuv => GamutMapping::GreyAxis(UniformSpace::Luv),
             GamutArg::Perpendicular => GamutMapping::Perpendicular,
-            GamutArg::Scb => GamutMapping::StoneCowanBeatty {
-                outside: scb_outside,
-            },
+            GamutArg::PerpendicularLab => GamutMapping::PerpendicularLab,
+            GamutArg::Hpminde => GamutMapping::Hpminde,
+            GamutArg::Smith => GamutMapping::Smith,
+            GamutArg::Scb => GamutMapping::StoneCowanBeatty(scb),
         }
     }
 }
@@ -297,7 +315,10 @@ fn settings_of(args: &RenderArgs) -> Result<RenderSettings, Failure> {
             args.scb_outside
         )));
     }
-    let gamut = args.gamut.mapping(args.scb_outside);
+    let gamut = args.gamut.mapping(ScbOptions {
+        outside: args.scb_outside,
+        umbrella: args.scb_umbrella,
+    });
     Ok(RenderSettings {
         adaptation: args.adapt.then_some(AdaptationTransform::Bradford),
         tone,
@@ -693,8 +714,19 @@ fn describe(summary: &RenderSummary, spectral: Option<&str>, output: &Path) -> S
     ));
     if let Some(scb) = &summary.stone_cowan_beatty {
         lines.push(format!(
-            "Stone–Cowan–Beatty: black shift {:.3}, contrast scale {:.4}",
-            scb.black_shift, scb.contrast_scale
+            "Stone–Cowan–Beatty: black shift {:.4}, contrast scale {:.4}; the scene's grey axis lands at L* {:.1} to {:.1}; {} left outside for the projection ({} of them highlights above the scene's white)",
+            scb.black_shift,
+            scb.contrast_scale,
+            scb.lightness[0],
+            scb.lightness[1],
+            scb.left_outside,
+            scb.highlights
+        ));
+    }
+    if let Some(smith) = &summary.smith {
+        lines.push(format!(
+            "Smith: Y_max {:.4} (the scene's white, or its lightest colour), α {}, β {}, γ {}",
+            smith.y_max, smith.alpha, smith.beta, smith.gamma
         ));
     }
     if let Some(s) = &summary.mapping_all {

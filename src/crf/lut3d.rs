@@ -153,7 +153,7 @@ pub enum LutError {
     #[error("a LUT of {0} points a side (2 to 129)")]
     Size(usize),
     #[error(
-        "Stone–Cowan–Beatty maps a whole scene, not a LUT's grid: give clip, grey-lab, grey-luv or perpendicular"
+        "Stone–Cowan–Beatty and Smith map a whole scene, not a LUT's grid: give clip, grey-lab, grey-luv, perpendicular, perpendicular-lab or hpminde"
     )]
     SceneMapping,
     #[error("the LUT is to run through calibration curves, but the profile has none")]
@@ -253,7 +253,7 @@ pub fn build_lut(
     if !(2..=129).contains(&options.size) {
         return Err(LutError::Size(options.size));
     }
-    if matches!(options.gamut, GamutMapping::StoneCowanBeatty { .. }) {
+    if options.gamut.is_scene_wide() {
         return Err(LutError::SceneMapping);
     }
     let curves = match (options.through_calibration, curves) {

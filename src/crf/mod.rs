@@ -19,6 +19,7 @@
 
 pub mod explain;
 pub mod gamut;
+pub mod gamut_bench;
 pub mod inverse_table;
 pub mod lut3d;
 pub mod scene;
@@ -35,7 +36,7 @@ use crate::color::adaptation::{AdaptationTransform, adaptation_matrix};
 use crate::fit::stats::ErrorStats;
 use crate::fit::validate::delta_e00_xyz;
 use crate::model::{Drive, MonitorModel, ScreenPosition};
-use gamut::{GamutAt, GamutMapping, StoneCowanBeatty};
+use gamut::{GamutAt, GamutMapping, Smith, StoneCowanBeatty};
 use inverse_table::InverseTable;
 use tone::{SceneLuminance, ToneCurve, ToneOperator};
 
@@ -135,6 +136,15 @@ pub struct RenderSummary {
     pub inversion: Option<ErrorStats>,
     /// Stone–Cowan–Beatty's chosen transform, when that mapping was used.
     pub stone_cowan_beatty: Option<StoneCowanBeatty>,
+    /// Smith's transform, when that mapping was used.
+    pub smith: Option<Smith>,
+}
+
+/// The scene-wide transform a mapping chose, if it is one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum SceneTransform {
+    StoneCowanBeatty(StoneCowanBeatty),
+    Smith(Smith),
 }
 
 /// A scene rendered for one display.
@@ -317,11 +327,20 @@ impl<'a> ColourReproduction<'a> {
         let centre = self
             .gamut_at(ScreenPosition::CENTRE)
             .ok_or(CrfError::SingularMatrix)?;
-        let scb = match settings.gamut {
-            GamutMapping::StoneCowanBeatty { outside } => {
+        // The scene's white after tone reproduction: its neutrals' direction and the
+        // level above which a colour is a highlight.
+        let scene_white = adapted.white.map(|w| w * curve.factor(w.y));
+        let transform = match settings.gamut {
+            GamutMapping::StoneCowanBeatty(options) => {
                 let with: Vec<(Xyz, &GamutAt)> =
                     targets.iter().copied().zip(gamuts.iter()).collect();
-                StoneCowanBeatty::fit(&with, &centre, outside)
+                let grey = scene_white.filter(|w| w.y > 0.0).unwrap_or(self.white);
+                StoneCowanBeatty::fit(&with, &centre, &grey, scene_white.map(|w| w.y), options)
+                    .map(SceneTransform::StoneCowanBeatty)
+            }
+            GamutMapping::Smith => {
+                Smith::fit(targets.iter().map(|t| t.y), scene_white.map(|w| w.y))
+                    .map(SceneTransform::Smith)
             }
             _ => None,
         };
@@ -332,7 +351,7 @@ impl<'a> ColourReproduction<'a> {
             .zip(targets.iter().zip(&gamuts))
             .map(|(pixel, (target, gamut))| {
                 let outside = !gamut.contains(target);
-                let mapped = self.map(settings.gamut, scb.as_ref(), gamut, target);
+                let mapped = self.map(settings.gamut, transform.as_ref(), gamut, target);
                 let drive = self.drive_for(&mapped, pixel.position);
                 let (codes, shown) =
                     self.codes_for(drive, &mapped, pixel.position, top, settings.codes);
@@ -347,7 +366,7 @@ impl<'a> ColourReproduction<'a> {
                 }
             })
             .collect();
-        let summary = summarise(&pixels, settings, scb);
+        let summary = summarise(&pixels, settings, transform);
         Ok(Rendering { pixels, summary })
     }
 
@@ -436,7 +455,7 @@ impl<'a> ColourReproduction<'a> {
     fn map(
         &self,
         mapping: GamutMapping,
-        scb: Option<&StoneCowanBeatty>,
+        transform: Option<&SceneTransform>,
         gamut: &GamutAt,
         target: &Xyz,
     ) -> Xyz {
@@ -446,9 +465,18 @@ impl<'a> ColourReproduction<'a> {
                 gamut::grey_axis_clip(gamut, target, space, &self.white)
             }
             GamutMapping::Perpendicular => gamut::perpendicular(gamut, target),
-            GamutMapping::StoneCowanBeatty { .. } => {
-                let moved = scb.map_or(*target, |t| t.apply(target));
-                gamut::perpendicular(gamut, &moved)
+            GamutMapping::PerpendicularLab => gamut::perpendicular_lab(gamut, target, &self.white),
+            GamutMapping::Hpminde => gamut::hpminde(gamut, target, &self.white),
+            GamutMapping::Smith => match transform {
+                Some(SceneTransform::Smith(t)) => t.apply(gamut, target),
+                _ => gamut::clip(gamut, target),
+            },
+            GamutMapping::StoneCowanBeatty(_) => {
+                let moved = match transform {
+                    Some(SceneTransform::StoneCowanBeatty(t)) => t.apply(target),
+                    _ => *target,
+                };
+                gamut::perpendicular_lab(gamut, &moved, &self.white)
             }
         }
     }
@@ -457,7 +485,7 @@ impl<'a> ColourReproduction<'a> {
 fn summarise(
     pixels: &[RenderedPixel],
     settings: &RenderSettings,
-    scb: Option<StoneCowanBeatty>,
+    transform: Option<SceneTransform>,
 ) -> RenderSummary {
     let all: Vec<f64> = pixels.iter().map(|p| p.mapping_delta_e00).collect();
     let outside: Vec<f64> = pixels
@@ -474,6 +502,13 @@ fn summarise(
         mapping_all: ErrorStats::of(&all),
         mapping_outside: ErrorStats::of(&outside),
         inversion: ErrorStats::of(&inversion),
-        stone_cowan_beatty: scb,
+        stone_cowan_beatty: match transform {
+            Some(SceneTransform::StoneCowanBeatty(t)) => Some(t),
+            _ => None,
+        },
+        smith: match transform {
+            Some(SceneTransform::Smith(t)) => Some(t),
+            _ => None,
+        },
     }
 }
