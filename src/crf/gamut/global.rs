@@ -299,15 +299,7 @@ impl Smith {
 mod tests {
     use super::*;
 
-    /// sRGB-like primaries (columns, white Y = 100) and a black of 0.5.
-    fn gamut() -> GamutAt {
-        let m = Matrix3::new(
-            41.24, 35.76, 18.05, //
-            21.26, 71.52, 7.22, //
-            1.93, 11.92, 95.05,
-        );
-        GamutAt::new(Xyz::new(0.475, 0.5, 0.545), m).unwrap()
-    }
+    use super::super::tests::gamut;
 
     fn fit(g: &GamutAt, scene: &[Xyz], white: Option<f64>, outside: f64) -> StoneCowanBeatty {
         let with: Vec<(Xyz, &GamutAt)> = scene.iter().map(|x| (*x, g)).collect();

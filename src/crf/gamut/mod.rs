@@ -327,8 +327,9 @@ fn ray_exit(start: &Vector3<f64>, direction: &Vector3<f64>) -> f64 {
 mod tests {
     use super::*;
 
-    /// sRGB-like primaries (columns, white Y = 100) and a black of 0.5.
-    fn gamut() -> GamutAt {
+    /// sRGB-like primaries (columns, white Y = 100) and a black of 0.5: the gamut
+    /// the mappings' unit tests work in.
+    pub(super) fn gamut() -> GamutAt {
         let m = Matrix3::new(
             41.24, 35.76, 18.05, //
             21.26, 71.52, 7.22, //

@@ -303,17 +303,8 @@ pub fn hpminde(gamut: &GamutAt, xyz: &Xyz, white: &Xyz) -> Xyz {
 mod tests {
     use super::*;
     use crate::color::spaces::lab_to_lch;
-    use nalgebra::Matrix3;
 
-    /// sRGB-like primaries (columns, white Y = 100) and a black of 0.5.
-    fn gamut() -> GamutAt {
-        let m = Matrix3::new(
-            41.24, 35.76, 18.05, //
-            21.26, 71.52, 7.22, //
-            1.93, 11.92, 95.05,
-        );
-        GamutAt::new(Xyz::new(0.475, 0.5, 0.545), m).unwrap()
-    }
+    use super::super::tests::gamut;
 
     fn outside_colours(g: &GamutAt) -> Vec<Xyz> {
         [
