@@ -11,8 +11,7 @@ use std::sync::OnceLock;
 use chromacal::color::spectrum::{Illuminant, Observer};
 use chromacal::color::{Xyz, xyz_to_lab};
 use chromacal::crf::gamut::{GamutMapping, ScbOptions, UniformSpace};
-use chromacal::crf::spectral::{MethodKind, SpectralMethod};
-use chromacal::crf::spectral_table::{Case, colorchecker_family};
+use chromacal::crf::spectral_table::colorchecker_xyz;
 use chromacal::crf::tone::ToneOperator;
 use chromacal::crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
 use chromacal::fit::validate::delta_e00_xyz;
@@ -106,23 +105,9 @@ fn grid(n: usize) -> Vec<ScreenPosition> {
         .collect()
 }
 
-/// The ColorChecker under D65 with its white at `white` cd/m², at the centre.
+/// The ColorChecker under `illuminant` with its white at `white` cd/m².
 fn colorchecker(white: f64, illuminant: Illuminant) -> Vec<Xyz> {
-    let family = colorchecker_family(illuminant, "");
-    let direct = SpectralMethod::new(MethodKind::Direct, Observer::default(), &[]).unwrap();
-    let light = direct.represent(family.light.as_ref().unwrap());
-    let y = direct.integrate(&light).y;
-    family
-        .cases
-        .iter()
-        .map(|c| match c {
-            Case::Reflected { reflectance, .. } => {
-                direct.integrate(&direct.product(&direct.reflectance(reflectance), &light))
-                    * (white / y)
-            }
-            Case::Emission { .. } => unreachable!(),
-        })
-        .collect()
+    colorchecker_xyz(illuminant, white).unwrap()
 }
 
 fn at_centre(xyz: &[Xyz]) -> Scene {

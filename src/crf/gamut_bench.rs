@@ -5,8 +5,7 @@
 use std::time::Instant;
 
 use super::gamut::{GamutMapping, ScbOptions, UniformSpace};
-use super::spectral::{MethodKind, SpectralMethod};
-use super::spectral_table::{Case, colorchecker_family};
+use super::spectral_table::colorchecker_xyz;
 use super::tone::ToneOperator;
 use super::{CodeChoice, ColourReproduction, CrfError, RenderSettings, Scene, ScenePixel};
 use crate::color::Xyz;
@@ -61,7 +60,7 @@ pub fn scenes(model: &MonitorModel) -> Vec<(String, Scene)> {
         .ok()
         .map(|w| w * (1.3 * white.y / 100.0));
     let mut list = Vec::new();
-    if let (Some(chart), Some(d65)) = (colorchecker(1.3 * white.y), d65) {
+    if let (Some(chart), Some(d65)) = (colorchecker_xyz(Illuminant::D65, 1.3 * white.y), d65) {
         list.push((
             "ColorChecker, D65 at 1.3 × white".to_string(),
             Scene {
@@ -89,25 +88,6 @@ pub fn scenes(model: &MonitorModel) -> Vec<(String, Scene)> {
         },
     ));
     list
-}
-
-/// The ColorChecker's 24 patches under D65, its white at luminance `white`.
-fn colorchecker(white: f64) -> Option<Vec<Xyz>> {
-    let family = colorchecker_family(Illuminant::D65, "");
-    let direct = SpectralMethod::new(MethodKind::Direct, Observer::default(), &[]).ok()?;
-    let light = direct.represent(family.light.as_ref()?);
-    let y = direct.integrate(&light).y;
-    family
-        .cases
-        .iter()
-        .map(|c| match c {
-            Case::Reflected { reflectance, .. } => Some(
-                direct.integrate(&direct.product(&direct.reflectance(reflectance), &light))
-                    * (white / y),
-            ),
-            Case::Emission { .. } => None,
-        })
-        .collect()
 }
 
 /// Every mapping on every scene, each rendering timed `rounds` times (the median).

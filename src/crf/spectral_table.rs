@@ -95,6 +95,27 @@ pub fn colorchecker_family(illuminant: Illuminant, label: &str) -> Family {
     }
 }
 
+/// XYZ of the ColorChecker's 24 patches under `illuminant` by the direct sum, scaled
+/// so that a perfect white would have luminance `white`; `None` if the tables are
+/// unusable.
+pub fn colorchecker_xyz(illuminant: Illuminant, white: f64) -> Option<Vec<Xyz>> {
+    let family = colorchecker_family(illuminant, "");
+    let direct = SpectralMethod::new(MethodKind::Direct, Observer::default(), &[]).ok()?;
+    let light = direct.represent(family.light.as_ref()?);
+    let y = direct.integrate(&light).y;
+    family
+        .cases
+        .iter()
+        .map(|c| match c {
+            Case::Reflected { reflectance, .. } => Some(
+                direct.integrate(&direct.product(&direct.reflectance(reflectance), &light))
+                    * (white / y),
+            ),
+            Case::Emission { .. } => None,
+        })
+        .collect()
+}
+
 /// The CIE illuminants carried by chromacal, seen directly.
 pub fn illuminant_family() -> Family {
     let cases = [
