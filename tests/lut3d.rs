@@ -279,3 +279,62 @@ fn a_lut_through_calibration_needs_curves_and_a_bad_name_is_refused() {
         assert!(!dir.path().join("x.cube").exists() && !dir.path().join("x.lut").exists());
     }
 }
+
+/// The `.cube`'s output triples, in file order (red fastest).
+fn cube_rows(path: &Path) -> Vec<[f64; 3]> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter_map(|l| {
+            let v: Vec<f64> = l
+                .split_whitespace()
+                .map(str::parse)
+                .collect::<Result<_, _>>()
+                .ok()?;
+            (v.len() == 3).then(|| [v[0], v[1], v[2]])
+        })
+        .collect()
+}
+
+#[test]
+fn sgck_keeps_rec2020_reds_apart_where_clipping_merges_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let profile_path = lcd_profile(dir.path());
+    let size = 17;
+    let lut = |gamut: &str| {
+        let path = dir.path().join(format!("{gamut}.cube"));
+        succeed(
+            chromacal()
+                .arg("lut3d")
+                .arg(&profile_path)
+                .args([
+                    "--source", "rec2020", "--size", "17", "--gamut", gamut, "-o",
+                ])
+                .arg(&path),
+        );
+        let rows = cube_rows(&path);
+        assert_eq!(rows.len(), size * size * size);
+        rows
+    };
+    // The red axis (green and blue at code 0) from half drive up: Rec. 2020's reds
+    // beyond the display's.
+    let distinct = |rows: &[[f64; 3]]| {
+        let mut seen: Vec<[i64; 3]> = (size / 2..size)
+            .map(|i| rows[i].map(|v| (v * 1e4).round() as i64))
+            .collect();
+        seen.dedup();
+        seen.len()
+    };
+    let (clip, sgck) = (lut("clip"), lut("sgck"));
+    let top = size - size / 2;
+    assert!(
+        distinct(&clip) < top,
+        "clipping kept {} of {top} apart",
+        distinct(&clip)
+    );
+    assert_eq!(distinct(&sgck), top, "SGCK merged reds");
+    // Along the axis SGCK's red drive never falls.
+    for i in 1..size {
+        assert!(sgck[i][0] >= sgck[i - 1][0] - 1e-9, "red falls at {i}");
+    }
+}

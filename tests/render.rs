@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use chromacal::color::spectrum::{Illuminant, Observer};
 use chromacal::color::{Xyz, xyz_to_lab};
-use chromacal::crf::gamut::{GamutMapping, ScbOptions, UniformSpace};
+use chromacal::crf::gamut::{GamutMapping, ScbOptions, SgckSource, UniformSpace};
 use chromacal::crf::spectral_table::colorchecker_xyz;
 use chromacal::crf::tone::ToneOperator;
 use chromacal::crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
@@ -473,6 +473,7 @@ fn the_perceptual_mappings_leave_colours_inside_alone_and_beat_clipping() {
     let clip = render(GamutMapping::Clip);
     let lab = render(GamutMapping::PerpendicularLab);
     let hp = render(GamutMapping::Hpminde);
+    let sgck = render(GamutMapping::Sgck(SgckSource::Rec2020));
     let mean = |r: &chromacal::crf::Rendering| {
         r.pixels.iter().map(|p| p.mapping_delta_e00).sum::<f64>() / r.pixels.len() as f64
     };
@@ -499,6 +500,19 @@ fn the_perceptual_mappings_leave_colours_inside_alone_and_beat_clipping() {
             let hue = |l: &chromacal::color::Lab| l.b.atan2(l.a).to_degrees();
             let turn = ((hue(&after) - hue(&before) + 540.0) % 360.0 - 180.0).abs();
             assert!(turn < 1.0, "colour {k}: HPMINDE turned hue by {turn}°");
+        }
+    }
+    // SGCK compresses from Rec. 2020 at constant hue: what it makes is inside the
+    // display and keeps each colour's CIELAB hue.
+    let centre = crf.gamut_at(ScreenPosition::CENTRE).unwrap();
+    for (k, x) in colours.iter().enumerate() {
+        let mapped = Xyz::from(sgck.pixels[k].mapped);
+        assert!(centre.contains(&mapped), "colour {k}: SGCK left it outside");
+        let (before, after) = (xyz_to_lab(x, &white), xyz_to_lab(&mapped, &white));
+        if before.a.hypot(before.b) > 1.0 && after.a.hypot(after.b) > 1e-3 {
+            let hue = |l: &chromacal::color::Lab| l.b.atan2(l.a).to_degrees();
+            let turn = ((hue(&after) - hue(&before) + 540.0) % 360.0 - 180.0).abs();
+            assert!(turn < 1.0, "colour {k}: SGCK turned hue by {turn}°");
         }
     }
 }
@@ -1209,6 +1223,7 @@ fn bench_gamut_prints_every_mapping_and_the_cielab_projection_is_nearest() {
         );
         for mapping in [
             "HPMINDE",
+            "SGCK",
             "Smith",
             "Stone–Cowan–Beatty",
             "in XYZ",

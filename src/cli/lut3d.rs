@@ -8,7 +8,7 @@ use chromacal::profile::Profile;
 
 use super::render::GamutArg;
 use super::shared::{Failure, is_stdout, write_stdout};
-use chromacal::crf::gamut::ScbOptions;
+use chromacal::crf::gamut::{ScbOptions, SgckSource};
 
 /// Write a 3D LUT that shows a source encoding (sRGB, BT.709/BT.1886, Display P3,
 /// Rec. 2020) on this display, for mpv, madVR, Resolve or ffmpeg's lut3d filter.
@@ -73,7 +73,8 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
         &LutOptions {
             source: args.source,
             size,
-            gamut: args.gamut.mapping(ScbOptions::default()),
+            // SGCK's source is the LUT's own source space (build_lut sets it).
+            gamut: args.gamut.mapping(ScbOptions::default(), SgckSource::Srgb),
             absolute: args.absolute,
             through_calibration: args.through_calibration,
         },

@@ -10,7 +10,7 @@ use chromacal::color::adaptation::AdaptationTransform;
 use chromacal::color::spaces::{Xyy, xyy_to_xyz};
 use chromacal::color::spectrum::{KM_PHOTOPIC, Observer};
 use chromacal::crf::explain::explain;
-use chromacal::crf::gamut::{GamutMapping, ScbOptions, UniformSpace};
+use chromacal::crf::gamut::{GamutMapping, ScbOptions, SgckSource, UniformSpace};
 use chromacal::crf::scene::{
     Placement, XyzImage, read_exr, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
 };
@@ -105,6 +105,10 @@ pub struct RenderArgs {
     /// desaturates).
     #[arg(long, default_value_t = 1.0, value_parser = positive_number)]
     scb_umbrella: f64,
+    /// SGCK's source gamut: the RGB space the scene's colours are taken to come
+    /// from, on the display's white and black.
+    #[arg(long, value_enum, ignore_case = true, default_value = "rec2020")]
+    sgck_source: SgckSourceArg,
     /// Bits per channel of the codes.
     #[arg(long, default_value_t = 8)]
     bits: u32,
@@ -167,11 +171,34 @@ pub(super) enum GamutArg {
     Smith,
     /// Stone–Cowan–Beatty's global transformation, then the CIELAB projection.
     Scb,
+    /// CIE 156's SGCK: sigmoidal lightness mapping and knee scaling toward the
+    /// cusp, from the source gamut of --sgck-source.
+    Sgck,
+}
+
+/// The RGB space whose gamut SGCK compresses from.
+#[derive(Clone, Copy, ValueEnum)]
+pub(super) enum SgckSourceArg {
+    Srgb,
+    AdobeRgb,
+    P3,
+    Rec2020,
+}
+
+impl SgckSourceArg {
+    fn source(self) -> SgckSource {
+        match self {
+            SgckSourceArg::Srgb => SgckSource::Srgb,
+            SgckSourceArg::AdobeRgb => SgckSource::AdobeRgb,
+            SgckSourceArg::P3 => SgckSource::P3,
+            SgckSourceArg::Rec2020 => SgckSource::Rec2020,
+        }
+    }
 }
 
 impl GamutArg {
-    /// The mapping named, Stone–Cowan–Beatty with `scb`.
-    pub(super) fn mapping(self, scb: ScbOptions) -> GamutMapping {
+    /// The mapping named, Stone–Cowan–Beatty with `scb`, SGCK from `sgck`.
+    pub(super) fn mapping(self, scb: ScbOptions, sgck: SgckSource) -> GamutMapping {
         match self {
             GamutArg::Clip => GamutMapping::Clip,
             GamutArg::GreyLab => GamutMapping::GreyAxis(UniformSpace::Lab),
@@ -181,6 +208,7 @@ impl GamutArg {
             GamutArg::Hpminde => GamutMapping::Hpminde,
             GamutArg::Smith => GamutMapping::Smith,
             GamutArg::Scb => GamutMapping::StoneCowanBeatty(scb),
+            GamutArg::Sgck => GamutMapping::Sgck(sgck),
         }
     }
 }
@@ -315,10 +343,13 @@ fn settings_of(args: &RenderArgs) -> Result<RenderSettings, Failure> {
             args.scb_outside
         )));
     }
-    let gamut = args.gamut.mapping(ScbOptions {
-        outside: args.scb_outside,
-        umbrella: args.scb_umbrella,
-    });
+    let gamut = args.gamut.mapping(
+        ScbOptions {
+            outside: args.scb_outside,
+            umbrella: args.scb_umbrella,
+        },
+        args.sgck_source.source(),
+    );
     Ok(RenderSettings {
         adaptation: args.adapt.then_some(AdaptationTransform::Bradford),
         tone,

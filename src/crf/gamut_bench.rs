@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use super::gamut::{GamutMapping, ScbOptions, UniformSpace};
+use super::gamut::{GamutMapping, ScbOptions, SgckSource, UniformSpace};
 use super::spectral_table::colorchecker_xyz;
 use super::tone::ToneOperator;
 use super::{CodeChoice, ColourReproduction, CrfError, RenderSettings, Scene, ScenePixel};
@@ -38,6 +38,7 @@ pub fn mappings() -> Vec<GamutMapping> {
         GamutMapping::Perpendicular,
         GamutMapping::PerpendicularLab,
         GamutMapping::Hpminde,
+        GamutMapping::Sgck(SgckSource::Rec2020),
         GamutMapping::Smith,
         GamutMapping::StoneCowanBeatty(ScbOptions::default()),
     ]

@@ -13,7 +13,7 @@
 
 use nalgebra::Matrix3;
 
-use super::gamut::GamutMapping;
+use super::gamut::{GamutMapping, SgckSource};
 use super::tone::ToneOperator;
 use super::{CodeChoice, ColourReproduction, CrfError, RenderSettings, Scene, ScenePixel};
 use crate::color::Xyz;
@@ -76,6 +76,15 @@ impl SourceSpace {
             SourceSpace::Srgb | SourceSpace::Bt709 | SourceSpace::Bt1886 => SRGB,
             SourceSpace::P3 => DISPLAY_P3,
             SourceSpace::Rec2020 => REC_2020,
+        }
+    }
+
+    /// The source gamut SGCK maps from for this encoding.
+    pub fn sgck_source(self) -> SgckSource {
+        match self {
+            SourceSpace::Srgb | SourceSpace::Bt709 | SourceSpace::Bt1886 => SgckSource::Srgb,
+            SourceSpace::P3 => SgckSource::P3,
+            SourceSpace::Rec2020 => SgckSource::Rec2020,
         }
     }
 
@@ -153,7 +162,7 @@ pub enum LutError {
     #[error("a LUT of {0} points a side (2 to 129)")]
     Size(usize),
     #[error(
-        "Stone–Cowan–Beatty and Smith map a whole scene, not a LUT's grid: give clip, grey-lab, grey-luv, perpendicular, perpendicular-lab or hpminde"
+        "Stone–Cowan–Beatty and Smith map a whole scene, not a LUT's grid: give clip, grey-lab, grey-luv, perpendicular, perpendicular-lab, hpminde or sgck"
     )]
     SceneMapping,
     #[error("the LUT is to run through calibration curves, but the profile has none")]
@@ -261,6 +270,11 @@ pub fn build_lut(
         (true, Some(c)) => Some(c),
         (false, _) => None,
     };
+    // SGCK compresses from the LUT's own source gamut.
+    let gamut = match options.gamut {
+        GamutMapping::Sgck(_) => GamutMapping::Sgck(options.source.sgck_source()),
+        other => other,
+    };
     let crf = ColourReproduction::new(model)?;
     let scene = Scene {
         pixels: grid(options.size)
@@ -277,7 +291,7 @@ pub fn build_lut(
         &RenderSettings {
             adaptation: None,
             tone: ToneOperator::Colorimetric,
-            gamut: options.gamut,
+            gamut,
             bits: 16,
             codes: CodeChoice::Rounded,
         },

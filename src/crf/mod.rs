@@ -141,10 +141,12 @@ pub struct RenderSummary {
 }
 
 /// The scene-wide transform a mapping chose, if it is one.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 enum SceneTransform {
     StoneCowanBeatty(StoneCowanBeatty),
     Smith(Smith),
+    /// SGCK's source gamut, put on the display's centre white and black.
+    SgckSource(GamutAt),
 }
 
 /// A scene rendered for one display.
@@ -342,6 +344,9 @@ impl<'a> ColourReproduction<'a> {
                 Smith::fit(targets.iter().map(|t| t.y), scene_white.map(|w| w.y))
                     .map(SceneTransform::Smith)
             }
+            GamutMapping::Sgck(source) => source
+                .gamut(&centre.white(), &centre.black())
+                .map(SceneTransform::SgckSource),
             _ => None,
         };
         let top = ((1u64 << settings.bits) - 1) as f64;
@@ -467,6 +472,12 @@ impl<'a> ColourReproduction<'a> {
             GamutMapping::Perpendicular => gamut::perpendicular(gamut, target),
             GamutMapping::PerpendicularLab => gamut::perpendicular_lab(gamut, target, &self.white),
             GamutMapping::Hpminde => gamut::hpminde(gamut, target, &self.white),
+            GamutMapping::Sgck(_) => match transform {
+                Some(SceneTransform::SgckSource(source)) => {
+                    gamut::sgck(gamut, source, target, &self.white)
+                }
+                _ => gamut::clip(gamut, target),
+            },
             GamutMapping::Smith => match transform {
                 Some(SceneTransform::Smith(t)) => t.apply(gamut, target),
                 _ => gamut::clip(gamut, target),

@@ -19,9 +19,11 @@
 
 mod global;
 mod perceptual;
+mod sgck;
 
 pub use global::{ScbOptions, Smith, StoneCowanBeatty};
 pub use perceptual::{hpminde, perpendicular_lab};
+pub use sgck::{SgckSource, sgck};
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -115,6 +117,10 @@ pub enum GamutMapping {
     /// CIE 156:2004's HPMINDE: hue-preserving minimum ΔE*ab clipping, the nearest
     /// point of the gamut in the colour's own CIELAB hue plane.
     Hpminde,
+    /// CIE 156:2004's SGCK: Braun and Fairchild's sigmoidal lightness mapping
+    /// weighted by chroma, then knee scaling toward the grey at the cusp's
+    /// lightness, from the source gamut of the given RGB space.
+    Sgck(SgckSource),
     /// Smith (1993), seed §4.3.2: in the RGB cube, bright colours turned toward the
     /// grey axis and every colour's luminance compressed by a power of Y / Y_max.
     Smith,
@@ -135,6 +141,10 @@ impl GamutMapping {
                 "perpendicular projection in CIELAB (nearest in ΔE00)".into()
             }
             GamutMapping::Hpminde => "HPMINDE (CIE 156, hue-preserving minimum ΔE*ab)".into(),
+            GamutMapping::Sgck(source) => format!(
+                "SGCK (CIE 156, sigmoidal lightness and cusp knee scaling from {})",
+                source.space().name
+            ),
             GamutMapping::Smith => "Smith (α = β = 0.75, γ = 5)".into(),
             GamutMapping::StoneCowanBeatty(o) => {
                 let umbrella = if o.umbrella == 1.0 {
