@@ -358,8 +358,13 @@ fn spectrum_integrates_emission_and_reflectance() {
         "{neutral}"
     );
 
-    // An uneven 3.333 nm grid is resampled, and gives the same answer as 1 nm.
-    let fine = Spectrum::new((380..=730).map(f64::from).collect(), vec![0.001; 351]).unwrap();
+    // An uneven 3.333 nm grid over 380–730 nm is extended to 780 nm and put on the
+    // 5 nm grid: a flat one gives what the flat 5 nm spectrum over 380–780 nm gives.
+    let fine = Spectrum::new(
+        (380..=780).step_by(5).map(f64::from).collect(),
+        vec![0.001; 81],
+    )
+    .unwrap();
     let uneven_csv = dir.path().join("uneven.csv");
     let mut text = String::from("wavelength_nm,flat\n");
     for i in 0..106 {
@@ -378,16 +383,16 @@ fn spectrum_integrates_emission_and_reflectance() {
     std::fs::write(&csv, "nm,a\n400,1\n500,2\n").unwrap();
     let (ok, _, stderr) = run(&["spectrum", path(&csv)]);
     assert!(!ok && stderr.contains("wavelength_nm"), "{stderr}");
-    std::fs::write(&csv, "wavelength_nm,a\n400,1\n400,2\n").unwrap();
+    std::fs::write(&csv, "wavelength_nm,a\n400,1\n400,2\n700,1\n").unwrap();
     let (ok, _, stderr) = run(&["spectrum", path(&csv)]);
     assert!(
-        !ok && stderr.contains("column 'a'") && stderr.contains("increase"),
+        !ok && stderr.contains("data row 2") && stderr.contains("must rise"),
         "{stderr}"
     );
     // Help says how spectra meet the CMF grid.
     let (_, help, _) = run(&["spectrum", "--help"]);
     assert!(
-        help.contains("1 nm grid") && help.contains("weighted ordinates"),
+        help.contains("5 nm grid") && help.contains("weighted ordinates"),
         "{help}"
     );
 }

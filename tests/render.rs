@@ -769,6 +769,68 @@ fn check_weighs_the_verification_by_a_scenes_colours() {
     // The two scenes sample different patches, so they see different errors.
     assert_ne!(d["mean"], b["mean"], "{d} {b}");
     assert!(d["patches_used"].as_u64().unwrap() >= 1);
+
+    // The same greys shown at the centre and in the top-left corner: the run's
+    // uniformity grid measured both places, and each scene is judged where it is.
+    let run_at = |x: f64, y: f64| {
+        let csv = dir.path().join("placed.csv");
+        let mut text = String::from("X,Y,Z,screen_x,screen_y\n");
+        for c in &bright {
+            text.push_str(&format!("{},{},{},{x},{y}\n", c.x, c.y, c.z));
+        }
+        std::fs::write(&csv, text).unwrap();
+        let out = chromacal()
+            .arg("check")
+            .arg(profile_path())
+            .arg(&journal)
+            .arg("--scene")
+            .arg(&csv)
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        json["scene_weighted"].clone()
+    };
+    let (centre, corner) = (run_at(0.5, 0.5), run_at(0.02, 0.03));
+    assert!(
+        centre["positions_measured"].as_u64().unwrap() > 1,
+        "{centre}"
+    );
+    assert_eq!(centre["positions_used"], 1);
+    assert_eq!(
+        centre["mean"], b["mean"],
+        "the centre is where a list without positions is"
+    );
+    assert_ne!(centre["mean"], corner["mean"], "{centre} {corner}");
+
+    // A spectral scene is read by the same reader as spectrum's: its colours are
+    // the ones spectrum integrates.
+    let spectra = dir.path().join("spectra.csv");
+    let mut text = String::from("wavelength_nm,a\n");
+    for nm in (400..=700).step_by(10) {
+        text.push_str(&format!("{nm},0.0004\n"));
+    }
+    std::fs::write(&spectra, text).unwrap();
+    let out = chromacal()
+        .arg("check")
+        .arg(profile_path())
+        .arg(&journal)
+        .arg("--scene")
+        .arg(&spectra)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(said.contains("weighted by the scene's 1 colours"), "{said}");
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("extended to 380 to 780 nm"),
+        "the same warning as spectrum's"
+    );
 }
 
 /// A ZIP-compressed OpenEXR of 4096 × 4096 zeros, a few megabytes, once took 7.4 GB
@@ -1236,5 +1298,171 @@ fn bench_gamut_prints_every_mapping_and_the_cielab_projection_is_nearest() {
             .find(|l| l.contains(scene) && l.contains("HPMINDE"))
             .unwrap();
         assert!(hpminde.contains(" 0.00 "), "HPMINDE turned hue: {hpminde}");
+    }
+}
+
+/// `spectrum --json FILE ARGS`: each sample's XYZ, or the error.
+fn spectrum_xyz(file: &std::path::Path, args: &[&str]) -> Result<Vec<[f64; 3]>, String> {
+    let out = chromacal()
+        .arg("spectrum")
+        .arg(file)
+        .args(args)
+        .arg("--json")
+        .output()
+        .unwrap();
+    if !out.status.success() {
+        return Err(String::from_utf8_lossy(&out.stderr).to_string());
+    }
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    Ok(json
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            let v = r["xyz"].as_array().unwrap();
+            [0, 1, 2].map(|k| v[k].as_f64().unwrap())
+        })
+        .collect())
+}
+
+/// `render … -o -`: each pixel's target XYZ, and what was said on stderr; or the error.
+fn render_targets(args: &[&OsStr]) -> Result<(Vec<[f64; 3]>, String), String> {
+    let mut args = args.to_vec();
+    args.extend::<[&OsStr; 2]>(["-o".as_ref(), "-".as_ref()]);
+    let out = render_command(&args);
+    let said = String::from_utf8_lossy(&out.stderr).to_string();
+    if !out.status.success() {
+        return Err(said);
+    }
+    let rows = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+            [v[6], v[7], v[8]]
+        })
+        .collect();
+    Ok((rows, said))
+}
+
+#[test]
+fn spectrum_and_render_read_a_spectral_file_alike() {
+    let dir = tempfile::tempdir().unwrap();
+    // Smooth radiances: on the 5 nm grid over 380–780 nm, then on an i1Pro's 10 nm
+    // grid over 400–730 nm (extended and put on the 5 nm grid by the one rule).
+    let radiance = |nm: f64, k: usize| {
+        let centre = [450.0, 540.0, 610.0][k];
+        0.004 * (-((nm - centre) / 40.0).powi(2)).exp() + 0.0005
+    };
+    let write = |name: &str, from: usize, to: usize, step: usize| {
+        let mut csv = String::from("wavelength_nm,a,b,c\n");
+        for nm in (from..=to).step_by(step) {
+            let nm = nm as f64;
+            csv.push_str(&format!(
+                "{nm},{},{},{}\n",
+                radiance(nm, 0),
+                radiance(nm, 1),
+                radiance(nm, 2)
+            ));
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, csv).unwrap();
+        path
+    };
+    let full = write("full.csv", 380, 780, 5);
+    let partial = write("partial.csv", 400, 730, 10);
+    let white = Xyz::new(95.0, 100.0, 108.9);
+    for (file, tolerance) in [(&full, 1e-9), (&partial, 1e-9)] {
+        let from_spectrum = spectrum_xyz(file, &[]).unwrap();
+        let (from_render, said) =
+            render_targets(&["--spectra".as_ref(), file.as_os_str()]).unwrap();
+        assert_eq!(from_spectrum.len(), 3);
+        assert_eq!(from_render.len(), 3);
+        for (a, b) in from_spectrum.iter().zip(&from_render) {
+            let (a, b) = (Xyz::new(a[0], a[1], a[2]), Xyz::new(b[0], b[1], b[2]));
+            // Relative to the sample's own luminance: ΔE00 of the two against a
+            // white at the sample's Y.
+            let d = delta_e00_xyz(&a, &b, &(white * (a.y / 100.0)));
+            assert!(
+                d <= tolerance,
+                "{}: {a:?} against {b:?}, ΔE00 {d}",
+                file.display()
+            );
+        }
+        let extended = said.contains("extended to 380 to 780 nm");
+        assert_eq!(extended, file == &partial, "{said}");
+    }
+    // Files the rule refuses: both commands say the same.
+    for (name, text, expected) in [
+        (
+            "one.csv",
+            "wavelength_nm,a\n550,0.5\n",
+            "cover 550 to 550 nm",
+        ),
+        (
+            "narrow.csv",
+            "wavelength_nm,a\n450,0.5\n650,0.5\n",
+            "at least 400 to 700 nm",
+        ),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let a = spectrum_xyz(&path, &["--reflectance"]).unwrap_err();
+        let b = render_targets(&["--reflectance".as_ref(), path.as_os_str()]).unwrap_err();
+        assert!(a.contains(expected), "spectrum: {a}");
+        assert!(b.contains(expected), "render: {b}");
+        let sentence = |s: &str| {
+            s.lines()
+                .find(|l| l.contains(expected))
+                .map(|l| l[l.find(name).unwrap()..].to_string())
+                .unwrap()
+        };
+        assert_eq!(sentence(&a), sentence(&b));
+    }
+}
+
+#[test]
+fn a_perfect_reflector_reads_as_the_white_it_is_measured_against() {
+    // A perfect white sampled by an i1Pro (400–730 nm at 10 nm): spectrum's L*a*b*
+    // is 100, 0, 0, and render --adapt carries it onto the display's white exactly.
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("wavelength_nm,white\n");
+    for nm in (400..=730).step_by(10) {
+        csv.push_str(&format!("{nm},1\n"));
+    }
+    let path = dir.path().join("white.csv");
+    std::fs::write(&path, csv).unwrap();
+    for illuminant in ["D65", "A"] {
+        let out = chromacal()
+            .arg("spectrum")
+            .arg(&path)
+            .args(["--reflectance", "--illuminant", illuminant, "--json"])
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        for (k, want) in [(0, 100.0), (1, 0.0), (2, 0.0)] {
+            for key in ["lab", "luv"] {
+                let v = json[0][key][k].as_f64().unwrap();
+                assert!((v - want).abs() < 1e-9, "{illuminant} {key}[{k}] = {v}");
+            }
+        }
+        let (targets, _) = render_targets(&[
+            "--reflectance".as_ref(),
+            path.as_os_str(),
+            "--illuminant".as_ref(),
+            illuminant.as_ref(),
+            "--adapt".as_ref(),
+        ])
+        .unwrap();
+        let profile = chromacal::profile::Profile::read(profile_path()).unwrap();
+        let display = profile.model.white();
+        let t = Xyz::new(targets[0][0], targets[0][1], targets[0][2]);
+        let chromaticity = |x: &Xyz| [x.x / (x.x + x.y + x.z), x.y / (x.x + x.y + x.z)];
+        let (a, b) = (chromaticity(&t), chromaticity(&display));
+        assert!(
+            (a[0] - b[0]).abs() < 1e-9 && (a[1] - b[1]).abs() < 1e-9,
+            "{illuminant}: the white lands at {a:?}, the display's is {b:?}"
+        );
     }
 }

@@ -1,15 +1,19 @@
 //! `chromacal check`: predict every measured patch from a profile.
 
 use super::shared::{out, outln};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use chromacal::crf::explain::{SceneWeighted, scene_weighted};
+use chromacal::crf::ScenePixel;
+use chromacal::crf::explain::{SceneWeighted, WeighedPatch, scene_weighted};
 use chromacal::crf::scene::read_xyz_csv;
+use chromacal::crf::spectral_file::SpectralFile;
 use chromacal::fit::checks::AssumptionChecks;
 use chromacal::fit::validate::{Evaluation, evaluate};
 use chromacal::html_report::{ReportInput, readings_of};
 use chromacal::measurement::Units;
 use chromacal::measurement_file::read_measurements;
+use chromacal::model::ScreenPosition;
+use chromacal::numeric_csv::NumericTable;
 use chromacal::profile::Profile;
 use chromacal::report;
 use chromacal::verification::{Criteria, verify};
@@ -30,8 +34,10 @@ pub struct CheckArgs {
     #[arg(long, default_value_t = 10)]
     worst: usize,
     /// Weigh the error by a scene's colours: an XYZ list (X, Y, Z columns, in the
-    /// measurements' units), each colour counting for the measured patch nearest it in
-    /// CIELAB.
+    /// measurements' units, and screen_x, screen_y where each is shown [default: the
+    /// centre]) or a spectral CSV of radiances (wavelength_nm first, read as
+    /// `spectrum` reads it). Each colour counts for the measured screen position
+    /// nearest to it, and there for the patch nearest it in CIELAB.
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Also write the verification report (`chromacal report`, its verification
@@ -106,15 +112,15 @@ fn check(args: &CheckArgs) -> Result<(), Failure> {
     let scene_weighted = match scene {
         None => None,
         Some(path) => {
-            let colours: Vec<_> = read_xyz_csv(path, 1.0)
-                .map_err(|e| e.to_string())?
-                .into_iter()
-                .map(|p| p.xyz)
-                .collect();
+            let colours = read_check_scene(path, set.units)?;
             let patches: Vec<_> = evaluation
                 .patches
                 .iter()
-                .map(|p| (p.measured, p.delta_e00))
+                .map(|p| WeighedPatch {
+                    measured: p.measured,
+                    position: p.position,
+                    delta_e00: p.delta_e00,
+                })
                 .collect();
             scene_weighted(&patches, &colours, &model.white())
         }
@@ -209,13 +215,50 @@ fn check(args: &CheckArgs) -> Result<(), Failure> {
         out!("{}", report::check_summary(&evaluation, worst))?;
         if let Some(w) = &scene_weighted {
             outln!(
-                "  weighted by the scene's {} colours ({} of the patches nearest them): mean ΔE00 {:.3}, max {:.3}",
+                "  weighted by the scene's {} colours ({} of the patches nearest them, at {} of the {} measured screen positions): mean ΔE00 {:.3}, max {:.3}",
                 w.colours,
                 w.patches_used,
+                w.positions_used,
+                w.positions_measured,
                 w.mean,
                 w.max
             )?;
+            if w.positions_measured == 1 {
+                outln!(
+                    "  (every reading was taken at one place: where the scene's colours are shown cannot change this)"
+                )?;
+            }
         }
     }
     Ok(())
+}
+
+/// A scene for `--scene`: an XYZ list (X, Y, Z and optionally screen_x, screen_y, in
+/// the measurements' units), or a spectral CSV (`wavelength_nm` first: radiances,
+/// integrated to cd/m² by the same reader as `spectrum` and `render`, shown at the
+/// centre).
+fn read_check_scene(path: &Path, units: Units) -> Result<Vec<ScenePixel>, Failure> {
+    let first = NumericTable::read(path)?.header[0].clone();
+    if !first.eq_ignore_ascii_case("wavelength_nm") {
+        return Ok(read_xyz_csv(path, 1.0).map_err(|e| e.to_string())?);
+    }
+    if units != Units::Absolute {
+        return Err(Failure::from(format!(
+            "{}: spectra integrate to cd/m², and the measurements are relative: give the scene as X, Y, Z in their units",
+            path.display()
+        )));
+    }
+    let file = SpectralFile::read(path).map_err(|e| e.to_string())?;
+    if let Some(warning) = file.warning() {
+        tracing::warn!("{warning}");
+    }
+    Ok(file
+        .emission_xyz()
+        .map_err(|e| e.to_string())?
+        .into_iter()
+        .map(|xyz| ScenePixel {
+            xyz,
+            position: ScreenPosition::CENTRE,
+        })
+        .collect())
 }

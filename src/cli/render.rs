@@ -15,6 +15,7 @@ use chromacal::crf::scene::{
     Placement, XyzImage, read_exr, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
 };
 use chromacal::crf::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
+use chromacal::crf::spectral_file::SpectralFile;
 use chromacal::crf::spectral_image::SpectralImage;
 use chromacal::crf::spectral_table::standard_methods;
 use chromacal::crf::tone::{TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
@@ -25,7 +26,6 @@ use chromacal::fit::validate::delta_e00_xyz;
 use chromacal::measurement::Units;
 use chromacal::model::ScreenPosition;
 use chromacal::model::target::{WhiteTarget, daylight_xy, parse_white};
-use chromacal::numeric_csv::NumericTable;
 use chromacal::profile::Profile;
 
 use super::shared::{
@@ -523,11 +523,8 @@ fn read_source(
                 big_y: 100.0 * relative_scale,
             }))
         }
-        None if args.reflectance.is_some() => Some(
-            chromacal::color::spectrum::white_point(args.illuminant.into(), Observer::default())
-                .map_err(|e| e.to_string())?
-                * relative_scale,
-        ),
+        // A reflectance scene's white is its illuminant's, integrated with the
+        // scene (`Source::scene`).
         None => None,
     };
     if let Some(path) = &args.xyz {
@@ -622,11 +619,13 @@ impl Source {
                 white,
             } => (spectra, light, *scale, *white),
         };
-        let xyz = integrate_all(method, spectra, light.as_ref())?;
+        let (xyz, reflector) = integrate_all(method, spectra, light.as_ref())?;
         Ok(ReadScene {
             scene: Scene {
                 pixels: at_centre(xyz, scale),
-                white,
+                // A reflectance scene's white: the perfect reflector under its light,
+                // by the same method on the same wavelengths as its colours.
+                white: white.or(reflector.map(|w| w * scale)),
             },
             size: None,
             spectral: Some(format!("{} ({})", method.name(), method.parameter())),
@@ -660,35 +659,29 @@ fn at_centre(xyz: Vec<Xyz>, scale: f64) -> Vec<ScenePixel> {
         .collect()
 }
 
-/// The columns of a `wavelength_nm` CSV, each on the 5 nm grid.
+/// The samples of a spectral CSV (read by the one rule of
+/// `crf::spectral_file`), each on the 5 nm grid.
 fn read_spectra(path: &Path) -> Result<Vec<Vec<f64>>, Failure> {
-    let table = NumericTable::read(path)?;
-    if !table.header[0].eq_ignore_ascii_case("wavelength_nm") || table.header.len() < 2 {
-        return Err(Failure::from(format!(
-            "{}: the first column must be wavelength_nm and one column per colour follow",
-            path.display()
-        )));
+    let file = SpectralFile::read(path).map_err(|e| e.to_string())?;
+    if let Some(warning) = file.warning() {
+        tracing::warn!("{warning}");
     }
-    let wavelengths = table.column(0);
-    if wavelengths.windows(2).any(|w| w[1] <= w[0]) {
-        return Err(Failure::from(format!(
-            "{}: wavelengths must rise from row to row",
-            path.display()
-        )));
-    }
-    Ok((1..table.header.len())
-        .map(|k| onto_grid(&wavelengths, &table.column(k)))
+    Ok(file
+        .spectra
+        .iter()
+        .map(|s| onto_grid(s.wavelengths_nm(), s.values()))
         .collect())
 }
 
 /// XYZ (in units of ∫ S f dλ) of each spectrum, or of each reflectance under `light`
-/// with the light's Y = 100, by `kind`. Characteristic vectors are computed from
-/// these spectra themselves (and the light).
+/// with the light's Y = 100, by `kind`, and then the perfect reflector's under that
+/// light. Characteristic vectors are computed from these spectra themselves (and
+/// the light).
 fn integrate_all(
     kind: &MethodKind,
     spectra: &[Vec<f64>],
     light: Option<&Vec<f64>>,
-) -> Result<Vec<Xyz>, Failure> {
+) -> Result<(Vec<Xyz>, Option<Xyz>), Failure> {
     debug_assert!(spectra.iter().all(|s| s.len() == GRID_LEN));
     let family: Vec<Vec<f64>> = match light {
         Some(l) => std::iter::once(l.clone())
@@ -703,22 +696,26 @@ fn integrate_all(
     let method = SpectralMethod::new(kind.clone(), Observer::default(), &family)
         .map_err(|e| e.to_string())?;
     Ok(match light {
-        None => spectra
-            .iter()
-            .map(|s| method.integrate(&method.represent(s)))
-            .collect(),
+        None => (
+            spectra
+                .iter()
+                .map(|s| method.integrate(&method.represent(s)))
+                .collect(),
+            None,
+        ),
         Some(l) => {
             let light = method.represent(l);
             let y = method.integrate(&light).y;
             if y.is_nan() || y <= 0.0 {
                 return Err(Failure::from("the illuminant has no luminance"));
             }
-            spectra
+            let colours = spectra
                 .iter()
                 .map(|r| {
                     method.integrate(&method.product(&method.reflectance(r), &light)) * (100.0 / y)
                 })
-                .collect()
+                .collect();
+            (colours, Some(method.integrate(&light) * (100.0 / y)))
         }
     })
 }

@@ -6,23 +6,24 @@ use std::path::{Path, PathBuf};
 use chromacal::color::spaces::{Xyz, xyz_to_luv, xyz_to_uv_prime, xyz_to_xyy};
 use chromacal::color::spectrum::{
     Illuminant, Observer, Spectrum, SpectrumError, emission_to_relative_xyz, emission_to_xyz,
-    photopic_luminance, reflectance_to_xyz, scotopic_luminance, white_point,
+    photopic_luminance, reflectance_to_xyz, scotopic_luminance,
 };
 use chromacal::color::{UvPrime, xyz_to_lab};
-use chromacal::numeric_csv::NumericTable;
+use chromacal::crf::spectral_file::SpectralFile;
 use chromacal::report;
 
 use super::shared::{Failure, IlluminantArg};
 
 /// Integrate spectra to XYZ, xyY, u′v′, L*a*b* and L*u*v*.
 ///
-/// The CSV's first column is `wavelength_nm`, each further column a sample. A
-/// sample on a uniform grid of whole nanometres (1, 4, 5, 10 nm …) is summed on
-/// its own grid, the colour-matching functions read at its wavelengths and Δλ its
-/// step (CIE 15 weighted ordinates). Any other grid (uneven, or steps such as
-/// 3.333 nm) is interpolated linearly onto the CMFs' 1 nm grid and summed with
-/// Δλ = 1 nm. Sums run only where the sample, the CMFs (360–830 nm) and the
-/// illuminant are all defined; nothing is extrapolated.
+/// The CSV's first column is `wavelength_nm`, each further column a sample; it is
+/// read by the same rule as `render`'s: the samples must cover 400–700 nm; where
+/// they stop inside 380–780 nm they are extended by repeating the nearest measured
+/// value (and a warning says so). A uniform grid of whole nanometres no coarser than
+/// 5 nm (1, 2, 5 nm …) is summed on its own wavelengths, the colour-matching
+/// functions read there and Δλ its step (CIE 15 weighted ordinates); any other (10 nm,
+/// uneven) is interpolated linearly onto the 5 nm grid first. L*a*b* and L*u*v* are
+/// taken against the perfect reflector summed on the same wavelengths.
 #[derive(clap::Args)]
 pub struct SpectrumArgs {
     /// A CSV of spectra: wavelength (nm) in the first column, one sample a column.
@@ -102,39 +103,26 @@ fn spectrum(
     } else {
         Observer::Cie1931TwoDegree
     };
-    let table = NumericTable::read(file)?;
-    if !table.header[0].eq_ignore_ascii_case("wavelength_nm") {
-        return Err(Failure::from(format!(
-            "{}: the first column must be wavelength_nm, not '{}'",
-            file.display(),
-            table.header[0]
-        )));
+    let read = SpectralFile::read(file).map_err(|e| Failure::from(e.to_string()))?;
+    if let Some(warning) = read.warning() {
+        tracing::warn!("{warning}");
     }
-    if table.header.len() < 2 {
-        return Err(Failure::from(format!(
-            "{}: no sample columns",
-            file.display()
-        )));
-    }
-    let wavelengths = table.column(0);
     let mut results = Vec::new();
     let mut absolute = Vec::new();
-    for (k, name) in table.header.iter().enumerate().skip(1) {
-        let sample = Spectrum::new(wavelengths.clone(), table.column(k))
-            .map_err(|e| Failure::from(format!("{}, column '{name}': {e}", file.display())))?;
+    for (name, sample) in read.names.iter().zip(&read.spectra) {
         let in_column =
             |e: SpectrumError| Failure::from(format!("{}, column '{name}': {e}", file.display()));
         let xyz = if reflectance {
-            reflectance_to_xyz(&sample, illuminant, observer).map_err(in_column)?
+            reflectance_to_xyz(sample, illuminant, observer).map_err(in_column)?
         } else if relative {
-            emission_to_relative_xyz(&sample, observer).map_err(in_column)?
+            emission_to_relative_xyz(sample, observer).map_err(in_column)?
         } else {
-            emission_to_xyz(&sample, observer).map_err(in_column)?
+            emission_to_xyz(sample, observer).map_err(in_column)?
         };
         let luminances = if !reflectance && !relative {
             Some((
-                photopic_luminance(&sample).map_err(in_column)?,
-                scotopic_luminance(&sample).ok(),
+                photopic_luminance(sample).map_err(in_column)?,
+                scotopic_luminance(sample).ok(),
             ))
         } else {
             None
@@ -142,8 +130,10 @@ fn spectrum(
         absolute.push(luminances);
         results.push((name.clone(), xyz));
     }
-    // The reference white for L*a*b* and L*u*v*.
-    let white_xyz = white_point(illuminant, observer)?;
+    // The reference white for L*a*b* and L*u*v*: the perfect reflector under the
+    // illuminant, summed on the samples' own wavelengths, so that a sample equal to
+    // it reads a* = b* = 0 exactly.
+    let white_xyz = perfect_reflector(&read, illuminant, observer)?;
     let white_luminance = if reflectance || relative {
         100.0
     } else {
@@ -247,6 +237,18 @@ fn spectrum(
         }
     }
     Ok(())
+}
+
+/// XYZ (Y = 100) of the perfect reflecting diffuser under `illuminant`, on the
+/// wavelengths of `read`'s samples.
+fn perfect_reflector(
+    read: &SpectralFile,
+    illuminant: Illuminant,
+    observer: Observer,
+) -> Result<Xyz, Failure> {
+    let grid = read.spectra[0].wavelengths_nm().to_vec();
+    let ones = Spectrum::new(grid.clone(), vec![1.0; grid.len()])?;
+    Ok(reflectance_to_xyz(&ones, illuminant, observer)?)
 }
 
 /// A chromaticity coordinate, or "undefined" for a sample with no light.

@@ -16,12 +16,12 @@ use serde::Serialize;
 use crate::color::Xyz;
 use crate::fit::stats::ErrorStats;
 use crate::fit::validate::delta_e00_xyz;
-use crate::model::MonitorModel;
 use crate::model::monitor::AdditivityTerms;
 use crate::model::spatial::SpatialMap;
 use crate::model::transfer::{Power, TransferLaw};
+use crate::model::{MonitorModel, ScreenPosition};
 
-use super::{ColourReproduction, CrfError, RenderSettings, Rendering, Scene};
+use super::{ColourReproduction, CrfError, RenderSettings, Rendering, Scene, ScenePixel};
 
 /// A part of the monitor model that a rendering may do without.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -233,30 +233,71 @@ pub struct SceneWeighted {
     pub colours: usize,
     /// Measured patches that are the nearest of at least one scene colour.
     pub patches_used: usize,
+    /// Screen positions the measurements were taken at, and how many of them the
+    /// scene's colours were weighed at.
+    pub positions_measured: usize,
+    pub positions_used: usize,
     /// Σ w ΔE00 / Σ w, w the number of scene colours nearest each patch.
     pub mean: f64,
     /// Largest ΔE00 of a patch some scene colour is nearest to.
     pub max: f64,
 }
 
-/// Weigh each measured patch's ΔE00 by how many of the scene's colours are nearest to
-/// it in CIELAB (against `white`): the error the scene's own colours would see,
-/// as far as the verification sampled them. `patches` are (measured XYZ, ΔE00).
-pub fn scene_weighted(patches: &[(Xyz, f64)], scene: &[Xyz], white: &Xyz) -> Option<SceneWeighted> {
+/// A measured patch for [`scene_weighted`]: its reading, where it was shown, and the
+/// profile's ΔE00 on it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WeighedPatch {
+    pub measured: Xyz,
+    pub position: ScreenPosition,
+    pub delta_e00: f64,
+}
+
+/// Weigh each measured patch's ΔE00 by how many of the scene's colours it stands for:
+/// the error the scene's own colours would see, as far as the verification sampled
+/// them. A scene colour stands at its screen position, so it is taken to the measured
+/// position nearest to it, and there to the patch nearest in CIELAB (against
+/// `white`). Where a position was measured only with greys (a uniformity grid), the
+/// scene's colours there count for those greys: that is all the readings say of
+/// that place.
+pub fn scene_weighted(
+    patches: &[WeighedPatch],
+    scene: &[ScenePixel],
+    white: &Xyz,
+) -> Option<SceneWeighted> {
     use crate::color::xyz_to_lab;
     if patches.is_empty() || scene.is_empty() {
         return None;
     }
-    let labs: Vec<_> = patches.iter().map(|(x, _)| xyz_to_lab(x, white)).collect();
+    let mut positions: Vec<ScreenPosition> = Vec::new();
+    for p in patches {
+        if !positions.contains(&p.position) {
+            positions.push(p.position);
+        }
+    }
+    let labs: Vec<_> = patches
+        .iter()
+        .map(|p| xyz_to_lab(&p.measured, white))
+        .collect();
     let mut weights = vec![0usize; patches.len()];
+    let mut used_positions = vec![false; positions.len()];
     for colour in scene {
-        let lab = xyz_to_lab(colour, white);
+        let screen = |q: &ScreenPosition| {
+            (q.x - colour.position.x).powi(2) + (q.y - colour.position.y).powi(2)
+        };
+        let Some(place) = (0..positions.len())
+            .min_by(|a, b| screen(&positions[*a]).total_cmp(&screen(&positions[*b])))
+        else {
+            continue;
+        };
+        used_positions[place] = true;
+        let lab = xyz_to_lab(&colour.xyz, white);
         let distance = |k: usize| {
             let p = &labs[k];
             (p.l - lab.l).powi(2) + (p.a - lab.a).powi(2) + (p.b - lab.b).powi(2)
         };
-        if let Some(nearest) =
-            (0..patches.len()).min_by(|a, b| distance(*a).total_cmp(&distance(*b)))
+        if let Some(nearest) = (0..patches.len())
+            .filter(|k| patches[*k].position == positions[place])
+            .min_by(|a, b| distance(*a).total_cmp(&distance(*b)))
         {
             weights[nearest] += 1;
         }
@@ -266,12 +307,17 @@ pub fn scene_weighted(patches: &[(Xyz, f64)], scene: &[Xyz], white: &Xyz) -> Opt
     Some(SceneWeighted {
         colours: scene.len(),
         patches_used: used.len(),
+        positions_measured: positions.len(),
+        positions_used: used_positions.iter().filter(|u| **u).count(),
         mean: used
             .iter()
-            .map(|k| weights[*k] as f64 * patches[*k].1)
+            .map(|k| weights[*k] as f64 * patches[*k].delta_e00)
             .sum::<f64>()
             / total as f64,
-        max: used.iter().map(|k| patches[*k].1).fold(0.0, f64::max),
+        max: used
+            .iter()
+            .map(|k| patches[*k].delta_e00)
+            .fold(0.0, f64::max),
     })
 }
 
@@ -285,15 +331,65 @@ mod tests {
         let white = Xyz::new(95.0, 100.0, 109.0);
         let dark = Xyz::new(5.0, 5.0, 5.5);
         let light = Xyz::new(80.0, 84.0, 92.0);
-        let patches = [(dark, 2.0), (light, 0.2)];
+        let at = |measured: Xyz, position: ScreenPosition, delta_e00: f64| WeighedPatch {
+            measured,
+            position,
+            delta_e00,
+        };
+        let centre = ScreenPosition::CENTRE;
+        let patches = [at(dark, centre, 2.0), at(light, centre, 0.2)];
+        let shown = |colours: &[Xyz], position: ScreenPosition| -> Vec<ScenePixel> {
+            colours
+                .iter()
+                .map(|xyz| ScenePixel {
+                    xyz: *xyz,
+                    position,
+                })
+                .collect()
+        };
         // A dark scene sees the dark patch's error, a light one the light patch's.
-        let near_dark = [Xyz::new(4.0, 4.2, 4.6), Xyz::new(6.0, 6.1, 6.8)];
+        let near_dark = shown(&[Xyz::new(4.0, 4.2, 4.6), Xyz::new(6.0, 6.1, 6.8)], centre);
         let w = scene_weighted(&patches, &near_dark, &white).unwrap();
         assert_eq!((w.patches_used, w.mean), (1, 2.0));
-        let mixed = [Xyz::new(4.0, 4.2, 4.6), light, light, light];
+        let mixed = shown(&[Xyz::new(4.0, 4.2, 4.6), light, light, light], centre);
         let w = scene_weighted(&patches, &mixed, &white).unwrap();
         assert!((w.mean - (2.0 + 3.0 * 0.2) / 4.0).abs() < 1e-12);
         assert_eq!(w.max, 2.0);
+    }
+
+    #[test]
+    fn scene_colours_count_where_they_are_shown() {
+        let white = Xyz::new(95.0, 100.0, 109.0);
+        let grey = Xyz::new(19.0, 20.0, 21.8);
+        let corner = ScreenPosition::new(0.1, 0.1);
+        // The same grey measured at the centre (ΔE00 0.3) and in a corner (1.5).
+        let patches = [
+            WeighedPatch {
+                measured: grey,
+                position: ScreenPosition::CENTRE,
+                delta_e00: 0.3,
+            },
+            WeighedPatch {
+                measured: grey * 0.9,
+                position: corner,
+                delta_e00: 1.5,
+            },
+        ];
+        let scene_at = |position: ScreenPosition| {
+            vec![ScenePixel {
+                xyz: grey,
+                position,
+            }]
+        };
+        let middle = scene_weighted(&patches, &scene_at(ScreenPosition::CENTRE), &white).unwrap();
+        let near_corner =
+            scene_weighted(&patches, &scene_at(ScreenPosition::new(0.05, 0.2)), &white).unwrap();
+        assert_eq!(middle.mean, 0.3);
+        assert_eq!(near_corner.mean, 1.5);
+        assert_eq!(
+            (near_corner.positions_measured, near_corner.positions_used),
+            (2, 1)
+        );
     }
 
     #[test]

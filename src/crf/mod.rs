@@ -24,6 +24,7 @@ pub mod inverse_table;
 pub mod lut3d;
 pub mod scene;
 pub mod spectral;
+pub mod spectral_file;
 pub mod spectral_image;
 pub mod spectral_table;
 pub mod tone;
