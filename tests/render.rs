@@ -549,7 +549,7 @@ fn the_tone_operators_map_a_bright_scene_into_the_display() {
     // The scene's white on the display's: the white patch (Y 90 %) just below it.
     let ratio = linear.pixels[18].target[1] / model.white().y;
     assert!((ratio - colours[18].y / 5000.0).abs() < 1e-9);
-    let ward = render(ToneOperator::Ward);
+    let ward = render(ToneOperator::Ward { focus: None });
     let tr = render(ToneOperator::TumblinRushmeier {
         display_contrast: 35.0,
     });
@@ -1465,4 +1465,144 @@ fn a_perfect_reflector_reads_as_the_white_it_is_measured_against() {
             "{illuminant}: the white lands at {a:?}, the display's is {b:?}"
         );
     }
+}
+
+#[test]
+fn explain_reports_what_the_whole_profile_shows_for_its_codes() {
+    // Greys and colours at the centre and a corner; --explain with a loose limit drops
+    // parts of the model, and the shown XYZ written are still the full profile's.
+    let dir = tempfile::tempdir().unwrap();
+    let model = model();
+    let mut csv = String::from("X,Y,Z,screen_x,screen_y\n");
+    for (k, rgb) in [
+        [0.2, 0.2, 0.2],
+        [0.6, 0.3, 0.1],
+        [0.1, 0.5, 0.7],
+        [0.9, 0.9, 0.8],
+    ]
+    .iter()
+    .enumerate()
+    {
+        let at = if k % 2 == 0 {
+            ScreenPosition::CENTRE
+        } else {
+            ScreenPosition::new(0.1, 0.1)
+        };
+        let xyz = model.forward(*rgb, at);
+        csv.push_str(&format!(
+            "{},{},{},{},{}\n",
+            xyz.x, xyz.y, xyz.z, at.x, at.y
+        ));
+    }
+    let scene = dir.path().join("scene.csv");
+    std::fs::write(&scene, csv).unwrap();
+    let out = dir.path().join("out.csv");
+    let said = render_ok(&[
+        "--xyz".as_ref(),
+        scene.as_os_str(),
+        "--explain".as_ref(),
+        "--max-de00".as_ref(),
+        "5".as_ref(),
+        "--bits".as_ref(),
+        "10".as_ref(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert!(said.contains("→ dropped"), "{said}");
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut differs = 0;
+    for line in text.lines().skip(1) {
+        let v: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
+        let at = ScreenPosition::new(v[1], v[2]);
+        let full = model.forward([v[3] / 1023.0, v[4] / 1023.0, v[5] / 1023.0], at);
+        let shown = Xyz::new(v[9], v[10], v[11]);
+        assert!(
+            (shown - full).norm() <= 1e-9 * full.norm().max(1.0),
+            "{line}"
+        );
+        // The reduced model's codes miss the asked colour by what was dropped.
+        let asked = Xyz::new(v[6], v[7], v[8]);
+        if delta_e00_xyz(&asked, &full, &model.white()) > 0.05 {
+            differs += 1;
+        }
+    }
+    assert!(differs > 0, "nothing dropped made a difference:\n{text}");
+}
+
+#[test]
+fn ward_adapts_to_the_mean_luminance_of_the_focus_area() {
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    // A sunlit left half (2000 cd/m²) and a shaded right half (20 cd/m²).
+    let grey = |y: f64, x: f64| ScenePixel {
+        xyz: d65_white(y),
+        position: ScreenPosition::new(x, 0.5),
+    };
+    let scene = Scene {
+        pixels: vec![
+            grey(2000.0, 0.1),
+            grey(1000.0, 0.3),
+            grey(20.0, 0.7),
+            grey(10.0, 0.9),
+        ],
+        white: None,
+    };
+    let factor = |focus| {
+        let r = crf
+            .render(
+                &scene,
+                &RenderSettings {
+                    adaptation: None,
+                    tone: ToneOperator::Ward { focus },
+                    ..settings(GamutMapping::Clip, 16)
+                },
+            )
+            .unwrap();
+        r.pixels[3].target[1] / scene.pixels[3].xyz.y
+    };
+    let area = |left| chromacal::crf::tone::FocusArea {
+        left,
+        top: 0.0,
+        width: 0.5,
+        height: 1.0,
+    };
+    // Ward's m from an adaptation luminance, on this display (L_da = L_dmax / 2).
+    let m = |la: f64| {
+        let lda = model.white().y / 2.0;
+        ((1.219 + lda.powf(0.4)) / (1.219 + la.powf(0.4))).powf(2.5)
+    };
+    let (sunlit, shaded, whole) = (
+        factor(Some(area(0.0))),
+        factor(Some(area(0.5))),
+        factor(None),
+    );
+    assert!((sunlit / m(1500.0) - 1.0).abs() < 1e-9, "{sunlit}");
+    assert!((shaded / m(15.0) - 1.0).abs() < 1e-9, "{shaded}");
+    assert!((whole / m(757.5) - 1.0).abs() < 1e-9, "{whole}");
+    assert!(shaded > 10.0 * sunlit);
+    // A focus area with nothing in it is refused by name.
+    let empty = crf.render(
+        &Scene {
+            pixels: vec![grey(100.0, 0.9)],
+            white: None,
+        },
+        &RenderSettings {
+            adaptation: None,
+            tone: ToneOperator::Ward {
+                focus: Some(area(0.0)),
+            },
+            ..settings(GamutMapping::Clip, 16)
+        },
+    );
+    assert!(empty.unwrap_err().to_string().contains("focus area"));
+    // From the command line, --focus is Ward's alone.
+    let out = render_command(&[
+        "--xyz".as_ref(),
+        "nonexistent.csv".as_ref(),
+        "--focus".as_ref(),
+        "0,0,0.5,0.5".as_ref(),
+        "-o".as_ref(),
+        "-".as_ref(),
+    ]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--tone ward"));
 }

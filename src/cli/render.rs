@@ -18,7 +18,7 @@ use chromacal::crf::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
 use chromacal::crf::spectral_file::SpectralFile;
 use chromacal::crf::spectral_image::SpectralImage;
 use chromacal::crf::spectral_table::standard_methods;
-use chromacal::crf::tone::{TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
+use chromacal::crf::tone::{FocusArea, TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
 use chromacal::crf::{
     CodeChoice, ColourReproduction, RenderSettings, RenderSummary, Scene, ScenePixel,
 };
@@ -89,6 +89,11 @@ pub struct RenderArgs {
     /// Tone reproduction.
     #[arg(long, value_enum, ignore_case = true, default_value = "colorimetric")]
     tone: ToneArg,
+    /// Ward: the area the observer looks at, LEFT,TOP,WIDTH,HEIGHT in fractions of
+    /// the screen; its mean luminance is the scene's adaptation [default: the whole
+    /// scene].
+    #[arg(long, value_name = "RECT")]
+    focus: Option<String>,
     /// Usable contrast of the display for Tumblin–Rushmeier (the survey's 35).
     #[arg(long, default_value_t = TUMBLIN_RUSHMEIER_CONTRAST, value_parser = contrast_ratio)]
     display_contrast: f64,
@@ -270,9 +275,14 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
     } else {
         profile.model.clone()
     };
-    let rendering = ColourReproduction::new(&model)
+    let mut rendering = ColourReproduction::new(&model)
         .and_then(|crf| crf.render(&read.scene, &settings))
         .map_err(|e| e.to_string())?;
+    if args.explain {
+        // The codes come from the reduced model; what they show is the whole
+        // profile's prediction.
+        rendering.shown_by(&profile.model, &read.scene, settings.bits);
+    }
     write_codes(&args, &read, &rendering)?;
     lines.push(describe(
         &rendering.summary,
@@ -329,10 +339,29 @@ fn lay_out(read: &mut ReadScene, grid: &str, placement: &Placement) -> Result<()
 }
 
 fn settings_of(args: &RenderArgs) -> Result<RenderSettings, Failure> {
+    if args.focus.is_some() && !matches!(args.tone, ToneArg::Ward) {
+        return Err(Failure::from(
+            "--focus is the area Ward's operator adapts to: give it with --tone ward",
+        ));
+    }
     let tone = match args.tone {
         ToneArg::Colorimetric => ToneOperator::Colorimetric,
         ToneArg::Linear => ToneOperator::Linear,
-        ToneArg::Ward => ToneOperator::Ward,
+        ToneArg::Ward => ToneOperator::Ward {
+            focus: args
+                .focus
+                .as_deref()
+                .map(|text| {
+                    Placement::parse(text).map(|p| FocusArea {
+                        left: p.left,
+                        top: p.top,
+                        width: p.width,
+                        height: p.height,
+                    })
+                })
+                .transpose()
+                .map_err(|e| Failure::from(format!("--focus: {e}")))?,
+        },
         ToneArg::TumblinRushmeier => ToneOperator::TumblinRushmeier {
             display_contrast: args.display_contrast,
         },

@@ -50,6 +50,10 @@ pub enum CrfError {
     BitDepth(u32),
     #[error("the scene has no lit pixel, so the {0} tone operator has nothing to adapt to")]
     NothingLit(String),
+    #[error(
+        "no lit pixel of the scene lies in Ward's focus area: give a --focus rectangle the scene covers"
+    )]
+    NothingLitInFocus,
     #[error("pixel {index}: {what}")]
     BadPixel { index: usize, what: String },
     #[error("chromatic adaptation needs the scene's white, and none was given")]
@@ -155,6 +159,24 @@ enum SceneTransform {
 pub struct Rendering {
     pub pixels: Vec<RenderedPixel>,
     pub summary: RenderSummary,
+}
+
+impl Rendering {
+    /// What `model` says the display shows for each pixel's codes, where `scene`
+    /// puts it: `shown`, `inversion_delta_e00` and the summary's inversion
+    /// recomputed. For codes chosen with a reduced model (`--explain`), this is the
+    /// full profile's prediction of what the screen will show.
+    pub fn shown_by(&mut self, model: &MonitorModel, scene: &Scene, bits: u32) {
+        let top = ((1u64 << bits) - 1) as f64;
+        let white = model.white();
+        for (pixel, at) in self.pixels.iter_mut().zip(&scene.pixels) {
+            let shown = model.forward(pixel.codes.map(|c| f64::from(c) / top), at.position);
+            pixel.shown = shown.into();
+            pixel.inversion_delta_e00 = delta_e00_xyz(&Xyz::from(pixel.mapped), &shown, &white);
+        }
+        let inversion: Vec<f64> = self.pixels.iter().map(|p| p.inversion_delta_e00).collect();
+        self.summary.inversion = ErrorStats::of(&inversion);
+    }
 }
 
 /// The colour reproduction function of one display: its model, prepared once.
@@ -450,11 +472,23 @@ impl<'a> ColourReproduction<'a> {
         if tone == ToneOperator::Colorimetric {
             return Ok(ToneCurve::Scale(1.0));
         }
-        let stats = SceneLuminance::of(
+        let mut stats = SceneLuminance::of(
             scene.pixels.iter().map(|p| p.xyz.y),
             scene.white.map(|w| w.y),
         )
         .ok_or_else(|| CrfError::NothingLit(tone.name()))?;
+        if let ToneOperator::Ward { focus: Some(area) } = tone {
+            let looked_at = SceneLuminance::of(
+                scene
+                    .pixels
+                    .iter()
+                    .filter(|p| area.contains(p.position.x, p.position.y))
+                    .map(|p| p.xyz.y),
+                None,
+            )
+            .ok_or(CrfError::NothingLitInFocus)?;
+            stats.mean = looked_at.mean;
+        }
         Ok(tone.curve(&stats, self.white.y))
     }
 

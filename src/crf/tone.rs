@@ -24,9 +24,10 @@ pub enum ToneOperator {
     /// m = [(1.219 + L_da^0.4) / (1.219 + L_sa^0.4)]^2.5, from Blackwell's threshold
     /// ΔL(L_a) = 0.054 (1.219 + L_a^0.4)^2.5, so that a just-noticeable difference in
     /// the scene is one on the display. L_da = L_dmax / 2 (Ward), L_sa the scene's
-    /// adaptation luminance (its log-mean luminance; Ward takes the mean over the
-    /// area the observer looks at).
-    Ward,
+    /// adaptation luminance: the mean luminance over the area the observer looks at
+    /// (seed §4.2.4: "the luminance average on that area"), `focus`, or over the
+    /// whole scene when no area is given.
+    Ward { focus: Option<FocusArea> },
     /// Tumblin and Rushmeier (1993), "Tone reproduction for realistic images", IEEE
     /// CG&A 13(6) (seed §4.2.4): equal Stevens brightness B = 10^β L^α for scene and
     /// display observer gives L_d = L_s^(α_s/α_d) · 10^((β_s − β_d)/α_d), with
@@ -37,6 +38,24 @@ pub enum ToneOperator {
     TumblinRushmeier { display_contrast: f64 },
 }
 
+/// Where the observer looks, for Ward: a rectangle of the screen in fractions of
+/// its width and height from the top left.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FocusArea {
+    pub left: f64,
+    pub top: f64,
+    pub width: f64,
+    pub height: f64,
+}
+
+impl FocusArea {
+    /// Whether the screen point (`x`, `y`) lies in the area (edges included).
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        (self.left..=self.left + self.width).contains(&x)
+            && (self.top..=self.top + self.height).contains(&y)
+    }
+}
+
 /// The survey's typical usable contrast of a display for Tumblin–Rushmeier.
 pub const TUMBLIN_RUSHMEIER_CONTRAST: f64 = 35.0;
 
@@ -45,6 +64,9 @@ pub const TUMBLIN_RUSHMEIER_CONTRAST: f64 = 35.0;
 pub struct SceneLuminance {
     /// Exp of the mean log luminance of the lit pixels (cd/m²).
     pub log_mean: f64,
+    /// Mean luminance of the lit pixels (cd/m²): over the focus area, for Ward,
+    /// when one is given.
+    pub mean: f64,
     pub max: f64,
     /// The scene's white, when known (a reflectance scene's perfect diffuser).
     pub white: Option<f64>,
@@ -56,14 +78,16 @@ const LIT: f64 = 1e-6;
 impl SceneLuminance {
     /// Statistics of the scene's luminances (cd/m²); `None` if no pixel is lit.
     pub fn of(luminances: impl Iterator<Item = f64>, white: Option<f64>) -> Option<Self> {
-        let (mut sum, mut n, mut max) = (0.0, 0usize, 0.0f64);
+        let (mut sum, mut linear, mut n, mut max) = (0.0, 0.0, 0usize, 0.0f64);
         for l in luminances.filter(|l| *l > LIT && l.is_finite()) {
             sum += l.ln();
+            linear += l;
             n += 1;
             max = max.max(l);
         }
         (n > 0).then(|| SceneLuminance {
             log_mean: (sum / n as f64).exp(),
+            mean: linear / n as f64,
             max,
             white,
         })
@@ -94,11 +118,10 @@ impl ToneOperator {
                 let reference = scene.white.unwrap_or(scene.max);
                 ToneCurve::Scale(display_max / reference)
             }
-            ToneOperator::Ward => {
+            ToneOperator::Ward { .. } => {
                 let display_adaptation = display_max / 2.0;
-                let m = ((1.219 + display_adaptation.powf(0.4))
-                    / (1.219 + scene.log_mean.powf(0.4)))
-                .powf(2.5);
+                let m = ((1.219 + display_adaptation.powf(0.4)) / (1.219 + scene.mean.powf(0.4)))
+                    .powf(2.5);
                 ToneCurve::Scale(m)
             }
             ToneOperator::TumblinRushmeier { display_contrast } => {
@@ -118,7 +141,14 @@ impl ToneOperator {
         match self {
             ToneOperator::Colorimetric => "colorimetric (L_d = L_s)".into(),
             ToneOperator::Linear => "linear scale to the display's white".into(),
-            ToneOperator::Ward => "Ward (1994) contrast-based scale factor".into(),
+            ToneOperator::Ward { focus: None } => {
+                "Ward (1994) contrast-based scale factor, adapted to the whole scene's mean luminance"
+                    .into()
+            }
+            ToneOperator::Ward { focus: Some(f) } => format!(
+                "Ward (1994) contrast-based scale factor, adapted to the mean luminance of the focus area {},{},{},{}",
+                f.left, f.top, f.width, f.height
+            ),
             ToneOperator::TumblinRushmeier { display_contrast } => {
                 format!("Tumblin–Rushmeier (1993), C_max {display_contrast}")
             }
@@ -162,6 +192,7 @@ mod tests {
     fn scene(log_mean: f64, max: f64) -> SceneLuminance {
         SceneLuminance {
             log_mean,
+            mean: log_mean,
             max,
             white: None,
         }
@@ -177,12 +208,14 @@ mod tests {
     #[test]
     fn ward_is_one_when_scene_and_display_adapt_alike() {
         // Scene adapted to 50 cd/m², display white 100 (L_da = 50): m = 1.
-        let c = ToneOperator::Ward.curve(&scene(50.0, 500.0), 100.0);
+        let c = ToneOperator::Ward { focus: None }.curve(&scene(50.0, 500.0), 100.0);
         assert!((c.factor(10.0) - 1.0).abs() < 1e-12);
         // A brighter scene is scaled down, and a just-noticeable step in the scene
         // (Blackwell's ΔL at its adaptation) becomes one on the display.
         let bright = scene(5000.0, 50_000.0);
-        let m = ToneOperator::Ward.curve(&bright, 100.0).factor(1.0);
+        let m = ToneOperator::Ward { focus: None }
+            .curve(&bright, 100.0)
+            .factor(1.0);
         let threshold = |la: f64| 0.054 * (1.219 + la.powf(0.4)).powf(2.5);
         assert!((m * threshold(5000.0) - threshold(50.0)).abs() < 1e-9);
     }
