@@ -4,10 +4,10 @@
 
 use chromacal::color::spectrum::Spectrum;
 use chromacal::color::spectrum::{Illuminant, Observer, reflectance_to_xyz};
-use chromacal::crf::spectral::{GRID_LEN, MethodKind, Operations, SpectralMethod, grid_nm};
+use chromacal::crf::spectral::{Band, GRID_LEN, MethodKind, Operations, SpectralMethod, grid_nm};
 use chromacal::crf::spectral_table::{
-    Case, Family, Row, cheapest_below, colorchecker_family, display_family, family_table,
-    illuminant_family, standard_methods,
+    Case, Family, Row, cheapest_below, colorchecker_family, display_family, family_table, findings,
+    illuminant_family, standard_methods, survey_families, survey_methods,
 };
 
 mod common;
@@ -53,7 +53,14 @@ fn the_direct_method_is_chromacals_own_colorimetry() {
 #[test]
 fn every_method_is_scored_against_the_reference_and_converges() {
     for family in families() {
-        let rows = family_table(&family, &standard_methods(), Observer::default(), 0).unwrap();
+        let rows = family_table(
+            &family,
+            &standard_methods(),
+            Observer::default(),
+            0,
+            Band::FULL,
+        )
+        .unwrap();
         assert_eq!(rows.len(), standard_methods().len(), "{}", family.name);
         for r in &rows {
             assert!(r.delta_e00.mean.is_finite() && r.delta_e_uv.mean.is_finite());
@@ -91,6 +98,7 @@ fn peaky_light_is_the_hard_case_as_the_survey_says() {
         &standard_methods(),
         Observer::default(),
         0,
+        Band::FULL,
     )
     .unwrap();
     let f11 = family_table(
@@ -98,6 +106,7 @@ fn peaky_light_is_the_hard_case_as_the_survey_says() {
         &standard_methods(),
         Observer::default(),
         0,
+        Band::FULL,
     )
     .unwrap();
     let ten = MethodKind::Sampling { step_nm: 10 };
@@ -159,7 +168,14 @@ fn operations_are_the_survey_formulas() {
 #[test]
 fn the_cheapest_method_meets_its_limit_and_a_spanning_basis_does_not_count() {
     let family = illuminant_family();
-    let rows = family_table(&family, &standard_methods(), Observer::default(), 0).unwrap();
+    let rows = family_table(
+        &family,
+        &standard_methods(),
+        Observer::default(),
+        0,
+        Band::FULL,
+    )
+    .unwrap();
     // Seven illuminants and m = 8 vectors: the basis holds them all.
     let spanning = row(&rows, &MethodKind::CharacteristicVectors { m: 8 });
     assert!(spanning.spans_the_family && spanning.delta_e00.max < 1e-9);
@@ -215,4 +231,56 @@ fn bench_spectral_prints_the_table_with_the_survey_beside() {
     };
     assert!(again.contains("display primaries"), "{again}");
     assert_eq!(counts(&again).len(), counts(&text).len());
+}
+
+#[test]
+fn the_survey_setting_reproduces_its_findings() {
+    // 380–700 nm, the ColorChecker under C, D65 and a four-peak fluorescent source,
+    // reflected once, ΔE*uv < 1 (seed §3.4).
+    let methods = survey_methods(24);
+    let tables: Vec<Vec<Row>> = survey_families()
+        .iter()
+        .map(|f| family_table(f, &methods, Observer::default(), 0, Band::SURVEY).unwrap())
+        .collect();
+    let found: Vec<_> = tables.iter().map(|rows| findings(rows, 1.0)).collect();
+    for f in &found[..2] {
+        // Degree 4 is the least that gives ΔE*uv < 1 after one reflection.
+        assert_eq!(f.least_degree, Some(4), "{f:?}");
+        // Point sampling (fewer points than the reference) is the cheapest product.
+        assert!(
+            matches!(f.cheapest_product, Some(MethodKind::Sampling { .. })),
+            "{f:?}"
+        );
+    }
+    // Characteristic vectors are the cheapest integration under every light.
+    for f in &found {
+        assert!(
+            matches!(
+                f.cheapest_integration,
+                Some(MethodKind::CharacteristicVectors { .. })
+            ),
+            "{f:?}"
+        );
+    }
+    // Under the four peaks, sampling with fewer points and polynomials cannot cope;
+    // characteristic vectors can.
+    let fluorescent = &tables[2];
+    assert!(
+        row(fluorescent, &MethodKind::Sampling { step_nm: 10 })
+            .delta_e_uv
+            .mean
+            > 10.0
+    );
+    assert_eq!(found[2].least_degree, None);
+    assert!(found[2].fewest_vectors.is_some());
+    // The setting matters: over 380–780 nm degree 4 misses under D65.
+    let wide = family_table(
+        &colorchecker_family(Illuminant::D65, "D65"),
+        &[MethodKind::RasoFournier { degree: 4 }],
+        Observer::default(),
+        0,
+        Band::FULL,
+    )
+    .unwrap();
+    assert!(wide[0].delta_e_uv.mean > 1.0, "{:?}", wide[0].delta_e_uv);
 }

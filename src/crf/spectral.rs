@@ -25,6 +25,42 @@ pub const GRID_STEP_NM: f64 = 5.0;
 /// Samples on the grid: 380, 385, …, 780 nm.
 pub const GRID_LEN: usize = 81;
 
+/// The wavelengths a method integrates over: a stretch of the grid. chromacal uses
+/// the whole grid, 380–780 nm; the survey used 380–700 nm (seed §3: λ_inf = 380 nm,
+/// λ_sup = 700 nm), and `bench spectral` runs both.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Band {
+    pub from_nm: f64,
+    pub to_nm: f64,
+}
+
+impl Band {
+    /// The whole grid, 380–780 nm.
+    pub const FULL: Band = Band {
+        from_nm: GRID_START_NM,
+        to_nm: 780.0,
+    };
+    /// The survey's visible domain, 380–700 nm.
+    pub const SURVEY: Band = Band {
+        from_nm: 380.0,
+        to_nm: 700.0,
+    };
+
+    /// Grid indices of the band's first and last samples.
+    fn indices(&self) -> (usize, usize) {
+        let at = |nm: f64| {
+            (((nm - GRID_START_NM) / GRID_STEP_NM).round().max(0.0) as usize).min(GRID_LEN - 1)
+        };
+        (at(self.from_nm), at(self.to_nm))
+    }
+
+    /// The grid's samples in the band.
+    fn len(&self) -> usize {
+        let (a, b) = self.indices();
+        b - a + 1
+    }
+}
+
 /// Wavelength of grid sample `i`.
 pub fn grid_nm(i: usize) -> f64 {
     GRID_START_NM + GRID_STEP_NM * i as f64
@@ -114,12 +150,18 @@ impl MethodKind {
     }
 
     pub fn parameter(&self) -> String {
+        self.parameter_in(Band::FULL)
+    }
+
+    /// The parameter as it stands over `band` (the samples a sampling method takes
+    /// there).
+    pub fn parameter_in(&self, band: Band) -> String {
         match self {
-            MethodKind::Direct => format!("{GRID_LEN} samples, 5 nm"),
+            MethodKind::Direct => format!("{} samples, 5 nm", band.len()),
             MethodKind::Sampling { step_nm } => {
                 format!(
                     "{} samples, {step_nm} nm",
-                    sampling_wavelengths(*step_nm).len()
+                    sampling_wavelengths(*step_nm, band).len()
                 )
             }
             MethodKind::Gauss { points } => format!("{points} per function"),
@@ -170,12 +212,12 @@ impl std::str::FromStr for MethodKind {
     }
 }
 
-/// Wavelengths of point sampling every `step_nm` from 380 to 780 nm.
-fn sampling_wavelengths(step_nm: usize) -> Vec<f64> {
+/// Wavelengths of point sampling every `step_nm` across `band`.
+fn sampling_wavelengths(step_nm: usize, band: Band) -> Vec<f64> {
     let step = step_nm.max(5);
     (0..)
-        .map(|k| GRID_START_NM + (k * step) as f64)
-        .take_while(|nm| *nm <= 780.0 + 1e-9)
+        .map(|k| band.from_nm + (k * step) as f64)
+        .take_while(|nm| *nm <= band.to_nm + 1e-9)
         .collect()
 }
 
@@ -207,6 +249,7 @@ pub enum SpectralError {
 #[derive(Debug, Clone)]
 pub struct SpectralMethod {
     pub kind: MethodKind,
+    pub band: Band,
     form: Form,
 }
 
@@ -221,6 +264,8 @@ enum Form {
     },
     Polynomial {
         degree: usize,
+        /// Grid indices of the two spans (the split sample in both).
+        spans: [Vec<usize>; 2],
         /// Least-squares projection of grid samples on each span's Chebyshev basis.
         projection: [DMatrix<f64>; 2],
         /// ∫ T_i(t) f(λ) dλ over each span for each function f, f itself the span's
@@ -238,10 +283,12 @@ enum Form {
 /// Where the Raso–Fournier spans split (nm).
 pub const SPLIT_NM: f64 = 550.0;
 
-/// Grid indices of each span: [380, 550] and [550, 780] (550 in both).
-fn span_indices() -> [Vec<usize>; 2] {
+/// Grid indices of each span of `band`: [380, 550] and [550, the band's end] (550 in
+/// both).
+fn span_indices(band: Band) -> [Vec<usize>; 2] {
     let split = ((SPLIT_NM - GRID_START_NM) / GRID_STEP_NM).round() as usize;
-    [(0..=split).collect(), (split..GRID_LEN).collect()]
+    let (first, last) = band.indices();
+    [(first..=split).collect(), (split..=last).collect()]
 }
 
 /// Chebyshev polynomials T_0 … T_degree at t ∈ [−1, 1].
@@ -275,27 +322,42 @@ fn cmf_on_grid(observer: Observer) -> [Vec<f64>; 3] {
 
 impl SpectralMethod {
     /// Prepare `kind` for `observer`; characteristic vectors are computed from
-    /// `family` (spectra on the grid, representative of the scene).
+    /// `family` (spectra on the grid, representative of the scene). Over the whole
+    /// grid, 380–780 nm.
     pub fn new(
         kind: MethodKind,
         observer: Observer,
         family: &[Vec<f64>],
     ) -> Result<SpectralMethod, SpectralError> {
+        SpectralMethod::in_band(kind, observer, family, Band::FULL)
+    }
+
+    /// The same over `band` only: what lies outside it is not seen.
+    pub fn in_band(
+        kind: MethodKind,
+        observer: Observer,
+        family: &[Vec<f64>],
+        band: Band,
+    ) -> Result<SpectralMethod, SpectralError> {
         let form = match &kind {
-            MethodKind::Direct => samples_form(sampling_wavelengths(5), observer, 5.0),
+            MethodKind::Direct => samples_form(sampling_wavelengths(5, band), observer, 5.0),
             MethodKind::Sampling { step_nm } => {
                 if *step_nm == 0 || step_nm % 5 != 0 || *step_nm > 400 {
                     return Err(SpectralError::Parameter(format!(
                         "a sampling step of {step_nm} nm (a multiple of 5 up to 400)"
                     )));
                 }
-                samples_form(sampling_wavelengths(*step_nm), observer, *step_nm as f64)
+                samples_form(
+                    sampling_wavelengths(*step_nm, band),
+                    observer,
+                    *step_nm as f64,
+                )
             }
-            MethodKind::Gauss { points } => gauss_form(*points, observer)?,
-            MethodKind::RasoFournier { degree } => polynomial_form(*degree, observer)?,
-            MethodKind::CharacteristicVectors { m } => basis_form(*m, observer, family)?,
+            MethodKind::Gauss { points } => gauss_form(*points, observer, band)?,
+            MethodKind::RasoFournier { degree } => polynomial_form(*degree, observer, band)?,
+            MethodKind::CharacteristicVectors { m } => basis_form(*m, observer, family, band)?,
         };
-        Ok(SpectralMethod { kind, form })
+        Ok(SpectralMethod { kind, band, form })
     }
 
     /// The method's representation of a spectrum given on the grid.
@@ -307,8 +369,9 @@ impl SpectralMethod {
                     .map(|nm| interpolate(spectrum, *nm))
                     .collect(),
             ),
-            Form::Polynomial { projection, .. } => {
-                let spans = span_indices();
+            Form::Polynomial {
+                projection, spans, ..
+            } => {
                 let mut coefficients = Vec::new();
                 for (span, indices) in spans.iter().enumerate() {
                     let values =
@@ -441,13 +504,15 @@ fn samples_form(wavelengths: Vec<f64>, observer: Observer, step: f64) -> Form {
 /// weights of the `points`-point rule orthogonal to f(λ) dλ, by the Golub–Welsch
 /// algorithm (the Jacobi matrix of the recurrence, from the discretised Stieltjes
 /// procedure on the 1 nm table, then its eigen-decomposition).
-fn gauss_form(points: usize, observer: Observer) -> Result<Form, SpectralError> {
+fn gauss_form(points: usize, observer: Observer, band: Band) -> Result<Form, SpectralError> {
     if !(1..=20).contains(&points) {
         return Err(SpectralError::Parameter(format!(
             "{points} quadrature points per function (1 to 20)"
         )));
     }
-    let nm: Vec<f64> = (380..=780).map(f64::from).collect();
+    let nm: Vec<f64> = (band.from_nm.round() as i32..=band.to_nm.round() as i32)
+        .map(f64::from)
+        .collect();
     let mut wavelengths = Vec::new();
     let mut weights: [Vec<Option<f64>>; 3] = [Vec::new(), Vec::new(), Vec::new()];
     for f in 0..3 {
@@ -527,13 +592,13 @@ fn gauss_rule(x: &[f64], w: &[f64], n: usize) -> Result<(Vec<f64>, Vec<f64>), Sp
 
 /// Raso–Fournier: least-squares projection on each span's Chebyshev basis, and the
 /// colour-matching functions as polynomials of the same form.
-fn polynomial_form(degree: usize, observer: Observer) -> Result<Form, SpectralError> {
+fn polynomial_form(degree: usize, observer: Observer, band: Band) -> Result<Form, SpectralError> {
     if !(1..=8).contains(&degree) {
         return Err(SpectralError::Parameter(format!(
             "polynomials of degree {degree} (1 to 8)"
         )));
     }
-    let spans = span_indices();
+    let spans = span_indices(band);
     let n = degree + 1;
     let mut projection = Vec::new();
     let mut bases = Vec::new();
@@ -566,6 +631,7 @@ fn polynomial_form(degree: usize, observer: Observer) -> Result<Form, SpectralEr
     let projection: [DMatrix<f64>; 2] = [projection[0].clone(), projection[1].clone()];
     Ok(Form::Polynomial {
         degree,
+        spans,
         projection,
         integrals,
     })
@@ -621,18 +687,33 @@ fn chebyshev_product_operations(n: usize) -> Operations {
 /// Peercy: the first m eigenvectors of the family's correlation matrix Σ s sᵀ (not
 /// centred, so that a spectrum is a combination of the vectors alone; the survey's
 /// "covariance" with the mean kept in). Orthonormal on the grid.
-fn basis_form(m: usize, observer: Observer, family: &[Vec<f64>]) -> Result<Form, SpectralError> {
+fn basis_form(
+    m: usize,
+    observer: Observer,
+    family: &[Vec<f64>],
+    band: Band,
+) -> Result<Form, SpectralError> {
     if family.is_empty() {
         return Err(SpectralError::NoFamily);
     }
-    if !(1..=GRID_LEN).contains(&m) {
+    if !(1..=band.len()).contains(&m) {
         return Err(SpectralError::Parameter(format!(
-            "m = {m} characteristic vectors (1 to {GRID_LEN})"
+            "m = {m} characteristic vectors (1 to {})",
+            band.len()
         )));
     }
+    // Only the band is seen: the family's samples outside it count as nothing, so
+    // the vectors are zero there.
+    let (first, last) = band.indices();
     let mut correlation = DMatrix::<f64>::zeros(GRID_LEN, GRID_LEN);
     for s in family {
-        let v = DVector::from_column_slice(s);
+        let v = DVector::from_fn(GRID_LEN, |k, _| {
+            if (first..=last).contains(&k) {
+                s[k]
+            } else {
+                0.0
+            }
+        });
         correlation += &v * v.transpose();
     }
     let eigen = SymmetricEigen::new(correlation);
@@ -641,7 +722,7 @@ fn basis_form(m: usize, observer: Observer, family: &[Vec<f64>]) -> Result<Form,
     let vectors = DMatrix::from_fn(GRID_LEN, m, |k, i| eigen.eigenvectors[(k, order[i])]);
     let cmf = cmf_on_grid(observer);
     let integrals = DMatrix::from_fn(3, m, |f, i| {
-        (0..GRID_LEN)
+        (first..=last)
             .map(|k| vectors[(k, i)] * cmf[f][k] * GRID_STEP_NM)
             .sum()
     });

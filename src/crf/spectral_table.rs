@@ -28,8 +28,8 @@ use crate::fit::stats::ErrorStats;
 use crate::numeric_csv::{CsvError, NumericTable};
 
 use super::spectral::{
-    GRID_LEN, GRID_START_NM, GRID_STEP_NM, MethodKind, Operations, SpectralError, SpectralMethod,
-    grid_nm, onto_grid,
+    Band, GRID_LEN, GRID_START_NM, GRID_STEP_NM, MethodKind, Operations, SpectralError,
+    SpectralMethod, grid_nm, onto_grid,
 };
 
 /// One spectrum to convert.
@@ -75,6 +75,25 @@ fn illuminant_on_grid(illuminant: Illuminant) -> Vec<f64> {
 
 /// The ColorChecker (Ohta, 380–780 nm at 5 nm: the grid itself) under `illuminant`.
 pub fn colorchecker_family(illuminant: Illuminant, label: &str) -> Family {
+    colorchecker_under(illuminant_on_grid(illuminant), label)
+}
+
+/// The survey's third light (seed §3.4, "a fluorescent source with four peaks"; it
+/// gives no spectrum): the four mercury lines of a fluorescent tube, 404.7, 435.8,
+/// 546.1 and 578 nm, each on the 5 nm sample nearest it (the survey spreads a peak
+/// over the 5 nm band around it), over a flat continuum at 5 % of the highest peak
+/// for the phosphor.
+pub fn four_peak_fluorescent() -> Vec<f64> {
+    let mut light = vec![0.05; GRID_LEN];
+    for (nm, height) in [(404.7, 0.4), (435.8, 0.8), (546.1, 1.0), (578.0, 0.6)] {
+        let i = ((nm - GRID_START_NM) / GRID_STEP_NM).round() as usize;
+        light[i] += height;
+    }
+    light
+}
+
+/// The ColorChecker under a light given on the grid.
+pub fn colorchecker_under(light: Vec<f64>, label: &str) -> Family {
     let cases = (0..24)
         .map(|patch| Case::Reflected {
             name: format!("patch {}", patch + 1),
@@ -90,7 +109,7 @@ pub fn colorchecker_family(illuminant: Illuminant, label: &str) -> Family {
         .collect();
     Family {
         name: format!("ColorChecker under {label}"),
-        light: Some(illuminant_on_grid(illuminant)),
+        light: Some(light),
         cases,
     }
 }
@@ -285,15 +304,16 @@ fn time_per_conversion(method: &SpectralMethod, family: &Family, repeats: usize)
     start.elapsed().as_nanos() as f64 / (repeats * prepared.len().max(1)) as f64
 }
 
-/// The table for one family: every method against the direct reference. `repeats`
-/// of 0 skips the timing.
+/// The table for one family: every method against the direct reference, both over
+/// `band`. `repeats` of 0 skips the timing.
 pub fn family_table(
     family: &Family,
     methods: &[MethodKind],
     observer: Observer,
     repeats: usize,
+    band: Band,
 ) -> Result<Vec<Row>, SpectralError> {
-    let reference = SpectralMethod::new(MethodKind::Direct, observer, &[])?;
+    let reference = SpectralMethod::in_band(MethodKind::Direct, observer, &[], band)?;
     let truth = convert(&reference, family);
     // The white of the ΔE: the light's (Y = 100), or each emission's own.
     let light_white = family.light.as_ref().map(|light| {
@@ -304,7 +324,7 @@ pub fn family_table(
     let representative = family.representative();
     let mut rows = Vec::new();
     for kind in methods {
-        let method = SpectralMethod::new(kind.clone(), observer, &representative)?;
+        let method = SpectralMethod::in_band(kind.clone(), observer, &representative, band)?;
         let got = convert(&method, family);
         let (mut uv, mut de00) = (Vec::new(), Vec::new());
         for (k, (g, t)) in got.iter().zip(&truth).enumerate() {
@@ -343,6 +363,76 @@ pub fn cheapest_below(rows: &[Row], reflective: bool, limit: f64) -> Option<&Row
     rows.iter()
         .filter(|r| r.delta_e00.mean < limit && !r.spans_the_family)
         .min_by_key(|r| r.operations(reflective))
+}
+
+/// The survey's test (seed §3.4): the 24 ColorChecker reflectances under
+/// illuminants C and D65 and a four-peak fluorescent source, reflected once, over
+/// 380–700 nm ([`Band::SURVEY`]).
+pub fn survey_families() -> Vec<Family> {
+    vec![
+        colorchecker_family(Illuminant::C, "C"),
+        colorchecker_family(Illuminant::D65, "D65"),
+        colorchecker_under(four_peak_fluorescent(), "a four-peak fluorescent"),
+    ]
+}
+
+/// The methods tried in the survey's setting: the direct sum, point sampling with
+/// fewer points, Gaussian quadrature, Raso–Fournier of degree 2 to 6, and
+/// characteristic vectors for every m from 1 to `max_m`.
+pub fn survey_methods(max_m: usize) -> Vec<MethodKind> {
+    let mut methods = vec![MethodKind::Direct];
+    methods.extend([10, 20, 40].map(|step_nm| MethodKind::Sampling { step_nm }));
+    methods.extend([2, 3, 4, 6, 8].map(|points| MethodKind::Gauss { points }));
+    methods.extend((2..=6).map(|degree| MethodKind::RasoFournier { degree }));
+    methods.extend((1..=max_m).map(|m| MethodKind::CharacteristicVectors { m }));
+    methods
+}
+
+/// What the survey concluded, measured on one family's rows: the least Raso–Fournier
+/// degree and the fewest characteristic vectors with a mean ΔE*uv below `limit`, and
+/// the cheapest methods for the product and for the integration at that limit.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Findings {
+    pub family: String,
+    pub least_degree: Option<usize>,
+    pub fewest_vectors: Option<usize>,
+    pub cheapest_product: Option<MethodKind>,
+    pub cheapest_integration: Option<MethodKind>,
+}
+
+/// The survey's claims on `rows` of one family, at a mean ΔE*uv below `limit` (the
+/// survey's 1, "non-perceptible").
+pub fn findings(rows: &[Row], limit: f64) -> Findings {
+    let good: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.delta_e_uv.mean < limit && !r.spans_the_family)
+        .collect();
+    let ops = |o: &Operations| o.multiplications + o.additions;
+    Findings {
+        family: rows.first().map_or(String::new(), |r| r.family.clone()),
+        least_degree: good
+            .iter()
+            .filter_map(|r| match r.method {
+                MethodKind::RasoFournier { degree } => Some(degree),
+                _ => None,
+            })
+            .min(),
+        fewest_vectors: good
+            .iter()
+            .filter_map(|r| match r.method {
+                MethodKind::CharacteristicVectors { m } => Some(m),
+                _ => None,
+            })
+            .min(),
+        cheapest_product: good
+            .iter()
+            .min_by_key(|r| ops(&r.product))
+            .map(|r| r.method.clone()),
+        cheapest_integration: good
+            .iter()
+            .min_by_key(|r| ops(&r.integration))
+            .map(|r| r.method.clone()),
+    }
 }
 
 /// The grid as the tables describe it.
