@@ -734,12 +734,9 @@ fn check_weighs_the_verification_by_a_scenes_colours() {
     let journal = common::daemon_runs(state).pop().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let model = model();
-    let run = |scene: &[Xyz]| {
+    // `check --json --scene` on a CSV of this text: its scene weighting.
+    let weighted = |text: String| {
         let csv = dir.path().join("scene.csv");
-        let mut text = String::from("X,Y,Z\n");
-        for x in scene {
-            text.push_str(&format!("{},{},{}\n", x.x, x.y, x.z));
-        }
         std::fs::write(&csv, text).unwrap();
         let out = chromacal()
             .arg("check")
@@ -758,6 +755,13 @@ fn check_weighs_the_verification_by_a_scenes_colours() {
         let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         json["scene_weighted"].clone()
     };
+    let run = |scene: &[Xyz]| {
+        let mut text = String::from("X,Y,Z\n");
+        for x in scene {
+            text.push_str(&format!("{},{},{}\n", x.x, x.y, x.z));
+        }
+        weighted(text)
+    };
     let dark: Vec<Xyz> = (1..6)
         .map(|k| model.forward([0.05 * k as f64; 3], ScreenPosition::CENTRE))
         .collect();
@@ -773,24 +777,11 @@ fn check_weighs_the_verification_by_a_scenes_colours() {
     // The same greys shown at the centre and in the top-left corner: the run's
     // uniformity grid measured both places, and each scene is judged where it is.
     let run_at = |x: f64, y: f64| {
-        let csv = dir.path().join("placed.csv");
         let mut text = String::from("X,Y,Z,screen_x,screen_y\n");
         for c in &bright {
             text.push_str(&format!("{},{},{},{x},{y}\n", c.x, c.y, c.z));
         }
-        std::fs::write(&csv, text).unwrap();
-        let out = chromacal()
-            .arg("check")
-            .arg(profile_path())
-            .arg(&journal)
-            .arg("--scene")
-            .arg(&csv)
-            .arg("--json")
-            .output()
-            .unwrap();
-        assert!(out.status.success());
-        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        json["scene_weighted"].clone()
+        weighted(text)
     };
     let (centre, corner) = (run_at(0.5, 0.5), run_at(0.02, 0.03));
     assert!(
