@@ -358,13 +358,10 @@ fn spectrum_integrates_emission_and_reflectance() {
         "{neutral}"
     );
 
-    // An uneven 3.333 nm grid over 380–730 nm is extended to 780 nm and put on the
-    // 5 nm grid: a flat one gives what the flat 5 nm spectrum over 380–780 nm gives.
-    let fine = Spectrum::new(
-        (380..=780).step_by(5).map(f64::from).collect(),
-        vec![0.001; 81],
-    )
-    .unwrap();
+    // A 3.333 nm grid over 380–730 nm (finer than 5 nm, not on whole nanometres) is
+    // extended to 780 nm and put on the 1 nm grid: a flat one gives what the flat
+    // 1 nm spectrum over 380–780 nm gives.
+    let fine = Spectrum::new((380..=780).map(f64::from).collect(), vec![0.001; 401]).unwrap();
     let uneven_csv = dir.path().join("uneven.csv");
     let mut text = String::from("wavelength_nm,flat\n");
     for i in 0..106 {
@@ -392,7 +389,7 @@ fn spectrum_integrates_emission_and_reflectance() {
     // Help says how spectra meet the CMF grid.
     let (_, help, _) = run(&["spectrum", "--help"]);
     assert!(
-        help.contains("5 nm grid") && help.contains("weighted ordinates"),
+        help.contains("1 nm") && help.contains("weighted ordinates"),
         "{help}"
     );
 }

@@ -190,7 +190,7 @@ fn outputs_are_never_nan_with_success() {
     let spectra = write(
         dir.path(),
         "s.csv",
-        "wavelength_nm,lamp,dark\n500,1,0\n550,2,0\n600,1,0\n",
+        "wavelength_nm,lamp,dark\n400,0.5,0\n500,1,0\n550,2,0\n600,1,0\n700,0.5,0\n",
     );
     // A reference white of Y = 0 makes L*a*b* infinite: refused.
     let (code, stdout, stderr) = run(
@@ -215,7 +215,11 @@ fn outputs_are_never_nan_with_success() {
     let json: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert!(json[1]["x"].is_null(), "{json}");
     // Nothing but darkness: L*a*b* has no white.
-    let dark_only = write(dir.path(), "d.csv", "wavelength_nm,dark\n500,0\n550,0\n");
+    let dark_only = write(
+        dir.path(),
+        "d.csv",
+        "wavelength_nm,dark\n400,0\n550,0\n700,0\n",
+    );
     let (code, _, stderr) = run(&["spectrum", &dark_only], Duration::from_secs(10));
     assert_eq!(code, Some(1));
     assert!(stderr.contains("no sample has any light"), "{stderr}");

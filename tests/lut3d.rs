@@ -265,6 +265,18 @@ fn a_lut_through_calibration_needs_curves_and_a_bad_name_is_refused() {
             vec!["--source", "srgb", "--size", "1", "-o", "x.cube"],
             "a LUT of 1 points",
         ),
+        (
+            vec![
+                "--source",
+                "srgb",
+                "--gamut",
+                "sgck",
+                "--absolute",
+                "-o",
+                "x.cube",
+            ],
+            "SGCK maps from the source space",
+        ),
     ] {
         let out = chromacal()
             .current_dir(dir.path())

@@ -21,9 +21,10 @@ use super::shared::{Failure, IlluminantArg};
 /// they stop inside 380–780 nm they are extended by repeating the nearest measured
 /// value (and a warning says so). A uniform grid of whole nanometres no coarser than
 /// 5 nm (1, 2, 5 nm …) is summed on its own wavelengths, the colour-matching
-/// functions read there and Δλ its step (CIE 15 weighted ordinates); any other (10 nm,
-/// uneven) is interpolated linearly onto the 5 nm grid first. L*a*b* and L*u*v* are
-/// taken against the perfect reflector summed on the same wavelengths.
+/// functions read there and Δλ its step (CIE 15 weighted ordinates); any other is
+/// interpolated linearly first, onto the 5 nm grid when coarser (10 nm, uneven) and
+/// onto 1 nm when finer (a spectrometer's 0.4 nm steps). L*a*b* and L*u*v* are taken
+/// against the perfect reflector summed on the same wavelengths.
 #[derive(clap::Args)]
 pub struct SpectrumArgs {
     /// A CSV of spectra: wavelength (nm) in the first column, one sample a column.

@@ -165,6 +165,10 @@ pub enum LutError {
         "Stone–Cowan–Beatty and Smith map a whole scene, not a LUT's grid: give clip, grey-lab, grey-luv, perpendicular, perpendicular-lab, hpminde or sgck"
     )]
     SceneMapping,
+    #[error(
+        "SGCK maps from the source space put on the display's white; --absolute keeps the source's own white: give one or the other"
+    )]
+    SgckAbsolute,
     #[error("the LUT is to run through calibration curves, but the profile has none")]
     NoCalibration,
     #[error(transparent)]
@@ -270,7 +274,10 @@ pub fn build_lut(
         (true, Some(c)) => Some(c),
         (false, _) => None,
     };
-    // SGCK compresses from the LUT's own source gamut.
+    // SGCK compresses from the LUT's own source gamut, on the display's white.
+    if options.absolute && matches!(options.gamut, GamutMapping::Sgck(_)) {
+        return Err(LutError::SgckAbsolute);
+    }
     let gamut = match options.gamut {
         GamutMapping::Sgck(_) => GamutMapping::Sgck(options.source.sgck_source()),
         other => other,

@@ -719,7 +719,15 @@ fn basis_form(
     let eigen = SymmetricEigen::new(correlation);
     let mut order: Vec<usize> = (0..GRID_LEN).collect();
     order.sort_by(|a, b| eigen.eigenvalues[*b].total_cmp(&eigen.eigenvalues[*a]));
-    let vectors = DMatrix::from_fn(GRID_LEN, m, |k, i| eigen.eigenvectors[(k, order[i])]);
+    // Zero outside the band even for vectors beyond the family's rank (whose
+    // eigenvalue is nil and whose direction is then arbitrary).
+    let vectors = DMatrix::from_fn(GRID_LEN, m, |k, i| {
+        if (first..=last).contains(&k) {
+            eigen.eigenvectors[(k, order[i])]
+        } else {
+            0.0
+        }
+    });
     let cmf = cmf_on_grid(observer);
     let integrals = DMatrix::from_fn(3, m, |f, i| {
         (first..=last)

@@ -16,9 +16,10 @@
 //! - beyond that nothing is extrapolated: each sum runs over the samples' own range.
 //!
 //! And one rule for resampling: a file on a uniform grid of whole nanometres no
-//! coarser than 5 nm keeps its grid; any other (10 nm data such as an i1Pro's, an
-//! uneven grid) is interpolated linearly onto the 5 nm grid, as CIE 15 asks for
-//! data measured more coarsely. `spectrum` then sums on that grid (CIE 15 weighted
+//! coarser than 5 nm keeps its grid; any other is interpolated linearly, onto the
+//! 5 nm grid when it is coarser (10 nm data such as an i1Pro's, as CIE 15 asks for
+//! data measured more coarsely), onto 1 nm when it is finer (a spectrometer's
+//! 0.4 nm steps), within 360–830 nm. Wavelengths outside 200–2500 nm are refused. `spectrum` then sums on that grid (CIE 15 weighted
 //! ordinates) and `render`'s spectral methods read it on their own 5 nm grid
 //! ([`super::spectral::onto_grid`]), so the two give the same XYZ; only a file finer
 //! than 5 nm is summed more finely by `spectrum` than `render` samples it.
@@ -34,6 +35,13 @@ pub const REQUIRED_NM: (f64, f64) = (400.0, 700.0);
 
 /// Wavelengths a file is extended to by repeating its end values, in nm.
 pub const EXTENDED_NM: (f64, f64) = (380.0, 780.0);
+
+/// Wavelengths a file may hold at all, in nm: from the near ultraviolet to the near
+/// infrared, beyond anything the colour-matching functions (360–830 nm) weigh.
+pub const PLAUSIBLE_NM: (f64, f64) = (200.0, 2500.0);
+
+/// The colour-matching functions' range, in nm: a resampled grid stops there.
+const CMF_NM: (f64, f64) = (360.0, 830.0);
 
 /// Why a spectral file cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -53,6 +61,12 @@ pub enum SpectralFileError {
         previous: f64,
         this: f64,
     },
+    #[error(
+        "{path}, data row {row}: {nm} nm is not a wavelength of light a colorimeter reads ({} to {} nm)",
+        PLAUSIBLE_NM.0,
+        PLAUSIBLE_NM.1
+    )]
+    Implausible { path: PathBuf, row: usize, nm: f64 },
     #[error(
         "{path}: the samples cover {from} to {to} nm, and at least {} to {} nm is needed (a single row covers nothing); the file is refused rather than extrapolated that far",
         REQUIRED_NM.0,
@@ -111,6 +125,16 @@ impl SpectralFile {
             return Err(SpectralFileError::NoSamples { path: path_buf });
         }
         let measured = table.column(0);
+        if let Some(k) = measured
+            .iter()
+            .position(|nm| !(PLAUSIBLE_NM.0..=PLAUSIBLE_NM.1).contains(nm))
+        {
+            return Err(SpectralFileError::Implausible {
+                path: path_buf,
+                row: k + 1,
+                nm: measured[k],
+            });
+        }
         if let Some(k) = measured.windows(2).position(|w| w[1] <= w[0]) {
             return Err(SpectralFileError::NotRising {
                 path: path_buf,
@@ -137,7 +161,7 @@ impl SpectralFile {
         let extended_nm = (!below.is_empty() || !above.is_empty())
             .then(|| (wavelengths[0], wavelengths[wavelengths.len() - 1]));
         let resampled = !keeps_its_grid(&wavelengths);
-        let five_nm = five_nm_grid(wavelengths[0], wavelengths[wavelengths.len() - 1]);
+        let target = resampling_grid(&wavelengths);
         let spectra = (1..table.header.len())
             .map(|k| {
                 let values = table.column(k);
@@ -147,11 +171,11 @@ impl SpectralFile {
                     .chain(std::iter::repeat_n(last, above.len()))
                     .collect();
                 let (grid, all) = if resampled {
-                    let on = five_nm
+                    let on = target
                         .iter()
                         .map(|nm| interpolate(&wavelengths, &all, *nm))
                         .collect();
-                    (five_nm.clone(), on)
+                    (target.clone(), on)
                 } else {
                     (wavelengths.clone(), all)
                 };
@@ -213,19 +237,27 @@ fn extension(measured: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let mut above = Vec::new();
     match step {
         Some(step) => {
-            // Multiples of the step from the ends, rounded to 10⁻⁶ nm so that a
-            // 3.333… nm grid lands on 780, not on 779.9999999999989.
+            // Multiples of the step from the ends that stay within the range, rounded
+            // to 10⁻⁶ nm so that a 3.333… nm grid lands on 780, not on
+            // 779.9999999999989; then the range's end itself if no step lands on it
+            // (the grid is then uneven, and resampled).
             let at = |nm: f64| (nm * 1e6).round() / 1e6;
             let mut k = 1.0;
-            while at(from - (k - 1.0) * step) > EXTENDED_NM.0 {
+            while at(from - k * step) >= EXTENDED_NM.0 {
                 below.push(at(from - k * step));
                 k += 1.0;
             }
+            if below.last().copied().unwrap_or(from) > EXTENDED_NM.0 {
+                below.push(EXTENDED_NM.0);
+            }
             below.reverse();
             let mut k = 1.0;
-            while at(to + (k - 1.0) * step) < EXTENDED_NM.1 {
+            while at(to + k * step) <= EXTENDED_NM.1 {
                 above.push(at(to + k * step));
                 k += 1.0;
+            }
+            if above.last().copied().unwrap_or(to) < EXTENDED_NM.1 {
+                above.push(EXTENDED_NM.1);
             }
         }
         None => {
@@ -249,13 +281,24 @@ fn keeps_its_grid(wavelengths: &[f64]) -> bool {
     })
 }
 
-/// The multiples of 5 nm from `from` to `to` (both within the range).
-fn five_nm_grid(from: f64, to: f64) -> Vec<f64> {
+/// The grid a file that does not keep its own is put on: 1 nm when its samples are
+/// finer than 5 nm on average (a spectrometer's narrow peaks are not to be point
+/// sampled away), else 5 nm; in both cases within its range and the
+/// colour-matching functions'.
+fn resampling_grid(wavelengths: &[f64]) -> Vec<f64> {
+    let (from, to) = (wavelengths[0], wavelengths[wavelengths.len() - 1]);
+    let mean_step = (to - from) / (wavelengths.len() - 1) as f64;
+    let step = if mean_step < COARSEST_KEPT_STEP_NM {
+        1.0
+    } else {
+        5.0
+    };
+    let (from, to) = (from.max(CMF_NM.0), to.min(CMF_NM.1));
     let (first, last) = (
-        (from / 5.0 - 1e-9).ceil() as i64,
-        (to / 5.0 + 1e-9).floor() as i64,
+        (from / step - 1e-9).ceil() as i64,
+        (to / step + 1e-9).floor() as i64,
     );
-    (first..=last).map(|k| k as f64 * 5.0).collect()
+    (first..=last).map(|k| k as f64 * step).collect()
 }
 
 /// `values` (on rising `wavelengths`) at `nm` within their range, linearly.
@@ -352,6 +395,11 @@ mod tests {
                 "at least 400 to 700 nm",
             ),
             ("nm,a\n400,1\n700,1\n", "must be wavelength_nm, not 'nm'"),
+            (
+                "wavelength_nm,a\n400,1\n700,1\n1e12,1\n",
+                "data row 3: 1000000000000 nm is not a wavelength",
+            ),
+            ("wavelength_nm,a\n-5,1\n400,1\n700,1\n", "data row 1: -5 nm"),
             ("wavelength_nm\n400\n700\n", "no sample columns"),
             (
                 "wavelength_nm,a\n400,1\n500,1\n500,1\n700,1\n",
@@ -363,5 +411,34 @@ mod tests {
             assert!(said.contains(expected), "{text:?}: {said}");
             assert!(said.starts_with("s.csv"), "{said}");
         }
+    }
+
+    #[test]
+    fn extension_stays_within_380_to_780_nm() {
+        // A two-row file (step 300 nm), a 30 nm grid and a 3 nm grid.
+        let mut thirty = String::from("wavelength_nm,a\n");
+        for nm in (400..=700).step_by(30) {
+            thirty.push_str(&format!("{nm},1\n"));
+        }
+        let mut three = String::from("wavelength_nm,a\n");
+        for nm in (400..=700).step_by(3) {
+            three.push_str(&format!("{nm},1\n"));
+        }
+        for text in ["wavelength_nm,a\n400,1\n700,1\n".to_string(), thirty, three] {
+            let file = parse(&text).unwrap();
+            let s = &file.spectra[0];
+            assert_eq!(s.range_nm(), (380.0, 780.0), "{text}");
+        }
+        // Fine uneven data goes onto 1 nm, keeping a narrow peak's power.
+        let mut fine = String::from("wavelength_nm,a\n");
+        for k in 0..=1000 {
+            let nm = 380.3 + k as f64 * 0.4;
+            let v = if (nm - 546.1).abs() < 0.5 { 100.0 } else { 0.0 };
+            fine.push_str(&format!("{nm},{v}\n"));
+        }
+        let file = parse(&fine).unwrap();
+        let s = &file.spectra[0];
+        assert_eq!(s.wavelengths_nm()[1] - s.wavelengths_nm()[0], 1.0);
+        assert!(s.values().iter().any(|v| *v > 10.0));
     }
 }

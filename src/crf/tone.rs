@@ -64,8 +64,8 @@ pub const TUMBLIN_RUSHMEIER_CONTRAST: f64 = 35.0;
 pub struct SceneLuminance {
     /// Exp of the mean log luminance of the lit pixels (cd/m²).
     pub log_mean: f64,
-    /// Mean luminance of the lit pixels (cd/m²): over the focus area, for Ward,
-    /// when one is given.
+    /// Mean luminance of the pixels, dark ones included (cd/m²): over the focus
+    /// area, for Ward, when one is given.
     pub mean: f64,
     pub max: f64,
     /// The scene's white, when known (a reflectance scene's perfect diffuser).
@@ -78,16 +78,22 @@ const LIT: f64 = 1e-6;
 impl SceneLuminance {
     /// Statistics of the scene's luminances (cd/m²); `None` if no pixel is lit.
     pub fn of(luminances: impl Iterator<Item = f64>, white: Option<f64>) -> Option<Self> {
-        let (mut sum, mut linear, mut n, mut max) = (0.0, 0.0, 0usize, 0.0f64);
-        for l in luminances.filter(|l| *l > LIT && l.is_finite()) {
-            sum += l.ln();
+        let (mut sum, mut n, mut max) = (0.0, 0usize, 0.0f64);
+        // The mean counts every pixel, dark ones too: an area that is mostly black
+        // adapts the eye to little light.
+        let (mut linear, mut all) = (0.0, 0usize);
+        for l in luminances.filter(|l| l.is_finite() && *l >= 0.0) {
             linear += l;
-            n += 1;
-            max = max.max(l);
+            all += 1;
+            if l > LIT {
+                sum += l.ln();
+                n += 1;
+                max = max.max(l);
+            }
         }
         (n > 0).then(|| SceneLuminance {
             log_mean: (sum / n as f64).exp(),
-            mean: linear / n as f64,
+            mean: linear / all as f64,
             max,
             white,
         })

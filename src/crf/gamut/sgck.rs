@@ -27,7 +27,10 @@
 //! display's; with equal ranges the sigmoid would still bend every grey, and a
 //! source that fits the display should pass unchanged. So SGCK moves an in-gamut
 //! colour only when the source reaches beyond the display along that colour's line
-//! (the knee), or in lightness (the sigmoid): that is what it is for.
+//! (the knee), or in lightness (the sigmoid): that is what it is for. At the
+//! screen's centre, with the source's black on the display's, the two lightness
+//! ranges are equal and the sigmoid has nothing to do; it acts where the display's
+//! range is the smaller (a dimmer corner, or a source whose black is deeper).
 
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
@@ -322,6 +325,9 @@ pub fn sgck(gamut: &GamutAt, source: &GamutAt, xyz: &Xyz, white: &Xyz) -> Xyz {
         )
     };
     let map = LightnessMap::new(lightness(source), lightness(gamut));
+    // Where nothing is to be compressed a colour inside comes back as it went in,
+    // not through a round trip to CIELAB.
+    let unchanged = map.identity && gamut.contains(xyz);
     let chroma = lab.a.hypot(lab.b);
     let hue = lab.b.atan2(lab.a);
     let (cos, sin) = (hue.cos(), hue.sin());
@@ -340,6 +346,9 @@ pub fn sgck(gamut: &GamutAt, source: &GamutAt, xyz: &Xyz, white: &Xyz) -> Xyz {
         c: chroma,
     };
     let finish = |p: HuePoint| {
+        if unchanged && p == mapped {
+            return *xyz;
+        }
         let x = to_xyz(p);
         if gamut.contains(&x) {
             x
@@ -373,11 +382,7 @@ pub fn sgck(gamut: &GamutAt, source: &GamutAt, xyz: &Xyz, white: &Xyz) -> Xyz {
     let knee = KNEE * display_edge;
     if source_edge <= display_edge || 1.0 <= knee {
         // Nothing to compress on this line: only the lightness mapping moved it.
-        return if map.identity && gamut.contains(xyz) {
-            *xyz
-        } else {
-            finish(mapped)
-        };
+        return finish(mapped);
     }
     finish(along(
         knee + (display_edge - knee) * (1.0 - knee) / (source_edge - knee),
