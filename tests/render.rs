@@ -865,7 +865,7 @@ fn a_two_plane_spectral_image_of_four_megapixels_renders_within_bounded_memory()
     let dir = tempfile::tempdir().unwrap();
     let stack = dir.path().join("stack");
     std::fs::create_dir(&stack).unwrap();
-    for (nm, y) in [(450, 0.01), (650, 0.02)] {
+    for (nm, y) in [(400, 0.01), (700, 0.02)] {
         chromacal::crf::scene::write_pfm(
             &stack.join(format!("{nm}.pfm")),
             &chromacal::crf::scene::XyzImage {

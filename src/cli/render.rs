@@ -596,8 +596,12 @@ fn read_source(
         });
     }
     if let Some(dir) = &args.spectral_image {
+        let image = SpectralImage::read(dir).map_err(|e| e.to_string())?;
+        if let Some(warning) = image.warning() {
+            tracing::warn!("{}: {warning}", dir.display());
+        }
         return Ok(Source::SpectralImage {
-            image: SpectralImage::read(dir).map_err(|e| e.to_string())?,
+            image,
             scale: absolute_spectra("--spectral-image")?,
             white,
         });

@@ -97,6 +97,24 @@ pub fn onto_grid(wavelengths: &[f64], values: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// The same, but holding the table's first and last values beyond its ends (the
+/// nearest measured value, the extrapolation of `spectral_file`'s rule).
+pub fn onto_grid_holding_ends(wavelengths: &[f64], values: &[f64]) -> Vec<f64> {
+    let (Some(first), Some(last)) = (wavelengths.first(), wavelengths.last()) else {
+        return vec![0.0; GRID_LEN];
+    };
+    let mut grid = onto_grid(wavelengths, values);
+    for (i, v) in grid.iter_mut().enumerate() {
+        let nm = grid_nm(i);
+        if nm < *first {
+            *v = values[0];
+        } else if nm > *last {
+            *v = values[values.len() - 1];
+        }
+    }
+    grid
+}
+
 /// Multiplications and additions of one step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct Operations {

@@ -67,11 +67,7 @@ pub enum SpectralFileError {
         PLAUSIBLE_NM.1
     )]
     Implausible { path: PathBuf, row: usize, nm: f64 },
-    #[error(
-        "{path}: the samples cover {from} to {to} nm, and at least {} to {} nm is needed (a single row covers nothing); the file is refused rather than extrapolated that far",
-        REQUIRED_NM.0,
-        REQUIRED_NM.1
-    )]
+    #[error("{path}: {}", too_narrow(*from, *to))]
     TooNarrow { path: PathBuf, from: f64, to: f64 },
     #[error("{path}, column '{column}': {source}")]
     Sample {
@@ -79,6 +75,20 @@ pub enum SpectralFileError {
         column: String,
         source: SpectrumError,
     },
+}
+
+/// Why samples covering `from` to `to` nm are refused: the one sentence every
+/// spectral input says.
+pub fn too_narrow(from: f64, to: f64) -> String {
+    format!(
+        "the samples cover {from} to {to} nm, and at least {} to {} nm is needed (a single row covers nothing); the file is refused rather than extrapolated that far",
+        REQUIRED_NM.0, REQUIRED_NM.1
+    )
+}
+
+/// Whether samples covering `from` to `to` nm meet the rule.
+pub fn covers_required(from: f64, to: f64) -> bool {
+    from <= REQUIRED_NM.0 && to >= REQUIRED_NM.1
 }
 
 /// A spectral file as read: its samples, each on the same (possibly extended)
@@ -144,7 +154,7 @@ impl SpectralFile {
             });
         }
         let (from, to) = (measured[0], measured[measured.len() - 1]);
-        if from > REQUIRED_NM.0 || to < REQUIRED_NM.1 {
+        if !covers_required(from, to) {
             return Err(SpectralFileError::TooNarrow {
                 path: path_buf,
                 from,

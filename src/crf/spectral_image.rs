@@ -11,7 +11,8 @@
 use std::path::{Path, PathBuf};
 
 use super::scene::{MAX_RENDER_BYTES, SceneError, XyzImage, read_pfm};
-use super::spectral::{MethodKind, SpectralError, SpectralMethod, onto_grid};
+use super::spectral::{MethodKind, SpectralError, SpectralMethod, onto_grid_holding_ends};
+use super::spectral_file::{EXTENDED_NM, covers_required, too_narrow};
 use crate::color::Xyz;
 use crate::color::spectrum::Observer;
 
@@ -66,6 +67,11 @@ impl SpectralImage {
                 format!("a second plane of {} nm", w[1].0),
             ));
         }
+        // The rule of every spectral input (`spectral_file`): 400–700 nm covered.
+        let (from, to) = (named[0].0, named[named.len() - 1].0);
+        if !covers_required(from, to) {
+            return Err(format_error(dir, too_narrow(from, to)));
+        }
         let grey = Xyz::new(1.0, 1.0, 1.0);
         let mut image = SpectralImage {
             width: 0,
@@ -116,10 +122,26 @@ impl SpectralImage {
         self.width * self.height
     }
 
-    /// Pixel `k`'s spectrum on the 5 nm grid (linear between planes, 0 outside them).
+    /// Pixel `k`'s spectrum on the 5 nm grid: linear between planes, the nearest
+    /// plane's value beyond them (380–780 nm, as `spectral_file` extends a file).
     pub fn spectrum(&self, k: usize) -> Vec<f64> {
         let values: Vec<f64> = self.planes.iter().map(|p| f64::from(p[k])).collect();
-        onto_grid(&self.wavelengths, &values)
+        onto_grid_holding_ends(&self.wavelengths, &values)
+    }
+
+    /// What the reader did beyond reading, for the user: `None` when the planes
+    /// reach 380 and 780 nm themselves.
+    pub fn warning(&self) -> Option<String> {
+        let (from, to) = (
+            self.wavelengths[0],
+            self.wavelengths[self.wavelengths.len() - 1],
+        );
+        (from > EXTENDED_NM.0 || to < EXTENDED_NM.1).then(|| {
+            format!(
+                "the planes cover {from} to {to} nm; extended to {} to {} nm by repeating the nearest measured value",
+                EXTENDED_NM.0, EXTENDED_NM.1
+            )
+        })
     }
 
     /// Every pixel's XYZ (in units of ∫ S f dλ) by `kind`, one pixel at a time.
@@ -159,31 +181,39 @@ mod tests {
     #[test]
     fn pixels_are_integrated_as_their_spectra_would_be_one_by_one() {
         let dir = tempfile::tempdir().unwrap();
-        plane(dir.path(), 450, &[1.0, 0.0, 0.5, 0.2], 2);
-        plane(dir.path(), 650, &[0.0, 1.0, 0.5, 0.9], 2);
+        plane(dir.path(), 400, &[1.0, 0.0, 0.5, 0.2], 2);
+        plane(dir.path(), 700, &[0.0, 1.0, 0.5, 0.9], 2);
         let image = SpectralImage::read(dir.path()).unwrap();
         assert_eq!((image.width, image.height), (2, 2));
-        assert_eq!(image.wavelengths, [450.0, 650.0]);
+        assert_eq!(image.wavelengths, [400.0, 700.0]);
+        // Beyond the planes, the nearest plane's value (not zero).
+        let s = image.spectrum(1);
+        assert_eq!((s[0], s[s.len() - 1]), (0.0, 1.0));
+        assert!(image.warning().unwrap().contains("400 to 700 nm"));
         let xyz = image.integrate(&MethodKind::Direct).unwrap();
         let direct = SpectralMethod::new(MethodKind::Direct, Observer::default(), &[]).unwrap();
         for k in 0..4 {
             let expected = direct.integrate(&direct.represent(&image.spectrum(k)));
             assert_eq!(xyz.xyz[k], expected);
         }
-        // 450 nm alone is bluish, 650 nm alone reddish.
+        // Light at the blue end alone is bluish, at the red end reddish.
         assert!(xyz.xyz[0].z > xyz.xyz[0].x && xyz.xyz[1].x > xyz.xyz[1].z);
     }
 
     #[test]
     fn planes_of_another_size_or_a_lone_plane_are_refused_by_name() {
         let dir = tempfile::tempdir().unwrap();
-        plane(dir.path(), 450, &[1.0, 0.0], 2);
+        plane(dir.path(), 400, &[1.0, 0.0], 2);
         let e = SpectralImage::read(dir.path()).unwrap_err().to_string();
         assert!(e.contains("at least two planes"), "{e}");
-        plane(dir.path(), 550, &[1.0, 0.0, 1.0, 0.0], 2);
+        // Two planes that stop short of 400–700 nm: the spectral files' sentence.
+        plane(dir.path(), 650, &[1.0, 0.0], 2);
+        let e = SpectralImage::read(dir.path()).unwrap_err().to_string();
+        assert!(e.contains(&too_narrow(400.0, 650.0)), "{e}");
+        plane(dir.path(), 700, &[1.0, 0.0, 1.0, 0.0], 2);
         let e = SpectralImage::read(dir.path()).unwrap_err().to_string();
         assert!(
-            e.contains("550.pfm") && e.contains("2 × 2 where the first plane is 2 × 1"),
+            e.contains("700.pfm") && e.contains("2 × 2 where the first plane is 2 × 1"),
             "{e}"
         );
     }
