@@ -1551,7 +1551,7 @@ fn ward_adapts_to_the_mean_luminance_of_the_focus_area() {
             .unwrap();
         r.pixels[3].target[1] / scene.pixels[3].xyz.y
     };
-    let area = |left| chromacal::crf::tone::FocusArea {
+    let area = |left| chromacal::crf::scene::Placement {
         left,
         top: 0.0,
         width: 0.5,

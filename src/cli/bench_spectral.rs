@@ -7,7 +7,7 @@ use super::shared::{Failure, outln};
 use std::path::Path;
 
 use chromacal::color::spectrum::{Illuminant, Observer};
-use chromacal::crf::spectral::{Band, MethodKind};
+use chromacal::crf::spectral::{Band, MethodKind, Operations};
 use chromacal::crf::spectral_table::{
     Family, Row, cheapest_below, colorchecker_family, display_family, family_table, findings,
     grid_description, illuminant_family, standard_methods, survey_families, survey_figure,
@@ -87,11 +87,8 @@ fn print_family(family: &Family, reflective: bool, rows: &[Row]) -> Result<(), F
                 } else {
                     r.method.parameter()
                 },
-                format!("{} × {} +", r.product.multiplications, r.product.additions),
-                format!(
-                    "{} × {} +",
-                    r.integration.multiplications, r.integration.additions
-                ),
+                operations(&r.product),
+                operations(&r.integration),
                 r.nanoseconds.map_or("-".into(), |n| format!("{n:.0}")),
                 format!("{:.3} / {:.3}", r.delta_e_uv.mean, r.delta_e_uv.max),
                 format!("{:.3} / {:.3}", r.delta_e00.mean, r.delta_e00.max),
@@ -153,11 +150,8 @@ fn survey_setting() -> Result<(), Failure> {
                 vec![
                     r.method.name().to_string(),
                     r.method.parameter_in(Band::SURVEY),
-                    format!("{} × {} +", r.product.multiplications, r.product.additions),
-                    format!(
-                        "{} × {} +",
-                        r.integration.multiplications, r.integration.additions
-                    ),
+                    operations(&r.product),
+                    operations(&r.integration),
                     format!("{:.3} / {:.3}", r.delta_e_uv.mean, r.delta_e_uv.max),
                 ]
             })
@@ -207,4 +201,9 @@ fn survey_setting() -> Result<(), Failure> {
         "The survey says: degree 4; a basis of \"θ\" vectors (the number is illegible in its text); point sampling best for products under C and D65; characteristic vectors cheapest for integration; under the fluorescent source only segmentation (not here) and characteristic vectors cope, the first better for products\n"
     )?;
     Ok(())
+}
+
+/// Operations as the tables print them: "m × a +".
+fn operations(o: &Operations) -> String {
+    format!("{} × {} +", o.multiplications, o.additions)
 }

@@ -249,9 +249,6 @@ fn read_check_scene(path: &Path, units: Units) -> Result<Vec<ScenePixel>, Failur
         )));
     }
     let file = SpectralFile::read(path).map_err(|e| e.to_string())?;
-    if let Some(warning) = file.warning() {
-        tracing::warn!("{warning}");
-    }
     Ok(file
         .emission_xyz()
         .map_err(|e| e.to_string())?

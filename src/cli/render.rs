@@ -18,7 +18,7 @@ use chromacal::crf::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
 use chromacal::crf::spectral_file::SpectralFile;
 use chromacal::crf::spectral_image::SpectralImage;
 use chromacal::crf::spectral_table::standard_methods;
-use chromacal::crf::tone::{FocusArea, TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
+use chromacal::crf::tone::{TUMBLIN_RUSHMEIER_CONTRAST, ToneOperator};
 use chromacal::crf::{
     CodeChoice, ColourReproduction, RenderSettings, RenderSummary, Scene, ScenePixel,
 };
@@ -351,14 +351,7 @@ fn settings_of(args: &RenderArgs) -> Result<RenderSettings, Failure> {
             focus: args
                 .focus
                 .as_deref()
-                .map(|text| {
-                    Placement::parse(text).map(|p| FocusArea {
-                        left: p.left,
-                        top: p.top,
-                        width: p.width,
-                        height: p.height,
-                    })
-                })
+                .map(Placement::parse)
                 .transpose()
                 .map_err(|e| Failure::from(format!("--focus: {e}")))?,
         },
@@ -696,9 +689,6 @@ fn at_centre(xyz: Vec<Xyz>, scale: f64) -> Vec<ScenePixel> {
 /// `crf::spectral_file`), each on the 5 nm grid.
 fn read_spectra(path: &Path) -> Result<Vec<Vec<f64>>, Failure> {
     let file = SpectralFile::read(path).map_err(|e| e.to_string())?;
-    if let Some(warning) = file.warning() {
-        tracing::warn!("{warning}");
-    }
     Ok(file
         .spectra
         .iter()

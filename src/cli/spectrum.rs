@@ -105,9 +105,6 @@ fn spectrum(
         Observer::Cie1931TwoDegree
     };
     let read = SpectralFile::read(file).map_err(|e| Failure::from(e.to_string()))?;
-    if let Some(warning) = read.warning() {
-        tracing::warn!("{warning}");
-    }
     let mut results = Vec::new();
     let mut absolute = Vec::new();
     for (name, sample) in read.names.iter().zip(&read.spectra) {

@@ -138,7 +138,7 @@ impl Spectrum {
     }
 
     /// The step of a uniform grid of whole nanometres, if this spectrum is on one.
-    fn whole_nm_step(&self) -> Option<f64> {
+    pub fn whole_nm_step(&self) -> Option<f64> {
         let step = self.wavelengths_nm[1] - self.wavelengths_nm[0];
         let whole = |w: f64| (w - w.round()).abs() < 1e-6;
         let uniform = self

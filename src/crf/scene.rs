@@ -31,8 +31,9 @@ pub enum SceneError {
     Placement { text: String, what: String },
 }
 
-/// Where an image sits on the screen, in fractions of its width and height.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Where an image sits on the screen (or where an observer looks), in fractions of
+/// its width and height from the top left.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Placement {
     pub left: f64,
     pub top: f64,
@@ -48,6 +49,12 @@ impl Placement {
         width: 1.0,
         height: 1.0,
     };
+
+    /// Whether the screen point (`x`, `y`) lies in the rectangle (edges included).
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        (self.left..=self.left + self.width).contains(&x)
+            && (self.top..=self.top + self.height).contains(&y)
+    }
 
     /// `LEFT,TOP,WIDTH,HEIGHT`, each a fraction, the rectangle within the screen.
     pub fn parse(text: &str) -> Result<Placement, SceneError> {

@@ -111,10 +111,15 @@ pub struct SpectralFile {
 pub const COARSEST_KEPT_STEP_NM: f64 = 5.0;
 
 impl SpectralFile {
-    /// Read `path` by the rule of this module.
+    /// Read `path` by the rule of this module; what was extended is said as a
+    /// warning, the same from every command.
     pub fn read(path: &Path) -> Result<SpectralFile, SpectralFileError> {
         let table = NumericTable::read(path)?;
-        SpectralFile::from_table(&table, path)
+        let file = SpectralFile::from_table(&table, path)?;
+        if let Some(warning) = file.warning() {
+            tracing::warn!("{warning}");
+        }
+        Ok(file)
     }
 
     /// The same from text already read (`path` names it in errors).
@@ -170,7 +175,6 @@ impl SpectralFile {
             .collect();
         let extended_nm = (!below.is_empty() || !above.is_empty())
             .then(|| (wavelengths[0], wavelengths[wavelengths.len() - 1]));
-        let resampled = !keeps_its_grid(&wavelengths);
         let target = resampling_grid(&wavelengths);
         let spectra = (1..table.header.len())
             .map(|k| {
@@ -180,22 +184,26 @@ impl SpectralFile {
                     .chain(values)
                     .chain(std::iter::repeat_n(last, above.len()))
                     .collect();
-                let (grid, all) = if resampled {
-                    let on = target
-                        .iter()
-                        .map(|nm| interpolate(&wavelengths, &all, *nm))
-                        .collect();
-                    (target.clone(), on)
-                } else {
-                    (wavelengths.clone(), all)
-                };
-                Spectrum::new(grid, all).map_err(|source| SpectralFileError::Sample {
+                let in_column = |source| SpectralFileError::Sample {
                     path: path_buf.clone(),
                     column: table.header[k].clone(),
                     source,
-                })
+                };
+                let extended = Spectrum::new(wavelengths.clone(), all).map_err(in_column)?;
+                if keeps_its_grid(&extended) {
+                    return Ok(extended);
+                }
+                // Linear between samples; the target grid lies within their range.
+                let on = target
+                    .iter()
+                    .map(|nm| extended.value_at(*nm).unwrap_or(0.0))
+                    .collect();
+                Spectrum::new(target.clone(), on).map_err(in_column)
             })
             .collect::<Result<Vec<_>, _>>()?;
+        let resampled = spectra
+            .first()
+            .is_some_and(|s| s.wavelengths_nm() != wavelengths.as_slice());
         Ok(SpectralFile {
             path: path_buf,
             names: table.header[1..].to_vec(),
@@ -282,13 +290,12 @@ fn extension(measured: &[f64]) -> (Vec<f64>, Vec<f64>) {
     (below, above)
 }
 
-/// Whether `wavelengths` is a uniform grid of whole nanometres no coarser than
+/// Whether `spectrum` is on a uniform grid of whole nanometres no coarser than
 /// [`COARSEST_KEPT_STEP_NM`].
-fn keeps_its_grid(wavelengths: &[f64]) -> bool {
-    let whole = |w: f64| (w - w.round()).abs() < 1e-6;
-    uniform_step(wavelengths).is_some_and(|step| {
-        whole(step) && step <= COARSEST_KEPT_STEP_NM + 1e-6 && wavelengths.iter().all(|w| whole(*w))
-    })
+fn keeps_its_grid(spectrum: &Spectrum) -> bool {
+    spectrum
+        .whole_nm_step()
+        .is_some_and(|step| step <= COARSEST_KEPT_STEP_NM + 1e-6)
 }
 
 /// The grid a file that does not keep its own is put on: 1 nm when its samples are
@@ -309,16 +316,6 @@ fn resampling_grid(wavelengths: &[f64]) -> Vec<f64> {
         (to / step + 1e-9).floor() as i64,
     );
     (first..=last).map(|k| k as f64 * step).collect()
-}
-
-/// `values` (on rising `wavelengths`) at `nm` within their range, linearly.
-fn interpolate(wavelengths: &[f64], values: &[f64], nm: f64) -> f64 {
-    let i = wavelengths
-        .partition_point(|w| *w < nm)
-        .clamp(1, wavelengths.len() - 1);
-    let (a, b) = (wavelengths[i - 1], wavelengths[i]);
-    let t = ((nm - a) / (b - a)).clamp(0.0, 1.0);
-    values[i - 1] * (1.0 - t) + values[i] * t
 }
 
 /// The step of a grid whose steps are all equal (within 10⁻⁶ nm).

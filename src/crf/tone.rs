@@ -8,6 +8,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::scene::Placement;
+
 /// Which operator maps scene luminance to display luminance.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -27,7 +29,7 @@ pub enum ToneOperator {
     /// adaptation luminance: the mean luminance over the area the observer looks at
     /// (seed §4.2.4: "the luminance average on that area"), `focus`, or over the
     /// whole scene when no area is given.
-    Ward { focus: Option<FocusArea> },
+    Ward { focus: Option<Placement> },
     /// Tumblin and Rushmeier (1993), "Tone reproduction for realistic images", IEEE
     /// CG&A 13(6) (seed §4.2.4): equal Stevens brightness B = 10^β L^α for scene and
     /// display observer gives L_d = L_s^(α_s/α_d) · 10^((β_s − β_d)/α_d), with
@@ -36,24 +38,6 @@ pub enum ToneOperator {
     /// is log₁₀ L_sa = E(log₁₀ L_s) + 0.84 and the display's L_da = L_dmax / √C_max,
     /// C_max the display's usable contrast (35 in the survey; a parameter here).
     TumblinRushmeier { display_contrast: f64 },
-}
-
-/// Where the observer looks, for Ward: a rectangle of the screen in fractions of
-/// its width and height from the top left.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct FocusArea {
-    pub left: f64,
-    pub top: f64,
-    pub width: f64,
-    pub height: f64,
-}
-
-impl FocusArea {
-    /// Whether the screen point (`x`, `y`) lies in the area (edges included).
-    pub fn contains(&self, x: f64, y: f64) -> bool {
-        (self.left..=self.left + self.width).contains(&x)
-            && (self.top..=self.top + self.height).contains(&y)
-    }
 }
 
 /// The survey's typical usable contrast of a display for Tumblin–Rushmeier.

@@ -184,6 +184,33 @@ pub fn clip(gamut: &GamutAt, xyz: &Xyz) -> Xyz {
 /// boundary's, far below any display's code step.
 const BISECTION_STEPS: usize = 40;
 
+/// The largest t ≥ 0 with `inside(t)` along a ray that holds t = 0 and leaves the set
+/// once: doubled from `start` until outside (unbounded rays stop at 10⁶), then
+/// bisected. `None` when t = 0 is outside. HPMINDE's largest chroma at a lightness
+/// and SGCK's boundaries along its lines are both this.
+fn last_inside(inside: impl Fn(f64) -> bool, start: f64) -> Option<f64> {
+    if !inside(0.0) {
+        return None;
+    }
+    let mut outside = start;
+    while inside(outside) {
+        outside *= 2.0;
+        if outside > 1e6 {
+            return Some(outside);
+        }
+    }
+    let mut inner = 0.0;
+    for _ in 0..BISECTION_STEPS {
+        let mid = 0.5 * (inner + outside);
+        if inside(mid) {
+            inner = mid;
+        } else {
+            outside = mid;
+        }
+    }
+    Some(inner)
+}
+
 /// Clip toward the grey axis at constant hue: keep the colour's lightness (brought into
 /// the range of this position's grey axis first) and hue angle in `space`, and scale
 /// its chroma down until it is inside. `white` is the reference white of `space`

@@ -12,7 +12,7 @@
 
 use nalgebra::Vector3;
 
-use super::{GamutAt, UniformSpace, clip, grey_axis_clip, perpendicular};
+use super::{GamutAt, UniformSpace, clip, grey_axis_clip, last_inside, perpendicular};
 use crate::color::Xyz;
 use crate::color::difference::{delta_e_1976, delta_e_2000};
 use crate::color::spaces::{Lab, lab_to_xyz, xyz_to_lab};
@@ -192,9 +192,8 @@ fn compass_search(
 
 /// Lightness samples of the grey axis HPMINDE searches first, before refining.
 const HPMINDE_LIGHTNESS_SAMPLES: usize = 65;
-/// Bisection steps for the largest chroma at a lightness, and golden-section steps for
-/// the lightness: both far below 0.001 ΔE*ab.
-const CHROMA_BISECTION: usize = 40;
+/// Golden-section steps for the lightness (the largest chroma at a lightness is
+/// bisected by `last_inside`): both far below 0.001 ΔE*ab.
 const LIGHTNESS_REFINEMENT: usize = 40;
 
 /// CIE 156:2004's HPMINDE (hue-preserving minimum ΔE): a colour outside is moved to
@@ -230,28 +229,7 @@ pub fn hpminde(gamut: &GamutAt, xyz: &Xyz, white: &Xyz) -> Xyz {
             white,
         )
     };
-    let largest_chroma = |l: f64| -> Option<f64> {
-        if !gamut.contains(&at(l, 0.0)) {
-            return None;
-        }
-        let mut outside = c0.max(1.0);
-        while gamut.contains(&at(l, outside)) {
-            outside *= 2.0;
-            if outside > 1e6 {
-                return Some(outside);
-            }
-        }
-        let mut inside = 0.0;
-        for _ in 0..CHROMA_BISECTION {
-            let mid = 0.5 * (inside + outside);
-            if gamut.contains(&at(l, mid)) {
-                inside = mid;
-            } else {
-                outside = mid;
-            }
-        }
-        Some(inside)
-    };
+    let largest_chroma = |l: f64| last_inside(|c| gamut.contains(&at(l, c)), c0.max(1.0));
     let nearest_at = |l: f64| -> Option<(f64, Lab)> {
         let c = c0.min(largest_chroma(l)?);
         let candidate = Lab {

@@ -35,7 +35,7 @@
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
-use super::{GamutAt, UniformSpace, clip, grey_axis_clip};
+use super::{GamutAt, UniformSpace, clip, grey_axis_clip, last_inside};
 use crate::color::Xyz;
 use crate::color::adaptation::{AdaptationTransform, adapt};
 use crate::color::gamut::{ADOBE_RGB, AdditiveGamut, DISPLAY_P3, REC_2020, RgbSpace, SRGB};
@@ -285,31 +285,6 @@ fn cusp(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<HuePoint> {
     best
 }
 
-/// The largest t ≥ 0 with `inside(t)`, for a set that holds t = 0 and is crossed
-/// once along the ray; `None` when t = 0 is outside. Unbounded rays stop at 10⁶.
-fn boundary(inside: impl Fn(f64) -> bool) -> Option<f64> {
-    if !inside(0.0) {
-        return None;
-    }
-    let mut outside = 1.0;
-    while inside(outside) {
-        outside *= 2.0;
-        if outside > 1e6 {
-            return Some(outside);
-        }
-    }
-    let mut inner = 0.0;
-    for _ in 0..BISECTION_STEPS {
-        let mid = 0.5 * (inner + outside);
-        if inside(mid) {
-            inner = mid;
-        } else {
-            outside = mid;
-        }
-    }
-    Some(inner)
-}
-
 /// SGCK (CIE 156:2004) of `xyz` from the `source` gamut into `gamut`, in CIELAB
 /// against `white`. What the knee leaves outside (a colour beyond the source gamut
 /// itself) is clipped toward the grey axis at constant hue and lightness.
@@ -375,7 +350,8 @@ pub fn sgck(gamut: &GamutAt, source: &GamutAt, xyz: &Xyz, white: &Xyz) -> Xyz {
         map.invert(p.l, p.c)
             .is_some_and(|l| source.contains(&to_xyz(HuePoint { l, c: p.c })))
     };
-    let (Some(display_edge), Some(source_edge)) = (boundary(in_display), boundary(in_source))
+    let (Some(display_edge), Some(source_edge)) =
+        (last_inside(in_display, 1.0), last_inside(in_source, 1.0))
     else {
         return finish(mapped);
     };
