@@ -88,16 +88,35 @@ fn test_codes() -> Vec<[f64; 3]> {
 /// L*a*b* (D50) of `codes` through an ICC profile, by Little CMS's `transicc`,
 /// relative colorimetric, without a precalculated transform (-c0).
 fn transicc_lab(icc: &Path, codes: &[[f64; 3]]) -> Vec<Lab> {
+    transicc(&format!("-i{}", icc.display()), "-o*Lab", codes)
+        .into_iter()
+        .map(|v| Lab {
+            l: v[0],
+            a: v[1],
+            b: v[2],
+        })
+        .collect()
+}
+
+/// Codes (0..255) of L*a*b* (D50) `labs` on the display of an ICC profile, by
+/// `transicc` the other way (the profile's B2A0 where it has one).
+fn transicc_codes(icc: &Path, labs: &[Lab]) -> Vec<[f64; 3]> {
+    let rows: Vec<[f64; 3]> = labs.iter().map(|c| [c.l, c.a, c.b]).collect();
+    transicc("-i*Lab", &format!("-o{}", icc.display()), &rows)
+}
+
+/// `transicc` with `input` and `output` profile flags on `rows`, relative
+/// colorimetric, without a precalculated transform (-c0).
+fn transicc(input: &str, output: &str, rows: &[[f64; 3]]) -> Vec<[f64; 3]> {
     common::need_tool("transicc", "liblcms2-utils");
     let mut child = Command::new("transicc")
-        .args(["-t1", "-c0", "-n", "-o", "*Lab"])
-        .arg(format!("-i{}", icc.display()))
+        .args(["-t1", "-c0", "-n", input, output])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let input: String = codes
+    let text: String = rows
         .iter()
         .map(|c| format!("{} {} {}\n", c[0], c[1], c[2]))
         .collect();
@@ -106,12 +125,12 @@ fn transicc_lab(icc: &Path, codes: &[[f64; 3]]) -> Vec<Lab> {
         .stdin
         .take()
         .unwrap()
-        .write_all(input.as_bytes())
+        .write_all(text.as_bytes())
         .unwrap();
     let out = child.wait_with_output().unwrap();
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    let labs: Vec<Lab> = text
+    let values: Vec<[f64; 3]> = text
         .lines()
         .filter_map(|line| {
             let v: Vec<f64> = line
@@ -119,15 +138,11 @@ fn transicc_lab(icc: &Path, codes: &[[f64; 3]]) -> Vec<Lab> {
                 .map(|w| w.parse::<f64>())
                 .collect::<Result<_, _>>()
                 .ok()?;
-            (v.len() == 3).then(|| Lab {
-                l: v[0],
-                a: v[1],
-                b: v[2],
-            })
+            (v.len() == 3).then(|| [v[0], v[1], v[2]])
         })
         .collect();
-    assert_eq!(labs.len(), codes.len(), "{text}");
-    labs
+    assert_eq!(values.len(), rows.len(), "{text}");
+    values
 }
 
 /// The worst ΔE00 between the model and `read` over `codes`.
@@ -284,6 +299,105 @@ fn icc_profiles_read_back_by_lcms_and_moxcms_match_the_model() {
             }
         }
     }
+}
+
+/// Issue 27: what the fit learns of a non-additive panel reaches the ICC profile. A
+/// plasma-like limiter on ISETBio's Sony OLED (greys 5–8 % below the sum of their
+/// channels) keeps the interaction term, which a matrix/TRC cannot hold; both ICC
+/// versions carry the whole model in A2B0 and B2A0. Little CMS reads every test code
+/// within 0.1 ΔE00 of the model where the additive part alone is more than 1 off, and
+/// sends the model's colours back to their codes; ArgyllCMS's `profcheck` judges the
+/// run's readings as the model does.
+#[test]
+fn a_model_with_terms_is_carried_by_the_icc_luts() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = isetbio_monitor(
+        "isetbio_oled_sony",
+        "[monitor.failures]\nchannel_interaction = 0.35",
+    );
+    let (profile, path) = calibrate(dir.path(), "plasma", &config);
+    assert!(
+        profile.model.terms.interaction.is_some(),
+        "{:?}",
+        profile.report.terms
+    );
+    let white = profile.report.white_anchor.as_ref().unwrap().measured;
+    let additive = MonitorModel {
+        terms: Default::default(),
+        ..profile.model.clone()
+    };
+    let codes = test_codes();
+    let additive_labs: Vec<Lab> = codes
+        .iter()
+        .map(|c| model_lab(&additive, &white, c.map(|v| v / 255.0)))
+        .collect();
+    let (gap, _) = worst_against_model(&profile.model, &white, &codes, &additive_labs);
+    assert!(gap > 1.0, "the term moves the colours by only {gap}");
+    for format in ["icc4", "icc2"] {
+        let icc = dir.path().join(format!("plasma.{format}.icc"));
+        export(&path, format, &icc, &[]);
+        let read = transicc_lab(&icc, &codes);
+        let (worst, at) = worst_against_model(&profile.model, &white, &codes, &read);
+        let mean = codes
+            .iter()
+            .zip(&read)
+            .map(|(c, lab)| {
+                delta_e_2000(
+                    &model_lab(&profile.model, &white, c.map(|v| v / 255.0)),
+                    lab,
+                )
+            })
+            .sum::<f64>()
+            / codes.len() as f64;
+        eprintln!(
+            "{format}: lcms mean ΔE00 {mean:.4}, worst {worst:.4} at {at:?} (the additive part: {gap:.3})"
+        );
+        // lut16's XYZ steps by 1/32768 of white, about 0.1 ΔE00 in the darkest codes.
+        assert!(worst < 0.2, "{format} via lcms: ΔE00 {worst} at {at:?}");
+        assert!(mean < 0.02, "{format} via lcms: mean ΔE00 {mean}");
+        // Back: the model's colours of the cube's codes, to codes and through the model.
+        let cube: Vec<[f64; 3]> = codes.iter().take(125).copied().collect();
+        let labs: Vec<Lab> = cube
+            .iter()
+            .map(|c| model_lab(&profile.model, &white, c.map(|v| v / 255.0)))
+            .collect();
+        let back = transicc_codes(&icc, &labs);
+        let (worst, at) = worst_against_model(&profile.model, &white, &back, &labs);
+        eprintln!("{format}: back through B2A0, worst ΔE00 {worst:.4} at {at:?}");
+        assert!(worst < 0.2, "{format} B2A0: ΔE00 {worst} at {at:?}");
+    }
+    // One judge: profcheck on the run's own readings, against the model in its frame.
+    let ti3 = dir.path().join("plasma.ti3");
+    export(&path, "ti3", &ti3, &[]);
+    let icc = dir.path().join("plasma.icc2.icc");
+    common::need_tool("profcheck", "argyll");
+    let judged = chromacal::argyll::profcheck_delta_e00(&ti3, &icc).unwrap();
+    let set = chromacal::cgats::read_ti3(&ti3).unwrap();
+    let model: Vec<f64> = set
+        .measurements
+        .iter()
+        .filter_map(|m| {
+            // Read back in the run's units (the file says its white's luminance).
+            let measured = m.usable_xyz()?;
+            let predicted = profile.model.forward_centre(m.drive);
+            Some(chromacal::comparison::judged_delta_e00(
+                &measured, &predicted, white.y,
+            ))
+        })
+        .collect();
+    assert_eq!(judged.len(), model.len());
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    eprintln!(
+        "profcheck on the ICC v2 {:.4}, the model {:.4}",
+        mean(&judged),
+        mean(&model)
+    );
+    assert!(
+        (mean(&judged) - mean(&model)).abs() < 0.01,
+        "ICC {} against model {}",
+        mean(&judged),
+        mean(&model)
+    );
 }
 
 fn argyll(tool: &str, args: &[&str], dir: &Path) -> String {
@@ -751,7 +865,7 @@ fn export_errors_name_what_was_wrong() {
 }
 
 #[test]
-fn terms_an_icc_profile_cannot_carry_are_named_and_the_rest_is_exact() {
+fn terms_are_carried_by_icc_luts_and_named_where_a_file_cannot_carry_them() {
     let dir = tempfile::tempdir().unwrap();
     let (profile, path) = calibrate(
         dir.path(),
@@ -765,6 +879,16 @@ fn terms_an_icc_profile_cannot_carry_are_named_and_the_rest_is_exact() {
     );
     let icc = dir.path().join("nonadditive.icc");
     let said = export(&path, "icc4", &icc, &[]);
+    assert!(!said.contains("channel-interaction term"), "{said}");
+    assert!(!said.contains("primary chromaticity term"), "{said}");
+    // The warnings of failed checks are not repeated once a term models them.
+    assert!(
+        !said.contains("channel interaction (grey luminance"),
+        "{said}"
+    );
+    // A PsychoPy file cannot carry them, and says so.
+    let psychopy = dir.path().join("nonadditive.json");
+    let said = export(&path, "psychopy", &psychopy, &[]);
     assert!(
         said.contains("not carried: the model's channel-interaction term"),
         "{said}"
@@ -773,22 +897,21 @@ fn terms_an_icc_profile_cannot_carry_are_named_and_the_rest_is_exact() {
         said.contains("not carried: the model's drive-dependent primary chromaticity term"),
         "{said}"
     );
-    // The warnings of failed checks are not repeated once a term models them.
-    assert!(
-        !said.contains("channel interaction (grey luminance"),
-        "{said}"
-    );
-    // What the profile can carry, the additive part (each channel scaled so that it
-    // still passes through the model's white), it carries exactly, relative to the
-    // measured white.
+    let white = profile.report.white_anchor.as_ref().unwrap().measured;
+    let codes = test_codes();
+    // The LUT tags, which Little CMS prefers, carry the whole model, both terms.
+    let (worst, at) =
+        worst_against_model(&profile.model, &white, &codes, &transicc_lab(&icc, &codes));
+    assert!(worst < 0.2, "the LUT via lcms: ΔE00 {worst} at {at:?}");
+    // The matrix/TRC tags, for readers without LUTs, carry the additive part (each
+    // channel scaled so that it still passes through the model's white) exactly,
+    // relative to the measured white.
     let (additive, _) = MonitorModel {
         terms: Default::default(),
         ..profile.model.clone()
     }
     .anchored_at_white(&profile.model.white())
     .unwrap();
-    let white = profile.report.white_anchor.as_ref().unwrap().measured;
-    let codes = test_codes();
     let bytes = std::fs::read(&icc).unwrap();
     let (worst, at) = worst_against_model(&additive, &white, &codes, &moxcms_lab(&bytes, &codes));
     assert!(worst < 0.1, "via moxcms: ΔE00 {worst} at {at:?}");

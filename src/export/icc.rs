@@ -14,6 +14,9 @@
 //!   display's own white (Y = 1) and there is no `chad` (readers derive Bradford from
 //!   `wtpt`, as Little CMS and ArgyllCMS do); TRCs are `curv` only; `bkpt` is written.
 //!
+//! A model with additivity terms also gets `A2B0` and `B2A0` (`icc_lut`), which carry
+//! them.
+//!
 //! Both carry the colorants adapted to D50, `lumi`, the `meta` dict with colord's
 //! metadata keys and, with calibration curves, the Apple `vcgt` tag (3 × 256 16-bit
 //! entries, as ArgyllCMS writes it).
@@ -21,6 +24,7 @@
 use md5::{Digest, Md5};
 use nalgebra::Matrix3;
 
+use super::icc_lut::lut16_bytes;
 use super::matrix_trc::{D50, MatrixTrc, Trc};
 use crate::color::Xyz;
 use crate::model::target::CURVE_ENTRIES;
@@ -249,6 +253,10 @@ pub fn encode(profile: &MatrixTrc, text: &IccText, version: IccVersion) -> Vec<u
     tags.push((*b"gTRC", trc_tag(&profile.trcs[1], version)));
     tags.push((*b"bTRC", trc_tag(&profile.trcs[2], version)));
     tags.push((*b"lumi", xyz_type(&Xyz::new(0.0, profile.white.y, 0.0))));
+    if let Some(luts) = &profile.luts {
+        tags.push((*b"A2B0", lut16_bytes(&luts.a2b0)));
+        tags.push((*b"B2A0", lut16_bytes(&luts.b2a0)));
+    }
     if let Some(calibration) = &profile.calibration {
         tags.push((*b"vcgt", vcgt(&calibration.curves)));
     }

@@ -13,6 +13,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use super::icc_lut::ModelLuts;
 use crate::color::Xyz;
 use crate::color::adaptation::{AdaptationTransform, adaptation_matrix};
 use crate::model::MonitorModel;
@@ -77,6 +78,8 @@ pub struct MatrixTrc {
     pub black_clipped: bool,
     /// Calibration curves the description is of the display through (for `vcgt`).
     pub calibration: Option<CalibrationCurves>,
+    /// The whole model as LUT tags, when it has terms the matrix/TRC cannot hold.
+    pub luts: Option<ModelLuts>,
 }
 
 impl MatrixTrc {
@@ -85,7 +88,8 @@ impl MatrixTrc {
     /// A matrix/TRC cannot hold the model's additivity terms: its additive part is
     /// exported, each channel scaled so that the description still passes through the
     /// model's white (which the fit anchored at the measured one), since everything in
-    /// the profile is relative to that white.
+    /// the profile is relative to that white. The whole model, terms included, goes
+    /// into `luts` (`icc_lut`), which readers prefer.
     pub fn from_model(model: &MonitorModel, calibration: Option<&CalibrationCurves>) -> Self {
         Self::relative_to(model, calibration, None)
     }
@@ -101,6 +105,7 @@ impl MatrixTrc {
         calibration: Option<&CalibrationCurves>,
         white: Option<Xyz>,
     ) -> Self {
+        let full = model;
         let additive;
         let model = if model.terms.is_empty() {
             model
@@ -162,14 +167,17 @@ impl MatrixTrc {
         let white = white
             .filter(|w| w.y > 0.0 && w.iter().all(|v| v.is_finite()))
             .unwrap_or(Xyz::new(white_vector.x, white_vector.y, white_vector.z));
-        MatrixTrc {
+        let mut profile = MatrixTrc {
             white,
             black: model.black,
             colorants: colorants / white.y,
             trcs,
             black_clipped,
             calibration: calibration.cloned(),
-        }
+            luts: None,
+        };
+        profile.luts = ModelLuts::of(full, calibration, white.y, &profile.chad());
+        profile
     }
 
     /// The white relative to itself: Y = 1.

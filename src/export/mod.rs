@@ -3,14 +3,16 @@
 //! measurements) and `.cal` (calibration curves), PsychoPy monitor files, and the
 //! native profile as JSON.
 //!
-//! Each format says what it cannot carry: a matrix/TRC profile describes the centre
-//! of the screen as an additive display; the spatial map, a failed additivity or
+//! Each format says what it cannot carry: an ICC profile describes the centre of the
+//! screen (the additivity terms in its LUT tags, `icc_lut`), a PsychoPy file an
+//! additive display; the spatial map, a failed additivity or
 //! primary-constancy check, and a surround dependence are listed in the profile's
 //! description and returned as notes.
 
 pub mod cal;
 pub mod colord;
 pub mod icc;
+pub mod icc_lut;
 pub mod matrix_trc;
 pub mod psychopy;
 
@@ -133,8 +135,9 @@ pub struct Exported {
     pub calibration: Option<CalibrationCurves>,
 }
 
-/// What a matrix/TRC description (or a PsychoPy gamma grid) of this profile leaves out.
-pub fn limitations(profile: &Profile) -> Vec<String> {
+/// What a description of this profile leaves out: a PsychoPy gamma grid, or an ICC
+/// profile, which carries the additivity terms in its LUT tags (`carries_terms`).
+pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
     let report = &profile.report;
     let mut notes = Vec::new();
     if !matches!(profile.model.spatial, crate::model::SpatialMap::Uniform) {
@@ -150,13 +153,13 @@ pub fn limitations(profile: &Profile) -> Vec<String> {
     }
     let checks = &report.checks;
     let terms = &profile.model.terms;
-    if let Some(gamma) = terms.interaction {
+    if let Some(gamma) = terms.interaction.filter(|_| !carries_terms) {
         notes.push(format!(
             "the model's channel-interaction term (each channel's light changes by γ = {:+.4}, {:+.4}, {:+.4} per full channel beside it); the curves and matrix are exact without it",
             gamma[0], gamma[1], gamma[2]
         ));
     }
-    if terms.chromaticity_shift.is_some() {
+    if terms.chromaticity_shift.is_some() && !carries_terms {
         notes.push(
             "the model's drive-dependent primary chromaticity term (the primaries are those of full drive)"
                 .into(),
@@ -300,7 +303,7 @@ pub fn export(
     format: Format,
     options: &ExportOptions,
 ) -> Result<Exported, ExportError> {
-    let mut notes = limitations(profile);
+    let mut notes = limitations(profile, matches!(format, Format::Icc4 | Format::Icc2));
     let mut warnings = Vec::new();
     let calibration = calibration_for(profile, options.target.as_ref())?;
     if let Some(k) = &calibration
