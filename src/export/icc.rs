@@ -254,8 +254,14 @@ pub fn encode(profile: &MatrixTrc, text: &IccText, version: IccVersion) -> Vec<u
     tags.push((*b"bTRC", trc_tag(&profile.trcs[2], version)));
     tags.push((*b"lumi", xyz_type(&Xyz::new(0.0, profile.white.y, 0.0))));
     if let Some(luts) = &profile.luts {
-        tags.push((*b"A2B0", lut16_bytes(&luts.a2b0)));
-        tags.push((*b"B2A0", lut16_bytes(&luts.b2a0)));
+        // The same tables for perceptual and for colorimetric intents: readers that
+        // look for the colorimetric tag only (moxcms) find it, and `assemble` writes
+        // the bytes once.
+        let (a2b, b2a) = (lut16_bytes(&luts.a2b0), lut16_bytes(&luts.b2a0));
+        tags.push((*b"A2B0", a2b.clone()));
+        tags.push((*b"B2A0", b2a.clone()));
+        tags.push((*b"A2B1", a2b));
+        tags.push((*b"B2A1", b2a));
     }
     if let Some(calibration) = &profile.calibration {
         tags.push((*b"vcgt", vcgt(&calibration.curves)));

@@ -5,8 +5,10 @@
 //! or chromaticity-shift term (`fit::terms`) lost it in every ICC profile, and with it
 //! what the fit won on a non-additive panel. Readers prefer the LUT tags when a
 //! profile has both (ICC.1:2001-04 §6.3.1.2; ArgyllCMS and Little CMS do), and a
-//! reader that knows only matrix/TRC still finds the additive part. A model without
-//! terms gets no LUT: the matrix/TRC is exact for it.
+//! reader that knows only matrix/TRC still finds the additive part. The same tables
+//! are written as `A2B1`/`B2A1` too, since moxcms looks only there for colorimetric
+//! intents. A model without terms gets no LUT: the matrix/TRC is exact for it while
+//! the black lies inside the primaries' triangle.
 //!
 //! The tables are laid out so that the grid holds what is smooth and the 1-D tables
 //! what is not (ICC.1:2001-04 §6.5.7):
@@ -14,9 +16,17 @@
 //!   light, ê = E(v) / E(1) (through the calibration curves, if any); the grid, over
 //!   the three shares, holds PCS XYZ. The additive model is linear in the shares and
 //!   the interaction term bilinear, so the grid interpolates them almost exactly.
-//! * `B2A0`: the input tables scale each PCS component to the grid's range; the grid
-//!   holds the shares the model's inverse gives (clipped to what each channel can
-//!   give); the output tables invert each channel's share curve back to the device.
+//! * `B2A0`: the input tables scale each PCS component to the grid's range (the most
+//!   any code gives); the grid holds the shares the model's inverse gives, which are
+//!   linear in XYZ for the additive part, so the grid interpolates them almost
+//!   exactly; the output tables clip each share to [0, 1] and invert its channel's
+//!   curve back to the device. The shares come from the inverse with the terms'
+//!   polynomials carried on beyond the gamut (`MonitorModel::extended_light_of`) and
+//!   are stored unclipped from −0.25 to 1.25: clamped, the cells crossing the gamut's
+//!   surface bent (device white came back as 254.6, edge colours 0.25 ΔE00 off).
+//!   Near black the output tables cannot resolve single codes (one entry is 3.7·10⁻⁴
+//!   of full light, code 7 of a γ 2.2 channel), but a share of exactly 0 falls on an
+//!   entry, so a channel that is off comes back off.
 //!
 //! PCS XYZ is relative to the profile's white and adapted to D50 as the matrix/TRC
 //! tags are, in lut16's XYZ encoding: 0x8000 is 1.0 (ICC.1:2001-04 Table 41).
@@ -41,12 +51,10 @@ const PCS_HEADROOM: f64 = 1.02;
 /// The largest PCS XYZ component lut16 can encode: 1 + 32767/32768.
 const PCS_MAX: f64 = 65535.0 / 32768.0;
 
-/// The B2A0 grid holds shares from `SHARE_RANGE.0` to `SHARE_RANGE.1`, not only 0 to 1:
-/// a grid point outside the display's gamut keeps the share the model extrapolates to
-/// (below 0 or above full), so that a colour inside the gamut interpolates between
-/// true values; clipped at the grid points, every cell on the gamut's edge would bend
-/// (by up to 5.8 ΔE00 in the test). The output tables clip after interpolation.
-const SHARE_RANGE: (f64, f64) = (-0.5, 1.5);
+/// The B2A0 grid's shares: from `SHARE_LOW`, in `SHARE_STEP`s of the output tables'
+/// entries, so that share 0 and share 1 fall exactly on entries 682 and 3410.
+const SHARE_LOW: f64 = -0.25;
+const SHARE_STEP: f64 = 0.25 / 682.0;
 
 /// One `lut16Type`: three inputs, three outputs, identity matrix.
 #[derive(Debug, Clone, PartialEq)]
@@ -128,9 +136,10 @@ impl ModelLuts {
             let most = a2b0.grid.iter().map(|v| v[j]).max().unwrap_or(0) as f64 / 32768.0;
             (most * PCS_HEADROOM).clamp(super::matrix_trc::D50[j], PCS_MAX)
         });
+        let high = SHARE_LOW + SHARE_STEP * (TABLE_ENTRIES - 1) as f64;
         let b2a0 = Lut16 {
             // Entry i stands for the encoded value i/(N − 1) · 65535, that is XYZ
-            // 65535/32768 · i/(N − 1).
+            // PCS_MAX · i/(N − 1).
             input: [0, 1, 2].map(|j| {
                 (0..TABLE_ENTRIES)
                     .map(|i| unit16(step(i, TABLE_ENTRIES) * PCS_MAX / range[j]))
@@ -140,20 +149,24 @@ impl ModelLuts {
                 .map(|p| {
                     let pcs = Vector3::from_fn(|j, _| step(p[j], n) * range[j]);
                     let xyz: Xyz = unchad * pcs * white_y;
-                    let (low, high) = SHARE_RANGE;
-                    match model.inverse(&xyz, ScreenPosition::CENTRE) {
-                        Ok(found) => [0, 1, 2]
-                            .map(|c| unit16((found.excitation[c] / full[c] - low) / (high - low))),
-                        Err(_) => [0; 3],
-                    }
+                    let light = model
+                        .extended_light_of(&xyz)
+                        .or_else(|| {
+                            let found = model.inverse(&xyz, ScreenPosition::CENTRE).ok()?;
+                            Some(Vector3::from_fn(|c, _| found.excitation[c] * gains[c]))
+                        })
+                        .unwrap_or_else(Vector3::zeros);
+                    [0, 1, 2].map(|c| {
+                        let e = light[c] / gains[c] / full[c];
+                        unit16((e - SHARE_LOW) / (high - SHARE_LOW))
+                    })
                 })
                 .collect(),
             output: [0, 1, 2].map(|c| {
-                let (low, high) = SHARE_RANGE;
                 (0..TABLE_ENTRIES)
                     .map(|i| {
-                        let target = low + step(i, TABLE_ENTRIES) * (high - low);
-                        unit16(device_for_share(|x| share(c, x), target))
+                        let e = SHARE_LOW + SHARE_STEP * i as f64;
+                        unit16(device_for_share(|x| share(c, x), e))
                     })
                     .collect()
             }),

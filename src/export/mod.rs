@@ -136,8 +136,10 @@ pub struct Exported {
 }
 
 /// What a description of this profile leaves out: a PsychoPy gamma grid, or an ICC
-/// profile, which carries the additivity terms in its LUT tags (`carries_terms`).
-pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
+/// profile, which carries the additivity terms in its LUT tags (`carries_terms`);
+/// `with_curves` when it is of the display through calibration curves solved at
+/// export.
+pub fn limitations(profile: &Profile, carries_terms: bool, with_curves: bool) -> Vec<String> {
     let report = &profile.report;
     let mut notes = Vec::new();
     if !matches!(profile.model.spatial, crate::model::SpatialMap::Uniform) {
@@ -165,7 +167,13 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
                 .into(),
         );
     }
-    if !terms.is_empty() {
+    if !terms.is_empty() && carries_terms {
+        notes.push(
+            "the terms in the matrix/TRC tags, which hold the additive part for readers that do not read the LUT tags"
+                .into(),
+        );
+    }
+    if !terms.is_empty() && with_curves {
         notes.push(
             "the terms in calibration curves solved at export (they come from the additive part; a calibration run with [target] measures its curves into place)"
                 .into(),
@@ -303,9 +311,13 @@ pub fn export(
     format: Format,
     options: &ExportOptions,
 ) -> Result<Exported, ExportError> {
-    let mut notes = limitations(profile, matches!(format, Format::Icc4 | Format::Icc2));
-    let mut warnings = Vec::new();
     let calibration = calibration_for(profile, options.target.as_ref())?;
+    let mut notes = limitations(
+        profile,
+        matches!(format, Format::Icc4 | Format::Icc2),
+        calibration.is_some(),
+    );
+    let mut warnings = Vec::new();
     if let Some(k) = &calibration
         && k.luminance_limited
     {
@@ -329,7 +341,7 @@ pub fn export(
                 Some(_) => None,
             };
             let matrix_trc = MatrixTrc::relative_to(&profile.model, calibration.as_ref(), measured);
-            if matrix_trc.black_clipped {
+            if matrix_trc.black_clipped && matrix_trc.luts.is_none() {
                 notes.push("the black's chromaticity (outside the primaries' triangle)".into());
             }
             let text = IccText {

@@ -164,13 +164,43 @@ impl MonitorModel {
     /// the terms are small next to the primaries (a few per cent; the fit keeps none
     /// beyond `fit::terms::MAX_TERM`). Also says whether it converged.
     fn light_of(&self, inverse: &Matrix3<f64>, above: &Xyz) -> (Vector3<f64>, bool) {
+        self.light_of_shares(inverse, above, drive_shares)
+    }
+
+    /// The channel lights at the centre whose XYZ, with the terms' polynomials carried
+    /// on beyond black and full drive (shares not clamped to [0, 1]), is `xyz`: inside
+    /// the gamut what [`Self::inverse`] finds, outside it the smooth continuation, for
+    /// a table that interpolates across the gamut's surface (`export::icc_lut`). `None`
+    /// when the matrix is singular or the fixed point does not converge.
+    pub fn extended_light_of(&self, xyz: &Xyz) -> Option<Vector3<f64>> {
+        let inverse = self.matrix.try_inverse()?;
+        let unclamped = |light: &Vector3<f64>, full: &[f64; 3]| {
+            [0, 1, 2].map(|c| {
+                if full[c] > 0.0 {
+                    light[c] / full[c]
+                } else {
+                    0.0
+                }
+            })
+        };
+        let (light, converged) = self.light_of_shares(&inverse, &(xyz - self.black), unclamped);
+        (converged && light.iter().all(|v| v.is_finite())).then_some(light)
+    }
+
+    /// [`Self::light_of`] with the shares ê taken by `shares`.
+    fn light_of_shares(
+        &self,
+        inverse: &Matrix3<f64>,
+        above: &Xyz,
+        shares: impl Fn(&Vector3<f64>, &[f64; 3]) -> [f64; 3],
+    ) -> (Vector3<f64>, bool) {
         let mut light = inverse * above;
         if self.terms.is_empty() {
             return (light, true);
         }
         let full = self.full_drive_excitations();
         for _ in 0..100 {
-            let shares = drive_shares(&light, &full);
+            let shares = shares(&light, &full);
             let mut target = *above;
             if let Some(u) = self.terms.chromaticity_shift {
                 let w = chromaticity_shift_basis(&shares);
@@ -191,6 +221,7 @@ impl MonitorModel {
                 return (light, true);
             }
         }
+        // Not settled in 100 steps: judged by how near the clamped forward comes.
         let reached = self.light_above_black(&light);
         let converged = (reached - above).norm() <= 1e-6 * above.norm().max(f64::MIN_POSITIVE);
         (light, converged)
