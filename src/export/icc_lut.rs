@@ -149,15 +149,16 @@ impl ModelLuts {
                 .map(|p| {
                     let pcs = Vector3::from_fn(|j, _| step(p[j], n) * range[j]);
                     let xyz: Xyz = unchad * pcs * white_y;
-                    let light = model
+                    let excitation: [f64; 3] = model
                         .extended_light_of(&xyz)
+                        .map(|light| [0, 1, 2].map(|c| light[c] / gains[c]))
                         .or_else(|| {
                             let found = model.inverse(&xyz, ScreenPosition::CENTRE).ok()?;
-                            Some(Vector3::from_fn(|c, _| found.excitation[c] * gains[c]))
+                            Some(found.excitation)
                         })
-                        .unwrap_or_else(Vector3::zeros);
+                        .unwrap_or([0.0; 3]);
                     [0, 1, 2].map(|c| {
-                        let e = light[c] / gains[c] / full[c];
+                        let e = excitation[c] / full[c];
                         unit16((e - SHARE_LOW) / (high - SHARE_LOW))
                     })
                 })

@@ -82,24 +82,6 @@ pub struct MatrixTrc {
     pub luts: Option<ModelLuts>,
 }
 
-/// `model` (additive) with each channel's light scaled by its own gain so that `drive`
-/// gives `target`: g = C⁻¹ (target − black), C's columns each channel's light at
-/// `drive`. `None` when C is singular or a gain is not a positive finite number.
-fn anchored_at_drive(model: &MonitorModel, drive: [f64; 3], target: &Xyz) -> Option<MonitorModel> {
-    let contributions =
-        Matrix3::from_fn(|row, c| model.matrix[(row, c)] * model.laws[c].excitation(drive[c]));
-    let gains = contributions.try_inverse()? * (target - model.black);
-    if !gains.iter().all(|g| g.is_finite() && *g > 0.0) {
-        return None;
-    }
-    let mut anchored = model.clone();
-    for c in 0..3 {
-        let column = anchored.matrix.column(c) * gains[c];
-        anchored.matrix.set_column(c, &column);
-    }
-    Some(anchored)
-}
-
 impl MatrixTrc {
     /// The display at the centre of the screen, through `calibration` when given.
     ///
@@ -138,7 +120,9 @@ impl MatrixTrc {
                     crate::model::target::interpolate(&k.curves[c], 1.0)
                 })
             });
-            additive = anchored_at_drive(&part, top, &model.forward_centre(top)).unwrap_or(part);
+            additive = part
+                .anchored_at(top, &model.forward_centre(top))
+                .map_or(part, |(anchored, _)| anchored);
             &additive
         };
         let inverse = model.matrix.try_inverse().unwrap_or_else(Matrix3::zeros);

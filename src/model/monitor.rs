@@ -309,36 +309,50 @@ impl MonitorModel {
         }
     }
 
-    /// Each channel's light above black in full white at the centre, terms included
-    /// (at full drive the chromaticity shift vanishes and the interaction multiplies
-    /// channel c by 1 + γ_c s_c): the columns of a matrix whose row sums, with black,
-    /// give the white.
-    pub fn white_contributions(&self) -> Matrix3<f64> {
+    /// Each channel's light above black at `drive` at the centre, terms included
+    /// (m_c l_c (1 + γ_c s_c) + u_c ê_c (1 − ê_c)): the columns of a matrix whose row
+    /// sums, with black, give the XYZ of `drive`. Each column is linear in m_c and u_c
+    /// together, which is what lets [`Self::anchored_at`] solve for one gain a channel.
+    pub fn contributions_at(&self, drive: Drive) -> Matrix3<f64> {
         let k = self.spatial.gains(ScreenPosition::CENTRE);
-        let full = self.full_drive_excitations();
-        let light = Vector3::new(k[0] * full[0], k[1] * full[1], k[2] * full[2]);
-        let s = interaction_basis(&drive_shares(&light, &full));
+        let e = self.excitations(drive);
+        let light = Vector3::new(k[0] * e[0], k[1] * e[1], k[2] * e[2]);
+        let shares = drive_shares(&light, &self.full_drive_excitations());
+        let s = interaction_basis(&shares);
+        let w = chromaticity_shift_basis(&shares);
         let mut contributions = Matrix3::zeros();
         for c in 0..3 {
             let gain = 1.0 + self.terms.interaction.map_or(0.0, |g| g[c] * s[c]);
-            contributions.set_column(c, &(self.matrix.column(c) * (light[c] * gain)));
+            let mut column = self.matrix.column(c) * (light[c] * gain);
+            if let Some(u) = self.terms.chromaticity_shift {
+                column += Xyz::from(u[c]) * w[c];
+            }
+            contributions.set_column(c, &column);
         }
         contributions
     }
 
     /// The same display with each channel's light scaled by its own gain g_c (its
     /// column and its chromaticity shift alike), so that full white at the centre
-    /// gives `white`: g = C⁻¹ (white − black), with C the channels' shares of white
-    /// (`white_contributions`). This is how a fit is anchored at the measured white
-    /// (`fit::anchor_at_measured_white`): an ICC profile, a `.cal` target and every
-    /// relative export are normalised to the white, so a model that misses the
-    /// measured white rescales every colour it exports. `None` when C is singular or a
-    /// gain is not a positive finite number.
+    /// gives `white` ([`Self::anchored_at`] at full drive). This is how a fit is
+    /// anchored at the measured white (`fit::anchor_at_measured_white`): an ICC
+    /// profile, a `.cal` target and every relative export are normalised to the
+    /// white, so a model that misses the measured white rescales every colour it
+    /// exports.
     pub fn anchored_at_white(&self, white: &Xyz) -> Option<(MonitorModel, [f64; 3])> {
+        self.anchored_at([1.0; 3], white)
+    }
+
+    /// The same display with each channel's light scaled by its own gain g_c (its
+    /// column and its chromaticity shift alike), so that `drive` at the centre gives
+    /// `target`: g = C⁻¹ (target − black), with C the channels' contributions at
+    /// `drive` (`contributions_at`). `None` when C is singular or a gain is not a
+    /// positive finite number.
+    pub fn anchored_at(&self, drive: Drive, target: &Xyz) -> Option<(MonitorModel, [f64; 3])> {
         let gains = self
-            .white_contributions()
+            .contributions_at(drive)
             .try_inverse()
-            .map(|inverse| inverse * (white - self.black))?;
+            .map(|inverse| inverse * (target - self.black))?;
         let gains = [gains[0], gains[1], gains[2]];
         if !gains.iter().all(|g| g.is_finite() && *g > 0.0) {
             return None;
