@@ -8,6 +8,9 @@
 #                                   SIGKILLs (CHROMACAL_SOAK_SEED=S picks the kill
 #                                   times), and the parser fuzz with 20 × N cases
 #                                   per parser
+#   scripts/test.sh --release       the whole suite built as `cargo run --release`
+#                                   builds the program (optimised code is where a
+#                                   compiler's faults show: see build.rs)
 #   scripts/test.sh ARGS...         passed to `cargo test --locked --features
 #                                   peer-engines`
 set -euo pipefail
