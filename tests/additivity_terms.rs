@@ -219,3 +219,90 @@ fn a_plasma_like_limiter_is_learnt_from_the_greys_and_carried_to_the_mixtures() 
         plain_sum / 6.0
     );
 }
+
+/// Calibration curves solved at export go through the whole model: on a
+/// plasma-like limiter (which dims a grey by up to a quarter below its channels' sum)
+/// and on a CRT whose primaries move with drive, the colours the curves ask for are
+/// the ones the kept terms predict, not the additive part's. Judged on the virtual
+/// monitor itself (its noise-free light through the curves), at 16 bits so that the
+/// display's own code steps (one code of blue near the top moves Z by 1 %, 0.7 ΔE00)
+/// do not decide.
+#[test]
+fn curves_solved_at_export_take_the_kept_terms_into_account() {
+    use chromacal::model::target::{
+        Target, ToneCurve, WhiteTarget, calibration_curves, white_error,
+    };
+    use chromacal::sim::monitor::centre_patch;
+    let target = Target {
+        white: WhiteTarget::Chromaticity([0.3127, 0.3290]),
+        tone: ToneCurve::Power(2.2),
+        luminance: None,
+    };
+    // (monitor, failure, most white ΔE00, most tone error) through the whole model.
+    let cases = [
+        (
+            isetbio_monitor("isetbio_oled_sony", "bit_depth = 16"),
+            "channel_interaction = 0.35",
+            1.0,
+            0.05,
+        ),
+        (
+            "[monitor]\npreset = \"crt\"\nbit_depth = 16".to_string(),
+            "primary_nonconstancy = 0.03",
+            0.5,
+            0.006,
+        ),
+    ];
+    for (monitor, failure, most_white, most_tone) in cases {
+        for seed in 1..=3 {
+            let config_text = common::with_fixed_plan(&format!(
+                "{monitor}\n[monitor.failures]\n{failure}\n[instrument.simulated]\nseed = {seed}\n[plan]\nseed = {seed}\n"
+            ));
+            let (set, _) = simulate(&config_text, Path::new("."));
+            let fitted = fit_monitor(&set, &FitOptions::default()).unwrap();
+            assert!(
+                !fitted.model.terms.is_empty(),
+                "{failure}, seed {seed}: no term kept"
+            );
+            let mut additive = fitted.model.clone();
+            additive.terms = Default::default();
+            let config = chromacal::config::parse_config(&config_text, "test config").unwrap();
+            let rig =
+                chromacal::calibrate::session::rig_for(&config, Path::new("."), None).unwrap();
+            let mut screen = rig.monitor.lock().unwrap();
+            // (white ΔE00 from the target, largest |Y / Y_target − 1| at k/8) on screen.
+            let mut judge = |model: &chromacal::model::MonitorModel| {
+                let curves = calibration_curves(model, &target).unwrap();
+                let mut shown = |x: f64| {
+                    screen.show(centre_patch(curves.apply([x; 3])));
+                    screen.clock().advance(10.0);
+                    screen.xyz_at(screen.patch_centre()).unwrap()
+                };
+                let white = nalgebra::Vector3::from(curves.white);
+                let white_de = white_error(&shown(1.0), &white);
+                let black = shown(0.0).y;
+                let tone = (1..=8)
+                    .map(|k| {
+                        let x = f64::from(k) / 8.0;
+                        let want = black + (white.y - black) * x.powf(2.2);
+                        (shown(x).y / want - 1.0).abs()
+                    })
+                    .fold(0.0, f64::max);
+                (white_de, tone)
+            };
+            let (whole_white, whole_tone) = judge(&fitted.model);
+            let (additive_white, additive_tone) = judge(&additive);
+            eprintln!(
+                "{failure}, seed {seed}: on the screen, white ΔE00 {whole_white:.3} and tone within {:.2} % through the whole model's curves; {additive_white:.3} and {:.2} % through the additive part's",
+                100.0 * whole_tone,
+                100.0 * additive_tone
+            );
+            // On the limiter what is left is the term's shape against the limiter's
+            // (3 % at 7/8): a gain linear in the other channels' light.
+            assert!(whole_white < most_white, "{failure}, seed {seed}");
+            assert!(whole_tone < most_tone, "{failure}, seed {seed}");
+            assert!(whole_white < 0.6 * additive_white, "{failure}, seed {seed}");
+            assert!(whole_tone < 0.7 * additive_tone, "{failure}, seed {seed}");
+        }
+    }
+}

@@ -136,10 +136,10 @@ pub struct Exported {
 }
 
 /// What a description of this profile leaves out: a PsychoPy gamma grid, or an ICC
-/// profile, which carries the additivity terms in its LUT tags (`carries_terms`);
-/// `with_curves` when it is of the display through calibration curves solved at
-/// export.
-pub fn limitations(profile: &Profile, carries_terms: bool, with_curves: bool) -> Vec<String> {
+/// profile, which carries the additivity terms in its LUT tags (`carries_terms`).
+/// (Calibration curves solved at export go through the whole model, terms included:
+/// `model::target::calibration_curves`.)
+pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
     let report = &profile.report;
     let mut notes = Vec::new();
     if !matches!(profile.model.spatial, crate::model::SpatialMap::Uniform) {
@@ -170,12 +170,6 @@ pub fn limitations(profile: &Profile, carries_terms: bool, with_curves: bool) ->
     if !terms.is_empty() && carries_terms {
         notes.push(
             "the terms in the matrix/TRC tags, which hold the additive part for readers that do not read the LUT tags"
-                .into(),
-        );
-    }
-    if !terms.is_empty() && with_curves {
-        notes.push(
-            "the terms in calibration curves solved at export (they come from the additive part; a calibration run with [target] measures its curves into place)"
                 .into(),
         );
     }
@@ -312,11 +306,7 @@ pub fn export(
     options: &ExportOptions,
 ) -> Result<Exported, ExportError> {
     let calibration = calibration_for(profile, options.target.as_ref())?;
-    let mut notes = limitations(
-        profile,
-        matches!(format, Format::Icc4 | Format::Icc2),
-        calibration.is_some(),
-    );
+    let mut notes = limitations(profile, matches!(format, Format::Icc4 | Format::Icc2));
     let mut warnings = Vec::new();
     if let Some(k) = &calibration
         && k.luminance_limited

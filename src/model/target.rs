@@ -14,6 +14,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::monitor::MonitorModel;
+use super::spatial::ScreenPosition;
 use crate::color::{Lab, Xyz, delta_e_2000, xyz_to_lab};
 
 /// Rows of the curves: what `.cal` files and `vcgt` tags hold (inputs i/255).
@@ -278,7 +279,12 @@ pub fn target_luminance(tone: ToneCurve, x: f64, black: f64, white: f64) -> f64 
     black + tone.relative(x, black, white) * (white - black)
 }
 
-/// Curves that take `model` (at the centre of the screen) to `target`.
+/// Curves that take `model` (at the centre of the screen) to `target`: each entry is
+/// the drive whose colour is the target's grey at that input, black + f(x)(white −
+/// black). For the additive model that is one law inverted per channel; with the
+/// additivity terms it is the whole model's inverse (`MonitorModel::inverse`), and the
+/// brightest white the terms allow, so that a panel whose greys are not the sum of
+/// its channels is calibrated to what it shows rather than to what the sum predicts.
 pub fn calibration_curves(
     model: &MonitorModel,
     target: &Target,
@@ -310,6 +316,9 @@ pub fn calibration_curves(
         let top = model.laws[c].full_drive_excitation();
         y_max = y_max.min((top + t0[c]) / u[c]);
     }
+    if !model.terms.is_empty() {
+        y_max = reachable_luminance(model, &w, y_max);
+    }
     let requested = target.luminance.unwrap_or(y_max);
     if requested <= black.y {
         return Err(TargetError::BelowBlack {
@@ -321,16 +330,45 @@ pub fn calibration_curves(
     let y_t = requested.min(y_max);
     let white = w * y_t;
     let e_t = inverse * (white - black);
-    let curves = [0, 1, 2].map(|c| {
-        (0..CURVE_ENTRIES)
-            .map(|i| {
-                let input = i as f64 / (CURVE_ENTRIES - 1) as f64;
-                let f = target.tone.relative(input, black.y, y_t);
-                let top = model.laws[c].full_drive_excitation();
-                model.laws[c].drive((f * e_t[c]).clamp(0.0, top))
+    let additive_drive = |c: usize, f: f64| {
+        let top = model.laws[c].full_drive_excitation();
+        model.laws[c].drive((f * e_t[c]).clamp(0.0, top))
+    };
+    let shares: Vec<f64> = (0..CURVE_ENTRIES)
+        .map(|i| {
+            let input = i as f64 / (CURVE_ENTRIES - 1) as f64;
+            target.tone.relative(input, black.y, y_t)
+        })
+        .collect();
+    let curves = if model.terms.is_empty() {
+        [0, 1, 2].map(|c| shares.iter().map(|&f| additive_drive(c, f)).collect())
+    } else {
+        // With the additivity terms the grey axis is not where the additive part puts
+        // it (a brightness limiter dims a grey below the sum of its channels), so each
+        // entry is the whole model's inverse of its target colour.
+        let drives: Vec<[f64; 3]> = shares
+            .iter()
+            .map(|&f| {
+                let xyz = black + (white - black) * f;
+                match model.inverse(&xyz, ScreenPosition::CENTRE) {
+                    Ok(inverse) => inverse.drive,
+                    Err(_) => [0, 1, 2].map(|c| additive_drive(c, f)),
+                }
             })
-            .collect::<Vec<f64>>()
-    });
+            .collect();
+        // Kept non-decreasing, as a lookup table must be (an entry whose fixed point
+        // did not converge falls back to the additive drive, which may lie below).
+        [0, 1, 2].map(|c| {
+            let mut floor: f64 = 0.0;
+            drives
+                .iter()
+                .map(|d| {
+                    floor = floor.max(d[c]);
+                    floor
+                })
+                .collect()
+        })
+    };
     let mut result = CalibrationCurves {
         target: *target,
         curves,
@@ -353,6 +391,32 @@ pub fn calibration_curves(
     result.predicted_white_de00 = predicted_white_de00;
     result.predicted_tone_error = predicted_tone_error;
     Ok(result)
+}
+
+/// The most luminance the whole model (terms included) gives at the chromaticity
+/// `w` (XYZ per unit luminance), found by bisection on whether its inverse has to clip
+/// a channel; `additive` is what the additive part allows, the answer when the inverse
+/// cannot say (a singular matrix, or no luminance near it that fits).
+fn reachable_luminance(model: &MonitorModel, w: &Vector3<f64>, additive: f64) -> f64 {
+    let fits = |y: f64| {
+        model
+            .inverse(&(w * y), ScreenPosition::CENTRE)
+            .is_ok_and(|inverse| !inverse.clipped)
+    };
+    let (mut low, mut high) = (0.25 * additive, 4.0 * additive);
+    if !fits(low) || fits(high) {
+        return additive;
+    }
+    // 60 halvings take the interval below 1e-17 of the additive white.
+    for _ in 0..60 {
+        let middle = 0.5 * (low + high);
+        if fits(middle) {
+            low = middle;
+        } else {
+            high = middle;
+        }
+    }
+    low
 }
 
 /// ΔE00 of `measured` against the target white, with the target white as the
@@ -433,6 +497,40 @@ mod tests {
             for c in 0..3 {
                 assert!(curves.curves[c].windows(2).all(|w| w[1] >= w[0]));
             }
+        }
+    }
+
+    /// A brightness limiter (negative interaction: a grey is dimmer than its channels'
+    /// sum) and primaries that move with drive: the curves still reach the target
+    /// through the whole model, the white as bright as the terms allow (one channel at
+    /// full drive), where curves from the additive part miss it.
+    #[test]
+    fn curves_go_through_the_terms() {
+        let mut model = display();
+        model.terms.interaction = Some([-0.12, -0.1, -0.11]);
+        model.terms.chromaticity_shift =
+            Some([[1.0, -0.5, 0.2], [0.3, 0.8, -1.0], [-0.4, 0.1, 2.0]]);
+        let mut additive = model.clone();
+        additive.terms = Default::default();
+        for luminance in [None, Some(50.0)] {
+            let target = Target {
+                white: WhiteTarget::Daylight(6500.0),
+                tone: ToneCurve::Power(2.2),
+                luminance,
+            };
+            let curves = calibration_curves(&model, &target).unwrap();
+            assert!(curves.predicted_white_de00 < 0.01, "{curves:?}");
+            assert!(curves.predicted_tone_error < 0.002);
+            for c in 0..3 {
+                assert!(curves.curves[c].windows(2).all(|w| w[1] >= w[0]));
+            }
+            let top = curves.curves.iter().map(|c| c[255]).fold(0.0, f64::max);
+            assert_eq!((top - 1.0).abs() < 1e-6, luminance.is_none(), "{top}");
+            // What the additive part's curves make of the same model.
+            let theirs = calibration_curves(&additive, &target).unwrap();
+            let through = model.forward_centre(theirs.apply([1.0; 3]));
+            let missed = white_error(&through, &Xyz::from(theirs.white));
+            assert!(missed > 1.0, "{missed}");
         }
     }
 
