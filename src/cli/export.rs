@@ -120,9 +120,10 @@ fn export(
             stored.levels.len()
         ))?,
         (_, _, Some(k)) => say(format!(
-            "calibration curves to {} (from the model): predicted white ΔE00 {:.3}, tone within {:.2} % at 9 levels",
+            "calibration curves to {} (from the model): predicted white ΔE00 {:.3}, greys within {:.3} ΔE00 and tone within {:.2} % at 8 levels",
             k.describe(),
             k.predicted_white_de00,
+            k.predicted_grey_de00,
             100.0 * k.predicted_tone_error
         ))?,
         _ => {}

@@ -69,6 +69,7 @@ mod tests {
             luminance_limited: false,
             predicted_white_de00: 0.0,
             predicted_tone_error: 0.0,
+            predicted_grey_de00: 0.0,
         };
         let text = cal_text(&curves, "now");
         let rows: Vec<&str> = text

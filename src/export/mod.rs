@@ -317,6 +317,14 @@ pub fn export(
             units_name(profile.units)
         ));
     }
+    if let Some(k) = &calibration
+        && (k.predicted_white_de00 > 0.5 || k.predicted_grey_de00 > 1.0)
+    {
+        warnings.push(format!(
+            "the model predicts these curves miss the target: white by {:.2} ΔE00, greys by up to {:.2} (a channel that would have to go below zero near black, or a curve held to keep rising)",
+            k.predicted_white_de00, k.predicted_grey_de00
+        ));
+    }
     let created_at = created_time(&profile.created);
     let created = icc_date_time(created_at);
     let bytes = match format {

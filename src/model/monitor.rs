@@ -39,6 +39,8 @@ pub struct InverseResult {
     /// True when a channel had to be clipped: the XYZ is outside the gamut at this
     /// position. (Mapping such colours into the gamut is the job of `crf`.)
     pub clipped: bool,
+    /// False when the terms' fixed point did not converge (then `clipped` too).
+    pub converged: bool,
 }
 
 /// A fitted (or simulated) monitor model.
@@ -284,6 +286,7 @@ impl MonitorModel {
             drive,
             excitation,
             clipped,
+            converged,
         })
     }
 

@@ -8,14 +8,16 @@
 //! asks for E(x) = f(x) · E_t, so that XYZ(x) = XYZ_black + f(x) (W_t − XYZ_black): the
 //! grey axis keeps the white's chromaticity except where the display's own black
 //! shows, and its luminance follows Y(x) = Y_black + f(x) (Y_t − Y_black), f being
-//! the tone curve. Each channel's drive is its law inverted at E_c(x).
+//! the tone curve. Each channel's drive is its law inverted at E_c(x). When the fit
+//! kept an additivity term, the same greys come from the whole model's inverse
+//! instead, and the white is the brightest the terms allow.
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::monitor::MonitorModel;
 use super::spatial::ScreenPosition;
-use crate::color::{Lab, Xyz, delta_e_2000, xyz_to_lab};
+use crate::color::{Xyz, delta_e_2000, xyz_to_lab};
 
 /// Rows of the curves: what `.cal` files and `vcgt` tags hold (inputs i/255).
 pub const CURVE_ENTRIES: usize = 256;
@@ -94,8 +96,14 @@ pub struct CalibrationCurves {
     pub luminance_limited: bool,
     /// ΔE00 between the model's white through the curves and the target white.
     pub predicted_white_de00: f64,
-    /// Largest |Y / Y_target − 1| at the 9 inputs k/8, k ≥ 1, predicted by the model.
+    /// Largest |Y / Y_target − 1| at the 8 inputs k/8, k ≥ 1, predicted by the model.
     pub predicted_tone_error: f64,
+    /// Largest ΔE00 (against the target white) between the model's grey through the
+    /// curves and the target's grey at the inputs k/8, k ≥ 1: chromaticity too, where
+    /// a channel had to be clipped near black or a curve held to stay non-decreasing.
+    /// (0 in files written before it was kept.)
+    #[serde(default)]
+    pub predicted_grey_de00: f64,
 }
 
 /// Parse a white point: `native`, `D50`, `D55`, `D65`, `D75`, `6500K`, or `x,y`.
@@ -352,21 +360,27 @@ pub fn calibration_curves(
                 let xyz = black + (white - black) * f;
                 match model.inverse(&xyz, ScreenPosition::CENTRE) {
                     Ok(inverse) => inverse.drive,
+                    // Unreachable: the matrix was inverted above.
                     Err(_) => [0, 1, 2].map(|c| additive_drive(c, f)),
                 }
             })
             .collect();
-        // Kept non-decreasing, as a lookup table must be (an entry whose fixed point
-        // did not converge falls back to the additive drive, which may lie below).
+        // Kept non-decreasing, as a lookup table must be: with the terms a channel's
+        // drive can fall as the grey brightens (another channel's shift adds its
+        // colour), and holding it from the top down keeps the white exact and leaves
+        // the error in the greys just below, where `predicted_grey_de00` shows it.
         [0, 1, 2].map(|c| {
-            let mut floor: f64 = 0.0;
-            drives
+            let mut ceiling: f64 = 1.0;
+            let mut curve: Vec<f64> = drives
                 .iter()
+                .rev()
                 .map(|d| {
-                    floor = floor.max(d[c]);
-                    floor
+                    ceiling = ceiling.min(d[c]);
+                    ceiling
                 })
-                .collect()
+                .collect();
+            curve.reverse();
+            curve
         })
     };
     let mut result = CalibrationCurves {
@@ -377,6 +391,7 @@ pub fn calibration_curves(
         luminance_limited,
         predicted_white_de00: 0.0,
         predicted_tone_error: 0.0,
+        predicted_grey_de00: 0.0,
     };
     let through = |x: f64| model.forward_centre(result.apply([x; 3]));
     let target_white = Xyz::new(white.x, white.y, white.z);
@@ -388,26 +403,55 @@ pub fn calibration_curves(
             (through(x).y / want - 1.0).abs()
         })
         .fold(0.0, f64::max);
+    let predicted_grey_de00 = (1..=8)
+        .map(|k| {
+            let x = k as f64 / 8.0;
+            let f = target.tone.relative(x, black.y, y_t);
+            white_error_against(&through(x), &(black + (white - black) * f), &target_white)
+        })
+        .fold(0.0, f64::max);
     result.predicted_white_de00 = predicted_white_de00;
+    result.predicted_grey_de00 = predicted_grey_de00;
     result.predicted_tone_error = predicted_tone_error;
     Ok(result)
 }
 
 /// The most luminance the whole model (terms included) gives at the chromaticity
-/// `w` (XYZ per unit luminance), found by bisection on whether its inverse has to clip
-/// a channel; `additive` is what the additive part allows, the answer when the inverse
-/// cannot say (a singular matrix, or no luminance near it that fits).
+/// `w` (XYZ per unit luminance): the top of what its inverse reaches without asking a
+/// channel for more than full drive, found by bisection. (A channel that would have
+/// to go below zero says nothing about the top: with a chromaticity shift the greys
+/// near black can be outside the gamut while the white is inside.) `additive`, what
+/// the additive part allows, starts the bracket; it is the answer only if no bracket
+/// is found within 2⁻²⁰ to 2²⁰ of it.
 fn reachable_luminance(model: &MonitorModel, w: &Vector3<f64>, additive: f64) -> f64 {
     let fits = |y: f64| {
         model
             .inverse(&(w * y), ScreenPosition::CENTRE)
-            .is_ok_and(|inverse| !inverse.clipped)
+            .is_ok_and(|inverse| {
+                inverse.converged
+                    && (0..3).all(|c| {
+                        let top = model.laws[c].full_drive_excitation();
+                        inverse.excitation[c] <= top * (1.0 + 1e-9)
+                    })
+            })
     };
-    let (mut low, mut high) = (0.25 * additive, 4.0 * additive);
+    let (mut low, mut high) = (0.5 * additive, 2.0 * additive);
+    for _ in 0..20 {
+        if fits(low) {
+            break;
+        }
+        low *= 0.5;
+    }
+    for _ in 0..20 {
+        if !fits(high) {
+            break;
+        }
+        high *= 2.0;
+    }
     if !fits(low) || fits(high) {
         return additive;
     }
-    // 60 halvings take the interval below 1e-17 of the additive white.
+    // 60 halvings take the interval below 1e-16 of the additive white.
     for _ in 0..60 {
         let middle = 0.5 * (low + high);
         if fits(middle) {
@@ -422,8 +466,15 @@ fn reachable_luminance(model: &MonitorModel, w: &Vector3<f64>, additive: f64) ->
 /// ΔE00 of `measured` against the target white, with the target white as the
 /// reference white of L*a*b*.
 pub fn white_error(measured: &Xyz, target_white: &Xyz) -> f64 {
-    let reference: Lab = xyz_to_lab(target_white, target_white);
-    delta_e_2000(&reference, &xyz_to_lab(measured, target_white))
+    white_error_against(measured, target_white, target_white)
+}
+
+/// ΔE00 of `measured` against `wanted`, with `target_white` as the reference white.
+fn white_error_against(measured: &Xyz, wanted: &Xyz, target_white: &Xyz) -> f64 {
+    delta_e_2000(
+        &xyz_to_lab(wanted, target_white),
+        &xyz_to_lab(measured, target_white),
+    )
 }
 
 impl CalibrationCurves {
@@ -531,6 +582,46 @@ mod tests {
             let through = model.forward_centre(theirs.apply([1.0; 3]));
             let missed = white_error(&through, &Xyz::from(theirs.white));
             assert!(missed > 1.0, "{missed}");
+        }
+    }
+
+    /// Two shifts within the fit's bound (|u_c| = 0.2 |m_c|) at 9300 K, from a review:
+    /// the first puts the greys near black outside the gamut (a channel would go
+    /// negative), which once made the bisection give up and aim at the additive part's
+    /// white, 2.6 ΔE00 out of reach; in the second red's drive falls near the top, and
+    /// holding it from below once left the white 1.7 ΔE00 off. Now the white is
+    /// reached in both, and what the greys lose is reported.
+    #[test]
+    fn shifts_that_clip_near_black_or_turn_a_curve_back_keep_the_white() {
+        let clips_near_black = [
+            [-4.28, 1.15, -8.16],
+            [3.82, -9.6, -12.43],
+            [18.78, -1.89, -4.48],
+        ];
+        let turns_back = [
+            [5.43, -6.9, -3.03],
+            [-10.39, 6.1, 10.78],
+            [-15.0, 12.04, 2.59],
+        ];
+        for (u, clips) in [(clips_near_black, true), (turns_back, false)] {
+            let mut model = display();
+            model.terms.chromaticity_shift = Some(u);
+            let target = Target {
+                white: WhiteTarget::Daylight(9300.0),
+                tone: ToneCurve::Power(2.2),
+                luminance: None,
+            };
+            let curves = calibration_curves(&model, &target).unwrap();
+            assert!(curves.predicted_white_de00 < 0.01, "{u:?}: {curves:?}");
+            let white = Xyz::from(curves.white);
+            let raw = model.inverse(&white, ScreenPosition::CENTRE).unwrap();
+            assert!(!raw.clipped, "{u:?}: the white is out of reach");
+            for c in 0..3 {
+                assert!(curves.curves[c].windows(2).all(|w| w[1] >= w[0]));
+            }
+            // The greys report what that costs them: 10 ΔE00 at 1/8 where red would
+            // have to go below zero (the export warns above 1), 0.3 where red is held.
+            assert_eq!(curves.predicted_grey_de00 > 1.0, clips, "{curves:?}");
         }
     }
 
