@@ -1000,6 +1000,56 @@ fn terms_are_carried_by_icc_luts_and_named_where_a_file_cannot_carry_them() {
         text.contains("chromaticity_shift") && text.contains("interaction"),
         "{text}"
     );
+    // Curves solved at export go through the terms, and say when the model predicts
+    // they miss: a shift large enough (a fifth of each primary, within the fit's
+    // bound) that at 9300 K red would have to go below zero for the darker greys.
+    let shifted = |u: [[f64; 3]; 3]| {
+        let mut model = MonitorModel {
+            matrix: nalgebra::Matrix3::new(
+                41.24, 35.76, 18.05, //
+                21.26, 71.52, 7.22, //
+                1.93, 11.92, 95.05,
+            ),
+            black: Xyz::new(0.19, 0.2, 0.22),
+            laws: [2.2, 2.4, 2.0].map(|gamma| {
+                chromacal::model::transfer::TransferLaw::Power(chromacal::model::transfer::Power {
+                    gamma,
+                })
+            }),
+            spatial: chromacal::model::SpatialMap::Uniform,
+            terms: Default::default(),
+        };
+        model.terms.chromaticity_shift = Some(u);
+        let mut changed = profile.clone();
+        changed.model = model;
+        let path = dir.path().join("shifted.toml");
+        changed.write(&path).unwrap();
+        let cal = dir.path().join("shifted.cal");
+        export(
+            &path,
+            "cal",
+            &cal,
+            &["--white", "9300K", "--tone", "gamma:2.2"],
+        )
+    };
+    let clips = [
+        [-4.28, 1.15, -8.16],
+        [3.82, -9.6, -12.43],
+        [18.78, -1.89, -4.48],
+    ];
+    let said = shifted(clips);
+    assert!(
+        said.contains("predicted white ΔE00 0.000") && said.contains("warning: the model predicts these curves miss the target: white by 0.00 ΔE00, greys by up to 9.96"),
+        "{said}"
+    );
+    let turns_back = [
+        [5.43, -6.9, -3.03],
+        [-10.39, 6.1, 10.78],
+        [-15.0, 12.04, 2.59],
+    ];
+    let said = shifted(turns_back);
+    assert!(said.contains("greys within 0.340 ΔE00"), "{said}");
+    assert!(!said.contains("miss the target"), "{said}");
 }
 
 #[test]
