@@ -338,10 +338,6 @@ pub fn calibration_curves(
     let y_t = requested.min(y_max);
     let white = w * y_t;
     let e_t = inverse * (white - black);
-    let additive_drive = |c: usize, f: f64| {
-        let top = model.laws[c].full_drive_excitation();
-        model.laws[c].drive((f * e_t[c]).clamp(0.0, top))
-    };
     let shares: Vec<f64> = (0..CURVE_ENTRIES)
         .map(|i| {
             let input = i as f64 / (CURVE_ENTRIES - 1) as f64;
@@ -349,22 +345,27 @@ pub fn calibration_curves(
         })
         .collect();
     let curves = if model.terms.is_empty() {
-        [0, 1, 2].map(|c| shares.iter().map(|&f| additive_drive(c, f)).collect())
+        [0, 1, 2].map(|c| {
+            let top = model.laws[c].full_drive_excitation();
+            shares
+                .iter()
+                .map(|&f| model.laws[c].drive((f * e_t[c]).clamp(0.0, top)))
+                .collect()
+        })
     } else {
         // With the additivity terms the grey axis is not where the additive part puts
         // it (a brightness limiter dims a grey below the sum of its channels), so each
         // entry is the whole model's inverse of its target colour.
-        let drives: Vec<[f64; 3]> = shares
+        let drives = shares
             .iter()
             .map(|&f| {
                 let xyz = black + (white - black) * f;
-                match model.inverse(&xyz, ScreenPosition::CENTRE) {
-                    Ok(inverse) => inverse.drive,
-                    // Unreachable: the matrix was inverted above.
-                    Err(_) => [0, 1, 2].map(|c| additive_drive(c, f)),
-                }
+                model
+                    .inverse(&xyz, ScreenPosition::CENTRE)
+                    .map(|inverse| inverse.drive)
             })
-            .collect();
+            .collect::<Result<Vec<[f64; 3]>, _>>()
+            .map_err(|_| TargetError::Singular)?;
         // Kept non-decreasing, as a lookup table must be: with the terms a channel's
         // drive can fall as the grey brightens (another channel's shift adds its
         // colour), and holding it from the top down keeps the white exact and leaves
@@ -396,20 +397,17 @@ pub fn calibration_curves(
     let through = |x: f64| model.forward_centre(result.apply([x; 3]));
     let target_white = Xyz::new(white.x, white.y, white.z);
     let predicted_white_de00 = white_error(&through(1.0), &target_white);
-    let predicted_tone_error = (1..=8)
-        .map(|k| {
-            let x = k as f64 / 8.0;
-            let want = target_luminance(target.tone, x, black.y, y_t);
-            (through(x).y / want - 1.0).abs()
-        })
-        .fold(0.0, f64::max);
-    let predicted_grey_de00 = (1..=8)
-        .map(|k| {
-            let x = k as f64 / 8.0;
-            let f = target.tone.relative(x, black.y, y_t);
-            white_error_against(&through(x), &(black + (white - black) * f), &target_white)
-        })
-        .fold(0.0, f64::max);
+    // At the inputs k/8: the tone error (luminance) and the grey's ΔE00 (chromaticity
+    // too) of what the model gives against the target's grey.
+    let (mut predicted_tone_error, mut predicted_grey_de00) = (0.0_f64, 0.0_f64);
+    for k in 1..=8 {
+        let x = k as f64 / 8.0;
+        let got = through(x);
+        let want = black + (white - black) * target.tone.relative(x, black.y, y_t);
+        predicted_tone_error = predicted_tone_error.max((got.y / want.y - 1.0).abs());
+        predicted_grey_de00 =
+            predicted_grey_de00.max(white_error_against(&got, &want, &target_white));
+    }
     result.predicted_white_de00 = predicted_white_de00;
     result.predicted_grey_de00 = predicted_grey_de00;
     result.predicted_tone_error = predicted_tone_error;
