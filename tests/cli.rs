@@ -409,6 +409,12 @@ fn a_stopped_emulator_leaves_no_screen_socket_behind() {
         assert!(exit.success(), "{signal}: {exit}");
         assert!(!screen.exists(), "{signal}: {} is left", screen.display());
     }
+    // The tests' own harness stops it the same way when a test ends.
+    let emulator = common::emulate(&["--instrument", "k10a"]);
+    let screen = std::path::PathBuf::from(&emulator.screen);
+    assert!(screen.exists(), "{}", screen.display());
+    drop(emulator);
+    assert!(!screen.exists(), "the harness left {}", screen.display());
 }
 
 #[test]

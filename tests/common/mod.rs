@@ -173,7 +173,7 @@ pub fn meter(
     )
 }
 
-/// A `chromacal emulate` process, killed when dropped.
+/// A `chromacal emulate` process, stopped when dropped.
 pub struct Emulator {
     pub child: std::process::Child,
     pub device: String,
@@ -181,7 +181,21 @@ pub struct Emulator {
 }
 
 impl Drop for Emulator {
+    /// SIGTERM first, as a user's Ctrl-C or systemd would: the emulator removes its
+    /// screen socket then. (A SIGKILL cannot be caught, and every test that ended
+    /// with one left a socket in the temporary directory: a thousand per suite.)
+    /// SIGKILL only if it has not gone within two seconds.
     fn drop(&mut self) {
+        let _ = std::process::Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
+        while std::time::Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
