@@ -138,26 +138,32 @@ impl MonitorModel {
         [0, 1, 2].map(|c| self.laws[c].full_drive_excitation())
     }
 
-    /// The light above black of channel lights `light` (l_c = K_c E_c), terms included.
+    /// The light above black of channel lights `light` (l_c = K_c E_c), terms included:
+    /// the sum of [`Self::channel_contributions`].
     pub fn light_above_black(&self, light: &Vector3<f64>) -> Xyz {
-        let mut xyz = self.matrix * light;
         if self.terms.is_empty() {
-            return xyz;
+            return self.matrix * light;
         }
+        let contributions = self.channel_contributions(light);
+        contributions.column(0) + contributions.column(1) + contributions.column(2)
+    }
+
+    /// Each channel's light above black at channel lights `light`, terms included:
+    /// m_c l_c (1 + γ_c s_c) + u_c ê_c (1 − ê_c), one column a channel.
+    fn channel_contributions(&self, light: &Vector3<f64>) -> Matrix3<f64> {
         let shares = drive_shares(light, &self.full_drive_excitations());
-        if let Some(gamma) = self.terms.interaction {
-            let s = interaction_basis(&shares);
-            for c in 0..3 {
-                xyz += self.matrix.column(c) * (light[c] * gamma[c] * s[c]);
+        let s = interaction_basis(&shares);
+        let w = chromaticity_shift_basis(&shares);
+        let mut contributions = Matrix3::zeros();
+        for c in 0..3 {
+            let gain = 1.0 + self.terms.interaction.map_or(0.0, |g| g[c] * s[c]);
+            let mut column = self.matrix.column(c) * (light[c] * gain);
+            if let Some(u) = self.terms.chromaticity_shift {
+                column += Xyz::from(u[c]) * w[c];
             }
+            contributions.set_column(c, &column);
         }
-        if let Some(u) = self.terms.chromaticity_shift {
-            let w = chromaticity_shift_basis(&shares);
-            for c in 0..3 {
-                xyz += Xyz::from(u[c]) * w[c];
-            }
-        }
-        xyz
+        contributions
     }
 
     /// The channel lights l that give `above` (the light above black): M⁻¹ applied to
@@ -319,20 +325,7 @@ impl MonitorModel {
     pub fn contributions_at(&self, drive: Drive) -> Matrix3<f64> {
         let k = self.spatial.gains(ScreenPosition::CENTRE);
         let e = self.excitations(drive);
-        let light = Vector3::new(k[0] * e[0], k[1] * e[1], k[2] * e[2]);
-        let shares = drive_shares(&light, &self.full_drive_excitations());
-        let s = interaction_basis(&shares);
-        let w = chromaticity_shift_basis(&shares);
-        let mut contributions = Matrix3::zeros();
-        for c in 0..3 {
-            let gain = 1.0 + self.terms.interaction.map_or(0.0, |g| g[c] * s[c]);
-            let mut column = self.matrix.column(c) * (light[c] * gain);
-            if let Some(u) = self.terms.chromaticity_shift {
-                column += Xyz::from(u[c]) * w[c];
-            }
-            contributions.set_column(c, &column);
-        }
-        contributions
+        self.channel_contributions(&Vector3::new(k[0] * e[0], k[1] * e[1], k[2] * e[2]))
     }
 
     /// The same display with each channel's light scaled by its own gain g_c (its
