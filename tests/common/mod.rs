@@ -184,21 +184,26 @@ impl Drop for Emulator {
     /// SIGTERM first, as a user's Ctrl-C or systemd would: the emulator removes its
     /// screen socket then. (A SIGKILL cannot be caught, and every test that ended
     /// with one left a socket in the temporary directory: a thousand per suite.)
-    /// SIGKILL only if it has not gone within two seconds.
     fn drop(&mut self) {
-        let _ = std::process::Command::new("kill")
-            .args(["-TERM", &self.child.id().to_string()])
-            .status();
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
-        while std::time::Instant::now() < deadline {
-            if let Ok(Some(_)) = self.child.try_wait() {
-                return;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(10));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        terminate(&mut self.child, std::time::Duration::from_secs(2));
     }
+}
+
+/// Stop `child` as a service manager would: SIGTERM, so that it can clean up after
+/// itself, then SIGKILL if it has not gone within `grace`.
+pub fn terminate(child: &mut std::process::Child, grace: std::time::Duration) {
+    let _ = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status();
+    let deadline = std::time::Instant::now() + grace;
+    while std::time::Instant::now() < deadline {
+        if let Ok(Some(_)) = child.try_wait() {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
 }
 
 /// Start `chromacal emulate` with `args`; returns once it has printed its device and
