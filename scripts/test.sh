@@ -78,5 +78,14 @@ cargo deb --version >/dev/null 2>&1 || {
         echo "scripts/test.sh: cargo-deb could not be installed; tests/package.rs will fail" >&2
 }
 
+# Building the suite takes about 4 GB under target/ (a clean checkout); say so up front
+# rather than let the linker fail half an hour in with "No space left on device".
+target_dir="${CARGO_TARGET_DIR:-target}"
+mkdir -p "$target_dir"
+free_kb="$(df --output=avail -k "$target_dir" 2>/dev/null | tail -1 | tr -d ' ')"
+if [ -n "$free_kb" ] && [ "$free_kb" -lt 4500000 ]; then
+    echo "scripts/test.sh: warning: $((free_kb / 1024)) MB free where $target_dir is; building the suite from clean takes about 4 GB" >&2
+fi
+
 # The suite is built with the peer engines, for `bench render`'s own test.
 cargo test --locked --features peer-engines "$@"
