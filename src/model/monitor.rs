@@ -144,16 +144,17 @@ impl MonitorModel {
         if self.terms.is_empty() {
             return self.matrix * light;
         }
-        let contributions = self.channel_contributions(light);
+        let shares = drive_shares(light, &self.full_drive_excitations());
+        let contributions = self.channel_contributions(light, &shares);
         contributions.column(0) + contributions.column(1) + contributions.column(2)
     }
 
-    /// Each channel's light above black at channel lights `light`, terms included:
-    /// m_c l_c (1 + γ_c s_c) + u_c ê_c (1 − ê_c), one column a channel.
-    fn channel_contributions(&self, light: &Vector3<f64>) -> Matrix3<f64> {
-        let shares = drive_shares(light, &self.full_drive_excitations());
-        let s = interaction_basis(&shares);
-        let w = chromaticity_shift_basis(&shares);
+    /// Each channel's light above black at channel lights `light` whose drive shares
+    /// are `shares`, terms included: m_c l_c (1 + γ_c s_c) + u_c ê_c (1 − ê_c), one
+    /// column a channel.
+    fn channel_contributions(&self, light: &Vector3<f64>, shares: &[f64; 3]) -> Matrix3<f64> {
+        let s = interaction_basis(shares);
+        let w = chromaticity_shift_basis(shares);
         let mut contributions = Matrix3::zeros();
         for c in 0..3 {
             let gain = 1.0 + self.terms.interaction.map_or(0.0, |g| g[c] * s[c]);
@@ -170,7 +171,8 @@ impl MonitorModel {
     /// `above` for the additive model; with terms, the fixed point of
     /// l_c = [M⁻¹(above − Σ u ê(1 − ê))]_c / (1 + γ_c s_c), which converges because
     /// the terms are small next to the primaries (a few per cent; the fit keeps none
-    /// beyond `fit::terms::MAX_TERM`). Also says whether it converged.
+    /// beyond `fit::terms::MAX_TERM`), slowly near that bound, where Newton's method
+    /// finishes what 100 steps leave. Also says whether it converged.
     fn light_of(&self, inverse: &Matrix3<f64>, above: &Xyz) -> (Vector3<f64>, bool) {
         self.light_of_shares(inverse, above, drive_shares)
     }
@@ -229,7 +231,32 @@ impl MonitorModel {
                 return (light, true);
             }
         }
-        // Not settled in 100 steps: judged by how near the clamped forward comes.
+        // Not settled in 100 steps: near the fit's bound on γ the iteration contracts
+        // by a factor close to 1 near white. Newton's method on the same equations
+        // finishes from where it stopped.
+        let residual = |light: &Vector3<f64>| {
+            let c = self.channel_contributions(light, &shares(light, &full));
+            c.column(0) + c.column(1) + c.column(2) - above
+        };
+        let scale = full.iter().fold(0.0, |a: f64, b| a.max(b.abs())).max(1e-12);
+        let h = 1e-7 * scale;
+        for _ in 0..20 {
+            let r = residual(&light);
+            let mut jacobian = Matrix3::zeros();
+            for k in 0..3 {
+                let mut moved = light;
+                moved[k] += h;
+                jacobian.set_column(k, &((residual(&moved) - r) / h));
+            }
+            let Some(step) = jacobian.lu().solve(&r) else {
+                break;
+            };
+            light -= step;
+            if step.abs().max() <= 1e-13 * scale {
+                break;
+            }
+        }
+        // Judged by how near the clamped forward comes.
         let reached = self.light_above_black(&light);
         let converged = (reached - above).norm() <= 1e-6 * above.norm().max(f64::MIN_POSITIVE);
         (light, converged)
@@ -325,7 +352,11 @@ impl MonitorModel {
     pub fn contributions_at(&self, drive: Drive) -> Matrix3<f64> {
         let k = self.spatial.gains(ScreenPosition::CENTRE);
         let e = self.excitations(drive);
-        self.channel_contributions(&Vector3::new(k[0] * e[0], k[1] * e[1], k[2] * e[2]))
+        let light = Vector3::new(k[0] * e[0], k[1] * e[1], k[2] * e[2]);
+        self.channel_contributions(
+            &light,
+            &drive_shares(&light, &self.full_drive_excitations()),
+        )
     }
 
     /// The same display with each channel's light scaled by its own gain g_c (its

@@ -583,6 +583,27 @@ mod tests {
         }
     }
 
+    /// A limiter at the edge of the fit's bound (|γ| just under `MAX_TERM`): the
+    /// terms' fixed point contracts slowly near white, and the white must still be the
+    /// brightest the terms allow (a channel at full drive), not where the iteration
+    /// happened to give up (a review found the white 1.5 % dimmer at γ = −0.249).
+    #[test]
+    fn a_limiter_at_the_bound_still_reaches_full_drive() {
+        for g in [-0.2, -0.24, -0.245, -0.249] {
+            let mut model = display();
+            model.terms.interaction = Some([g; 3]);
+            let target = Target {
+                white: WhiteTarget::Daylight(6500.0),
+                tone: ToneCurve::Power(2.2),
+                luminance: None,
+            };
+            let curves = calibration_curves(&model, &target).unwrap();
+            assert!(curves.predicted_white_de00 < 0.01, "{g}: {curves:?}");
+            let top = curves.curves.iter().map(|c| c[255]).fold(0.0, f64::max);
+            assert!((top - 1.0).abs() < 1e-4, "γ {g}: top drive {top}");
+        }
+    }
+
     /// Two shifts within the fit's bound (|u_c| = 0.2 |m_c|) at 9300 K, from a review:
     /// the first puts the greys near black outside the gamut (a channel would go
     /// negative), which once made the bisection give up and aim at the additive part's
