@@ -158,3 +158,68 @@ async fn job_watch_off_a_terminal_streams_a_line_a_step() {
     assert_eq!(status["last_job"]["outcome"]["result"], "ok", "{status}");
     assert_eq!(status["last_job"]["job"]["kind"], "calibrate", "{status}");
 }
+
+/// `calibrate --display window --instrument …` then `daemon` with a config that says
+/// neither: the daemon would verify the in-process simulation against the screen's
+/// profile (and call it good). It refuses to start, naming both and the remedy.
+#[test]
+fn a_daemon_configured_for_the_simulation_refuses_a_store_measured_on_a_screen() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let config = dir.path().join("my.toml");
+    std::fs::write(&config, "[plan]\nuniformity_grid = 0\n").unwrap();
+    let out = chromacal()
+        .args(["calibrate", "--config"])
+        .arg(&config)
+        .arg("--state-dir")
+        .arg(&state)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out));
+    let daemon = |socket: &str| {
+        let mut child = chromacal()
+            .args(["daemon", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state)
+            .arg("--socket")
+            .arg(dir.path().join(socket))
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // A daemon that starts serves until stopped: give it two seconds.
+        let deadline = std::time::Instant::now() + Duration::from_secs(2);
+        while std::time::Instant::now() < deadline {
+            if let Ok(Some(_)) = child.try_wait() {
+                return Some(child.wait_with_output().unwrap());
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        common::terminate(&mut child, Duration::from_secs(5));
+        None
+    };
+    // A simulated profile: the simulated daemon starts.
+    assert!(
+        daemon("a.sock").is_none(),
+        "the daemon stopped on its own store"
+    );
+    // The same profile as if measured on a window with a PR-670.
+    let current = state.join("current.toml");
+    let profile = std::fs::read_to_string(&current).unwrap();
+    let measured = profile.replace(
+        "display = \"virtual monitor 'crt'\"",
+        "display = \"window on DUMMY0 of X display :0 (8 bits)\"",
+    );
+    assert_ne!(measured, profile, "{profile}");
+    std::fs::write(&current, measured).unwrap();
+    let out = daemon("b.sock").expect("the daemon started");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("was measured on window on DUMMY0")
+            && stderr.contains("simulated monitor")
+            && stderr.contains("[display] sink"),
+        "{stderr}"
+    );
+}

@@ -10,7 +10,7 @@ use super::sequential::measure_run;
 use crate::calibrate::rig::SimulatedRig;
 use crate::config::digest;
 use crate::config::{
-    Config, ConfigError, LoadedConfig, PublishConfig, check_config, parse_config_unchecked,
+    Config, ConfigError, LoadedConfig, PublishConfig, Sink, check_config, parse_config_unchecked,
 };
 use crate::display::PatchDisplay;
 use crate::fit::{FitError, FitOptions, FittedModel, fit_monitor};
@@ -430,6 +430,7 @@ pub fn start_run(
     display: String,
     instrument: crate::instrument::InstrumentInfo,
 ) -> Result<PreparedRun, CalibrateError> {
+    let config = &grid_the_instrument_can_see(config);
     let text = toml::to_string(config).map_err(|e| CalibrateError::Serialize(e.to_string()))?;
     let run_id = new_run_id();
     let header = JournalHeader {
@@ -452,6 +453,27 @@ pub fn start_run(
         run_id,
         settings_at_resume: None,
     })
+}
+
+/// `config` without its uniformity grid when nothing would move the instrument to it:
+/// chromacal's window is the screen in front of the user, read by an instrument
+/// aimed at its centre, and a grid patch off the centre reads the dark surround
+/// (a first-time user's run published 8 grid readings at 0.1 % of the white, and a
+/// report of ΔE00 99 there). `--prompt-positions` keeps the grid and asks for each
+/// move. The journal records the config as run, so a resume agrees.
+fn grid_the_instrument_can_see(config: &Config) -> Config {
+    let mut config = config.clone();
+    if config.display.sink() == Sink::Window
+        && !config.display.prompt_positions
+        && config.plan.uniformity_grid >= 2
+    {
+        tracing::warn!(
+            "the uniformity grid (plan.uniformity_grid = {}) is not measured: the window moves the patch off the centre and the instrument stays where it is aimed; --prompt-positions (display.prompt_positions) measures it, asking to move the instrument to each position",
+            config.plan.uniformity_grid
+        );
+        config.plan.uniformity_grid = 0;
+    }
+    config
 }
 
 /// Reopen the unfinished run in `dir`, with the config it started with.
@@ -807,8 +829,58 @@ pub fn rig_for(
 
 #[cfg(test)]
 mod tests {
-    use super::resume_command;
+    use super::{ProfileStore, resume_command, start_run};
+    use crate::config::{Config, Sink};
+    use crate::model::spatial::ScreenPosition;
     use std::path::Path;
+
+    /// The window sink measures the centre only unless someone moves the instrument.
+    #[test]
+    fn a_window_run_measures_the_grid_only_when_asked_to_move_the_instrument() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = ProfileStore::new(dir.path());
+        for (sink, prompt, grid_expected) in [
+            (Sink::Window, false, false),
+            (Sink::Window, true, true),
+            (Sink::Web, false, true),
+            (Sink::Simulated, false, true),
+        ] {
+            let mut config = Config::default();
+            config.display.sink = Some(sink);
+            config.display.prompt_positions = prompt;
+            let run = start_run(
+                &store,
+                &config,
+                dir.path(),
+                "a screen".into(),
+                crate::instrument::InstrumentInfo {
+                    name: "a meter".into(),
+                    serial: None,
+                    capability: crate::instrument::Capability::Tristimulus,
+                },
+            )
+            .unwrap();
+            let off_centre = run
+                .journal
+                .header()
+                .plan
+                .patches
+                .iter()
+                .filter(|p| p.position() != ScreenPosition::CENTRE)
+                .count();
+            assert_eq!(off_centre > 0, grid_expected, "{sink:?}, prompt {prompt}");
+            assert_eq!(run.config.plan.uniformity_grid >= 2, grid_expected);
+            // The journal's config is the one run, so a resume measures the same plan.
+            assert!(
+                run.journal.header().config.contains(&format!(
+                    "uniformity_grid = {}",
+                    run.config.plan.uniformity_grid
+                )),
+                "{}",
+                run.journal.header().config
+            );
+        }
+    }
 
     #[test]
     fn the_resume_command_names_the_state_directory_as_one_shell_word() {

@@ -632,6 +632,7 @@ fn open_device(
     // Held while the device serves: no `calibrate` or second daemon writes this store
     // meanwhile.
     let lock = store.lock("chromacal daemon")?;
+    refuse_a_simulation_over_a_measured_screen(&config, &store)?;
     // A calibration killed while it held a window's LUT left the user's ramp.
     crate::display::lut::restore_pending_logged(store.root());
     let turn = config.shared_instrument.as_ref().map(|name| {
@@ -639,6 +640,40 @@ fn open_device(
         turns.entry(name.clone()).or_default().clone()
     });
     Ok(Device::new(config, store, lock, turn, bus.clone()))
+}
+
+/// A config that measures the in-process simulated monitor, started on a store whose
+/// current profile was measured on a real screen (`calibrate --display window
+/// --instrument …` given on the command line, then `daemon` with the same file but
+/// without them), would verify the simulation against that profile and report it
+/// good, and recalibrate the simulation over it. Refused at start, naming both.
+fn refuse_a_simulation_over_a_measured_screen(
+    config: &DeviceConfig,
+    store: &ProfileStore,
+) -> Result<(), DaemonError> {
+    if config.loaded.config.display.sink() != crate::config::Sink::Simulated {
+        return Ok(());
+    }
+    let Ok(profile) = crate::profile::Profile::read(&store.current_path()) else {
+        return Ok(());
+    };
+    let Some(display) = profile.provenance.display.as_deref() else {
+        return Ok(());
+    };
+    if display.starts_with("virtual monitor") {
+        return Ok(());
+    }
+    let instrument = profile
+        .provenance
+        .instrument
+        .as_ref()
+        .map_or(String::new(), |i| format!(" with the {}", i.name));
+    Err(DaemonError::Config(format!(
+        "device {}: the current profile ({}, in {}) was measured on {display}{instrument}, but the config measures the in-process simulated monitor: give the daemon that screen's [display] sink and [instrument] driver and port (what --display and --instrument gave `calibrate`), or another --state-dir for a simulation",
+        config.name,
+        profile.id,
+        store.root().display()
+    )))
 }
 
 /// What a device tells before the API answers: its figures from the store (metrics,
