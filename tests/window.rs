@@ -759,6 +759,12 @@ fn displays_name_the_outputs_their_monitors_and_the_device_on_each() {
     );
     assert!(text.contains("device default: no profile yet"), "{text}");
     assert!(text.contains("DUMMY1  disconnected"), "{text}");
+    // A server that nobody has loaded a LUT into holds its own straight ramp (the
+    // code shifted up, i << 8, whose top is 255 steps short of full): not curves.
+    assert!(
+        text.contains("256 entries, straight") && !text.contains("curves loaded"),
+        "{text}"
+    );
     let json: serde_json::Value = serde_json::from_slice(&succeed(&mut args(true)).stdout).unwrap();
     let outputs = json.as_array().unwrap();
     assert_eq!(outputs[0]["name"], "DUMMY0");

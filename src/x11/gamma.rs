@@ -92,10 +92,20 @@ impl GammaRamp {
         worst
     }
 
-    /// Whether this is the straight ramp within one 16-bit step (a ramp some drivers
-    /// round a little differently).
+    /// Whether this is a straight ramp within one 16-bit step (a ramp some drivers
+    /// round a little differently): i·65535/(n − 1), or i·65536/n, the code shifted up
+    /// (i << 8 at 256 entries), which is what the X server loads when it starts, and
+    /// whose top entry is 255 steps short of full.
     pub fn is_identity(&self) -> bool {
-        self.max_difference(&GammaRamp::identity(self.len().max(2))) <= 1.0
+        let n = self.len().max(2);
+        let shifted = |table: &[u16]| {
+            table
+                .iter()
+                .enumerate()
+                .all(|(i, &v)| (f64::from(v) - i as f64 * 65536.0 / n as f64).abs() <= 1.0)
+        };
+        self.max_difference(&GammaRamp::identity(n)) <= 1.0
+            || self.channels().iter().all(|table| shifted(table))
     }
 
     /// The ramp as three curves of `entries` points in [0, 1] (for a `.cal` file).
@@ -167,6 +177,19 @@ mod tests {
         let mut bent = GammaRamp::identity(256);
         bent.green[128] += 300;
         assert!(!bent.is_identity());
+        // The X server's ramp when nothing has loaded one: the code shifted up.
+        for n in [256usize, 1024] {
+            let shift = 16 - n.trailing_zeros();
+            let mut server = GammaRamp::from_fn(n, |_, _| 0.0);
+            for table in [&mut server.red, &mut server.green, &mut server.blue] {
+                for (i, v) in table.iter_mut().enumerate() {
+                    *v = (i << shift) as u16;
+                }
+            }
+            assert!(server.is_identity(), "{n}");
+            server.red[n / 2] += 200;
+            assert!(!server.is_identity(), "{n}");
+        }
         assert!((bent.max_difference(&GammaRamp::identity(1024)) - 300.0).abs() < 2.0);
     }
 
