@@ -84,6 +84,23 @@ pub fn sync_directory(dir: &Path) {
     }
 }
 
+/// [`write_atomic`] to a path a user named (`-o`): its directory must exist already.
+/// A mistyped directory is an error that names it, as any other program's would be,
+/// not a tree of new directories (`report -o /nonexistent/r.html` made `/nonexistent`).
+pub fn write_atomic_named(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !dir.is_dir() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!("no such directory: {}", dir.display()),
+        ));
+    }
+    write_atomic(path, bytes)
+}
+
 /// Write `bytes` to `path` so that a crash leaves either the old file or the new one,
 /// never a mix: write a temporary file in the same directory, fsync it, rename it over
 /// `path`, fsync the directory.

@@ -417,6 +417,32 @@ fn a_stopped_emulator_leaves_no_screen_socket_behind() {
     assert!(!screen.exists(), "the harness left {}", screen.display());
 }
 
+/// An output in a directory that does not exist is a mistyped path: refused, naming
+/// the directory, and nothing created (the report made `/nonexistent` and said
+/// "written").
+#[test]
+fn an_output_in_a_missing_directory_is_refused_not_created() {
+    let dir = tempfile::tempdir().unwrap();
+    let ti3 = fixture("ti3/crt-default.ti3");
+    let missing = dir.path().join("no-such-dir");
+    let profile = dir.path().join("crt.toml");
+    let (ok, _, stderr) = run(&["fit", path(&ti3), "-o", path(&missing.join("crt.toml"))]);
+    assert!(!ok && stderr.contains("no such directory"), "{stderr}");
+    let (ok, _, stderr) = run(&["fit", path(&ti3), "-o", path(&profile)]);
+    assert!(ok, "{stderr}");
+    let (ok, _, stderr) = run(&[
+        "report",
+        path(&profile),
+        "-o",
+        path(&missing.join("r.html")),
+    ]);
+    assert!(
+        !ok && stderr.contains("no such directory") && stderr.contains("no-such-dir"),
+        "{stderr}"
+    );
+    assert!(!missing.exists());
+}
+
 #[test]
 fn a_file_that_is_not_a_profile_is_named_for_what_it_is() {
     let dir = tempfile::tempdir().unwrap();

@@ -88,7 +88,7 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
     if is_stdout(&args.output) {
         write_stdout(text.as_bytes())?;
     } else {
-        chromacal::durable::write_atomic(&args.output, text.as_bytes())
+        chromacal::durable::write_atomic_named(&args.output, text.as_bytes())
             .map_err(|e| Failure::from(format!("cannot write {}: {e}", args.output.display())))?;
     }
     let moved = match &lut.mapping {

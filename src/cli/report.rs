@@ -66,7 +66,7 @@ pub fn write_page(input: &ReportInput, output: &Path) -> Result<(), Failure> {
     if is_stdout(output) {
         return write_stdout(page.as_bytes());
     }
-    chromacal::durable::write_atomic(output, page.as_bytes())
+    chromacal::durable::write_atomic_named(output, page.as_bytes())
         .map_err(|e| Failure::from(format!("cannot write {}: {e}", output.display())))?;
     eprintln!("chromacal: report written to {}", output.display());
     Ok(())

@@ -280,12 +280,15 @@ impl Profile {
         toml::to_string(self).map_err(|e| ProfileError::Serialize(e.to_string()))
     }
 
-    /// Write to `path` atomically (see [`crate::durable::write_atomic`]).
+    /// Write to `path`, a file the user named, atomically (see
+    /// [`crate::durable::write_atomic_named`]).
     pub fn write(&self, path: &Path) -> Result<(), ProfileError> {
         let text = self.to_toml()?;
-        crate::durable::write_atomic(path, text.as_bytes()).map_err(|source| ProfileError::Io {
-            path: path.display().to_string(),
-            source,
+        crate::durable::write_atomic_named(path, text.as_bytes()).map_err(|source| {
+            ProfileError::Io {
+                path: path.display().to_string(),
+                source,
+            }
         })
     }
 }
