@@ -662,6 +662,58 @@ fn ctrl_c_stops_a_calibration_keeping_its_readings_for_resume() {
     assert!(state.path().join("current.toml").exists());
 }
 
+/// A second Ctrl-C exits at once, and its hint names the state directory as the
+/// first one's does (it said a plain `--resume`, which would not find this run).
+#[test]
+fn a_second_ctrl_c_names_the_state_directory_to_resume_in() {
+    let state = tempfile::tempdir().unwrap();
+    let child = chromacal()
+        .args([
+            "calibrate",
+            "--realtime",
+            "--time-scale",
+            "0.5",
+            "--state-dir",
+        ])
+        .arg(state.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // A reading in the journal: the run is under way, its signal handler in place.
+    let journal = || {
+        let run = std::fs::read_dir(state.path().join("runs"))
+            .ok()?
+            .next()?
+            .ok()?;
+        std::fs::read_to_string(run.path().join("journal.jsonl")).ok()
+    };
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while journal().is_none_or(|j| j.lines().count() < 2) {
+        assert!(std::time::Instant::now() < deadline, "no readings");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    // Twice within a reading (half a second at this time scale).
+    for _ in 0..2 {
+        let status = std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(&format!(
+            "stopped at once; every reading taken is in the journal, and `chromacal calibrate --resume --state-dir {}` goes on",
+            state.path().display()
+        )),
+        "{stderr}"
+    );
+}
+
 #[test]
 fn completions_and_manual_pages_come_from_the_command_line_definitions() {
     // bash takes the script and completes the subcommands from it.

@@ -35,11 +35,20 @@ fn resume_command(journal: &Path) -> String {
         .and_then(Path::parent)
         .and_then(Path::parent)
     {
-        Some(state) if !state.as_os_str().is_empty() => format!(
+        Some(state) => resume_command_in(state),
+        None => resume_command_in(Path::new("")),
+    }
+}
+
+/// The command that resumes the unfinished run in state directory `state`.
+pub fn resume_command_in(state: &Path) -> String {
+    if state.as_os_str().is_empty() {
+        "chromacal calibrate --resume".into()
+    } else {
+        format!(
             "chromacal calibrate --resume --state-dir {}",
             shell_quoted(&state.display().to_string())
-        ),
-        _ => "chromacal calibrate --resume".into(),
+        )
     }
 }
 

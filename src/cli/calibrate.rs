@@ -144,7 +144,8 @@ fn calibrate(
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
-    runtime.spawn(stop_on_signal(stop_requested.clone(), bar.clone()));
+    let resume = chromacal::calibrate::session::resume_command_in(&options.state_dir);
+    runtime.spawn(stop_on_signal(stop_requested.clone(), bar.clone(), resume));
     let outcome = runtime.block_on(calibrate_session(
         &loaded,
         &options,
@@ -358,7 +359,7 @@ pub fn run_runs(args: RunsArgs) -> Result<(), Failure> {
 /// The first Ctrl-C or SIGTERM asks the run to stop after the reading under way (the
 /// display is blanked and the journal keeps every reading); a second one exits at once,
 /// which loses nothing either: each reading is in the journal when it is taken.
-async fn stop_on_signal(stop: Arc<AtomicBool>, bar: indicatif::ProgressBar) {
+async fn stop_on_signal(stop: Arc<AtomicBool>, bar: indicatif::ProgressBar, resume: String) {
     use tokio::signal::unix::{SignalKind, signal};
     let Ok(mut terminate) = signal(SignalKind::terminate()) else {
         return;
@@ -371,7 +372,7 @@ async fn stop_on_signal(stop: Arc<AtomicBool>, bar: indicatif::ProgressBar) {
         if stop.swap(true, Ordering::SeqCst) {
             bar.abandon();
             eprintln!(
-                "chromacal: stopped at once; every reading taken is in the journal, and `chromacal calibrate --resume` goes on"
+                "chromacal: stopped at once; every reading taken is in the journal, and `{resume}` goes on"
             );
             std::process::exit(INTERRUPTED.into());
         }
