@@ -87,6 +87,23 @@ fn emulate_records_a_byte_exact_transcript_and_measure_reads_it() {
         .output()
         .unwrap();
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown instrument"));
+    // A port that does not exist never had an instrument: said so, with where to look.
+    let missing = chromacal()
+        .args([
+            "measure",
+            "--instrument",
+            "pr670:/dev/ttyUSB-chromacal-none",
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&missing.stderr);
+    assert!(!missing.status.success());
+    assert!(
+        stderr.contains("cannot open the pr670's port /dev/ttyUSB-chromacal-none")
+            && stderr.contains("chromacal instruments")
+            && !stderr.contains("gone"),
+        "{stderr}"
+    );
 }
 
 #[test]
