@@ -485,6 +485,15 @@ fn a_file_that_is_not_a_profile_is_named_for_what_it_is() {
         stderr.contains("is an ArgyllCMS CTI3 file") && stderr.contains("chromacal fit"),
         "{stderr}"
     );
+    // `check` given the journal first and the profile second.
+    let journal = fixture("journals/crt-default.jsonl");
+    let (ok, _, stderr) = run(&["check", path(&journal), path(&profile)]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("is a chromacal run's journal")
+            && stderr.contains("`chromacal check PROFILE JOURNAL` takes the profile first"),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -294,7 +294,8 @@ impl Profile {
 }
 
 /// What a file that is not a chromacal profile is, judged from its first bytes, for
-/// the files people mistake for one: an ICC profile (ICC.1:2022 §7.2: 'acsp' at byte
+/// the files people mistake for one: a run's journal (arguments given the other way
+/// round), an ICC profile (ICC.1:2022 §7.2: 'acsp' at byte
 /// 36, the version at byte 8, the class at 12, the colour space at 16), an ArgyllCMS
 /// CGATS file, or anything that is not text. `None` for text that may be TOML.
 fn other_kind(head: &[u8]) -> Option<(String, &'static str)> {
@@ -316,6 +317,17 @@ fn other_kind(head: &[u8]) -> Option<(String, &'static str)> {
         ));
     }
     let text = String::from_utf8_lossy(head);
+    if text.trim_start().starts_with('{')
+        && text.contains(&format!(
+            "\"format\":\"{}\"",
+            crate::journal::JOURNAL_FORMAT
+        ))
+    {
+        return Some((
+            "a chromacal run's journal (its readings)".to_string(),
+            ": `chromacal fit JOURNAL -o PROFILE.toml` makes a profile from it, and `chromacal check PROFILE JOURNAL` takes the profile first",
+        ));
+    }
     if let Some(kind) = ["CTI3", "CTI1", "CAL", "CGATS"]
         .into_iter()
         .find(|k| text.trim_start().starts_with(k))
