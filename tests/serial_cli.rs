@@ -104,6 +104,20 @@ fn emulate_records_a_byte_exact_transcript_and_measure_reads_it() {
             && !stderr.contains("gone"),
         "{stderr}"
     );
+    // The wrong kind on a port (a K-10A asked of a PR-670): named, port and all.
+    let pr670 = common::emulate(&["--instrument", "pr670", "--time-scale", "0.01"]);
+    let wrong = chromacal()
+        .args(["measure", "--timing-scale", "0.01", "--instrument"])
+        .arg(format!("k10a:{}", pr670.device))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&wrong.stderr);
+    assert!(!wrong.status.success());
+    assert!(
+        stderr.contains(&format!("no k10a answered on {}", pr670.device))
+            && stderr.contains("chromacal instruments"),
+        "{stderr}"
+    );
 }
 
 #[test]

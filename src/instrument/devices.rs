@@ -195,7 +195,18 @@ impl DeviceKind {
             }
             other => other.into(),
         })?;
+        // Silence or nonsense at connect is mostly another instrument (or none) on
+        // the port: name the port and the way to find the right one.
+        let attempts = options.attempts.max(1);
         self.connect(Box::new(transport), options)
+            .map_err(|e| match e {
+                InstrumentError::Timeout { .. } | InstrumentError::Protocol(_) => {
+                    InstrumentError::Unavailable(format!(
+                        "no {self} answered on {path} ({attempts} attempts; the last: {e}): is that its port, and is it switched on? `chromacal instruments` says what answers on each port"
+                    ))
+                }
+                other => other,
+            })
     }
 }
 
