@@ -1069,7 +1069,19 @@ fn export_says_only_what_it_writes_and_where() {
             stderr.contains("not carried: calibration curves to white x 0.3127 y 0.3290"),
             "{stderr}"
         );
+        // The readings are of the screen without the curves: a .ti3 says so, since
+        // colprof would profile the uncalibrated screen from it.
+        assert_eq!(
+            stderr.contains("readings are of the screen without its calibration curves"),
+            format == "ti3",
+            "{format}: {stderr}"
+        );
     }
+    let (_, stderr) = export_said(&path, "ti3", &dir.path().join("plain.ti3"), &[]);
+    assert!(
+        !stderr.contains("without its calibration curves"),
+        "{stderr}"
+    );
     // An ICC profile carries them, and says so on stdout; what it leaves out goes to
     // stderr.
     let icc = dir.path().join("x.icc");
