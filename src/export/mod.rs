@@ -237,14 +237,10 @@ fn measurements(profile: &Profile, options: &ExportOptions) -> Result<Measuremen
 /// display, the day it was made and what it is calibrated to (`native` without
 /// curves). The rest goes to [`details`].
 fn short_description(profile: &Profile, calibration: Option<&CalibrationCurves>) -> String {
-    let display: String = profile
-        .provenance
-        .display
-        .clone()
-        .unwrap_or_else(|| "display".into())
-        .chars()
-        .take(40)
-        .collect();
+    let display = shortened(
+        profile.provenance.display.as_deref().unwrap_or("display"),
+        40,
+    );
     let day = created_time(&profile.created)
         .to_zoned(jiff::tz::TimeZone::UTC)
         .date();
@@ -263,6 +259,24 @@ fn short_description(profile: &Profile, calibration: Option<&CalibrationCurves>)
         format!("{white} {}", k.target.tone.describe())
     });
     format!("{display} {day} {calibrated}")
+}
+
+/// `name` in at most `max` characters for a menu: whole when it fits, else without a
+/// closing parenthetical ("window on DUMMY0 of X display :0 (8 bits)" lost only its
+/// closing parenthesis to a plain cut), else cut with "...".
+fn shortened(name: &str, max: usize) -> String {
+    if name.chars().count() <= max {
+        return name.to_string();
+    }
+    if let Some(open) = name.rfind(" (")
+        && name.ends_with(')')
+        && name[..open].chars().count() <= max
+    {
+        return name[..open].to_string();
+    }
+    let mut cut: String = name.chars().take(max.saturating_sub(3)).collect();
+    cut += "...";
+    cut
 }
 
 /// The long description: profile id, held-out error, target, what is not carried.
@@ -456,4 +470,25 @@ pub fn parse_target(
             .unwrap_or(ToneCurve::Power(2.2)),
         luminance,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shortened;
+
+    #[test]
+    fn a_long_display_name_is_shortened_without_a_broken_parenthesis() {
+        assert_eq!(
+            shortened("virtual monitor 'crt'", 40),
+            "virtual monitor 'crt'"
+        );
+        assert_eq!(
+            shortened("window on DUMMY0 of X display :0 (8 bits)", 40),
+            "window on DUMMY0 of X display :0"
+        );
+        let long = "emulator screen at /tmp/chromacal-emulate-pr670-24644.sock";
+        let short = shortened(long, 40);
+        assert_eq!(short.chars().count(), 40);
+        assert!(short.ends_with("...") && long.starts_with(&short[..37]));
+    }
 }
