@@ -82,7 +82,8 @@ pub struct EmulateArgs {
     pub video_levels: bool,
     /// Look at this X display's screen instead: before each reading the virtual monitor
     /// shows the pixels under the aim point, through the output's CRTC gamma ramp as a
-    /// video card sends them (e.g. :1, an Xvfb showing `--display window`).
+    /// video card sends them (e.g. :1, an X server showing `--display window`: Xorg with
+    /// the dummy driver keeps the ramp; Xvfb's reads back straight whatever is set).
     #[arg(long, value_name = "DISPLAY")]
     pub x_display: Option<String>,
     /// An emulated colorimeter (k10a, cs100a, colorcal2) reads exact CIE XYZ instead of
