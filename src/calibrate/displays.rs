@@ -92,7 +92,16 @@ pub fn list_displays(
 /// The lines `chromacal displays` prints for `entries`.
 pub fn describe_displays(x_display: &str, entries: &[DisplayEntry]) -> String {
     let mut out = format!("X display {x_display}:\n");
-    for e in entries {
+    // An output with nothing on it and nothing of chromacal's gets one word on a
+    // shared line: a dummy or docking-station driver has a dozen of them.
+    let idle = |e: &DisplayEntry| {
+        !e.output.connected
+            && e.output.crtc.is_none()
+            && e.edid.is_none()
+            && e.edid_error.is_none()
+            && e.devices.is_empty()
+    };
+    for e in entries.iter().filter(|e| !idle(e)) {
         let o = &e.output;
         let state = match (o.connected, o.crtc) {
             (_, Some(_)) => format!(
@@ -153,6 +162,14 @@ pub fn describe_displays(x_display: &str, entries: &[DisplayEntry]) -> String {
                     ))
             );
         }
+    }
+    let disconnected: Vec<&str> = entries
+        .iter()
+        .filter(|e| idle(e))
+        .map(|e| e.output.name.as_str())
+        .collect();
+    if !disconnected.is_empty() {
+        out += &format!("  disconnected: {}\n", disconnected.join(", "));
     }
     out
 }
