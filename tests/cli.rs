@@ -612,34 +612,56 @@ fn config_show_says_what_is_in_effect_and_the_user_config_is_found() {
     assert_eq!(laws, ["power"]);
 }
 
-#[test]
-fn ctrl_c_stops_a_calibration_keeping_its_readings_for_resume() {
-    let state = tempfile::tempdir().unwrap();
-    let child = chromacal()
+/// A realtime calibration into `state`, once its journal holds `lines` lines (the
+/// header and readings: the run is under way, its signal handler in place); and that
+/// journal.
+fn calibrate_until(
+    state: &Path,
+    time_scale: &str,
+    lines: usize,
+) -> (std::process::Child, std::path::PathBuf) {
+    let mut child = chromacal()
         .args([
             "calibrate",
             "--realtime",
             "--time-scale",
-            "0.05",
+            time_scale,
             "--state-dir",
         ])
-        .arg(state.path())
-        .stdout(std::process::Stdio::piped())
+        .arg(state)
+        .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Wait for a few readings in the journal, then press Ctrl-C.
     let journal = || {
-        let runs = state.path().join("runs");
-        let run = std::fs::read_dir(&runs).ok()?.next()?.ok()?.path();
-        Some(run.join("journal.jsonl"))
+        let run = std::fs::read_dir(state.join("runs")).ok()?.next()?.ok()?;
+        Some(run.path().join("journal.jsonl"))
     };
-    let lines = |path: &Path| std::fs::read_to_string(path).map_or(0, |t| t.lines().count());
+    let count = |path: &Path| std::fs::read_to_string(path).map_or(0, |t| t.lines().count());
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
-    while journal().is_none_or(|j| lines(&j) < 6) {
-        assert!(std::time::Instant::now() < deadline, "no readings");
+    let ready = loop {
+        let ready = journal().filter(|j| count(j) >= lines);
+        if ready.is_some() || std::time::Instant::now() > deadline {
+            break ready;
+        }
         std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    match ready {
+        Some(j) => (child, j),
+        None => {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("no readings in {}", state.display())
+        }
     }
+}
+
+#[test]
+fn ctrl_c_stops_a_calibration_keeping_its_readings_for_resume() {
+    let state = tempfile::tempdir().unwrap();
+    // A few readings in the journal, then Ctrl-C.
+    let (child, journal) = calibrate_until(state.path(), "0.05", 6);
+    let lines = |path: &Path| std::fs::read_to_string(path).map_or(0, |t| t.lines().count());
     let status = std::process::Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
@@ -654,7 +676,6 @@ fn ctrl_c_stops_a_calibration_keeping_its_readings_for_resume() {
     );
     // It says how many readings are kept, where, and how to go on; the journal holds
     // exactly that many.
-    let journal = journal().unwrap();
     let kept = lines(&journal) - 1;
     assert!(
         stderr.contains(&format!("stopped on request after {kept} of ")),
@@ -676,32 +697,7 @@ fn ctrl_c_stops_a_calibration_keeping_its_readings_for_resume() {
 #[test]
 fn a_second_ctrl_c_names_the_state_directory_to_resume_in() {
     let state = tempfile::tempdir().unwrap();
-    let child = chromacal()
-        .args([
-            "calibrate",
-            "--realtime",
-            "--time-scale",
-            "0.5",
-            "--state-dir",
-        ])
-        .arg(state.path())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // A reading in the journal: the run is under way, its signal handler in place.
-    let journal = || {
-        let run = std::fs::read_dir(state.path().join("runs"))
-            .ok()?
-            .next()?
-            .ok()?;
-        std::fs::read_to_string(run.path().join("journal.jsonl")).ok()
-    };
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
-    while journal().is_none_or(|j| j.lines().count() < 2) {
-        assert!(std::time::Instant::now() < deadline, "no readings");
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
+    let (child, _) = calibrate_until(state.path(), "0.5", 2);
     // Twice within a reading (half a second at this time scale).
     for _ in 0..2 {
         let status = std::process::Command::new("kill")
