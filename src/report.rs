@@ -220,6 +220,14 @@ pub fn fit_summary(report: &FitReport) -> String {
         );
         out.push_str(&table(&["map", "mean", "p95", "max"], &rows));
     }
+    if report.spatial.unseen > 0 {
+        let _ = writeln!(
+            out,
+            "\nWARNING: {} uniformity-grid reading(s) under {:.0} % of the centre's light were left out of the spatial map: the instrument did not see the patch there. A real instrument has to be moved to each position: --prompt-positions asks for it (or plan.uniformity_grid = 0 measures the centre only).",
+            report.spatial.unseen,
+            100.0 * crate::fit::spatial::MIN_PLAUSIBLE_GAIN
+        );
+    }
     let _ = writeln!(out);
     if let Some(note) = &report.luminance_only {
         let _ = writeln!(out, "NOTE: {note}\n");

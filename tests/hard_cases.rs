@@ -21,9 +21,9 @@ fn laws(kinds: &[LawKind]) -> FitOptions {
     }
 }
 
-/// The profile a fit makes, as TOML: no NaN or infinity anywhere in it.
-fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
-    let profile = Profile {
+/// The profile of a fit, as the store would keep it.
+fn profile_of(fit: &chromacal::fit::FittedModel) -> Profile {
+    Profile {
         schema_version: SCHEMA_VERSION,
         id: "test".into(),
         created: "now".into(),
@@ -42,8 +42,12 @@ fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
         report: fit.report.clone(),
         calibration: None,
         cost: None,
-    };
-    let text = profile.to_toml().unwrap();
+    }
+}
+
+/// The profile a fit makes, as TOML: no NaN or infinity anywhere in it.
+fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
+    let text = profile_of(fit).to_toml().unwrap();
     fn all_finite(value: &toml::Value, path: &str) {
         match value {
             toml::Value::Float(f) => assert!(f.is_finite(), "{path} = {f}"),
@@ -349,6 +353,74 @@ fn black_with_no_chromaticity_gives_finite_figures() {
             .iter()
             .all(|c| c.max_delta_uv.is_finite())
     );
+}
+
+/// A grid read by an instrument that stayed at the centre while the patch moved (the
+/// window sink without --prompt-positions did this): every grid reading is the dark
+/// surround. Nothing of it is fitted, and the summary says why, once; a real screen's
+/// darkest corner (half the centre's light) is still taken.
+#[test]
+fn a_grid_the_instrument_did_not_see_is_left_out_and_said() {
+    let mut set = read_measurements(&fixture("journals/crt-default.jsonl")).unwrap();
+    let grid = set
+        .measurements
+        .iter()
+        .filter(|m| m.role == Role::Uniformity && m.reading.xyz.is_some())
+        .count();
+    assert!(grid > 8, "{grid}");
+    let mut dimmed = set.clone();
+    for m in set
+        .measurements
+        .iter_mut()
+        .filter(|m| m.role == Role::Uniformity)
+    {
+        m.reading.xyz = m.reading.xyz.map(|xyz| xyz * 0.001);
+    }
+    let fit = fit_monitor(&set, &FitOptions::default()).unwrap();
+    assert_eq!(fit.report.spatial.unseen, grid);
+    assert_eq!(fit.report.spatial.positions, 0);
+    assert!(matches!(
+        fit.model.spatial,
+        chromacal::model::SpatialMap::Uniform
+    ));
+    let summary = chromacal::report::fit_summary(&fit.report);
+    assert!(
+        summary.contains(&format!(
+            "WARNING: {grid} uniformity-grid reading(s) under 20 % of the centre's light were left out"
+        )) && summary.contains("--prompt-positions"),
+        "{summary}"
+    );
+    // The report page says it in its uniformity section.
+    let profile = profile_of(&fit);
+    let page = chromacal::html_report::report_html(&chromacal::html_report::ReportInput {
+        profile: &profile,
+        readings: Some(&set),
+        readings_note: None,
+        history: None,
+        device: None,
+        checked: None,
+        criteria: Default::default(),
+    })
+    .unwrap();
+    let section = &page[page.find("id=\"uniformity\"").unwrap()..];
+    assert!(
+        section.contains(&format!(
+            "{grid} grid reading(s) under 20 % of the centre's light were left out"
+        )),
+        "{section}"
+    );
+    // Half the light, as a poor screen's corner: fitted, nothing said.
+    for m in dimmed
+        .measurements
+        .iter_mut()
+        .filter(|m| m.role == Role::Uniformity)
+    {
+        m.reading.xyz = m.reading.xyz.map(|xyz| xyz * 0.5);
+    }
+    let fit = fit_monitor(&dimmed, &FitOptions::default()).unwrap();
+    assert_eq!(fit.report.spatial.unseen, 0);
+    assert_eq!(fit.report.spatial.positions, 24);
+    assert!(!chromacal::report::fit_summary(&fit.report).contains("WARNING: "));
 }
 
 #[test]

@@ -38,6 +38,14 @@ pub struct SpatialReport {
     /// Largest drop of light at a measured position, percent of the centre.
     pub largest_falloff_percent: Option<f64>,
     pub candidates: Vec<SpatialCandidateReport>,
+    /// Grid readings left out as darker than any screen's corner (under
+    /// [`MIN_PLAUSIBLE_GAIN`] of the centre): the instrument did not see the patch.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub unseen: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,6 +67,11 @@ impl Shape {
 
 /// Largest gain (grid reading over the centre's prediction) taken as a reading.
 const MAX_PLAUSIBLE_GAIN: f64 = 10.0;
+
+/// Smallest gain taken as a reading of the patch. The worst screens lose 30 to 50 %
+/// of the centre's light in a corner; a fifth of it is the dark surround, read by an
+/// instrument that was not moved to the patch (a run on the window sink read 0.07 %).
+pub const MIN_PLAUSIBLE_GAIN: f64 = 0.2;
 
 /// One grid reading as an observed gain.
 struct GainPoint<'a> {
@@ -82,9 +95,11 @@ fn gain_points<'a>(
             let above = centre.y - base.black.y;
             let gain = (r.xyz.y - base.black.y) / above;
             // A grid patch is bright, and no screen's corner is ten times its centre:
-            // a gain outside (0, 10) is a reading out of all range (−1e308, a unit
-            // slip), which says nothing about the falloff. It is left out, not fitted.
-            if !(above > 0.0 && gain > 0.0 && gain < MAX_PLAUSIBLE_GAIN) {
+            // a gain above 10 is a reading out of all range (1e308, a unit slip), and
+            // one under a fifth a reading of something else (the instrument not moved
+            // to the patch); neither says anything about the falloff. Left out, not
+            // fitted (the second counted by `unseen_readings`).
+            if !(above > 0.0 && (MIN_PLAUSIBLE_GAIN..MAX_PLAUSIBLE_GAIN).contains(&gain)) {
                 return None;
             }
             let on: Vec<usize> = (0..3).filter(|c| m.drive[*c] > 0.0).collect();
@@ -97,6 +112,17 @@ fn gain_points<'a>(
             })
         })
         .collect()
+}
+
+/// Grid readings whose light is under [`MIN_PLAUSIBLE_GAIN`] of the centre's
+/// prediction at the same drive.
+fn unseen_readings(base: &MonitorModel, grid: &[Corrected<'_>]) -> usize {
+    grid.iter()
+        .filter(|r| {
+            let above = base.forward_centre(r.measurement.drive).y - base.black.y;
+            above > 0.0 && (r.xyz.y - base.black.y) / above < MIN_PLAUSIBLE_GAIN
+        })
+        .count()
 }
 
 /// Fit a surface of `degree` to the points' gains, or `None` if they cannot carry it.
@@ -184,6 +210,14 @@ pub fn choose_spatial_map(
     noise: &NoiseModel,
 ) -> (SpatialMap, SpatialReport) {
     let points = gain_points(base, grid, noise);
+    let unseen = unseen_readings(base, grid);
+    if unseen > 0 {
+        tracing::warn!(
+            unseen,
+            "uniformity-grid readings under {:.0} % of the centre's light are left out: the instrument did not see the patch there (--prompt-positions asks to move it to each position)",
+            100.0 * MIN_PLAUSIBLE_GAIN
+        );
+    }
     let positions = distinct_positions(points.iter().map(|p| p.position));
     let white = base.white();
     let per_channel_data = (0..3).all(|c| points.iter().any(|p| p.channel == Some(c)));
@@ -251,6 +285,7 @@ pub fn choose_spatial_map(
             readings: points.len(),
             largest_falloff_percent,
             candidates,
+            unseen,
         },
     )
 }

@@ -744,6 +744,13 @@ fn uniformity(input: &ReportInput, verified: Option<&Verification>) -> Result<Ma
             ),
         )
     };
+    let unseen = (spatial.unseen > 0).then(|| {
+        note(&format!(
+            "{} grid reading(s) under {:.0} % of the centre's light were left out of the spatial map: the instrument did not see the patch there (a real instrument has to be moved to each position: --prompt-positions). The table below shows them as read.",
+            spatial.unseen,
+            100.0 * crate::fit::spatial::MIN_PLAUSIBLE_GAIN
+        ))
+    });
     let cells = verified
         .map(|v| v.uniformity.as_slice())
         .unwrap_or_default();
@@ -786,6 +793,9 @@ fn uniformity(input: &ReportInput, verified: Option<&Verification>) -> Result<Ma
     Ok(html! {
         section #uniformity {
             h2 { "Uniformity" }
+            @if let Some(unseen) = unseen {
+                (unseen)
+            }
             (map)
             @if !rows.is_empty() {
                 p {
