@@ -115,14 +115,23 @@ fn gain_points<'a>(
 }
 
 /// Grid readings whose light is under [`MIN_PLAUSIBLE_GAIN`] of the centre's
-/// prediction at the same drive.
+/// prediction at the same drive, said in the log when there are any.
 fn unseen_readings(base: &MonitorModel, grid: &[Corrected<'_>]) -> usize {
-    grid.iter()
+    let unseen = grid
+        .iter()
         .filter(|r| {
             let above = base.forward_centre(r.measurement.drive).y - base.black.y;
             above > 0.0 && (r.xyz.y - base.black.y) / above < MIN_PLAUSIBLE_GAIN
         })
-        .count()
+        .count();
+    if unseen > 0 {
+        tracing::warn!(
+            unseen,
+            "uniformity-grid readings under {:.0} % of the centre's light are left out: the instrument did not see the patch there (--prompt-positions asks to move it to each position)",
+            100.0 * MIN_PLAUSIBLE_GAIN
+        );
+    }
+    unseen
 }
 
 /// Fit a surface of `degree` to the points' gains, or `None` if they cannot carry it.
@@ -211,13 +220,6 @@ pub fn choose_spatial_map(
 ) -> (SpatialMap, SpatialReport) {
     let points = gain_points(base, grid, noise);
     let unseen = unseen_readings(base, grid);
-    if unseen > 0 {
-        tracing::warn!(
-            unseen,
-            "uniformity-grid readings under {:.0} % of the centre's light are left out: the instrument did not see the patch there (--prompt-positions asks to move it to each position)",
-            100.0 * MIN_PLAUSIBLE_GAIN
-        );
-    }
     let positions = distinct_positions(points.iter().map(|p| p.position));
     let white = base.white();
     let per_channel_data = (0..3).all(|c| points.iter().any(|p| p.channel == Some(c)));
