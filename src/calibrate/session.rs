@@ -395,6 +395,7 @@ pub fn adopt_settings_at_resume(
 ) -> Result<(), CalibrateError> {
     let mut now = given.config.clone();
     overrides.apply(&mut now);
+    let now = grid_the_instrument_can_see(&now);
     let (was, now) = (&run.config, &now);
     let differ: Vec<&str> = [
         ("monitor", was.monitor == now.monitor),
@@ -439,7 +440,14 @@ pub fn start_run(
     display: String,
     instrument: crate::instrument::InstrumentInfo,
 ) -> Result<PreparedRun, CalibrateError> {
-    let config = &grid_the_instrument_can_see(config);
+    let as_run = grid_the_instrument_can_see(config);
+    if as_run.plan != config.plan {
+        tracing::warn!(
+            "the uniformity grid (plan.uniformity_grid = {}) is not measured: the window moves the patch off the centre and the instrument stays where it is aimed; --prompt-positions (display.prompt_positions) measures it, asking to move the instrument to each position",
+            config.plan.uniformity_grid
+        );
+    }
+    let config = &as_run;
     let text = toml::to_string(config).map_err(|e| CalibrateError::Serialize(e.to_string()))?;
     let run_id = new_run_id();
     let header = JournalHeader {
@@ -469,17 +477,14 @@ pub fn start_run(
 /// aimed at its centre, and a grid patch off the centre reads the dark surround
 /// (a first-time user's run published 8 grid readings at 0.1 % of the white, and a
 /// report of ΔE00 99 there). `--prompt-positions` keeps the grid and asks for each
-/// move. The journal records the config as run, so a resume agrees.
+/// move. The journal records the config as run, and a config given at `--resume` is
+/// compared as it would run, so a resume agrees.
 fn grid_the_instrument_can_see(config: &Config) -> Config {
     let mut config = config.clone();
     if config.display.sink() == Sink::Window
         && !config.display.prompt_positions
         && config.plan.uniformity_grid >= 2
     {
-        tracing::warn!(
-            "the uniformity grid (plan.uniformity_grid = {}) is not measured: the window moves the patch off the centre and the instrument stays where it is aimed; --prompt-positions (display.prompt_positions) measures it, asking to move the instrument to each position",
-            config.plan.uniformity_grid
-        );
         config.plan.uniformity_grid = 0;
     }
     config
@@ -838,8 +843,8 @@ pub fn rig_for(
 
 #[cfg(test)]
 mod tests {
-    use super::{ProfileStore, resume_command, start_run};
-    use crate::config::{Config, Sink};
+    use super::{ProfileStore, adopt_settings_at_resume, reopen_run, resume_command, start_run};
+    use crate::config::{Config, LoadedConfig, Sink};
     use crate::model::spatial::ScreenPosition;
     use std::path::Path;
 
@@ -888,6 +893,18 @@ mod tests {
                 "{}",
                 run.journal.header().config
             );
+            // `--resume --config` with the same file is the same run (a review found
+            // it refused: "[plan] differs").
+            let run_dir = run.journal.path().parent().unwrap().to_path_buf();
+            drop(run);
+            let mut reopened = reopen_run(&run_dir).unwrap();
+            let given = LoadedConfig {
+                config: config.clone(),
+                text: String::new(),
+                origin: "my.toml".into(),
+                base_dir: dir.path().to_path_buf(),
+            };
+            adopt_settings_at_resume(&mut reopened, &given, &Default::default()).unwrap();
         }
     }
 
