@@ -441,6 +441,17 @@ fn an_output_in_a_missing_directory_is_refused_not_created() {
         "{stderr}"
     );
     assert!(!missing.exists());
+    // `calibrate --report` says it before measuring, not after publishing.
+    let state = dir.path().join("state");
+    let (ok, _, stderr) = run(&[
+        "calibrate",
+        "--state-dir",
+        path(&state),
+        "--report",
+        path(&missing.join("r.html")),
+    ]);
+    assert!(!ok && stderr.contains("no such directory"), "{stderr}");
+    assert!(!state.exists(), "a run was started");
 }
 
 #[test]

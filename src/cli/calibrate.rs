@@ -112,6 +112,11 @@ fn calibrate(
         device,
         state_dir.unwrap_or_else(default_state_dir),
     )?;
+    // The report is written after the run: a directory that is not there is said
+    // now, before anything is measured.
+    if let Some(path) = report_path {
+        super::report::check_output_dir(path)?;
+    }
     // Ctrl-C (or SIGTERM) stops after the reading under way; a second one at once.
     let stop_requested = Arc::new(AtomicBool::new(false));
     let flag = stop_requested.clone();

@@ -59,6 +59,23 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
     )
 }
 
+/// Refuse a report path whose directory does not exist, before a run that would
+/// write it at its end (as `write_page` would then).
+pub fn check_output_dir(output: &Path) -> Result<(), Failure> {
+    let dir = output
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if is_stdout(output) || dir.is_dir() {
+        return Ok(());
+    }
+    Err(Failure::from(format!(
+        "cannot write the report to {}: no such directory: {}",
+        output.display(),
+        dir.display()
+    )))
+}
+
 /// Render `input` and write it to `output` (`-`: standard output), saying where on
 /// standard error so that a page sent to standard output stays clean.
 pub fn write_page(input: &ReportInput, output: &Path) -> Result<(), Failure> {
