@@ -82,8 +82,8 @@ cargo deb --version >/dev/null 2>&1 || {
 # rather than let the linker fail half an hour in with "No space left on device".
 target_dir="${CARGO_TARGET_DIR:-target}"
 mkdir -p "$target_dir"
-free_kb="$(df --output=avail -k "$target_dir" 2>/dev/null | tail -1 | tr -d ' ')"
-if [ -n "$free_kb" ] && [ "$free_kb" -lt 4500000 ]; then
+free_kb="$(df --output=avail -k "$target_dir" 2>/dev/null | tail -1 | tr -d ' ' || true)"
+if [ "$free_kb" -eq "$free_kb" ] 2>/dev/null && [ "$free_kb" -lt 4500000 ]; then
     echo "scripts/test.sh: warning: $((free_kb / 1024)) MB free where $target_dir is; building the suite from clean takes about 4 GB" >&2
 fi
 

@@ -192,6 +192,10 @@ impl Drop for Emulator {
 /// Stop `child` as a service manager would: SIGTERM, so that it can clean up after
 /// itself, then SIGKILL if it has not gone within `grace`.
 pub fn terminate(child: &mut std::process::Child, grace: std::time::Duration) {
+    // Already reaped: its pid may be another process's by now.
+    if let Ok(Some(_)) = child.try_wait() {
+        return;
+    }
     let _ = std::process::Command::new("kill")
         .args(["-TERM", &child.id().to_string()])
         .status();
