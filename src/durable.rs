@@ -88,17 +88,25 @@ pub fn sync_directory(dir: &Path) {
 /// A mistyped directory is an error that names it, as any other program's would be,
 /// not a tree of new directories (`report -o /nonexistent/r.html` made `/nonexistent`).
 pub fn write_atomic_named(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    require_parent_dir(path)?;
+    write_atomic(path, bytes)
+}
+
+/// That the directory `path` would be written in exists (the current one for a bare
+/// file name): checked by [`write_atomic_named`], and before a run whose output is
+/// written at its end.
+pub fn require_parent_dir(path: &Path) -> std::io::Result<()> {
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    if !dir.is_dir() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::NotFound,
-            format!("no such directory: {}", dir.display()),
-        ));
+    if dir.is_dir() {
+        return Ok(());
     }
-    write_atomic(path, bytes)
+    Err(std::io::Error::new(
+        std::io::ErrorKind::NotFound,
+        format!("no such directory: {}", dir.display()),
+    ))
 }
 
 /// Write `bytes` to `path` so that a crash leaves either the old file or the new one,

@@ -62,18 +62,15 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
 /// Refuse a report path whose directory does not exist, before a run that would
 /// write it at its end (as `write_page` would then).
 pub fn check_output_dir(output: &Path) -> Result<(), Failure> {
-    let dir = output
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    if is_stdout(output) || dir.is_dir() {
+    if is_stdout(output) {
         return Ok(());
     }
-    Err(Failure::from(format!(
-        "cannot write the report to {}: no such directory: {}",
-        output.display(),
-        dir.display()
-    )))
+    chromacal::durable::require_parent_dir(output).map_err(|e| {
+        Failure::from(format!(
+            "cannot write the report to {}: {e}",
+            output.display()
+        ))
+    })
 }
 
 /// Render `input` and write it to `output` (`-`: standard output), saying where on

@@ -660,7 +660,7 @@ fn refuse_a_simulation_over_a_measured_screen(
     let Some(display) = profile.provenance.display.as_deref() else {
         return Ok(());
     };
-    if display.starts_with("virtual monitor") {
+    if crate::display::simulated::is_simulated_display(display) {
         return Ok(());
     }
     let instrument = profile

@@ -16,6 +16,16 @@ pub struct SimulatedDisplay {
     settle_s: f64,
 }
 
+/// How the in-process virtual monitor's name begins (in journals and provenance), so
+/// that a profile can be told to be of the simulation ([`is_simulated_display`]).
+const SIMULATED_NAME: &str = "virtual monitor";
+
+/// Whether `name`, a display's name as a journal records it, is the in-process
+/// virtual monitor's.
+pub fn is_simulated_display(name: &str) -> bool {
+    name.starts_with(SIMULATED_NAME)
+}
+
 impl SimulatedDisplay {
     pub fn new(monitor: Arc<Mutex<VirtualMonitor>>, settle_s: f64) -> Self {
         SimulatedDisplay { monitor, settle_s }
@@ -35,8 +45,8 @@ impl SimulatedDisplay {
 impl PatchDisplay for SimulatedDisplay {
     fn name(&self) -> String {
         match self.monitor.lock() {
-            Ok(m) => format!("virtual monitor '{}'", m.spec().name),
-            Err(_) => "virtual monitor".into(),
+            Ok(m) => format!("{SIMULATED_NAME} '{}'", m.spec().name),
+            Err(_) => SIMULATED_NAME.into(),
         }
     }
 

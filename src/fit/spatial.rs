@@ -83,12 +83,16 @@ struct GainPoint<'a> {
     sigma: f64,
 }
 
+/// The grid readings as gains, and how many were under [`MIN_PLAUSIBLE_GAIN`] (said in
+/// the log when there are any).
 fn gain_points<'a>(
     base: &MonitorModel,
     grid: &'a [Corrected<'a>],
     noise: &NoiseModel,
-) -> Vec<GainPoint<'a>> {
-    grid.iter()
+) -> (Vec<GainPoint<'a>>, usize) {
+    let mut unseen = 0;
+    let points = grid
+        .iter()
         .filter_map(|r| {
             let m = r.measurement;
             let centre = base.forward_centre(m.drive);
@@ -97,8 +101,11 @@ fn gain_points<'a>(
             // A grid patch is bright, and no screen's corner is ten times its centre:
             // a gain above 10 is a reading out of all range (1e308, a unit slip), and
             // one under a fifth a reading of something else (the instrument not moved
-            // to the patch); neither says anything about the falloff. Left out, not
-            // fitted (the second counted by `unseen_readings`).
+            // to the patch, counted as unseen); neither says anything about the
+            // falloff. Left out, not fitted.
+            if above > 0.0 && gain < MIN_PLAUSIBLE_GAIN {
+                unseen += 1;
+            }
             if !(above > 0.0 && (MIN_PLAUSIBLE_GAIN..MAX_PLAUSIBLE_GAIN).contains(&gain)) {
                 return None;
             }
@@ -111,19 +118,7 @@ fn gain_points<'a>(
                 sigma: noise.sigma(r.xyz.y) / above,
             })
         })
-        .collect()
-}
-
-/// Grid readings whose light is under [`MIN_PLAUSIBLE_GAIN`] of the centre's
-/// prediction at the same drive, said in the log when there are any.
-fn unseen_readings(base: &MonitorModel, grid: &[Corrected<'_>]) -> usize {
-    let unseen = grid
-        .iter()
-        .filter(|r| {
-            let above = base.forward_centre(r.measurement.drive).y - base.black.y;
-            above > 0.0 && (r.xyz.y - base.black.y) / above < MIN_PLAUSIBLE_GAIN
-        })
-        .count();
+        .collect();
     if unseen > 0 {
         tracing::warn!(
             unseen,
@@ -131,7 +126,7 @@ fn unseen_readings(base: &MonitorModel, grid: &[Corrected<'_>]) -> usize {
             100.0 * MIN_PLAUSIBLE_GAIN
         );
     }
-    unseen
+    (points, unseen)
 }
 
 /// Fit a surface of `degree` to the points' gains, or `None` if they cannot carry it.
@@ -218,8 +213,7 @@ pub fn choose_spatial_map(
     grid: &[Corrected<'_>],
     noise: &NoiseModel,
 ) -> (SpatialMap, SpatialReport) {
-    let points = gain_points(base, grid, noise);
-    let unseen = unseen_readings(base, grid);
+    let (points, unseen) = gain_points(base, grid, noise);
     let positions = distinct_positions(points.iter().map(|p| p.position));
     let white = base.white();
     let per_channel_data = (0..3).all(|c| points.iter().any(|p| p.channel == Some(c)));

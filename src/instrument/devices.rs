@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use super::driver::{DriverOptions, Protocol, SerialInstrument};
 use super::emulator::{DeviceModel, Meter};
 use super::serial::{SerialSettings, SerialTransport};
-use super::transport::{Link, Transport, TransportError};
+use super::transport::{Link, Transport};
 use super::{Capability, InstrumentError};
 use super::{colorcal, jeti, klein, minolta, pr6xx, pr650};
 
@@ -180,20 +180,11 @@ impl DeviceKind {
         path: &str,
         options: DriverOptions,
     ) -> Result<SerialInstrument, InstrumentError> {
-        // A port that cannot be opened never had an instrument to lose: say what
-        // the system said, and where to look (not "the instrument is gone").
-        let transport = SerialTransport::open(path, self.settings()).map_err(|e| match e {
-            TransportError::Disconnected(m) | TransportError::Io(m) => {
-                let hint = if m.contains("ermission denied") {
-                    " (serial ports belong to group dialout: add yourself to it and log in again)"
-                } else {
-                    ""
-                };
-                InstrumentError::Unavailable(format!(
-                    "cannot open the {self}'s port {m}{hint}; `chromacal instruments` lists the serial ports and what answers on each"
-                ))
-            }
-            other => other.into(),
+        // A port that cannot be opened: what the system said, and where to look.
+        let transport = SerialTransport::open(path, self.settings()).map_err(|e| {
+            InstrumentError::Unavailable(format!(
+                "cannot open the {self}'s port {e}; `chromacal instruments` lists the serial ports and what answers on each"
+            ))
         })?;
         // Silence or nonsense at connect is mostly another instrument (or none) on
         // the port: name the port and the way to find the right one.

@@ -53,6 +53,11 @@ fn io_error(path: &str) -> impl Fn(serialport::Error) -> TransportError + '_ {
         serialport::ErrorKind::Io(std::io::ErrorKind::NotFound) => {
             TransportError::Disconnected(format!("{path}: {e}"))
         }
+        serialport::ErrorKind::Io(std::io::ErrorKind::PermissionDenied) => {
+            TransportError::Io(format!(
+                "{path}: {e} (serial ports belong to group dialout: add yourself to it and log in again)"
+            ))
+        }
         _ => TransportError::Io(format!("{path}: {e}")),
     }
 }
@@ -69,8 +74,14 @@ fn open_port(path: &str, settings: SerialSettings) -> Result<TTYPort, TransportE
 }
 
 impl SerialTransport {
+    /// Open the port. One that cannot be opened never had a device to lose: its
+    /// error is `Io` (what the system said), never `Disconnected`, which `reopen`
+    /// gives when a device that was there has gone.
     pub fn open(path: &str, settings: SerialSettings) -> Result<Self, TransportError> {
-        let port = open_port(path, settings)?;
+        let port = open_port(path, settings).map_err(|e| match e {
+            TransportError::Disconnected(m) => TransportError::Io(m),
+            other => other,
+        })?;
         Ok(SerialTransport {
             path: path.to_string(),
             settings,

@@ -258,14 +258,14 @@ impl MonitorModel {
             }
         }
         // Newton far from the answer can run off (or to NaN): the better of the two.
-        let miss = |light: &Vector3<f64>| residual(light).norm();
-        if !(miss(&light) <= miss(&picard)) {
-            light = picard;
+        let (mut miss, picard_miss) = (residual(&light).norm(), residual(&picard).norm());
+        if !(miss <= picard_miss) {
+            (light, miss) = (picard, picard_miss);
         }
         // Judged by the equations solved, with the shares as given (clamped for the
         // inverse, carried on beyond the gamut for the extended table): judging the
         // extended solution by the clamped forward called a third of them unsolved.
-        let converged = miss(&light) <= 1e-6 * above.norm().max(f64::MIN_POSITIVE);
+        let converged = miss <= 1e-6 * above.norm().max(f64::MIN_POSITIVE);
         (light, converged)
     }
 
