@@ -41,6 +41,7 @@ pub const RANGES: &[Range] = &[
     r("monitor.falloff[]", 0.0, 1.0),
     r("monitor.failures.primary_nonconstancy", 0.0, 1.0),
     r("monitor.failures.channel_interaction", -1.0, 1.0),
+    r("monitor.failures.channel_crosstalk", -1.0, 1.0),
     r("monitor.failures.surround_dependence", -1.0, 1.0),
     r("monitor.failures.warmup_amplitude", -1.0, 1.0),
     r("monitor.failures.warmup_time_constant_s", 0.0, 1e6),

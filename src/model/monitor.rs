@@ -6,9 +6,10 @@
 //! each primary at full drive, black taken off), E the per-channel transfer laws,
 //! K the spatial gain map and XYZ_black the light at zero drive, flare included.
 //!
-//! Two optional terms (`AdditivityTerms`) model what the additive form misses, and are
+//! Optional terms (`AdditivityTerms`) model what the additive form misses, and are
 //! kept by the fit only where cross-validation shows they lower the error
-//! (`fit::terms`): channel interaction and primary chromaticity that moves with drive.
+//! (`fit::terms`): channel interaction, crosstalk between channels, and primary
+//! chromaticity that moves with drive.
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -62,11 +63,18 @@ pub struct MonitorModel {
 /// l_c = K_c E_c the light of channel c in units of its primary, and ê_c = l_c / E_c(1)
 /// its share of full drive (clamped to [0, 1]), the light above black is
 ///
-/// XYZ − XYZ_black = Σ_c m_c l_c (1 + γ_c Σ_{k≠c} ê_k) + Σ_c u_c ê_c (1 − ê_c)
+/// XYZ − XYZ_black = Σ_c m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c) + Σ_c u_c ê_c (1 − ê_c),
+/// s_c = Σ_{k≠c} ê_k
 ///
 /// γ (interaction): a channel's light changes in proportion to what the other channels
 /// give, as when a shared supply sags (Brainard 1989's channel independence failing);
-/// alone, a channel is unaffected, so the ramps still define the curves. u
+/// alone, a channel is unaffected, so the ramps still define the curves. κ
+/// (crosstalk): the same, but fading as the channel itself nears full drive, where it
+/// has no more to give: an LCD whose subpixels are brighter with their neighbours lit
+/// (the charge of a lit neighbour's data line couples into the subpixel), so that its
+/// greys read above the sum of its ramps at mid drive and on the sum at white (the
+/// shared MacBook Pro: +2.3 % at 0.5, +0.4 % at white; a brightness limiter instead
+/// departs most at white, which γ models). u
 /// (chromaticity shift): the XYZ a channel adds besides its primary's direction,
 /// largest at mid drive and none at black and full drive, as a TN panel's or a CRT's
 /// blue moves in chromaticity with drive (the channel's own curve is still E_c).
@@ -76,6 +84,9 @@ pub struct AdditivityTerms {
     /// γ of red, green and blue.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub interaction: Option<[f64; 3]>,
+    /// κ of red, green and blue.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub crosstalk: Option<[f64; 3]>,
     /// u of red, green and blue, XYZ each.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chromaticity_shift: Option<[[f64; 3]; 3]>,
@@ -83,7 +94,17 @@ pub struct AdditivityTerms {
 
 impl AdditivityTerms {
     pub fn is_empty(&self) -> bool {
-        self.interaction.is_none() && self.chromaticity_shift.is_none()
+        self.interaction.is_none() && self.crosstalk.is_none() && self.chromaticity_shift.is_none()
+    }
+
+    /// Each channel's gain at drive shares `shares`: 1 + γ_c s_c + κ_c (1 − ê_c) s_c.
+    pub fn gains(&self, shares: &[f64; 3]) -> [f64; 3] {
+        let s = interaction_basis(shares);
+        let x = crosstalk_basis(shares);
+        [0, 1, 2].map(|c| {
+            1.0 + self.interaction.map_or(0.0, |g| g[c] * s[c])
+                + self.crosstalk.map_or(0.0, |k| k[c] * x[c])
+        })
     }
 
     /// Names of the terms present, for reports and export notes.
@@ -91,6 +112,9 @@ impl AdditivityTerms {
         let mut names = Vec::new();
         if self.interaction.is_some() {
             names.push("channel interaction");
+        }
+        if self.crosstalk.is_some() {
+            names.push("crosstalk between channels");
         }
         if self.chromaticity_shift.is_some() {
             names.push("drive-dependent primary chromaticity");
@@ -101,6 +125,7 @@ impl AdditivityTerms {
     /// Every coefficient is a finite number.
     fn is_finite(&self) -> bool {
         self.interaction.iter().flatten().all(|v| v.is_finite())
+            && self.crosstalk.iter().flatten().all(|v| v.is_finite())
             && self
                 .chromaticity_shift
                 .iter()
@@ -127,6 +152,13 @@ pub fn interaction_basis(shares: &[f64; 3]) -> [f64; 3] {
     shares.map(|s| total - s)
 }
 
+/// (1 − ê_c) s_c: the multiplier of κ_c, what the others give while channel c has
+/// room to rise.
+pub fn crosstalk_basis(shares: &[f64; 3]) -> [f64; 3] {
+    let s = interaction_basis(shares);
+    [0, 1, 2].map(|c| (1.0 - shares[c]) * s[c])
+}
+
 /// ê_c (1 − ê_c): the weight of u_c.
 pub fn chromaticity_shift_basis(shares: &[f64; 3]) -> [f64; 3] {
     shares.map(|s| s * (1.0 - s))
@@ -150,15 +182,14 @@ impl MonitorModel {
     }
 
     /// Each channel's light above black at channel lights `light` whose drive shares
-    /// are `shares`, terms included: m_c l_c (1 + γ_c s_c) + u_c ê_c (1 − ê_c), one
-    /// column a channel.
+    /// are `shares`, terms included: m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c)
+    /// + u_c ê_c (1 − ê_c), one column a channel.
     fn channel_contributions(&self, light: &Vector3<f64>, shares: &[f64; 3]) -> Matrix3<f64> {
-        let s = interaction_basis(shares);
+        let gains = self.terms.gains(shares);
         let w = chromaticity_shift_basis(shares);
         let mut contributions = Matrix3::zeros();
         for c in 0..3 {
-            let gain = 1.0 + self.terms.interaction.map_or(0.0, |g| g[c] * s[c]);
-            let mut column = self.matrix.column(c) * (light[c] * gain);
+            let mut column = self.matrix.column(c) * (light[c] * gains[c]);
             if let Some(u) = self.terms.chromaticity_shift {
                 column += Xyz::from(u[c]) * w[c];
             }
@@ -169,7 +200,7 @@ impl MonitorModel {
 
     /// The channel lights l that give `above` (the light above black): M⁻¹ applied to
     /// `above` for the additive model; with terms, the fixed point of
-    /// l_c = [M⁻¹(above − Σ u ê(1 − ê))]_c / (1 + γ_c s_c), which converges because
+    /// l_c = [M⁻¹(above − Σ u ê(1 − ê))]_c / g_c (the gains), which converges because
     /// the terms are small next to the primaries (a few per cent; the fit keeps none
     /// beyond `fit::terms::MAX_TERM`), slowly near that bound, where Newton's method
     /// finishes what 100 steps leave. Also says whether it converged.
@@ -219,11 +250,8 @@ impl MonitorModel {
                 }
             }
             let mut next = inverse * target;
-            if let Some(gamma) = self.terms.interaction {
-                let s = interaction_basis(&shares);
-                for c in 0..3 {
-                    next[c] /= (1.0 + gamma[c] * s[c]).max(1e-3);
-                }
+            for (c, gain) in self.terms.gains(&shares).into_iter().enumerate() {
+                next[c] /= gain.max(1e-3);
             }
             let step = (next - light).abs().max();
             light = next;
@@ -609,6 +637,7 @@ mod tests {
         MonitorModel {
             terms: AdditivityTerms {
                 interaction: Some([-0.03, -0.02, -0.05]),
+                crosstalk: Some([0.04, 0.03, 0.05]),
                 chromaticity_shift: Some([[0.0, 0.5, 1.5], [0.8, 0.0, -0.4], [-1.0, 1.2, 0.0]]),
             },
             ..srgb_like()

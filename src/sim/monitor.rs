@@ -187,6 +187,11 @@ pub struct Failures {
     /// α: the light above black drops by α times the mean channel output (channel
     /// interaction: white is dimmer than the sum of its channels).
     pub channel_interaction: f64,
+    /// χ: a subpixel's drive rises by χ d (1 − d) times the mean drive of the other
+    /// two channels (crosstalk, as an LCD's lit neighbours couple into a subpixel): a
+    /// channel alone is unaffected, greys read above the sum of their channels at mid
+    /// drive and on it at black and white.
+    pub channel_crosstalk: f64,
     /// β: a patch's light drops by β times the screen's mean output (surround
     /// dependence).
     pub surround_dependence: f64,
@@ -329,9 +334,16 @@ impl VirtualMonitor {
         (v.clamp(0.0, 1.0) * levels).round() / levels
     }
 
-    /// Output of each channel for a drive (quantised).
+    /// Output of each channel for a drive (quantised), crosstalk included (after the
+    /// codes: it is analogue).
     fn outputs(&self, drive: Drive) -> [f64; 3] {
-        [0, 1, 2].map(|c| self.spec.transfer.output(c, self.quantise(drive[c])))
+        let q = drive.map(|v| self.quantise(v));
+        let chi = self.spec.failures.channel_crosstalk;
+        [0, 1, 2].map(|c| {
+            let others = (q.iter().sum::<f64>() - q[c]) / 2.0;
+            let effective = q[c] + chi * q[c] * (1.0 - q[c]) * others;
+            self.spec.transfer.output(c, effective)
+        })
     }
 
     /// Output above the channel's own black, in [0, 1].
