@@ -1,8 +1,8 @@
 //! The whole model, additivity terms included, as the ICC `lut16Type` tags `A2B0`
 //! (device → PCS) and `B2A0` (PCS → device) beside the matrix/TRC tags.
 //!
-//! Why: a matrix/TRC profile is additive, so a model that keeps a channel-interaction
-//! or chromaticity-shift term (`fit::terms`) lost it in every ICC profile, and with it
+//! Why: a matrix/TRC profile is additive, so a model that keeps a channel-interaction,
+//! crosstalk or chromaticity-shift term (`fit::terms`) lost it in every ICC profile, and with it
 //! what the fit won on a non-additive panel. Readers prefer the LUT tags when a
 //! profile has both (ICC.1:2001-04 §6.3.1.2; ArgyllCMS and Little CMS do), and a
 //! reader that knows only matrix/TRC still finds the additive part. The same tables
@@ -14,8 +14,11 @@
 //! what is not (ICC.1:2001-04 §6.5.7):
 //! * `A2B0`: each input table maps the device value to its channel's share of full
 //!   light, ê = E(v) / E(1) (through the calibration curves, if any); the grid, over
-//!   the three shares, holds PCS XYZ. The additive model is linear in the shares and
-//!   the interaction term bilinear, so the grid interpolates them almost exactly.
+//!   the three shares, holds PCS XYZ as fractions of each output table's top (a
+//!   straight line from 0, chosen by `output_top` so that the black falls on a grid
+//!   step, as near the identity as that allows). The additive model is linear in the shares and
+//!   the interaction term bilinear and the crosstalk term cubic, so the grid
+//!   interpolates them almost exactly.
 //! * `B2A0`: the input tables scale each PCS component to the grid's range (the most
 //!   any code gives); the grid holds the shares the model's inverse gives, which are
 //!   linear in XYZ for the additive part, so the grid interpolates them almost
@@ -115,26 +118,31 @@ impl ModelLuts {
         let n = GRID_POINTS;
         let grid_points =
             || (0..n).flat_map(move |i| (0..n).flat_map(move |j| (0..n).map(move |k| [i, j, k])));
+        let pcs_grid: Vec<Vector3<f64>> = grid_points()
+            .map(|p| {
+                let light = Vector3::from_fn(|c, _| step(p[c], n) * full[c] * gains[c]);
+                let xyz = model.light_above_black(&light) + model.black;
+                chad * (xyz / white_y)
+            })
+            .collect();
+        let most = [0, 1, 2].map(|j| pcs_grid.iter().map(|v| v[j]).fold(0.0, f64::max));
+        // The grid's first point is the black (every share 0).
+        let tops = [0, 1, 2].map(|j| output_top(pcs_grid[0][j], most[j]));
         let a2b0 = Lut16 {
             input: [0, 1, 2].map(|c| {
                 (0..TABLE_ENTRIES)
                     .map(|i| unit16(share(c, step(i, TABLE_ENTRIES))))
                     .collect()
             }),
-            grid: grid_points()
-                .map(|p| {
-                    let light = Vector3::from_fn(|c, _| step(p[c], n) * full[c] * gains[c]);
-                    let xyz = model.light_above_black(&light) + model.black;
-                    let pcs = chad * (xyz / white_y);
-                    [xyz16(pcs.x), xyz16(pcs.y), xyz16(pcs.z)]
-                })
+            grid: pcs_grid
+                .iter()
+                .map(|pcs| [0, 1, 2].map(|j| unit16(pcs[j] / tops[j])))
                 .collect(),
-            output: [0, 1, 2].map(|_| vec![0, 65535]),
+            output: tops.map(|top| vec![0, xyz16(top)]),
         };
         // Each PCS component's grid range: the most any device colour gives.
         let range = Vector3::from_fn(|j, _| {
-            let most = a2b0.grid.iter().map(|v| v[j]).max().unwrap_or(0) as f64 / 32768.0;
-            (most * PCS_HEADROOM).clamp(super::matrix_trc::D50[j], PCS_MAX)
+            (most[j] * PCS_HEADROOM).clamp(super::matrix_trc::D50[j], PCS_MAX)
         });
         let high = SHARE_LOW + SHARE_STEP * (TABLE_ENTRIES - 1) as f64;
         let b2a0 = Lut16 {
@@ -174,6 +182,32 @@ impl ModelLuts {
         };
         Some(ModelLuts { a2b0, b2a0 })
     }
+}
+
+/// The top of an A2B0 output table (a straight line from 0), as a PCS value: the
+/// grid then stores each component as a fraction of it, in steps of top/65535.
+///
+/// Why not always the identity (top 65535, one encoding step a grid step): in lut16's
+/// XYZ encoding a step is 1/32768 of the white, and near black, where CIELAB's a* and
+/// b* grow 3,900 times faster than X, Y and Z, rounding the black to a step moved a
+/// panel's black 0.12 ΔE00 off the model for a reader that interpolates in floating
+/// point (ArgyllCMS). So the top is the largest that holds `most` for which the `black`
+/// falls on a grid step within 10⁻³ of an encoding step. Why the largest: a reader
+/// that evaluates the tables in 16 bits (Little CMS) rounds twice when the top is not
+/// the identity's, and the nearer the identity the less that second rounding costs; a
+/// black below any step (an OLED's) keeps the identity.
+fn output_top(black: f64, most: f64) -> f64 {
+    let units = |v: f64| (v * 32768.0).clamp(0.0, 65535.0);
+    let (black, least) = (units(black), units(most).ceil().max(1.0) as u32);
+    let miss = |top: u32| {
+        let steps = black * 65535.0 / top as f64;
+        (steps - steps.round()).abs() * top as f64 / 65535.0
+    };
+    let top = (least..=65535)
+        .rev()
+        .find(|top| miss(*top) < 1e-3)
+        .unwrap_or(65535);
+    top as f64 / 32768.0
 }
 
 /// The smallest device value whose share reaches `target`, by bisection (the share
@@ -262,25 +296,51 @@ mod tests {
         out
     }
 
+    /// A2B0 as a reader evaluates it: the grid, then the output tables, straight
+    /// lines from 0; PCS XYZ.
+    fn forward_lookup(lut: &Lut16, shares: [f64; 3]) -> [f64; 3] {
+        let grid = lookup(lut, shares);
+        [0, 1, 2].map(|o| {
+            assert_eq!(lut.output[o].len(), 2);
+            grid[o] / 65535.0 * lut.output[o][1] as f64 / 32768.0
+        })
+    }
+
     #[test]
     fn only_a_model_with_terms_gets_tables() {
         let chad = Matrix3::identity();
         assert!(ModelLuts::of(&model(AdditivityTerms::default()), None, 100.0, &chad).is_none());
     }
 
+    /// A model with each gain term: the interaction, then crosstalk.
+    fn gain_term_models() -> [MonitorModel; 2] {
+        [
+            model(AdditivityTerms {
+                interaction: Some([-0.08, -0.05, -0.1]),
+                ..Default::default()
+            }),
+            model(AdditivityTerms {
+                crosstalk: Some([0.12, 0.08, 0.1]),
+                ..Default::default()
+            }),
+        ]
+    }
+
     #[test]
-    fn the_forward_grid_gives_the_model_with_its_interaction() {
-        let m = model(AdditivityTerms {
-            interaction: Some([-0.08, -0.05, -0.1]),
-            chromaticity_shift: None,
-        });
+    fn the_forward_grid_gives_the_model_with_its_gain_terms() {
+        for m in gain_term_models() {
+            forward_grid_gives_the_model(&m);
+        }
+    }
+
+    fn forward_grid_gives_the_model(m: &MonitorModel) {
         let white_y = m.white().y;
         let chad = Matrix3::identity();
-        let luts = ModelLuts::of(&m, None, white_y, &chad).unwrap();
+        let luts = ModelLuts::of(m, None, white_y, &chad).unwrap();
         let mut worst: f64 = 0.0;
         for rgb in [[0.5, 0.5, 0.5], [1.0, 0.3, 0.7], [0.2, 0.9, 0.1], [1.0; 3]] {
             let shares = [0, 1, 2].map(|c| m.laws[c].excitation(rgb[c]));
-            let got = lookup(&luts.a2b0, shares).map(|v| v / 32768.0);
+            let got = forward_lookup(&luts.a2b0, shares);
             let want = m.forward_centre(rgb) / white_y;
             for j in 0..3 {
                 worst = worst.max((got[j] - want[j]).abs());
@@ -288,20 +348,52 @@ mod tests {
         }
         // 1.5 × 10⁻⁵ is the encoding's step; the grid adds the term's curvature.
         assert!(worst < 1e-4, "{worst}");
-        // Without the term the same colours would be off by the interaction.
+        // The black, where a* and b* are most sensitive, comes out as the model's, to
+        // far below the encoding's step.
+        let black = forward_lookup(&luts.a2b0, [0.0; 3]);
+        let want = m.black / white_y;
+        for j in 0..3 {
+            assert!((black[j] - want[j]).abs() < 1e-7, "{black:?} {want:?}");
+        }
+        // Without the term the same colours would be off by it.
         let plain = model(AdditivityTerms::default());
         let grey = (plain.forward_centre([0.5; 3]) - m.forward_centre([0.5; 3])).norm() / white_y;
-        assert!(grey > 1e-2, "{grey}");
+        assert!(grey > 5e-3, "{grey}");
+    }
+
+    #[test]
+    fn the_output_top_holds_the_brightest_and_puts_the_black_on_a_step() {
+        for (black, most) in [
+            (0.00117, 0.9642),
+            (0.0, 1.0),
+            (0.0035, 1.7),
+            (0.0021, 0.825),
+        ] {
+            let top = output_top(black, most);
+            assert!(top >= most && top <= PCS_MAX, "{top}");
+            // How far the black is from a grid step, in the encoding's steps.
+            let steps = black / top * 65535.0;
+            let miss = (steps - steps.round()).abs() * top / 65535.0 * 32768.0;
+            assert!(miss < 1e-3, "black {black}, most {most}: {miss}");
+        }
+        // Beyond what lut16 can encode, and with a black no step can hold, the top is
+        // the encoding's.
+        assert_eq!(output_top(0.01, 2.5), PCS_MAX);
+        assert_eq!(output_top(2e-8, 1.0), PCS_MAX);
+        // The black on a step, as near the identity as that allows.
+        assert!(output_top(0.00117, 0.9642) > 0.97 * PCS_MAX);
     }
 
     #[test]
     fn the_inverse_grid_and_output_tables_give_back_the_device_values() {
-        let m = model(AdditivityTerms {
-            interaction: Some([-0.08, -0.05, -0.1]),
-            chromaticity_shift: None,
-        });
+        for m in gain_term_models() {
+            inverse_gives_back_the_device_values(&m);
+        }
+    }
+
+    fn inverse_gives_back_the_device_values(m: &MonitorModel) {
         let white_y = m.white().y;
-        let luts = ModelLuts::of(&m, None, white_y, &Matrix3::identity()).unwrap();
+        let luts = ModelLuts::of(m, None, white_y, &Matrix3::identity()).unwrap();
         // The grid's range as the input tables give it: where they reach 65535.
         let range = Vector3::from_fn(|j, _| {
             let table = &luts.b2a0.input[j];
@@ -336,7 +428,7 @@ mod tests {
     fn the_element_has_the_layout_of_lut16() {
         let m = model(AdditivityTerms {
             interaction: Some([0.01, 0.02, 0.03]),
-            chromaticity_shift: None,
+            ..Default::default()
         });
         let luts = ModelLuts::of(&m, None, m.white().y, &Matrix3::identity()).unwrap();
         let bytes = lut16_bytes(&luts.a2b0);

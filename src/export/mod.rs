@@ -161,6 +161,12 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
             gamma[0], gamma[1], gamma[2]
         ));
     }
+    if let Some(kappa) = terms.crosstalk.filter(|_| !carries_terms) {
+        notes.push(format!(
+            "the model's crosstalk term (each channel's light changes by κ = {:+.4}, {:+.4}, {:+.4} per full channel beside it, less as the channel nears full drive); the curves and matrix are exact without it",
+            kappa[0], kappa[1], kappa[2]
+        ));
+    }
     if terms.chromaticity_shift.is_some() && !carries_terms {
         notes.push(
             "the model's drive-dependent primary chromaticity term (the primaries are those of full drive)"
@@ -173,7 +179,10 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
                 .into(),
         );
     }
-    if checks.additivity_verdict == Verdict::Fails && terms.interaction.is_none() {
+    if checks.additivity_verdict == Verdict::Fails
+        && terms.interaction.is_none()
+        && terms.crosstalk.is_none()
+    {
         let worst = checks
             .additivity
             .iter()
