@@ -8,8 +8,7 @@ use chromacal::color::Xyz;
 use chromacal::comparison::MAX_TRAIN;
 use chromacal::fit::validate::{evaluate, ramps_and_greys_split};
 use chromacal::fit::{FitOptions, fit_monitor};
-use chromacal::instrument::{Reading, ReadingStatus};
-use chromacal::measurement::{Measurement, MeasurementSet, Role, Units};
+use chromacal::measurement::{MeasurementSet, Role};
 use nalgebra::{Matrix3, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
@@ -58,41 +57,10 @@ fn readings_of(
         .map(|(index, drive)| {
             let light = primaries() * Vector3::from_fn(|c, _| truth(drive[c]));
             let xyz = (black + light).map(|v| v * (1.0 + noise.sample(&mut rng)));
-            measurement(index, *drive, xyz)
+            common::xyz_measurement(index, *drive, xyz)
         })
         .collect();
-    measurement_set(source, measurements)
-}
-
-/// One reading of XYZ at `drive`, at the centre on black, its role read from the drive.
-fn measurement(index: usize, drive: [f64; 3], xyz: Xyz) -> Measurement {
-    Measurement {
-        index,
-        role: Role::from_drive(drive),
-        drive,
-        codes: None,
-        position: Default::default(),
-        background: [0.0; 3],
-        time_s: None,
-        reading: Reading {
-            xyz: Some(xyz),
-            spectrum: None,
-            status: ReadingStatus::Ok,
-            integration_s: 1.0,
-            ..Default::default()
-        },
-    }
-}
-
-fn measurement_set(source: &str, measurements: Vec<Measurement>) -> MeasurementSet {
-    MeasurementSet {
-        source: source.into(),
-        units: Units::Absolute,
-        instrument: None,
-        display: None,
-        measured_at: None,
-        measurements,
-    }
+    common::measurement_set(source, measurements)
 }
 
 /// Largest relative error of the fitted excitations at a quarter and three quarters.
@@ -156,10 +124,10 @@ fn power_law_set(drives: &[[f64; 3]]) -> MeasurementSet {
         .enumerate()
         .map(|(index, drive)| {
             let light = primaries() * Vector3::from_fn(|c, _| drive[c].powf(2.2));
-            measurement(index, *drive, black + light)
+            common::xyz_measurement(index, *drive, black + light)
         })
         .collect();
-    measurement_set("exact power law", measurements)
+    common::measurement_set("exact power law", measurements)
 }
 
 #[test]

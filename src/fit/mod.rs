@@ -12,15 +12,14 @@
 //! 4. every candidate law fitted and cross-validated, the simplest within noise of the
 //!    best kept (`select_law`; `laws`, `law_selection`);
 //! 5. the primary matrix, refused if too ill-conditioned to invert (`primary_matrix`);
-//!    then the terms for what additivity misses (channel interaction, chromaticity that
-//!    moves with drive), each kept only if it lowers the cross-validated error
+//!    the assumption checks (`checks`), which need no model; then the terms for what additivity misses (channel interaction, crosstalk,
+//!    chromaticity that moves with drive), each kept only if it lowers the cross-validated error
 //!    (`terms`), and if one is kept the curves fitted again with the greys corrected
-//!    by it (`refit_curves_for_terms`);
+//!    by it (`refit`);
 //! 6. the spatial map from the uniformity grid, chosen the same way (`spatial`), and
 //!    the model against the measured white, which every export is normalised to
 //!    (`anchor_at_measured_white`);
-//! 7. held-out error on the verification patches (`validate_on_held_out`), and the
-//!    assumption checks (`checks`).
+//! 7. held-out error on the verification patches (`validate_on_held_out`).
 //!
 //! Readings of luminance alone (a light meter) go through `light_meter`, which gives
 //! them chromaticities and runs the same chain twice.
@@ -35,6 +34,7 @@ pub mod least_squares;
 pub mod light_meter;
 pub mod noise;
 pub mod primaries;
+pub mod refit;
 pub mod select;
 pub mod spatial;
 pub mod stats;
@@ -53,16 +53,17 @@ use crate::model::monitor::matrix_condition_number;
 use crate::model::transfer::LawKind;
 use crate::model::{CHANNELS, MonitorModel, SpatialMap};
 use checks::{AssumptionChecks, check_assumptions};
-use code_correction::{CodeCorrection, CodeCorrectionReport, correct_at_codes};
+use code_correction::CodeCorrectionReport;
 use law_selection::{CorrectionReport, LawChoice, LawReport, LawSelection, choose_law};
 use noise::{DriftModel, DriftReport, NoiseModel, estimate_drift, estimate_noise};
 use primaries::{
     BlackEstimate, ChannelRamp, Corrected, RampError, add_grey_excitations, channel_ramp,
     estimate_black,
 };
+use refit::{CurveEvidence, CurveRefit, refit_curves_for_terms};
 use spatial::{SpatialReport, choose_spatial_map};
 use stats::ErrorStats;
-use terms::{TermChoice, TermReading, TermReport, choose_terms, fit_terms};
+use terms::{TermChoice, TermReading, TermReport, choose_terms};
 use validate::{Evaluation, PatchError, evaluate};
 
 /// Default largest condition number of the primary matrix that a profile may have.
@@ -375,26 +376,6 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
         code_step(set),
     )?;
     let (additive, condition_number) = primary_matrix(&ramps, &selection, &black, options)?;
-    let readings = term_readings(&corrected);
-    let choice = if options.additivity_terms {
-        choose_terms(&additive, &readings, &noise, &white_reference)
-    } else {
-        TermChoice::additive("switched off (fit.additivity_terms = false)")
-    };
-    let base = refit_curves_for_terms(
-        &additive,
-        &choice,
-        &ramps,
-        &greys,
-        &readings,
-        &noise,
-        CurveRefit::as_chosen(&selection, options, code_step(set)),
-    );
-    let grid = readings_of_role(&corrected, Role::Uniformity);
-    let (spatial_map, spatial) = choose_spatial_map(&base, &grid, &noise);
-    let (model, white_anchor) =
-        anchor_at_measured_white(base.with_spatial(spatial_map), &corrected, options);
-    let (evaluation, held_out) = validate_on_held_out(&model, &corrected);
     let checks = check_assumptions(
         &corrected,
         &ramps,
@@ -403,6 +384,27 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
         &drift,
         &white_reference,
     );
+    let readings = term_readings(&corrected);
+    let evidence = CurveEvidence {
+        ramps: &ramps,
+        greys: &greys,
+        readings: &readings,
+        noise: &noise,
+    };
+    let refit = CurveRefit::as_chosen(&selection, options, code_step(set));
+    let (choice, base) = terms_for_what_additivity_misses(
+        &additive,
+        &evidence,
+        &white_reference,
+        &checks,
+        refit,
+        options,
+    );
+    let grid = readings_of_role(&corrected, Role::Uniformity);
+    let (spatial_map, spatial) = choose_spatial_map(&base, &grid, &noise);
+    let (model, white_anchor) =
+        anchor_at_measured_white(base.with_spatial(spatial_map), &corrected, options);
+    let (evaluation, held_out) = validate_on_held_out(&model, &corrected);
     Ok(FittedModel {
         report: FitReport {
             units: set.units,
@@ -426,6 +428,35 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
         },
         model,
     })
+}
+
+/// Step 5, after the matrix: the terms for what additivity misses (`terms`), chosen on
+/// the readings of `evidence` and the additivity check, and the model with those kept,
+/// its curves fitted again for them (`refit`).
+fn terms_for_what_additivity_misses(
+    additive: &MonitorModel,
+    evidence: &CurveEvidence<'_>,
+    white_reference: &Xyz,
+    checks: &AssumptionChecks,
+    refit: CurveRefit,
+    options: &FitOptions,
+) -> (TermChoice, MonitorModel) {
+    let choice = if options.additivity_terms {
+        choose_terms(
+            additive,
+            evidence.readings,
+            evidence.noise,
+            white_reference,
+            &checks.additivity,
+        )
+    } else {
+        TermChoice::additive("switched off (fit.additivity_terms = false)")
+    };
+    let base = match &choice.model {
+        Some(kept) => refit_curves_for_terms(additive, kept, choice.chosen, evidence, refit),
+        None => additive.clone(),
+    };
+    (choice, base)
 }
 
 /// The readings of `role` taken under standard conditions (centre, usual surround).
@@ -729,110 +760,6 @@ fn term_readings(corrected: &[Corrected<'_>]) -> Vec<TermReading> {
             })
         })
         .collect()
-}
-
-/// Step 5b: with a term kept, the curves again. The greys shaped them as if the display
-/// were additive (`add_grey_excitations`), so each grey is first corrected by what the
-/// terms add at its level; the law kept is fitted again to every channel, and the terms'
-/// coefficients again on the new curves. Without a term, or when a channel's law no
-/// longer fits, the model of `choice` is kept as it is.
-fn refit_curves_for_terms(
-    additive: &MonitorModel,
-    choice: &TermChoice,
-    ramps: &[ChannelRamp; 3],
-    greys: &[(usize, f64, Xyz)],
-    readings: &[TermReading],
-    noise: &NoiseModel,
-    refit: CurveRefit,
-) -> MonitorModel {
-    let CurveRefit {
-        max_condition,
-        toe,
-        law,
-        corrected,
-        codes,
-    } = refit;
-    let Some(kept) = choice.model.clone() else {
-        return additive.clone();
-    };
-    let corrected_greys: Vec<(usize, f64, Xyz)> = greys
-        .iter()
-        .map(|(index, level, xyz)| {
-            let added = kept.forward_centre([*level; 3]) - additive.forward_centre([*level; 3]);
-            (*index, *level, xyz - added)
-        })
-        .collect();
-    let mut ramps = ramps.clone();
-    for ramp in ramps.iter_mut() {
-        ramp.grey_points.clear();
-    }
-    add_grey_excitations(
-        &mut ramps,
-        &corrected_greys,
-        &additive.black,
-        noise,
-        max_condition,
-    );
-    let mut fits = Vec::with_capacity(3);
-    for ramp in &ramps {
-        let Ok(mut fit) = laws::fit_law(law, ramp, toe) else {
-            return kept;
-        };
-        if let Some(c) = corrected.and_then(|h| law_correction::correct_law(&fit, ramp, h)) {
-            fit = c;
-        }
-        fits.push(fit);
-    }
-    // The correction at the codes, as it was kept: on all three channels or none.
-    let at_codes: Option<Vec<laws::LawFit>> = codes.and_then(|codes| {
-        fits.iter()
-            .zip(&ramps)
-            .map(|(fit, ramp)| correct_at_codes(fit, ramp, codes))
-            .collect()
-    });
-    let mut refitted = additive.clone();
-    for (c, (ramp, fit)) in ramps.iter().zip(at_codes.unwrap_or(fits)).enumerate() {
-        refitted.matrix.set_column(c, &ramp.column(fit.amplitude));
-        refitted.laws[c] = fit.law;
-    }
-    let all: Vec<&TermReading> = readings.iter().collect();
-    fit_terms(&refitted, choice.chosen, &all, noise).unwrap_or(kept)
-}
-
-/// How the curves are fitted again once a term is kept: as the law was chosen.
-#[derive(Debug, Clone, Copy)]
-struct CurveRefit {
-    max_condition: f64,
-    toe: f64,
-    law: LawKind,
-    /// The law was corrected at the measured levels, with this kernel width.
-    corrected: Option<f64>,
-    /// The curves were corrected at the measured codes, so.
-    codes: Option<CodeCorrection>,
-}
-
-impl CurveRefit {
-    fn as_chosen(selection: &LawSelection, options: &FitOptions, toe: f64) -> Self {
-        CurveRefit {
-            max_condition: options.max_condition_number,
-            toe,
-            law: selection.chosen,
-            corrected: selection
-                .correction
-                .as_ref()
-                .filter(|c| c.kept)
-                .map(|c| c.bandwidth),
-            codes: selection
-                .codes
-                .as_ref()
-                .filter(|c| c.kept)
-                .and_then(|c| c.noise_scale)
-                .map(|noise_scale| CodeCorrection {
-                    code_step: toe,
-                    noise_scale,
-                }),
-        }
-    }
 }
 
 /// The corrected readings of one role.

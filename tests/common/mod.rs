@@ -9,6 +9,10 @@ pub mod xserver;
 
 use std::path::PathBuf;
 
+use chromacal::color::Xyz;
+use chromacal::instrument::{Reading, ReadingStatus};
+use chromacal::measurement::{Measurement, MeasurementSet, Role, Units};
+
 /// `../shared/data`, relative to the crate root.
 pub fn shared_data_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
@@ -106,10 +110,7 @@ pub fn with_fixed_plan(config_text: &str) -> String {
 pub fn simulate(
     config_text: &str,
     base_dir: &std::path::Path,
-) -> (
-    chromacal::measurement::MeasurementSet,
-    chromacal::model::MonitorModel,
-) {
+) -> (MeasurementSet, chromacal::model::MonitorModel) {
     let config_text = &with_fixed_plan(config_text);
     let config = chromacal::config::parse_config(config_text, "test config").unwrap();
     let dir = tempfile::tempdir().unwrap();
@@ -330,7 +331,7 @@ pub fn newest_run(state: &std::path::Path) -> std::path::PathBuf {
 /// so is each patch it added, numbered on from the seed plan without a gap.
 pub fn assert_each_planned_patch_once(
     header: &chromacal::journal::JournalHeader,
-    entries: &[chromacal::measurement::Measurement],
+    entries: &[Measurement],
 ) {
     let mut seen: Vec<usize> = entries.iter().map(|m| m.index).collect();
     seen.sort();
@@ -355,4 +356,36 @@ pub fn need_tool(tool: &str, package: &str) {
         found,
         "{tool} is missing: scripts/test.sh installs it (Debian package {package})"
     );
+}
+
+/// One reading of XYZ at `drive`, at the centre on black, its role read from the drive.
+pub fn xyz_measurement(index: usize, drive: [f64; 3], xyz: Xyz) -> Measurement {
+    Measurement {
+        index,
+        role: Role::from_drive(drive),
+        drive,
+        codes: None,
+        position: Default::default(),
+        background: [0.0; 3],
+        time_s: None,
+        reading: Reading {
+            xyz: Some(xyz),
+            spectrum: None,
+            status: ReadingStatus::Ok,
+            integration_s: 1.0,
+            ..Default::default()
+        },
+    }
+}
+
+/// Absolute readings from `source`.
+pub fn measurement_set(source: &str, measurements: Vec<Measurement>) -> MeasurementSet {
+    MeasurementSet {
+        source: source.into(),
+        units: Units::Absolute,
+        instrument: None,
+        display: None,
+        measured_at: None,
+        measurements,
+    }
 }
