@@ -20,7 +20,7 @@
 //! again with the greys corrected by it (`fit::refit`), since the greys shaped them as
 //! if the display were additive. Crosstalk shows only where a grey is measured beside
 //! its channels below full drive; with one such level cross-validation cannot judge
-//! it, and the additivity check does (`crosstalk_on_the_checks_evidence`).
+//! a gain term, and the additivity check does (`gain_term_on_the_checks_evidence`).
 
 use nalgebra::{DMatrix, DVector, Matrix3};
 use serde::{Deserialize, Serialize};
@@ -362,31 +362,59 @@ fn forward_selection(scores: &[Option<Vec<f64>>], tolerance: f64) -> TermSet {
     better_of(pairs, kept).unwrap_or(kept)
 }
 
-/// Crosstalk where cross-validation cannot test it. Its evidence is a grey against the
-/// sum of its channels measured alone at the same drive below full (at full drive the
-/// term vanishes); with one such level, leaving it out leaves nothing to fit κ to, and
-/// the other greys cannot tell κ from the curves' shape, so the cross-validated error
-/// is the same with the term or without (the shared MacBook Pro's 57-patch set: ramps
-/// at 0.5 and full only; 0.385 against 0.386). There the additivity check decides:
-/// when that grey departs from the sum beyond noise (3σ in X, Y or Z, `checks`), and
-/// cross-validation kept no gain term, crosstalk is added to what it kept. On the
-/// shared MacBook Pro that halves the error on the mixtures no fit sees (0.239 → 0.13);
-/// on additive virtual monitors measured so, one run in a hundred gets it
-/// (`tests/additivity_terms.rs`). With two such levels or more, cross-validation
-/// decides alone.
-fn crosstalk_on_the_checks_evidence(chosen: TermSet, additivity: &[GreyAdditivity]) -> TermSet {
+/// A gain term where cross-validation cannot judge it: a design with one grey below
+/// full drive measured beside its channels (the 57-patch ArgyllCMS sets: ramps at 0.5
+/// and full only). Leaving that level out leaves nothing to fit the term to, and with
+/// the curves held fixed, as the greys shaped them, the cross-validated error hardly
+/// moves (the shared MacBook Pro: 0.385 with crosstalk against 0.386) or rises (a
+/// virtual limiter panel: 2.17 with the interaction against 1.72). There the
+/// additivity check decides, when that grey departs from the sum of its channels
+/// beyond noise (`checks`) and cross-validation kept no gain term:
+/// * the white adds up: crosstalk, which vanishes at full drive (a subpixel lit by its
+///   neighbours). The shared MacBook Pro's and Samsung's error on the mixtures no fit
+///   sees: 0.239 → 0.132 and 0.565 → 0.525.
+/// * the white departs too: the interaction, a gain that follows the light (a
+///   brightness limiter). Virtual limiter panels from ISETBio's measured tables
+///   measured so: 2.17 → 0.51 on the mixtures (OLED), 1.28 → 0.34 (LCD); crosstalk
+///   there would give 2.03 and 1.18.
+///
+/// On an additive virtual LCD measured so no run of 40 gets a term
+/// (`tests/one_grey_level.rs`). With two such levels or more, cross-validation decides
+/// alone.
+fn gain_term_on_the_checks_evidence(chosen: TermSet, additivity: &[GreyAdditivity]) -> TermSet {
+    let departs =
+        |a: &GreyAdditivity| matches!(a.verdict, Verdict::Fails | Verdict::BelowVisibility);
     let below_full: Vec<&GreyAdditivity> = additivity.iter().filter(|a| a.drive < 1.0).collect();
-    let departs = matches!(below_full[..], [a] if a.verdict != Verdict::WithinNoise);
+    let [grey] = below_full[..] else {
+        return chosen;
+    };
+    if !departs(grey) {
+        return chosen;
+    }
+    let gain = if additivity.iter().any(|a| a.drive >= 1.0 && departs(a)) {
+        TermSet::Interaction
+    } else {
+        TermSet::Crosstalk
+    };
     match chosen {
-        TermSet::None if departs => TermSet::Crosstalk,
-        TermSet::ChromaticityShift if departs => TermSet::CrosstalkAndShift,
+        TermSet::None => gain,
+        TermSet::ChromaticityShift => gain.with_shift().unwrap_or(chosen),
         other => other,
+    }
+}
+
+/// What the rule says of a set kept on the additivity check's evidence.
+fn kept_on_evidence(chosen: TermSet) -> &'static str {
+    if matches!(chosen, TermSet::Crosstalk | TermSet::CrosstalkAndShift) {
+        "; crosstalk kept on the additivity check's evidence: the one grey below full drive measured beside its channels departs from their sum beyond noise and the white does not, and with one such level cross-validation cannot test the term"
+    } else {
+        "; the interaction kept on the additivity check's evidence: the one grey below full drive measured beside its channels departs from their sum beyond noise and so does the white (a gain that follows the light), and with one such level cross-validation cannot test the term"
     }
 }
 
 /// Fit and cross-validate each candidate set of terms on `readings` with the curves
 /// and matrix of `model`, choose by `forward_selection` (and where it cannot judge
-/// crosstalk, by the additivity check, `crosstalk_on_the_checks_evidence`).
+/// a gain term, by the additivity check, `gain_term_on_the_checks_evidence`).
 pub fn choose_terms(
     model: &MonitorModel,
     readings: &[TermReading],
@@ -417,7 +445,7 @@ pub fn choose_terms(
             .as_ref()
             .filter(|m| !m.terms.is_empty())
     };
-    let on_evidence = crosstalk_on_the_checks_evidence(by_cross_validation, additivity);
+    let on_evidence = gain_term_on_the_checks_evidence(by_cross_validation, additivity);
     // A set whose terms could not be fitted within bounds is not kept.
     let chosen = if fitted_of(on_evidence).is_some() {
         on_evidence
@@ -448,7 +476,7 @@ pub fn choose_terms(
         "fewer than two drive levels to leave out: the additive model is kept".into()
     };
     if chosen != by_cross_validation {
-        rule.push_str("; crosstalk kept on the additivity check's evidence: the one grey below full drive measured beside its channels departs from their sum beyond noise, and with one such level cross-validation cannot test the term");
+        rule.push_str(kept_on_evidence(chosen));
     }
     TermChoice {
         model,
