@@ -1267,3 +1267,48 @@ fn the_psychopy_calibration_is_named_in_local_time_and_the_icc_date_in_utc() {
         );
     }
 }
+
+/// Crosstalk carries a grey's departure below full drive, not the white's: kept on
+/// the shared Samsung (its mid grey 4.9 % above the sum of its channels, its white
+/// within noise), the export names no failed additivity; with the white failing too,
+/// it names the white's.
+#[test]
+fn crosstalk_answers_for_the_greys_below_full_drive_only() {
+    use chromacal::fit::checks::Verdict;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("samsung.toml");
+    common::succeed(
+        chromacal()
+            .arg("fit")
+            .arg(common::shared_path(
+                "measurements/samsung_s24a350h_colormunki_spectral_57.ti3",
+            ))
+            .arg("-o")
+            .arg(&path),
+    );
+    let mut profile = Profile::read(&path).unwrap();
+    assert!(
+        profile.model.terms.crosstalk.is_some(),
+        "{:?}",
+        profile.model.terms
+    );
+    assert!(profile.model.terms.interaction.is_none());
+    let checks = &mut profile.report.checks;
+    assert_eq!(checks.additivity_verdict, Verdict::Fails);
+    let named = |profile: &Profile| {
+        chromacal::export::limitations(profile, true)
+            .into_iter()
+            .find(|note| note.contains("grey luminance"))
+    };
+    assert_eq!(named(&profile), None);
+    let checks = &mut profile.report.checks;
+    let white = checks
+        .additivity
+        .iter_mut()
+        .find(|a| a.drive == 1.0)
+        .unwrap();
+    white.verdict = Verdict::Fails;
+    white.luminance_departure_percent = -6.5;
+    let note = named(&profile).expect("the white's departure is named");
+    assert!(note.contains("-6.5 %"), "{note}");
+}

@@ -179,12 +179,16 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
                 .into(),
         );
     }
-    if checks.additivity_verdict == Verdict::Fails
-        && terms.interaction.is_none()
-        && terms.crosstalk.is_none()
-    {
-        let worst = checks
-            .additivity
+    // The interaction carries every grey's departure; crosstalk, which vanishes at full
+    // drive, only those below it.
+    let uncarried: Vec<_> = checks
+        .additivity
+        .iter()
+        .filter(|a| a.verdict == Verdict::Fails)
+        .filter(|a| terms.interaction.is_none() && (terms.crosstalk.is_none() || a.drive >= 1.0))
+        .collect();
+    if checks.additivity_verdict == Verdict::Fails && !uncarried.is_empty() {
+        let worst = uncarried
             .iter()
             .map(|a| a.luminance_departure_percent)
             .fold(0.0, |w: f64, v| if v.abs() > w.abs() { v } else { w });

@@ -111,7 +111,36 @@ pub struct GreyAdditivity {
     /// and still fall short in Z. Absent from profiles made before it was judged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub xyz_departure_percent: Option<[f64; 3]>,
+    /// The grey's luminance above black over what the greys measured on either side
+    /// give at its drive (`luminance_between_neighbours`), minus one, percent. A grey
+    /// reading that is off on its own departs from its neighbours as much as from its
+    /// channels; what the display does (crosstalk, a limiter) moves the greys
+    /// together. Absent without a grey on both sides.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub neighbour_departure_percent: Option<f64>,
     pub verdict: Verdict,
+}
+
+impl GreyAdditivity {
+    /// Whether this grey's departure from its channels looks like a reading off on its
+    /// own: it departs from its neighbouring greys by half as much or more. Unknown
+    /// (no neighbours) counts as not.
+    pub fn stands_alone(&self) -> bool {
+        self.neighbour_departure_percent
+            .is_some_and(|n| n.abs() >= 0.5 * self.luminance_departure_percent.abs())
+    }
+}
+
+/// The luminance above black at `level` that the greys on either side give: the
+/// nearest measured level below and above, interpolated linearly in log luminance over
+/// log drive (a power law's straight line). `greys` holds (drive, luminance above
+/// black), sorted by drive. `None` without a grey with light on both sides.
+pub fn luminance_between_neighbours(greys: &[(f64, f64)], level: f64) -> Option<f64> {
+    let lit = |g: &&(f64, f64)| g.1 > 0.0 && g.0 > 0.0;
+    let below = greys.iter().filter(lit).rfind(|g| g.0 < level)?;
+    let above = greys.iter().filter(lit).find(|g| g.0 > level)?;
+    let t = (level.ln() - below.0.ln()) / (above.0.ln() - below.0.ln());
+    Some((below.1.ln() * (1.0 - t) + above.1.ln() * t).exp())
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -247,15 +276,22 @@ fn additivity(
         .collect();
     levels.sort_by(|a, b| a.total_cmp(b));
     levels.dedup();
+    let grey_at = |level: f64| {
+        mean_at(
+            readings
+                .iter()
+                .filter(standard)
+                .filter(|r| r.measurement.drive == [level; 3]),
+        )
+    };
+    let greys: Vec<(f64, f64)> = levels
+        .iter()
+        .filter_map(|level| Some((*level, grey_at(*level)?.0.y - black.y)))
+        .collect();
     levels
         .into_iter()
         .filter_map(|level| {
-            let (grey, n_grey) = mean_at(
-                readings
-                    .iter()
-                    .filter(standard)
-                    .filter(|r| r.measurement.drive == [level; 3]),
-            )?;
+            let (grey, n_grey) = grey_at(level)?;
             let mut sum = *black;
             let mut worst_n = usize::MAX;
             for c in 0..3 {
@@ -296,6 +332,8 @@ fn additivity(
                 delta_e00: de,
                 luminance_departure_percent: departures[1] * 100.0,
                 xyz_departure_percent: Some(departures.map(|d| d * 100.0)),
+                neighbour_departure_percent: luminance_between_neighbours(&greys, level)
+                    .map(|between| ((grey.y - black.y) / between - 1.0) * 100.0),
                 verdict: Verdict::judge(within_noise, de < DE00_VISIBILITY),
             })
         })
@@ -490,6 +528,32 @@ mod tests {
         let checks = additivity(&corrected, &black, &noise, &white);
         assert_eq!(checks.len(), 1);
         checks[0].clone()
+    }
+
+    #[test]
+    fn a_grey_is_judged_against_its_neighbours_on_a_power_law() {
+        let greys: Vec<(f64, f64)> = [0.25, 0.375, 0.625, 0.75]
+            .iter()
+            .map(|d: &f64| (*d, 100.0 * d.powf(2.2)))
+            .collect();
+        // A power law is a straight line in log over log: exact between neighbours.
+        let between = luminance_between_neighbours(&greys, 0.5).unwrap();
+        assert!((between / (100.0 * 0.5f64.powf(2.2)) - 1.0).abs() < 1e-12);
+        // None beyond the measured greys.
+        assert_eq!(luminance_between_neighbours(&greys, 0.8), None);
+        assert_eq!(luminance_between_neighbours(&greys, 0.25), None);
+        let grey = |luminance: f64, neighbours: Option<f64>| GreyAdditivity {
+            drive: 0.5,
+            delta_e00: 1.0,
+            luminance_departure_percent: luminance,
+            xyz_departure_percent: None,
+            neighbour_departure_percent: neighbours,
+            verdict: Verdict::Fails,
+        };
+        assert!(grey(4.0, Some(3.9)).stands_alone());
+        assert!(grey(-4.0, Some(-2.0)).stands_alone());
+        assert!(!grey(4.9, Some(-1.7)).stands_alone());
+        assert!(!grey(4.0, None).stands_alone());
     }
 
     #[test]

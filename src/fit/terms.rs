@@ -97,6 +97,11 @@ impl TermSet {
         )
     }
 
+    /// Whether the set holds the crosstalk term.
+    fn has_crosstalk(self) -> bool {
+        matches!(self, TermSet::Crosstalk | TermSet::CrosstalkAndShift)
+    }
+
     /// The set with the chromaticity shift added to a gain term (`None` for what has
     /// no such pair).
     fn with_shift(self) -> Option<TermSet> {
@@ -364,32 +369,38 @@ fn forward_selection(scores: &[Option<Vec<f64>>], tolerance: f64) -> TermSet {
 
 /// A gain term where cross-validation cannot judge it: a design with one grey below
 /// full drive measured beside its channels (the 57-patch ArgyllCMS sets: ramps at 0.5
-/// and full only). Leaving that level out leaves nothing to fit the term to, and with
-/// the curves held fixed, as the greys shaped them, the cross-validated error hardly
-/// moves (the shared MacBook Pro: 0.385 with crosstalk against 0.386) or rises (a
-/// virtual limiter panel: 2.17 with the interaction against 1.72). There the
-/// additivity check decides, when that grey departs from the sum of its channels
-/// beyond noise (`checks`) and cross-validation kept no gain term:
+/// and full only). Leaving that level out leaves nothing to fit the term to, and the
+/// curves held fixed were shaped by that very grey, so cross-validation scores a gain
+/// term worse than none even where it is real: the shared MacBook Pro 0.326 with
+/// crosstalk against 0.307, the Samsung 0.548 against 0.456, a virtual limiter 2.17
+/// with the interaction against 1.72, where on the mixtures no fit sees the terms
+/// take 0.239 → 0.132, 0.565 → 0.525 and 2.17 → 0.51. There the additivity check
+/// decides, when cross-validation kept no gain term and that grey departs from the
+/// sum of its channels beyond noise (`checks`) but not on its own: a grey that departs
+/// from the greys on either side by half as much or more is taken for a reading off
+/// by itself (`GreyAdditivity::stands_alone`), since what a display does moves its
+/// greys together. Then:
 /// * the white adds up: crosstalk, which vanishes at full drive (a subpixel lit by its
-///   neighbours). The shared MacBook Pro's and Samsung's error on the mixtures no fit
-///   sees: 0.239 → 0.132 and 0.565 → 0.525.
+///   neighbours);
 /// * the white departs too: the interaction, a gain that follows the light (a
-///   brightness limiter). Virtual limiter panels from ISETBio's measured tables
-///   measured so: 2.17 → 0.51 on the mixtures (OLED), 1.28 → 0.34 (LCD); crosstalk
-///   there would give 2.03 and 1.18.
+///   brightness limiter). Crosstalk there would take the virtual limiters' mixtures
+///   only to 2.03 (OLED) and 1.18 (LCD) where the interaction gives 0.51 and 0.34.
 ///
-/// On an additive virtual LCD measured so no run of 40 gets a term
-/// (`tests/one_grey_level.rs`). With two such levels or more, cross-validation decides
-/// alone.
-fn gain_term_on_the_checks_evidence(chosen: TermSet, additivity: &[GreyAdditivity]) -> TermSet {
+/// On an additive virtual LCD measured so, no run of 40 gets a term, nor any with its
+/// one grey reading 4 % off (`tests/one_grey_level.rs`). With two such levels or more,
+/// cross-validation decides alone.
+fn gain_term_on_the_checks_evidence(chosen: TermSet, additivity: &[GreyAdditivity]) -> Evidence {
     let departs =
         |a: &GreyAdditivity| matches!(a.verdict, Verdict::Fails | Verdict::BelowVisibility);
     let below_full: Vec<&GreyAdditivity> = additivity.iter().filter(|a| a.drive < 1.0).collect();
     let [grey] = below_full[..] else {
-        return chosen;
+        return Evidence::None;
     };
-    if !departs(grey) {
-        return chosen;
+    if !departs(grey) || !matches!(chosen, TermSet::None | TermSet::ChromaticityShift) {
+        return Evidence::None;
+    }
+    if grey.stands_alone() {
+        return Evidence::StandsAlone;
     }
     let gain = if additivity.iter().any(|a| a.drive >= 1.0 && departs(a)) {
         TermSet::Interaction
@@ -397,18 +408,37 @@ fn gain_term_on_the_checks_evidence(chosen: TermSet, additivity: &[GreyAdditivit
         TermSet::Crosstalk
     };
     match chosen {
-        TermSet::None => gain,
-        TermSet::ChromaticityShift => gain.with_shift().unwrap_or(chosen),
-        other => other,
+        TermSet::ChromaticityShift => gain.with_shift().map_or(Evidence::None, Evidence::Keep),
+        _ => Evidence::Keep(gain),
     }
 }
 
-/// What the rule says of a set kept on the additivity check's evidence.
-fn kept_on_evidence(chosen: TermSet) -> &'static str {
-    if matches!(chosen, TermSet::Crosstalk | TermSet::CrosstalkAndShift) {
-        "; crosstalk kept on the additivity check's evidence: the one grey below full drive measured beside its channels departs from their sum beyond noise and the white does not, and with one such level cross-validation cannot test the term"
-    } else {
-        "; the interaction kept on the additivity check's evidence: the one grey below full drive measured beside its channels departs from their sum beyond noise and so does the white (a gain that follows the light), and with one such level cross-validation cannot test the term"
+/// What the additivity check says where cross-validation cannot judge a gain term.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Evidence {
+    /// Nothing to add to what cross-validation chose.
+    None,
+    /// Keep this set instead.
+    Keep(TermSet),
+    /// The one grey departs, but from its neighbouring greys as much: no term.
+    StandsAlone,
+}
+
+impl Evidence {
+    /// What the rule says of it, given the set finally kept.
+    fn rule(self, chosen: TermSet) -> &'static str {
+        match self {
+            Evidence::None => "",
+            Evidence::StandsAlone => {
+                "; no gain term from the additivity check: the one grey below full drive measured beside its channels departs from the greys on either side as much as from its channels (a reading off on its own, not the display)"
+            }
+            Evidence::Keep(_) if chosen.has_crosstalk() => {
+                "; crosstalk kept on the additivity check's evidence: the one grey below full drive measured beside its channels departs from their sum beyond noise, with its neighbouring greys, and the white does not; with one such level cross-validation cannot judge the term"
+            }
+            Evidence::Keep(_) => {
+                "; the interaction kept on the additivity check's evidence: the one grey below full drive measured beside its channels departs from their sum beyond noise, with its neighbouring greys, and so does the white (a gain that follows the light); with one such level cross-validation cannot judge the term"
+            }
+        }
     }
 }
 
@@ -445,12 +475,11 @@ pub fn choose_terms(
             .as_ref()
             .filter(|m| !m.terms.is_empty())
     };
-    let on_evidence = gain_term_on_the_checks_evidence(by_cross_validation, additivity);
+    let evidence = gain_term_on_the_checks_evidence(by_cross_validation, additivity);
     // A set whose terms could not be fitted within bounds is not kept.
-    let chosen = if fitted_of(on_evidence).is_some() {
-        on_evidence
-    } else {
-        by_cross_validation
+    let chosen = match evidence {
+        Evidence::Keep(set) if fitted_of(set).is_some() => set,
+        _ => by_cross_validation,
     };
     let model = fitted_of(chosen).cloned();
     let reports = TermSet::ALL
@@ -473,10 +502,10 @@ pub fn choose_terms(
             tolerance * TOLERANCE_SHARE
         )
     } else {
-        "fewer than two drive levels to leave out: the additive model is kept".into()
+        "fewer than two drive levels to leave out: cross-validation keeps no term".into()
     };
-    if chosen != by_cross_validation {
-        rule.push_str(kept_on_evidence(chosen));
+    if chosen != by_cross_validation || evidence == Evidence::StandsAlone {
+        rule.push_str(evidence.rule(chosen));
     }
     TermChoice {
         model,
