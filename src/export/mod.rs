@@ -187,13 +187,25 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
         .filter(|a| a.verdict == Verdict::Fails)
         .filter(|a| terms.interaction.is_none() && (terms.crosstalk.is_none() || a.drive >= 1.0))
         .collect();
-    if checks.additivity_verdict == Verdict::Fails && !uncarried.is_empty() {
-        let worst = uncarried
-            .iter()
-            .map(|a| a.luminance_departure_percent)
-            .fold(0.0, |w: f64, v| if v.abs() > w.abs() { v } else { w });
+    // The largest departure in X, Y or Z (a white can add up in luminance and not in Z).
+    let worst = uncarried
+        .iter()
+        .flat_map(|a| {
+            let xyz = a
+                .xyz_departure_percent
+                .unwrap_or([0.0, a.luminance_departure_percent, 0.0]);
+            (0..3).map(move |j| (a.drive, j, xyz[j]))
+        })
+        .max_by(|a, b| a.2.abs().total_cmp(&b.2.abs()));
+    if let (Verdict::Fails, Some((drive, j, departure))) = (checks.additivity_verdict, worst) {
+        let what = if drive >= 1.0 {
+            "the white's".to_string()
+        } else {
+            format!("the grey's at {:.0} % drive", drive * 100.0)
+        };
         notes.push(format!(
-            "channel interaction (grey luminance {worst:+.1} % off the sum of its channels)"
+            "channel interaction ({what} {} {departure:+.1} % off the sum of its channels)",
+            ["X", "Y", "Z"][j]
         ));
     }
     if checks.primary_constancy_verdict == Verdict::Fails && terms.chromaticity_shift.is_none() {

@@ -111,36 +111,49 @@ pub struct GreyAdditivity {
     /// and still fall short in Z. Absent from profiles made before it was judged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub xyz_departure_percent: Option<[f64; 3]>,
-    /// The grey's luminance above black over what the greys measured on either side
-    /// give at its drive (`luminance_between_neighbours`), minus one, percent. A grey
-    /// reading that is off on its own departs from its neighbours as much as from its
+    /// The grey's X, Y and Z above black over what the greys measured on either side
+    /// give at its drive (`between_neighbours`), minus one, percent. A grey reading
+    /// that is off on its own departs from its neighbours as it departs from its
     /// channels; what the display does (crosstalk, a limiter) moves the greys
     /// together. Absent without a grey on both sides.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub neighbour_departure_percent: Option<f64>,
+    pub neighbour_departure_percent: Option<[f64; 3]>,
     pub verdict: Verdict,
 }
 
 impl GreyAdditivity {
     /// Whether this grey's departure from its channels looks like a reading off on its
-    /// own: it departs from its neighbouring greys by half as much or more. Unknown
-    /// (no neighbours) counts as not.
+    /// own: in the component (X, Y or Z) where it departs most from its channels, it
+    /// departs from its neighbouring greys the same way by half as much or more.
+    /// Unknown (no neighbours) counts as not.
     pub fn stands_alone(&self) -> bool {
-        self.neighbour_departure_percent
-            .is_some_and(|n| n.abs() >= 0.5 * self.luminance_departure_percent.abs())
+        let (Some(channels), Some(neighbours)) =
+            (self.xyz_departure_percent, self.neighbour_departure_percent)
+        else {
+            return false;
+        };
+        let j = (0..3)
+            .max_by(|a, b| channels[*a].abs().total_cmp(&channels[*b].abs()))
+            .unwrap_or(1);
+        channels[j] * neighbours[j] > 0.0 && neighbours[j].abs() >= 0.5 * channels[j].abs()
     }
 }
 
-/// The luminance above black at `level` that the greys on either side give: the
-/// nearest measured level below and above, interpolated linearly in log luminance over
-/// log drive (a power law's straight line). `greys` holds (drive, luminance above
-/// black), sorted by drive. `None` without a grey with light on both sides.
-pub fn luminance_between_neighbours(greys: &[(f64, f64)], level: f64) -> Option<f64> {
-    let lit = |g: &&(f64, f64)| g.1 > 0.0 && g.0 > 0.0;
+/// X, Y and Z above black at `level` as the greys on either side give them: the
+/// nearest measured level below and above, each component interpolated linearly in
+/// log light over log drive (a power law's straight line). `greys` holds (drive,
+/// XYZ above black), sorted by drive. `None` without a grey with light in all three
+/// on both sides.
+pub fn between_neighbours(greys: &[(f64, Xyz)], level: f64) -> Option<Xyz> {
+    let lit = |g: &&(f64, Xyz)| g.0 > 0.0 && g.1.iter().all(|v| *v > 0.0);
     let below = greys.iter().filter(lit).rfind(|g| g.0 < level)?;
     let above = greys.iter().filter(lit).find(|g| g.0 > level)?;
     let t = (level.ln() - below.0.ln()) / (above.0.ln() - below.0.ln());
-    Some((below.1.ln() * (1.0 - t) + above.1.ln() * t).exp())
+    Some(
+        below
+            .1
+            .zip_map(&above.1, |b, a| (b.ln() * (1.0 - t) + a.ln() * t).exp()),
+    )
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -284,9 +297,9 @@ fn additivity(
                 .filter(|r| r.measurement.drive == [level; 3]),
         )
     };
-    let greys: Vec<(f64, f64)> = levels
+    let greys: Vec<(f64, Xyz)> = levels
         .iter()
-        .filter_map(|level| Some((*level, grey_at(*level)?.0.y - black.y)))
+        .filter_map(|level| Some((*level, grey_at(*level)?.0 - black)))
         .collect();
     levels
         .into_iter()
@@ -332,8 +345,9 @@ fn additivity(
                 delta_e00: de,
                 luminance_departure_percent: departures[1] * 100.0,
                 xyz_departure_percent: Some(departures.map(|d| d * 100.0)),
-                neighbour_departure_percent: luminance_between_neighbours(&greys, level)
-                    .map(|between| ((grey.y - black.y) / between - 1.0) * 100.0),
+                neighbour_departure_percent: between_neighbours(&greys, level).map(|between| {
+                    [0, 1, 2].map(|j| ((grey[j] - black[j]) / between[j] - 1.0) * 100.0)
+                }),
                 verdict: Verdict::judge(within_noise, de < DE00_VISIBILITY),
             })
         })
@@ -532,28 +546,38 @@ mod tests {
 
     #[test]
     fn a_grey_is_judged_against_its_neighbours_on_a_power_law() {
-        let greys: Vec<(f64, f64)> = [0.25, 0.375, 0.625, 0.75]
+        let light = |d: f64| Xyz::new(95.0, 100.0, 108.0) * d.powf(2.2);
+        let greys: Vec<(f64, Xyz)> = [0.25, 0.375, 0.625, 0.75]
             .iter()
-            .map(|d: &f64| (*d, 100.0 * d.powf(2.2)))
+            .map(|d| (*d, light(*d)))
             .collect();
         // A power law is a straight line in log over log: exact between neighbours.
-        let between = luminance_between_neighbours(&greys, 0.5).unwrap();
-        assert!((between / (100.0 * 0.5f64.powf(2.2)) - 1.0).abs() < 1e-12);
+        let between = between_neighbours(&greys, 0.5).unwrap();
+        for j in 0..3 {
+            assert!((between[j] / light(0.5)[j] - 1.0).abs() < 1e-12);
+        }
         // None beyond the measured greys.
-        assert_eq!(luminance_between_neighbours(&greys, 0.8), None);
-        assert_eq!(luminance_between_neighbours(&greys, 0.25), None);
-        let grey = |luminance: f64, neighbours: Option<f64>| GreyAdditivity {
+        assert_eq!(between_neighbours(&greys, 0.8), None);
+        assert_eq!(between_neighbours(&greys, 0.25), None);
+        let grey = |channels: [f64; 3], neighbours: Option<[f64; 3]>| GreyAdditivity {
             drive: 0.5,
             delta_e00: 1.0,
-            luminance_departure_percent: luminance,
-            xyz_departure_percent: None,
+            luminance_departure_percent: channels[1],
+            xyz_departure_percent: Some(channels),
             neighbour_departure_percent: neighbours,
             verdict: Verdict::Fails,
         };
-        assert!(grey(4.0, Some(3.9)).stands_alone());
-        assert!(grey(-4.0, Some(-2.0)).stands_alone());
-        assert!(!grey(4.9, Some(-1.7)).stands_alone());
-        assert!(!grey(4.0, None).stands_alone());
+        // Off its neighbours as off its channels: a reading off on its own.
+        assert!(grey([4.0; 3], Some([3.9; 3])).stands_alone());
+        assert!(grey([-4.0; 3], Some([-2.0; 3])).stands_alone());
+        // The display: the greys move together (the shared Samsung's grey), or its
+        // neighbours depart further the same way.
+        assert!(!grey([4.9; 3], Some([-1.7; 3])).stands_alone());
+        assert!(!grey([4.0; 3], Some([-2.5; 3])).stands_alone());
+        assert!(!grey([4.0; 3], None).stands_alone());
+        // Judged where it departs most: Z, not luminance.
+        assert!(!grey([0.3, 0.3, -5.0], Some([0.2, 0.2, 0.1])).stands_alone());
+        assert!(grey([0.3, 0.3, -5.0], Some([0.0, 0.0, -4.0])).stands_alone());
     }
 
     #[test]
