@@ -156,6 +156,13 @@ pub fn between_neighbours(greys: &[(f64, Xyz)], level: f64) -> Option<Xyz> {
     )
 }
 
+/// `above_black` over what the greys on either side give at `level`, minus one, in
+/// percent, for X, Y and Z (`GreyAdditivity::neighbour_departure_percent`).
+fn neighbour_departure(greys: &[(f64, Xyz)], level: f64, above_black: Xyz) -> Option<[f64; 3]> {
+    let between = between_neighbours(greys, level)?;
+    Some([0, 1, 2].map(|j| (above_black[j] / between[j] - 1.0) * 100.0))
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SurroundCheck {
     pub delta_e00: f64,
@@ -345,9 +352,7 @@ fn additivity(
                 delta_e00: de,
                 luminance_departure_percent: departures[1] * 100.0,
                 xyz_departure_percent: Some(departures.map(|d| d * 100.0)),
-                neighbour_departure_percent: between_neighbours(&greys, level).map(|between| {
-                    [0, 1, 2].map(|j| ((grey[j] - black[j]) / between[j] - 1.0) * 100.0)
-                }),
+                neighbour_departure_percent: neighbour_departure(&greys, level, grey - black),
                 verdict: Verdict::judge(within_noise, de < DE00_VISIBILITY),
             })
         })
