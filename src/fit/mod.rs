@@ -12,10 +12,11 @@
 //! 4. every candidate law fitted and cross-validated, the simplest within noise of the
 //!    best kept (`select_law`; `laws`, `law_selection`);
 //! 5. the primary matrix, refused if too ill-conditioned to invert (`primary_matrix`);
-//!    the assumption checks (`checks`), which need no model; then the terms for what additivity misses (channel interaction, crosstalk,
-//!    chromaticity that moves with drive), each kept only if it lowers the cross-validated error
-//!    (`terms`), and if one is kept the curves fitted again with the greys corrected
-//!    by it (`refit`);
+//!    the assumption checks (`checks`), which need no model; then the terms for what
+//!    additivity misses (channel interaction, crosstalk, chromaticity that moves with
+//!    drive), each kept only if it lowers the cross-validated error (`terms`) or, with
+//!    one grey level beside its channels, on the additivity check's evidence, and if
+//!    one is kept the curves fitted again with the greys corrected by it (`refit`);
 //! 6. the spatial map from the uniformity grid, chosen the same way (`spatial`), and
 //!    the model against the measured white, which every export is normalised to
 //!    (`anchor_at_measured_white`);

@@ -372,8 +372,9 @@ fn forward_selection(scores: &[Option<Vec<f64>>], tolerance: f64) -> TermSet {
 /// take 0.239 → 0.132, 0.565 → 0.525 and 2.17 → 0.51. There the additivity check
 /// decides, when cross-validation kept no gain term and that grey departs from the
 /// sum of its channels beyond noise (`checks`) but not on its own: a grey that departs
-/// from the greys on either side by half as much or more is taken for a reading off
-/// by itself (`GreyAdditivity::stands_alone`), since what a display does moves its
+/// from the greys on either side the same way by half as much or more (in X, Y or Z,
+/// where it departs most from its channels) is taken for a reading off by itself
+/// (`GreyAdditivity::stands_alone`), since what a display does moves its
 /// greys together. Then:
 /// * the white adds up: crosstalk, which vanishes at full drive (a subpixel lit by its
 ///   neighbours);
