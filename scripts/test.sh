@@ -11,15 +11,15 @@
 #   scripts/test.sh --release       the whole suite built as `cargo run --release`
 #                                   builds the program (optimised code is where a
 #                                   compiler's faults show: see build.rs)
-#   scripts/test.sh ARGS...         passed to `cargo test --locked --features
-#                                   peer-engines`
+#   scripts/test.sh ARGS...         passed to `cargo test --workspace --locked
+#                                   --features chromacal/peer-engines`
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 if [ "${1:-}" = "--soak" ]; then
     kills="${2:?--soak needs a number of kills}"
-    CHROMACAL_SOAK_KILLS="$kills" cargo test --locked --features peer-engines --test daemon_kill -- --nocapture
-    CHROMACAL_FUZZ_CASES="$((kills * 20))" exec cargo test --locked --features peer-engines --test parser_fuzz -- --nocapture
+    CHROMACAL_SOAK_KILLS="$kills" cargo test --locked --features chromacal/peer-engines --test daemon_kill -- --nocapture
+    CHROMACAL_FUZZ_CASES="$((kills * 20))" exec cargo test --locked --features chromacal/peer-engines --test parser_fuzz -- --nocapture
 fi
 
 updated=""
@@ -87,5 +87,6 @@ if [ "$free_kb" -eq "$free_kb" ] 2>/dev/null && [ "$free_kb" -lt 4500000 ]; then
     echo "scripts/test.sh: warning: $((free_kb / 1024)) MB free where $target_dir is; building the suite from clean takes about 4 GB" >&2
 fi
 
-# The suite is built with the peer engines, for `bench render`'s own test.
-cargo test --locked --features peer-engines "$@"
+# Every crate of the workspace, built with the peer engines for `bench render`'s own
+# test.
+cargo test --workspace --locked --features chromacal/peer-engines "$@"

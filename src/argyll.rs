@@ -9,10 +9,10 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use crate::cgats::to_ti3;
-use crate::color::Xyz;
-use crate::measurement::MeasurementSet;
-use crate::model::Drive;
+use chromacal_color::Xyz;
+use chromacal_formats::cgats::to_ti3;
+use chromacal_model::Drive;
+use chromacal_model::measurement::MeasurementSet;
 
 /// Why ArgyllCMS gave no predictions.
 #[derive(Debug, thiserror::Error)]

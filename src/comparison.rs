@@ -19,15 +19,16 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::argyll::{matrix_shaper_profile, profcheck_delta_e00};
-use crate::cgats::to_ti3_against;
-use crate::color::Xyz;
-use crate::export::icc::{IccText, IccVersion, encode};
-use crate::export::matrix_trc::{D50, MatrixTrc};
-use crate::fit::stats::ErrorStats;
-use crate::fit::validate::{delta_e00_xyz, ramps_and_greys_split};
-use crate::fit::{FitError, FitOptions, FittedModel, fit_monitor};
-use crate::measurement::MeasurementSet;
-use crate::model::Drive;
+use chromacal_color::Xyz;
+use chromacal_formats::cgats::to_ti3_against;
+use chromacal_formats::icc::{IccText, IccVersion, encode};
+use chromacal_formats::icc_lut::D50;
+use chromacal_formats::matrix_trc::MatrixTrc;
+use chromacal_model::Drive;
+use chromacal_model::fit::stats::ErrorStats;
+use chromacal_model::fit::validate::{delta_e00_xyz, ramps_and_greys_split};
+use chromacal_model::fit::{FitError, FitOptions, FittedModel, fit_monitor};
+use chromacal_model::measurement::MeasurementSet;
 
 /// Most readings the training side of the split may have.
 pub const MAX_TRAIN: usize = 60;
@@ -74,7 +75,7 @@ impl Comparison {
         means.sort_by(|a, b| a.total_cmp(b));
         Some(Spread {
             min: means[0],
-            median: crate::fit::stats::percentile(&means, 50.0),
+            median: chromacal_model::fit::stats::percentile(&means, 50.0),
             max: means[means.len() - 1],
         })
     }

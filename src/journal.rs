@@ -14,10 +14,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::durable::sync_directory;
-use crate::instrument::InstrumentInfo;
-use crate::measurement::{Measurement, MeasurementSet, Units};
-use crate::plan::Plan;
+use chromacal_formats::durable::sync_directory;
+use chromacal_instruments::InstrumentInfo;
+use chromacal_model::measurement::{Measurement, MeasurementSet, Units};
+use chromacal_model::plan::Plan;
 
 /// Written in the header so other files are not mistaken for journals.
 pub const JOURNAL_FORMAT: &str = "chromacal-journal";
@@ -163,9 +163,11 @@ impl Journal {
             .open(path)
             .map_err(io_error(path))?;
         lock_journal(&file, path)?;
-        let text =
-            crate::durable::read_text_limited_from(&mut file, crate::durable::limits::JOURNAL)
-                .map_err(io_error(path))?;
+        let text = chromacal_formats::durable::read_text_limited_from(
+            &mut file,
+            chromacal_formats::durable::limits::JOURNAL,
+        )
+        .map_err(io_error(path))?;
         let (header, entries, recovery, good_len) = parse(&text, path)?;
         if recovery.dropped_tail.is_some() {
             file.set_len(good_len as u64).map_err(io_error(path))?;
@@ -185,8 +187,11 @@ impl Journal {
 
     /// Read a journal without changing it.
     pub fn read(path: &Path) -> Result<(JournalHeader, Vec<Measurement>, Recovery), JournalError> {
-        let text = crate::durable::read_text_limited(path, crate::durable::limits::JOURNAL)
-            .map_err(io_error(path))?;
+        let text = chromacal_formats::durable::read_text_limited(
+            path,
+            chromacal_formats::durable::limits::JOURNAL,
+        )
+        .map_err(io_error(path))?;
         let (header, entries, recovery, _) = parse(&text, path)?;
         Ok((header, entries, recovery))
     }
@@ -379,10 +384,10 @@ fn parse(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::color::Xyz;
-    use crate::instrument::{Capability, Reading, ReadingStatus};
-    use crate::measurement::Role;
-    use crate::plan::{PlanConfig, make_plan};
+    use chromacal_color::Xyz;
+    use chromacal_instruments::{Capability, Reading, ReadingStatus};
+    use chromacal_model::measurement::Role;
+    use chromacal_model::plan::{PlanConfig, make_plan};
 
     fn header() -> JournalHeader {
         JournalHeader {

@@ -9,7 +9,8 @@ mod cli;
 
 use cli::{
     bench, calibrate, check, completions, config, correction, daemon, displays, emulate, export,
-    fit, instruments, lut, lut3d, measure, profile, render, report, spectrum,
+    fit, history, instruments, job, lut, lut3d, measure, profile, render, report, runs, spectrum,
+    status,
 };
 
 #[derive(Parser)]
@@ -35,7 +36,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     Calibrate(calibrate::CalibrateArgs),
-    Runs(calibrate::RunsArgs),
+    Runs(runs::RunsArgs),
     Fit(fit::FitArgs),
     Check(check::CheckArgs),
     Spectrum(spectrum::SpectrumArgs),
@@ -51,10 +52,12 @@ enum Command {
     Export(export::ExportArgs),
     Profile(profile::ProfileArgs),
     Daemon(daemon::DaemonArgs),
-    Status(daemon::StatusArgs),
-    Job(daemon::JobArgs),
-    History(daemon::HistoryArgs),
-    Rollback(daemon::RollbackArgs),
+    Status(status::StatusArgs),
+    Job(job::JobArgs),
+    History(history::HistoryArgs),
+    Rollback(history::RollbackArgs),
+    // A developer's tool: hidden from the user's --help, its man page and completions.
+    #[command(hide = true)]
     Bench(bench::BenchArgs),
     Config(config::ConfigArgs),
     Completions(completions::CompletionsArgs),
@@ -70,7 +73,7 @@ fn main() -> ExitCode {
     );
     let result = match cli.command {
         Command::Calibrate(args) => calibrate::run(args),
-        Command::Runs(args) => calibrate::run_runs(args),
+        Command::Runs(args) => runs::run(args),
         Command::Fit(args) => fit::run(args),
         Command::Check(args) => check::run(args),
         Command::Spectrum(args) => spectrum::run(args),
@@ -86,10 +89,10 @@ fn main() -> ExitCode {
         Command::Export(args) => export::run(args),
         Command::Profile(args) => profile::run(args),
         Command::Daemon(args) => daemon::run(args),
-        Command::Status(args) => daemon::run_status(args),
-        Command::Job(args) => daemon::run_job(args),
-        Command::History(args) => daemon::run_history(args),
-        Command::Rollback(args) => daemon::run_rollback(args),
+        Command::Status(args) => status::run(args),
+        Command::Job(args) => job::run(args),
+        Command::History(args) => history::run(args),
+        Command::Rollback(args) => history::run_rollback(args),
         Command::Bench(args) => bench::run(args),
         Command::Config(args) => config::run(args),
         Command::Completions(args) => completions::run_completions(args, Cli::command()),

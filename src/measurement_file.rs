@@ -4,9 +4,9 @@
 
 use std::path::Path;
 
-use crate::cgats::{CgatsError, ti3_from_text};
 use crate::journal::{Journal, JournalError, to_measurement_set};
-use crate::measurement::MeasurementSet;
+use chromacal_formats::cgats::{CgatsError, ti3_from_text};
+use chromacal_model::measurement::MeasurementSet;
 
 /// Why a measurement file could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -26,11 +26,10 @@ pub enum ReadMeasurementsError {
 /// told apart by their first line.
 pub fn read_measurements(path: &Path) -> Result<MeasurementSet, ReadMeasurementsError> {
     let bytes =
-        crate::durable::read_limited(path, crate::durable::limits::TABLE).map_err(|source| {
-            ReadMeasurementsError::Io {
-                path: path.display().to_string(),
-                source,
-            }
+        chromacal_formats::durable::read_limited(path, chromacal_formats::durable::limits::TABLE)
+            .map_err(|source| ReadMeasurementsError::Io {
+            path: path.display().to_string(),
+            source,
         })?;
     let text = String::from_utf8_lossy(&bytes);
     if text.trim_start().starts_with('{') {

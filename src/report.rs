@@ -3,15 +3,15 @@
 
 use std::fmt::Write as _;
 
-use crate::color::spaces::xyz_to_xyy;
-use crate::fit::checks::Verdict;
-use crate::fit::stats::ErrorStats;
-use crate::fit::validate::Evaluation;
-use crate::fit::{FitReport, WhiteAnchor};
-use crate::model::spatial::SpatialMap;
-use crate::model::{CHANNELS, MonitorModel};
-use crate::plan::BudgetBreakdown;
 use crate::profile::Profile;
+use chromacal_color::spaces::xyz_to_xyy;
+use chromacal_model::fit::checks::Verdict;
+use chromacal_model::fit::stats::ErrorStats;
+use chromacal_model::fit::validate::Evaluation;
+use chromacal_model::fit::{FitReport, WhiteAnchor};
+use chromacal_model::plan::BudgetBreakdown;
+use chromacal_model::spatial::SpatialMap;
+use chromacal_model::{CHANNELS, MonitorModel};
 
 /// Columns aligned: the first to the left, the others to the right.
 pub fn table(headers: &[&str], rows: &[Vec<String>]) -> String {
@@ -99,7 +99,7 @@ pub fn budget_line(b: &BudgetBreakdown) -> String {
 /// assumptions.
 /// One line on how the model was anchored at the measured white.
 pub fn white_anchor_line(w: &WhiteAnchor) -> String {
-    let xyz = |v: &crate::color::Xyz| format!("{:.4} {:.4} {:.4}", v.x, v.y, v.z);
+    let xyz = |v: &chromacal_color::Xyz| format!("{:.4} {:.4} {:.4}", v.x, v.y, v.z);
     let gains = format!("{:.4} {:.4} {:.4}", w.gains[0], w.gains[1], w.gains[2]);
     let how = if w.anchored {
         format!("the model made to pass through it (each channel's light × {gains})")
@@ -225,7 +225,7 @@ pub fn fit_summary(report: &FitReport) -> String {
             out,
             "\nWARNING: {} uniformity-grid reading(s) under {:.0} % of the centre's light were left out of the spatial map: the instrument did not see the patch there. A real instrument has to be moved to each position: --prompt-positions asks for it (or plan.uniformity_grid = 0 measures the centre only).",
             report.spatial.unseen,
-            100.0 * crate::fit::spatial::MIN_PLAUSIBLE_GAIN
+            100.0 * chromacal_model::fit::spatial::MIN_PLAUSIBLE_GAIN
         );
     }
     let _ = writeln!(out);
@@ -396,7 +396,7 @@ pub fn describe_model(model: &MonitorModel, units: &str) -> String {
             .map(|(x, y)| {
                 let g = model
                     .spatial
-                    .gains(crate::model::ScreenPosition::new(*x, *y));
+                    .gains(chromacal_model::ScreenPosition::new(*x, *y));
                 format!("({x:.1}, {y:.1}): {:.3}", g[1])
             })
             .collect::<Vec<_>>()
@@ -625,6 +625,84 @@ pub fn describe_lut(status: &crate::calibrate::video_lut::LutStatus) -> String {
     out += "  input     R        G        B\n";
     for [v, r, g, b] in &status.samples {
         out += &format!("  {v:.4}  {r:.5}  {g:.5}  {b:.5}\n");
+    }
+    out
+}
+
+/// What `chromacal calibrate` says of a run when it ends: the patches and what they
+/// cost, the fit, the curves, the video LUT, and where the journal and the profile are.
+pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutcome) -> String {
+    let mut out = format!(
+        "chromacal: calibrated {} with {}\n",
+        outcome.display,
+        outcome
+            .profile
+            .provenance
+            .instrument
+            .as_ref()
+            .map_or("an instrument", |i| i.name.as_str())
+    );
+    out += &format!(
+        "  patches measured: {}\n",
+        budget_line(&outcome.plan.budget)
+    );
+    if let Some(stop) = &outcome.run.sequential_stop {
+        out += &format!(
+            "  sequential plan: {} patches added to the seed plan's; stopped: {stop}\n",
+            outcome.run.sequential_added
+        );
+    }
+    if outcome.run.extra_reads > 0 || outcome.run.unsettled > 0 {
+        out += &format!(
+            "  stability check: {} extra readings; {} patches never agreed (last reading kept)\n",
+            outcome.run.extra_reads, outcome.run.unsettled
+        );
+    }
+    if outcome.run.already_measured > 0 {
+        out += &format!(
+            "  resumed: {} patches were in the journal, {} measured now\n",
+            outcome.run.already_measured, outcome.run.measured_now
+        );
+    }
+    // "Simulated" only when the instrument was: an emulated or real serial one
+    // spent (or reported) this time itself.
+    let simulated = outcome
+        .profile
+        .provenance
+        .instrument
+        .as_ref()
+        .is_some_and(|i| i.name.starts_with("simulated"));
+    out += &format!(
+        "  {}instrument time {} (integration and settling), fit time {}\n\n",
+        if simulated { "simulated " } else { "" },
+        duration(outcome.instrument_seconds),
+        duration(outcome.fit_seconds)
+    );
+    out += &edid_summary(&outcome.profile);
+    out += &fit_summary(&outcome.fitted.report);
+    if let Some(c) = &outcome.profile.calibration {
+        out += &calibration_summary(c);
+    }
+    if let Some(why) = &outcome.calibration_error {
+        out += &format!("\ncalibration curves: none ({why})\n");
+    }
+    if let Some(lut) = &outcome.lut {
+        out += &format!("video LUT: {lut}\n");
+    }
+    out += &format!("\njournal: {}\n", outcome.journal_path.display());
+    match &outcome.rejection {
+        None => {
+            out += &format!(
+                "profile: {} (published as current)\n",
+                outcome.profile_path.display()
+            )
+        }
+        Some(why) => {
+            out += &format!(
+                "profile: {} (NOT published: {why})\n",
+                outcome.profile_path.display()
+            )
+        }
     }
     out
 }

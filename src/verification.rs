@@ -7,19 +7,19 @@
 //! uniformity against the centre where a grid was measured.
 //!
 //! Plain data, computed here and drawn by `html_report`; the patches' ΔE00 are
-//! [`crate::fit::validate::evaluate`]'s, the very figures `chromacal check` prints.
+//! [`chromacal_model::fit::validate::evaluate`]'s, the very figures `chromacal check` prints.
 
 use serde::Serialize;
 
-use crate::color::gamut::{self, AdditiveGamut, GamutComparison};
-use crate::color::spaces::{Lab, lab_to_lch, xyz_to_uv_prime, xyz_to_xyy};
-use crate::color::temperature::{ColourTemperature, xyz_to_cct_duv};
-use crate::color::{UvPrime, Xyz, delta_e_2000, xyz_to_lab};
 use crate::config::PublishConfig;
-use crate::fit::stats::ErrorStats;
-use crate::fit::validate::{PatchError, evaluate};
-use crate::measurement::{MeasurementSet, Role};
-use crate::model::{Drive, MonitorModel, ScreenPosition};
+use chromacal_color::gamut::{self, AdditiveGamut, GamutComparison};
+use chromacal_color::spaces::{Lab, lab_to_lch, xyz_to_uv_prime, xyz_to_xyy};
+use chromacal_color::temperature::{ColourTemperature, xyz_to_cct_duv};
+use chromacal_color::{UvPrime, Xyz, delta_e_2000, xyz_to_lab};
+use chromacal_model::fit::stats::ErrorStats;
+use chromacal_model::fit::validate::{PatchError, evaluate};
+use chromacal_model::measurement::{MeasurementSet, Role};
+use chromacal_model::{Drive, MonitorModel, ScreenPosition};
 
 /// What a verification must achieve to pass, by name.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -5,9 +5,9 @@
 
 use std::path::Path;
 
-use chromacal::fit::terms::TermSet;
-use chromacal::fit::{FitOptions, FittedModel, fit_monitor};
-use chromacal::model::ScreenPosition;
+use chromacal_model::ScreenPosition;
+use chromacal_model::fit::terms::TermSet;
+use chromacal_model::fit::{FitOptions, FittedModel, fit_monitor};
 
 mod common;
 use common::{isetbio_monitor, simulate};
@@ -169,7 +169,7 @@ fn a_model_with_terms_inverts_what_it_predicts_and_survives_its_file() {
         );
     }
     let text = toml::to_string(model).unwrap();
-    let read: chromacal::model::MonitorModel = toml::from_str(&text).unwrap();
+    let read: chromacal_model::MonitorModel = toml::from_str(&text).unwrap();
     assert_eq!(&read, model);
 }
 
@@ -229,10 +229,10 @@ fn a_plasma_like_limiter_is_learnt_from_the_greys_and_carried_to_the_mixtures() 
 /// Z by 1 %, 0.7 ΔE00) do not decide.
 #[test]
 fn curves_solved_at_export_take_the_kept_terms_into_account() {
-    use chromacal::model::target::{
+    use chromacal_model::target::{
         Target, ToneCurve, WhiteTarget, calibration_curves, white_error,
     };
-    use chromacal::sim::monitor::centre_patch;
+    use chromacal_sim::monitor::centre_patch;
     let whites = [
         WhiteTarget::Chromaticity([0.3127, 0.3290]),
         WhiteTarget::Daylight(9300.0),
@@ -273,7 +273,7 @@ fn curves_solved_at_export_take_the_kept_terms_into_account() {
                 chromacal::calibrate::session::rig_for(&config, Path::new("."), None).unwrap();
             let mut screen = rig.monitor.lock().unwrap();
             // (white ΔE00 from the target, largest |Y / Y_target − 1| at k/8) on screen.
-            let mut judge = |model: &chromacal::model::MonitorModel, white: WhiteTarget| {
+            let mut judge = |model: &chromacal_model::MonitorModel, white: WhiteTarget| {
                 let target = Target {
                     white,
                     tone: ToneCurve::Power(2.2),

@@ -3,13 +3,13 @@
 
 use std::path::Path;
 
-use chromacal::fit::checks::Verdict;
-use chromacal::fit::{FitOptions, fit_monitor};
+use chromacal_model::fit::checks::Verdict;
+use chromacal_model::fit::{FitOptions, fit_monitor};
 
 mod common;
 use common::simulate;
 
-fn with_failure(failure: &str) -> chromacal::fit::FittedModel {
+fn with_failure(failure: &str) -> chromacal_model::fit::FittedModel {
     let config = format!("[monitor]\npreset = \"crt\"\n[monitor.failures]\n{failure}\n");
     let (set, _) = simulate(&config, Path::new("."));
     fit_monitor(&set, &FitOptions::default()).unwrap()

@@ -10,8 +10,8 @@
 
 use std::path::Path;
 
-use chromacal::fit::{FitOptions, FittedModel, LawRule, fit_monitor};
-use chromacal::model::transfer::{LawKind, TransferLaw};
+use chromacal_model::fit::{FitOptions, FittedModel, LawRule, fit_monitor};
+use chromacal_model::transfer::{LawKind, TransferLaw};
 
 mod common;
 use common::{isetbio_monitor, simulate};

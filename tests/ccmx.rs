@@ -2,8 +2,8 @@
 //! one, and an emulated colorimeter's readings reach the fit through its matrix; a
 //! singular or absurd one is refused before anything is measured, naming the file.
 
-use chromacal::ccmx::{Ccmx, ccmx_text};
 use chromacal::profile::Profile;
+use chromacal_formats::ccmx::{Ccmx, ccmx_text};
 use nalgebra::Matrix3;
 
 mod common;
@@ -140,18 +140,18 @@ fn failure_text(out: std::process::Output) -> String {
 /// `.ccss` with too few samples, or a native colorimeter given one, is refused.
 #[test]
 fn a_ccss_corrects_a_colorimeter_of_known_sensitivities() {
-    use chromacal::ccss::{correction_from_samples, parse_ccss};
-    use chromacal::color::difference::delta_e_2000;
-    use chromacal::color::spaces::xyz_to_lab;
-    use chromacal::color::spectrum::{Observer, emission_to_xyz};
-    use chromacal::instrument::filters::{ColorimeterFilters, FilterModel};
-    use chromacal::model::ScreenPosition;
-    use chromacal::sim::monitor::{VirtualMonitor, centre_patch};
+    use chromacal_color::difference::delta_e_2000;
+    use chromacal_color::spaces::xyz_to_lab;
+    use chromacal_color::spectrum::{Observer, emission_to_xyz};
+    use chromacal_formats::ccss::{correction_from_samples, parse_ccss};
+    use chromacal_instruments::filters::{ColorimeterFilters, FilterModel};
+    use chromacal_model::ScreenPosition;
+    use chromacal_sim::monitor::{VirtualMonitor, centre_patch};
 
     let text = common::isetbio_monitor("isetbio_lcd_dell", "");
     let config = chromacal::config::parse_config(&text, "lcd").unwrap();
     let spec = config.monitor.resolve(std::path::Path::new(".")).unwrap();
-    let clock = std::sync::Arc::new(chromacal::sim::clock::VirtualClock::new(None));
+    let clock = std::sync::Arc::new(chromacal_sim::clock::VirtualClock::new(None));
     let mut monitor = VirtualMonitor::new(spec, clock).unwrap();
     let mut radiance = |drive: [f64; 3]| {
         monitor.show(centre_patch(drive));

@@ -2,11 +2,11 @@
 
 use std::path::Path;
 
-use chromacal::color::spectrum::{
+use chromacal::profile::Profile;
+use chromacal_color::spectrum::{
     Illuminant, Observer, Spectrum, emission_to_xyz, reflectance_to_xyz,
 };
-use chromacal::model::transfer::LawKind;
-use chromacal::profile::Profile;
+use chromacal_model::transfer::LawKind;
 
 mod common;
 use common::{chromacal, fixture, shared_path, shared_table};

@@ -7,15 +7,15 @@
 
 use std::sync::Arc;
 
-use chromacal::color::Xyz;
-use chromacal::color::difference::delta_e_2000;
-use chromacal::color::spaces::xyz_to_lab;
-use chromacal::color::spectrum::{Observer, emission_to_xyz};
 use chromacal::config::parse_config;
-use chromacal::instrument::filters::{ColorimeterFilters, FilterModel};
-use chromacal::model::ScreenPosition;
-use chromacal::sim::clock::VirtualClock;
-use chromacal::sim::monitor::{VirtualMonitor, centre_patch};
+use chromacal_color::Xyz;
+use chromacal_color::difference::delta_e_2000;
+use chromacal_color::spaces::xyz_to_lab;
+use chromacal_color::spectrum::{Observer, emission_to_xyz};
+use chromacal_instruments::filters::{ColorimeterFilters, FilterModel};
+use chromacal_model::ScreenPosition;
+use chromacal_sim::clock::VirtualClock;
+use chromacal_sim::monitor::{VirtualMonitor, centre_patch};
 use nalgebra::Matrix3;
 
 mod common;

@@ -1,16 +1,16 @@
 //! Colorimetry against published reference data.
 
-use chromacal::color::adaptation::{AdaptationTransform, adaptation_matrix};
-use chromacal::color::difference::delta_e_2000;
-use chromacal::color::spaces::{Lab, Xyz};
-use chromacal::color::spectrum::{Illuminant, Observer, Spectrum, reflectance_to_xyz};
+use chromacal_color::adaptation::{AdaptationTransform, adaptation_matrix};
+use chromacal_color::difference::delta_e_2000;
+use chromacal_color::spaces::{Lab, Xyz};
+use chromacal_color::spectrum::{Illuminant, Observer, Spectrum, reflectance_to_xyz};
 
 mod common;
 
 /// Sharma, Wu and Dalal (2005), Table 1: all 34 pairs to 1e-4.
 #[test]
 fn ciede2000_matches_all_34_pairs_of_sharmas_table() {
-    let text = include_str!("../data/deltae/sharma2005_ciede2000_testdata.csv");
+    let text = include_str!("../crates/color/data/deltae/sharma2005_ciede2000_testdata.csv");
     let mut pairs = 0;
     for line in text.lines().skip(1).filter(|l| !l.trim().is_empty()) {
         let v: Vec<f64> = line.split(',').map(|x| x.trim().parse().unwrap()).collect();

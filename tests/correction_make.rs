@@ -8,10 +8,10 @@
 use std::path::{Path, PathBuf};
 
 use chromacal::calibrate::correction::{PairedReading, pairs_path};
-use chromacal::ccmx::{parse_ccmx, read_ccmx};
-use chromacal::color::Xyz;
-use chromacal::color::difference::delta_e_2000;
-use chromacal::color::spaces::xyz_to_lab;
+use chromacal_color::Xyz;
+use chromacal_color::difference::delta_e_2000;
+use chromacal_color::spaces::xyz_to_lab;
+use chromacal_formats::ccmx::{parse_ccmx, read_ccmx};
 use nalgebra::Matrix3;
 
 mod common;
@@ -233,7 +233,7 @@ fn spotread_applies_chromacals_ccmx() {
     let bench = emulate_bench(None, Some("lcd"), &[]);
     // A correction that is plainly not the identity, within what is plausible.
     let m = Matrix3::new(1.10, 0.05, 0.0, -0.02, 0.95, 0.01, 0.0, 0.03, 1.05);
-    let ccmx = chromacal::ccmx::Ccmx {
+    let ccmx = chromacal_formats::ccmx::Ccmx {
         matrix: m,
         description: "test".into(),
         display: "virtual LCD".into(),
@@ -242,7 +242,7 @@ fn spotread_applies_chromacals_ccmx() {
         technology: "LCD".into(),
     };
     let file = dir.path().join("test.ccmx");
-    std::fs::write(&file, chromacal::ccmx::ccmx_text(&ccmx, "now")).unwrap();
+    std::fs::write(&file, chromacal_formats::ccmx::ccmx_text(&ccmx, "now")).unwrap();
     // The K-10A beside it, through ArgyllCMS, reads a white patch with and without it.
     drop(bench);
     let emulator = common::emulate(&[
@@ -282,7 +282,7 @@ fn spotread_applies_chromacals_ccmx() {
             command.arg("--config").arg(c);
         }
         let out = succeed(&mut command);
-        let readings: Vec<chromacal::instrument::Reading> =
+        let readings: Vec<chromacal_instruments::Reading> =
             serde_json::from_slice(&out.stdout).unwrap();
         readings.iter().map(|r| r.xyz.unwrap()).sum::<Xyz>() / readings.len() as f64
     };

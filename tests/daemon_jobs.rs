@@ -9,8 +9,8 @@ use std::time::Duration;
 
 use chromacal::daemon::events::Event;
 use chromacal::journal::Journal;
-use chromacal::model::ScreenPosition;
 use chromacal::profile::Profile;
+use chromacal_model::ScreenPosition;
 
 mod common;
 use common::daemon::{
@@ -23,7 +23,7 @@ use common::daemon::{
 /// readings and the failures the clients met.
 async fn second_run_readings(
     clients: usize,
-) -> (Vec<chromacal::measurement::Measurement>, usize, usize) {
+) -> (Vec<chromacal_model::measurement::Measurement>, usize, usize) {
     let dir = tempfile::tempdir().unwrap();
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
@@ -276,9 +276,9 @@ async fn a_uniformity_job_gives_the_profile_a_new_spatial_map() {
     let (a, b) = (falloff(&calibrated), falloff(&updated));
     // What the virtual monitor really does there.
     let truth = {
-        let monitor = chromacal::sim::monitor::VirtualMonitor::new(
-            chromacal::sim::presets::preset("crt").unwrap(),
-            std::sync::Arc::new(chromacal::sim::clock::VirtualClock::new(None)),
+        let monitor = chromacal_sim::monitor::VirtualMonitor::new(
+            chromacal_sim::presets::preset("crt").unwrap(),
+            std::sync::Arc::new(chromacal_sim::clock::VirtualClock::new(None)),
         )
         .unwrap();
         let model = monitor.true_model();

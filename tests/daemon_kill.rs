@@ -59,7 +59,10 @@ async fn sigkill_anywhere_loses_no_reading_and_keeps_the_previous_profile() {
     let wanted = kills_wanted();
     let (mut kills, mut completed_runs) = (0, 0);
     // What each run's journal held after the last kill, to check nothing is lost.
-    let mut kept: Option<(std::path::PathBuf, Vec<chromacal::measurement::Measurement>)> = None;
+    let mut kept: Option<(
+        std::path::PathBuf,
+        Vec<chromacal_model::measurement::Measurement>,
+    )> = None;
     while kills < wanted {
         let mut daemon = start_daemon(dir.path(), CONFIG);
         let api = daemon.endpoint();

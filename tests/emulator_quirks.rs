@@ -1,13 +1,13 @@
 //! The device quirks the emulators reproduce (`../shared/PROTOCOLS.md`), and what the
 //! drivers make of them.
 
-use chromacal::instrument::devices::DeviceKind;
-use chromacal::instrument::driver::DriverOptions;
-use chromacal::instrument::emulator::faults::FaultSpec;
-use chromacal::instrument::emulator::memory::MemoryTransport;
-use chromacal::instrument::emulator::{DeviceModel, Meter};
-use chromacal::instrument::transport::Transport;
-use chromacal::instrument::{klein, minolta, pr6xx, pr650};
+use chromacal_instruments::devices::DeviceKind;
+use chromacal_instruments::driver::DriverOptions;
+use chromacal_instruments::emulator::faults::FaultSpec;
+use chromacal_instruments::emulator::memory::MemoryTransport;
+use chromacal_instruments::emulator::{DeviceModel, Meter};
+use chromacal_instruments::transport::Transport;
+use chromacal_instruments::{klein, minolta, pr6xx, pr650};
 
 mod common;
 use common::{meter, virtual_monitor};

@@ -12,10 +12,10 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use chromacal::color::adaptation::{AdaptationTransform, adaptation_matrix};
-use chromacal::color::{Lab, Xyz, delta_e_2000, xyz_to_lab};
-use chromacal::model::MonitorModel;
 use chromacal::profile::Profile;
+use chromacal_color::adaptation::{AdaptationTransform, adaptation_matrix};
+use chromacal_color::{Lab, Xyz, delta_e_2000, xyz_to_lab};
+use chromacal_model::MonitorModel;
 use common::{chromacal, in_process_profile, isetbio_monitor};
 
 const D50: [f64; 3] = [0.9642, 1.0, 0.8249];
@@ -448,7 +448,7 @@ fn a_model_with_terms_is_carried_by_the_icc_luts() {
     let icc = dir.path().join("plasma.icc2.icc");
     common::need_tool("profcheck", "argyll");
     let judged = chromacal::argyll::profcheck_delta_e00(&ti3, &icc).unwrap();
-    let set = chromacal::cgats::read_ti3(&ti3).unwrap();
+    let set = chromacal_formats::cgats::read_ti3(&ti3).unwrap();
     let model: Vec<f64> = set
         .measurements
         .iter()
@@ -558,7 +558,7 @@ fn argyll_reads_the_v2_profile_the_ti3_and_the_calibration_curves() {
     argyll("iccvcgt", &["-x", "ours.icc", "extracted.cal"], d);
     let rows = |file: &str| -> Vec<Vec<f64>> {
         let text = std::fs::read_to_string(d.join(file)).unwrap();
-        let sets = chromacal::cgats::parse_cgats(&text, file).unwrap();
+        let sets = chromacal_formats::cgats::parse_cgats(&text, file).unwrap();
         let table = &sets[0];
         table
             .rows
@@ -708,7 +708,7 @@ fn psychopy_loads_the_monitor_file_with_json_tricks() {
 /// The curves of an exported `.cal`, read with chromacal's CGATS reader.
 fn read_cal(path: &Path) -> ([Vec<f64>; 3], [f64; 3]) {
     let text = std::fs::read_to_string(path).unwrap();
-    let table = chromacal::cgats::parse_cgats(&text, "cal")
+    let table = chromacal_formats::cgats::parse_cgats(&text, "cal")
         .unwrap()
         .remove(0);
     let column = |name: &str| table.fields.iter().position(|f| f == name).unwrap();
@@ -734,7 +734,7 @@ fn read_cal(path: &Path) -> ([Vec<f64>; 3], [f64; 3]) {
 /// against the target white, and the largest relative luminance error against the
 /// tone curve at the 8 grey levels above black.
 fn through_curves_on_the_truth(config: &str, cal: &Path, tone: &str, black: f64) -> (f64, f64) {
-    use chromacal::model::target::{interpolate, parse_tone, target_luminance, white_error};
+    use chromacal_model::target::{interpolate, parse_tone, target_luminance, white_error};
     let (curves, target_white) = read_cal(cal);
     assert_eq!(curves[0].len(), 256);
     // At code 0 the curves leave the black alone.
@@ -744,7 +744,7 @@ fn through_curves_on_the_truth(config: &str, cal: &Path, tone: &str, black: f64)
     let show = |code: f64| -> Xyz {
         let drive = [0, 1, 2].map(|c| interpolate(&curves[c], code / 255.0));
         let mut m = rig.monitor.lock().unwrap();
-        m.show(chromacal::sim::monitor::centre_patch(drive));
+        m.show(chromacal_sim::monitor::centre_patch(drive));
         m.xyz_at(m.patch_centre()).unwrap()
     };
     let target_white = Xyz::new(target_white[0], target_white[1], target_white[2]);
@@ -1009,11 +1009,11 @@ fn terms_are_carried_by_icc_luts_and_named_where_a_file_cannot_carry_them() {
             ),
             black: Xyz::new(0.19, 0.2, 0.22),
             laws: [2.2, 2.4, 2.0].map(|gamma| {
-                chromacal::model::transfer::TransferLaw::Power(chromacal::model::transfer::Power {
+                chromacal_model::transfer::TransferLaw::Power(chromacal_model::transfer::Power {
                     gamma,
                 })
             }),
-            spatial: chromacal::model::SpatialMap::Uniform,
+            spatial: chromacal_model::SpatialMap::Uniform,
             terms: Default::default(),
         };
         model.terms.chromaticity_shift = Some(u);
@@ -1169,7 +1169,7 @@ fn a_spectral_run_exports_its_spectra_in_the_ti3_as_argyll_reads_them() {
     let mut worst = 0.0_f64;
     for (a, b) in ours.iter().zip(&theirs) {
         let (a, b) = (Xyz::new(a[0], a[1], a[2]), Xyz::new(b[0], b[1], b[2]));
-        let de = chromacal::fit::validate::delta_e00_xyz(&a, &b, &white);
+        let de = chromacal_model::fit::validate::delta_e00_xyz(&a, &b, &white);
         assert!(de < 0.15, "ours {a:?}, spec2cie {b:?}: ΔE00 {de}");
         worst = worst.max(de);
     }
@@ -1183,7 +1183,7 @@ fn a_spectral_run_exports_its_spectra_in_the_ti3_as_argyll_reads_them() {
     ))
     .unwrap();
     let back = chromacal::measurement_file::read_measurements(&ti3).unwrap();
-    let white = |set: &chromacal::measurement::MeasurementSet| {
+    let white = |set: &chromacal_model::measurement::MeasurementSet| {
         set.measurements
             .iter()
             .find(|m| m.drive == [1.0; 3] && m.is_standard_condition())
@@ -1271,7 +1271,7 @@ fn the_psychopy_calibration_is_named_in_local_time_and_the_icc_date_in_utc() {
 /// it names the white's.
 #[test]
 fn crosstalk_answers_for_the_greys_below_full_drive_only() {
-    use chromacal::fit::checks::Verdict;
+    use chromacal_model::fit::checks::Verdict;
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("samsung.toml");
     common::succeed(

@@ -5,9 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use chromacal::calibrate::session::{block_on, measure_simulated};
-use chromacal::cgats::to_ti3;
 use chromacal::config::{DEFAULT_CONFIG, parse_config};
 use chromacal::journal::Journal;
+use chromacal_formats::cgats::to_ti3;
 
 mod common;
 use common::{LCD_CONFIG, fixture};

@@ -156,7 +156,7 @@ screen = "{}"
                 .to_string(),
         );
         let next = status["next_verification"].as_str().unwrap();
-        let next = chromacal::time::parse_rfc3339(next).unwrap();
+        let next = chromacal_formats::time::parse_rfc3339(next).unwrap();
         let ahead = next
             .duration_since(std::time::SystemTime::now())
             .unwrap()

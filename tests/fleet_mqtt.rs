@@ -443,12 +443,7 @@ async fn with_the_broker_down_a_calibration_completes_and_the_dropped_events_are
     let profile = get(&api, "/status").await.json().unwrap()["current_profile"]["id"].clone();
     assert!(profile.is_string());
     let late = subscribe(port, "chromacal/#");
-    let topic = |end: &str| {
-        format!(
-            "chromacal/{}/default/{end}",
-            chromacal::daemon::mqtt::host_name()
-        )
-    };
+    let topic = |end: &str| format!("chromacal/{}/default/{end}", chromacal::daemon::host_name());
     late.until(&topic("state"), Duration::from_secs(30), |p| {
         p["current_profile"]["id"] == profile && p["last_job"]["result"] == "ok"
     });

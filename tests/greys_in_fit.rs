@@ -3,12 +3,12 @@
 //! curves follow the shape the greys show, not the power law two levels allow. On the
 //! real 57-patch sets, that halves the error on every held-out mixture.
 
-use chromacal::cgats::read_ti3;
-use chromacal::color::Xyz;
 use chromacal::comparison::MAX_TRAIN;
-use chromacal::fit::validate::{evaluate, ramps_and_greys_split};
-use chromacal::fit::{FitOptions, fit_monitor};
-use chromacal::measurement::{MeasurementSet, Role};
+use chromacal_color::Xyz;
+use chromacal_formats::cgats::read_ti3;
+use chromacal_model::fit::validate::{evaluate, ramps_and_greys_split};
+use chromacal_model::fit::{FitOptions, fit_monitor};
+use chromacal_model::measurement::{MeasurementSet, Role};
 use nalgebra::{Matrix3, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
@@ -147,7 +147,7 @@ fn grey_shares_keep_their_scale_when_a_fold_takes_an_unpinned_ramps_top_level() 
     let fit = fit_monitor(
         &power_law_set(&drives),
         &FitOptions {
-            laws: vec![chromacal::model::LawKind::Power],
+            laws: vec![chromacal_model::LawKind::Power],
             ..FitOptions::default()
         },
     )
@@ -177,7 +177,7 @@ fn sixteenths_set(truth: impl Fn(f64) -> f64, seed: u64) -> MeasurementSet {
 
 fn cowan_only() -> FitOptions {
     FitOptions {
-        laws: vec![chromacal::model::transfer::LawKind::Cowan],
+        laws: vec![chromacal_model::transfer::LawKind::Cowan],
         ..FitOptions::default()
     }
 }
@@ -240,7 +240,8 @@ fn the_tn_panel_s_primaries_are_its_full_drive_readings() {
         if single && m.drive.contains(&1.0) {
             let measured = m.usable_xyz().unwrap();
             let predicted = fit.model.forward_centre(m.drive);
-            let error = chromacal::fit::validate::delta_e00_xyz(&measured, &predicted, &white);
+            let error =
+                chromacal_model::fit::validate::delta_e00_xyz(&measured, &predicted, &white);
             assert!(error < 0.15, "{:?}: ΔE00 {error}", m.drive);
         }
     }

@@ -3,13 +3,13 @@
 
 use std::path::Path;
 
-use chromacal::fit::{FitError, FitOptions, fit_monitor};
-use chromacal::instrument::ReadingStatus;
-use chromacal::measurement::Role;
 use chromacal::measurement_file::read_measurements;
-use chromacal::model::ScreenPosition;
-use chromacal::model::transfer::LawKind;
 use chromacal::profile::{Profile, Provenance, SCHEMA_VERSION};
+use chromacal_instruments::ReadingStatus;
+use chromacal_model::ScreenPosition;
+use chromacal_model::fit::{FitError, FitOptions, fit_monitor};
+use chromacal_model::measurement::Role;
+use chromacal_model::transfer::LawKind;
 
 mod common;
 use common::{chromacal, fixture, isetbio_monitor, simulate};
@@ -22,7 +22,7 @@ fn laws(kinds: &[LawKind]) -> FitOptions {
 }
 
 /// The profile of a fit, as the store would keep it.
-fn profile_of(fit: &chromacal::fit::FittedModel) -> Profile {
+fn profile_of(fit: &chromacal_model::fit::FittedModel) -> Profile {
     Profile {
         schema_version: SCHEMA_VERSION,
         id: "test".into(),
@@ -46,7 +46,7 @@ fn profile_of(fit: &chromacal::fit::FittedModel) -> Profile {
 }
 
 /// The profile a fit makes, as TOML: no NaN or infinity anywhere in it.
-fn assert_finite_profile(fit: &chromacal::fit::FittedModel) {
+fn assert_finite_profile(fit: &chromacal_model::fit::FittedModel) {
     let text = profile_of(fit).to_toml().unwrap();
     fn all_finite(value: &toml::Value, path: &str) {
         match value {
@@ -215,7 +215,7 @@ fn a_non_monotone_ramp_is_pooled_and_reported() {
     assert_eq!(red_check.reversals_beyond_noise, 1);
     assert_eq!(
         fit.report.checks.monotonicity_verdict,
-        chromacal::fit::checks::Verdict::Fails
+        chromacal_model::fit::checks::Verdict::Fails
     );
     let table = fit
         .report
@@ -381,7 +381,7 @@ fn a_grid_the_instrument_did_not_see_is_left_out_and_said() {
     assert_eq!(fit.report.spatial.positions, 0);
     assert!(matches!(
         fit.model.spatial,
-        chromacal::model::SpatialMap::Uniform
+        chromacal_model::SpatialMap::Uniform
     ));
     let summary = chromacal::report::fit_summary(&fit.report);
     assert!(
@@ -448,7 +448,7 @@ fn a_uniformity_grid_with_missing_cells() {
     assert_eq!(fit.report.spatial.positions, 12);
     assert!(!matches!(
         fit.model.spatial,
-        chromacal::model::SpatialMap::Uniform
+        chromacal_model::SpatialMap::Uniform
     ));
     // Four cells cannot carry a surface: the map falls back to uniform and says why.
     let mut kept = 0;
@@ -461,7 +461,7 @@ fn a_uniformity_grid_with_missing_cells() {
     assert_eq!(fit.report.spatial.positions, 4);
     assert!(matches!(
         fit.model.spatial,
-        chromacal::model::SpatialMap::Uniform
+        chromacal_model::SpatialMap::Uniform
     ));
     assert!(
         fit.report
@@ -492,7 +492,7 @@ fn infinite_and_missing_values_in_imported_files_are_errors() {
                 1,
             )
             .replace("NUMBER_OF_SETS 71", "NUMBER_OF_SETS 72");
-        let err = chromacal::cgats::ti3_from_text(&broken, "broken.ti3")
+        let err = chromacal_formats::cgats::ti3_from_text(&broken, "broken.ti3")
             .unwrap_err()
             .to_string();
         assert!(err.contains("XYZ_Y") && err.contains(bad), "{bad}: {err}");
@@ -502,8 +502,8 @@ fn infinite_and_missing_values_in_imported_files_are_errors() {
 /// A fit of `set` on its own thread: its result, or `None` if it has not ended after a
 /// minute (a hang; a real fit of these few readings takes milliseconds).
 fn fit_that_ends(
-    set: chromacal::measurement::MeasurementSet,
-) -> Option<Result<chromacal::fit::FittedModel, FitError>> {
+    set: chromacal_model::measurement::MeasurementSet,
+) -> Option<Result<chromacal_model::fit::FittedModel, FitError>> {
     let (send, receive) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let _ = send.send(fit_monitor(&set, &FitOptions::default()));
@@ -524,7 +524,7 @@ fn a_reading_out_of_all_proportion_ends_the_fit_with_a_result() {
         .find(|m| m.role == Role::Ramp)
         .unwrap();
     let xyz = ramp.reading.xyz.unwrap();
-    ramp.reading.xyz = Some(chromacal::color::Xyz::new(xyz.x * 1e6, 2e6, xyz.z * 1e6));
+    ramp.reading.xyz = Some(chromacal_color::Xyz::new(xyz.x * 1e6, 2e6, xyz.z * 1e6));
     let result = fit_that_ends(set).expect("the fit did not end");
     // Whatever it concludes, it says it in numbers or in words, never NaN.
     if let Ok(fit) = result {
@@ -566,7 +566,7 @@ fn a_uniformity_reading_of_minus_1e308_ends_the_fit() {
         .find(|m| m.role == Role::Uniformity)
         .expect("the default plan measures a uniformity grid");
     let xyz = position.reading.xyz.unwrap();
-    position.reading.xyz = Some(chromacal::color::Xyz::new(xyz.x, -1e308, xyz.z));
+    position.reading.xyz = Some(chromacal_color::Xyz::new(xyz.x, -1e308, xyz.z));
     let fit = fit_that_ends(set)
         .expect("the fit did not end")
         .expect("one absurd grid reading is left out, not fatal");
@@ -586,13 +586,13 @@ fn a_stop_check_ends_a_long_fit_early() {
     let whole = started.elapsed();
 
     let stop = Arc::new(AtomicBool::new(false));
-    let check: chromacal::fit::cancel::StopCheck = {
+    let check: chromacal_model::fit::cancel::StopCheck = {
         let stop = stop.clone();
         Arc::new(move || stop.load(Ordering::SeqCst))
     };
     let (send, receive) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
-        let result = chromacal::fit::cancel::with_stop(Some(check), || {
+        let result = chromacal_model::fit::cancel::with_stop(Some(check), || {
             fit_monitor(&set, &FitOptions::default())
         });
         let _ = send.send((result, std::time::Instant::now()));

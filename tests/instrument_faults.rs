@@ -3,12 +3,12 @@
 
 use std::sync::atomic::Ordering;
 
-use chromacal::color::Xyz;
-use chromacal::instrument::devices::DeviceKind;
-use chromacal::instrument::driver::{DriverOptions, SerialInstrument};
-use chromacal::instrument::emulator::faults::FaultSpec;
-use chromacal::instrument::emulator::memory::{MemoryControls, MemoryTransport};
-use chromacal::instrument::{InstrumentError, Reading, ReadingStatus};
+use chromacal_color::Xyz;
+use chromacal_instruments::devices::DeviceKind;
+use chromacal_instruments::driver::{DriverOptions, SerialInstrument};
+use chromacal_instruments::emulator::faults::FaultSpec;
+use chromacal_instruments::emulator::memory::{MemoryControls, MemoryTransport};
+use chromacal_instruments::{InstrumentError, Reading, ReadingStatus};
 
 mod common;
 use common::{meter, true_xyz, virtual_monitor};

@@ -3,11 +3,11 @@
 //! past the protocol's timeouts, and every run ends in a reading or a clean error.
 //! A reading in range must be the right one.
 
-use chromacal::instrument::devices::DeviceKind;
-use chromacal::instrument::driver::DriverOptions;
-use chromacal::instrument::emulator::faults::FaultSpec;
-use chromacal::instrument::emulator::memory::MemoryTransport;
-use chromacal::instrument::{InstrumentError, ReadingStatus};
+use chromacal_instruments::devices::DeviceKind;
+use chromacal_instruments::driver::DriverOptions;
+use chromacal_instruments::emulator::faults::FaultSpec;
+use chromacal_instruments::emulator::memory::MemoryTransport;
+use chromacal_instruments::{InstrumentError, ReadingStatus};
 use rand::{Rng, SeedableRng};
 
 mod common;

@@ -1,13 +1,13 @@
 //! Every driver against its emulator: in-process on virtual time, and over a real
 //! pseudo-terminal in (scaled) real time.
 
-use chromacal::color::Xyz;
-use chromacal::instrument::devices::DeviceKind;
-use chromacal::instrument::driver::{DriverOptions, SerialInstrument};
-use chromacal::instrument::emulator::faults::FaultSpec;
-use chromacal::instrument::emulator::memory::MemoryTransport;
-use chromacal::instrument::emulator::pty::{PtyEmulator, PtyOptions};
-use chromacal::instrument::{Capability, Reading, ReadingStatus};
+use chromacal_color::Xyz;
+use chromacal_instruments::devices::DeviceKind;
+use chromacal_instruments::driver::{DriverOptions, SerialInstrument};
+use chromacal_instruments::emulator::faults::FaultSpec;
+use chromacal_instruments::emulator::memory::MemoryTransport;
+use chromacal_instruments::emulator::pty::{PtyEmulator, PtyOptions};
+use chromacal_instruments::{Capability, Reading, ReadingStatus};
 
 mod common;
 use common::{meter, true_xyz, virtual_monitor};

@@ -4,9 +4,9 @@
 
 use std::path::Path;
 
-use chromacal::fit::{FitOptions, LawRule, fit_monitor};
-use chromacal::measurement::MeasurementSet;
-use chromacal::model::transfer::LawKind;
+use chromacal_model::fit::{FitOptions, LawRule, fit_monitor};
+use chromacal_model::measurement::MeasurementSet;
+use chromacal_model::transfer::LawKind;
 
 mod common;
 use common::{isetbio_monitor, simulate};

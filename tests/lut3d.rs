@@ -8,12 +8,12 @@ mod common;
 
 use std::path::Path;
 
-use chromacal::color::Xyz;
-use chromacal::color::adaptation::{AdaptationTransform, adapt};
-use chromacal::crf::ColourReproduction;
-use chromacal::fit::validate::delta_e00_xyz;
-use chromacal::model::{MonitorModel, ScreenPosition};
 use chromacal::profile::Profile;
+use chromacal_color::Xyz;
+use chromacal_color::adaptation::{AdaptationTransform, adapt};
+use chromacal_crf::ColourReproduction;
+use chromacal_model::fit::validate::delta_e00_xyz;
+use chromacal_model::{MonitorModel, ScreenPosition};
 use common::{chromacal, succeed};
 
 /// The simulated LCD, calibrated with the fixed plan: its profile.

@@ -10,14 +10,14 @@
 
 use std::sync::Arc;
 
-use chromacal::color::Xyz;
-use chromacal::fit::terms::TermSet;
-use chromacal::fit::validate::{evaluate, ramps_and_greys_split};
-use chromacal::fit::{FitOptions, FittedModel, fit_monitor};
-use chromacal::measurement::{MeasurementSet, Role};
-use chromacal::sim::clock::VirtualClock;
-use chromacal::sim::monitor::{VirtualMonitor, centre_patch};
-use chromacal::sim::presets::MonitorConfig;
+use chromacal_color::Xyz;
+use chromacal_model::fit::terms::TermSet;
+use chromacal_model::fit::validate::{evaluate, ramps_and_greys_split};
+use chromacal_model::fit::{FitOptions, FittedModel, fit_monitor};
+use chromacal_model::measurement::{MeasurementSet, Role};
+use chromacal_sim::clock::VirtualClock;
+use chromacal_sim::monitor::{VirtualMonitor, centre_patch};
+use chromacal_sim::presets::MonitorConfig;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 

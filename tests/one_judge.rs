@@ -8,14 +8,15 @@
 //! itself passes through the measured white. And the bench's comparison: one judge for
 //! both tools, colprof's rescaled runs, and a split that holds its cap.
 
-use chromacal::cgats::{read_ti3, to_ti3_against};
-use chromacal::color::Xyz;
 use chromacal::comparison::{MAX_TRAIN, compare_with_argyll, judged_delta_e00};
-use chromacal::export::matrix_trc::{D50, MatrixTrc};
-use chromacal::fit::validate::ramps_and_greys_split;
-use chromacal::fit::{FitOptions, fit_monitor};
-use chromacal::measurement::Role;
 use chromacal::profile::Profile;
+use chromacal_color::Xyz;
+use chromacal_formats::cgats::{read_ti3, to_ti3_against};
+use chromacal_formats::icc_lut::D50;
+use chromacal_formats::matrix_trc::MatrixTrc;
+use chromacal_model::fit::validate::ramps_and_greys_split;
+use chromacal_model::fit::{FitOptions, fit_monitor};
+use chromacal_model::measurement::Role;
 
 mod common;
 use common::shared_path;

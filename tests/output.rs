@@ -160,12 +160,12 @@ fn a_luminance_the_white_cannot_give_is_stated_as_reached_not_as_asked() {
     let model = chromacal::profile::Profile::read(&profile)
         .expect("profile")
         .model;
-    let target = chromacal::model::target::Target {
-        white: chromacal::model::target::WhiteTarget::Native,
-        tone: chromacal::model::target::ToneCurve::Power(2.2),
+    let target = chromacal_model::target::Target {
+        white: chromacal_model::target::WhiteTarget::Native,
+        tone: chromacal_model::target::ToneCurve::Power(2.2),
         luminance: Some(500.0),
     };
-    let curves = chromacal::model::target::calibration_curves(&model, &target).expect("curves");
+    let curves = chromacal_model::target::calibration_curves(&model, &target).expect("curves");
     assert!(curves.luminance_limited);
     let reached = format!(
         "luminance {:.2} (the most the white allows; 500 was asked)",

@@ -205,7 +205,7 @@ fn accepted_but_not_finite(what: &str) -> Result<bool, String> {
 }
 
 fn parse_ti3(text: &str) -> Result<bool, String> {
-    let Ok(set) = chromacal::cgats::ti3_from_text(text, "fuzz.ti3") else {
+    let Ok(set) = chromacal_formats::cgats::ti3_from_text(text, "fuzz.ti3") else {
         return Ok(false);
     };
     let finite = set.measurements.iter().all(|m| {
@@ -245,7 +245,7 @@ fn parse_config(text: &str) -> Result<bool, String> {
         return Ok(false);
     };
     // An accepted config builds its plan without running away.
-    let _ = chromacal::plan::make_plan(&config.plan);
+    let _ = chromacal_model::plan::make_plan(&config.plan);
     Ok(true)
 }
 
@@ -258,8 +258,8 @@ fn parse_profile(text: &str) -> Result<bool, String> {
     let model = &profile.model;
     for drive in [[0.0; 3], [0.5, 0.2, 0.9], [1.0; 3]] {
         for position in [
-            chromacal::model::ScreenPosition::CENTRE,
-            chromacal::model::ScreenPosition::new(0.05, 0.95),
+            chromacal_model::ScreenPosition::CENTRE,
+            chromacal_model::ScreenPosition::new(0.05, 0.95),
         ] {
             let xyz = model.forward(drive, position);
             if xyz.iter().any(|v| !v.is_finite()) {
@@ -272,7 +272,9 @@ fn parse_profile(text: &str) -> Result<bool, String> {
 }
 
 fn parse_csv(text: &str) -> Result<bool, String> {
-    let Ok(table) = chromacal::numeric_csv::NumericTable::parse(text, Path::new("fuzz.csv")) else {
+    let Ok(table) =
+        chromacal_formats::numeric_csv::NumericTable::parse(text, Path::new("fuzz.csv"))
+    else {
         return Ok(false);
     };
     if table.rows.iter().flatten().any(|v| !v.is_finite()) {
@@ -341,7 +343,7 @@ fn numeric_tables() {
         "csv",
         &[std::fs::read_to_string(
             Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("data/displays/colour_typical_crt_brainard1997_5nm.csv"),
+                .join("crates/color/data/displays/colour_typical_crt_brainard1997_5nm.csv"),
         )
         .unwrap()],
         parse_csv,

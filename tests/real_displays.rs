@@ -1,15 +1,15 @@
 //! Fitting real measurements of real displays (../shared/data/measurements, public
 //! data of ArgyllCMS users and Psychtoolbox), scored on patches held out of the fit.
 
-use chromacal::cgats::read_ti3;
-use chromacal::fit::checks::Verdict;
-use chromacal::fit::validate::evaluate;
-use chromacal::fit::{FitOptions, fit_monitor};
+use chromacal_formats::cgats::read_ti3;
+use chromacal_model::fit::checks::Verdict;
+use chromacal_model::fit::validate::evaluate;
+use chromacal_model::fit::{FitOptions, fit_monitor};
 
 mod common;
 use common::shared_path;
 
-fn measurements(name: &str) -> chromacal::measurement::MeasurementSet {
+fn measurements(name: &str) -> chromacal_model::measurement::MeasurementSet {
     read_ti3(&shared_path(&format!("measurements/{name}"))).unwrap()
 }
 
@@ -34,7 +34,7 @@ fn dell_lcd_predicts_831_held_out_mixtures() {
 #[test]
 fn curves_are_corrected_at_codes_measured_twice_that_agree() {
     use chromacal::comparison::MAX_TRAIN;
-    use chromacal::fit::validate::ramps_and_greys_split;
+    use chromacal_model::fit::validate::ramps_and_greys_split;
     let set = measurements("dell_u2713hm_i1d3_912.ti3");
     let (train, test) = ramps_and_greys_split(&set, MAX_TRAIN);
     let fit = fit_monitor(&train, &FitOptions::default()).unwrap();
@@ -46,12 +46,12 @@ fn curves_are_corrected_at_codes_measured_twice_that_agree() {
     assert!(corrected.mean < 0.7 * alone.mean, "{alone:?} {corrected:?}");
     let measured: Vec<f64> = train.measurements.iter().flat_map(|m| m.drive).collect();
     // Within half a code step of a drive trained on (a chart's 21.4286 % and 21.429 %).
-    let at_measured_codes = |m: &chromacal::measurement::Measurement| {
+    let at_measured_codes = |m: &chromacal_model::measurement::Measurement| {
         m.drive
             .iter()
             .all(|d| measured.iter().any(|t| (t - d).abs() < 0.5 / 255.0))
     };
-    let score = |keep: &dyn Fn(&chromacal::measurement::Measurement) -> bool| {
+    let score = |keep: &dyn Fn(&chromacal_model::measurement::Measurement) -> bool| {
         evaluate(
             &fit.model,
             test.measurements

@@ -8,16 +8,16 @@ use std::ffi::OsStr;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-use chromacal::color::spectrum::{Illuminant, Observer};
-use chromacal::color::{Xyz, xyz_to_lab};
-use chromacal::crf::gamut::{GamutMapping, ScbOptions, SgckSource, UniformSpace};
-use chromacal::crf::spectral_table::colorchecker_xyz;
-use chromacal::crf::tone::ToneOperator;
-use chromacal::crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
-use chromacal::fit::validate::delta_e00_xyz;
-use chromacal::model::spatial::SpatialMap;
-use chromacal::model::{MonitorModel, ScreenPosition};
 use chromacal::profile::Profile;
+use chromacal_color::spectrum::{Illuminant, Observer};
+use chromacal_color::{Xyz, xyz_to_lab};
+use chromacal_crf::gamut::{GamutMapping, ScbOptions, SgckSource, UniformSpace};
+use chromacal_crf::spectral_table::colorchecker_xyz;
+use chromacal_crf::tone::ToneOperator;
+use chromacal_crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
+use chromacal_model::fit::validate::delta_e00_xyz;
+use chromacal_model::spatial::SpatialMap;
+use chromacal_model::{MonitorModel, ScreenPosition};
 
 mod common;
 use common::chromacal;
@@ -271,7 +271,7 @@ fn the_grey_axis_clip_keeps_hue_and_the_projection_is_nearest() {
         );
         let lightest = xyz_to_lab(&gamut.white(), &white).l;
         if before.l <= lightest && before.a.hypot(before.b) > 1.0 {
-            let angle = |l: &chromacal::color::Lab| l.b.atan2(l.a);
+            let angle = |l: &chromacal_color::Lab| l.b.atan2(l.a);
             assert!(
                 (angle(&before) - angle(&after)).abs() < 1e-6,
                 "{before:?} {after:?}"
@@ -281,7 +281,7 @@ fn the_grey_axis_clip_keeps_hue_and_the_projection_is_nearest() {
         }
         // Clipping per channel turns hue; this one does not.
         let clipped = xyz_to_lab(&Xyz::from(c.mapped), &white);
-        let turn = |l: &chromacal::color::Lab| (l.b.atan2(l.a) - before.b.atan2(before.a)).abs();
+        let turn = |l: &chromacal_color::Lab| (l.b.atan2(l.a) - before.b.atan2(before.a)).abs();
         assert!(turn(&after) <= turn(&clipped) + 1e-9);
         // Perpendicular projection: on the boundary, and no farther than the clip.
         let distance = |m: [f64; 3]| (Xyz::from(m) - x).norm();
@@ -296,7 +296,7 @@ fn the_grey_axis_clip_keeps_hue_and_the_projection_is_nearest() {
 
 /// D65's white at luminance `y`.
 fn d65_white(y: f64) -> Xyz {
-    chromacal::color::spectrum::white_point(Illuminant::D65, Observer::default()).unwrap()
+    chromacal_color::spectrum::white_point(Illuminant::D65, Observer::default()).unwrap()
         * (y / 100.0)
 }
 
@@ -312,7 +312,7 @@ fn stone_cowan_beatty_moves_the_whole_set_and_keeps_the_grey_axis() {
         ..at_centre(&colours)
     };
     let settings = RenderSettings {
-        adaptation: Some(chromacal::color::adaptation::AdaptationTransform::Bradford),
+        adaptation: Some(chromacal_color::adaptation::AdaptationTransform::Bradford),
         ..settings(scb(0.0), 16)
     };
     let r = crf.render(&scene, &settings).unwrap();
@@ -396,7 +396,7 @@ fn stone_cowan_beatty_keeps_neutrals_on_the_grey_axis_whatever_dark_colour_the_s
             ..at_centre(&colours)
         };
         let settings = RenderSettings {
-            adaptation: Some(chromacal::color::adaptation::AdaptationTransform::Bradford),
+            adaptation: Some(chromacal_color::adaptation::AdaptationTransform::Bradford),
             ..settings(scb(0.01), 16)
         };
         let r = crf.render(&scene, &settings).unwrap();
@@ -426,7 +426,7 @@ fn one_highlight_does_not_darken_the_scene_under_stone_cowan_beatty() {
             ..at_centre(colours)
         };
         let settings = RenderSettings {
-            adaptation: Some(chromacal::color::adaptation::AdaptationTransform::Bradford),
+            adaptation: Some(chromacal_color::adaptation::AdaptationTransform::Bradford),
             ..settings(scb(0.01), 16)
         };
         crf.render(&scene, &settings).unwrap()
@@ -436,7 +436,7 @@ fn one_highlight_does_not_darken_the_scene_under_stone_cowan_beatty() {
     with_highlight.push(d65_white(10.0 * white));
     let lit = render(&with_highlight);
     let lightness =
-        |r: &chromacal::crf::Rendering| xyz_to_lab(&Xyz::from(r.pixels[18].mapped), &crf.white()).l;
+        |r: &chromacal_crf::Rendering| xyz_to_lab(&Xyz::from(r.pixels[18].mapped), &crf.white()).l;
     assert!(
         (lightness(&plain) - lightness(&lit)).abs() < 5.0,
         "the white patch: L* {:.1} alone, {:.1} beside a highlight",
@@ -459,12 +459,12 @@ fn the_perceptual_mappings_leave_colours_inside_alone_and_beat_clipping() {
     let mut colours = hard_scene(&model);
     for k in 0..24 {
         let h = k as f64 * 15f64.to_radians();
-        let lab = chromacal::color::Lab {
+        let lab = chromacal_color::Lab {
             l: 30.0 + 2.5 * k as f64,
             a: 110.0 * h.cos(),
             b: 110.0 * h.sin(),
         };
-        colours.push(chromacal::color::spaces::lab_to_xyz(&lab, &white));
+        colours.push(chromacal_color::spaces::lab_to_xyz(&lab, &white));
     }
     let render = |gamut| {
         crf.render(&at_centre(&colours), &settings(gamut, 16))
@@ -474,7 +474,7 @@ fn the_perceptual_mappings_leave_colours_inside_alone_and_beat_clipping() {
     let lab = render(GamutMapping::PerpendicularLab);
     let hp = render(GamutMapping::Hpminde);
     let sgck = render(GamutMapping::Sgck(SgckSource::Rec2020));
-    let mean = |r: &chromacal::crf::Rendering| {
+    let mean = |r: &chromacal_crf::Rendering| {
         r.pixels.iter().map(|p| p.mapping_delta_e00).sum::<f64>() / r.pixels.len() as f64
     };
     assert!(clip.summary.outside > 20, "{}", clip.summary.outside);
@@ -497,7 +497,7 @@ fn the_perceptual_mappings_leave_colours_inside_alone_and_beat_clipping() {
             xyz_to_lab(&Xyz::from(h.mapped), &white),
         );
         if before.a.hypot(before.b) > 1.0 && after.a.hypot(after.b) > 1e-3 {
-            let hue = |l: &chromacal::color::Lab| l.b.atan2(l.a).to_degrees();
+            let hue = |l: &chromacal_color::Lab| l.b.atan2(l.a).to_degrees();
             let turn = ((hue(&after) - hue(&before) + 540.0) % 360.0 - 180.0).abs();
             assert!(turn < 1.0, "colour {k}: HPMINDE turned hue by {turn}°");
         }
@@ -510,7 +510,7 @@ fn the_perceptual_mappings_leave_colours_inside_alone_and_beat_clipping() {
         assert!(centre.contains(&mapped), "colour {k}: SGCK left it outside");
         let (before, after) = (xyz_to_lab(x, &white), xyz_to_lab(&mapped, &white));
         if before.a.hypot(before.b) > 1.0 && after.a.hypot(after.b) > 1e-3 {
-            let hue = |l: &chromacal::color::Lab| l.b.atan2(l.a).to_degrees();
+            let hue = |l: &chromacal_color::Lab| l.b.atan2(l.a).to_degrees();
             let turn = ((hue(&after) - hue(&before) + 540.0) % 360.0 - 180.0).abs();
             assert!(turn < 1.0, "colour {k}: SGCK turned hue by {turn}°");
         }
@@ -562,7 +562,7 @@ fn the_tone_operators_map_a_bright_scene_into_the_display() {
         }
     }
     // Ward scales by one factor; Tumblin–Rushmeier by a power (it changes contrast).
-    let factor = |r: &chromacal::crf::Rendering, k: usize| r.pixels[k].target[1] / colours[k].y;
+    let factor = |r: &chromacal_crf::Rendering, k: usize| r.pixels[k].target[1] / colours[k].y;
     assert!((factor(&ward, 0) - factor(&ward, 18)).abs() < 1e-12);
     assert!((factor(&tr, 0) - factor(&tr, 18)).abs() > 1e-3);
 }
@@ -573,13 +573,13 @@ fn render_writes_codes_a_png_reader_gets_back() {
     // A 4 × 3 PFM of a mid grey at 20 cd/m² over the whole screen.
     let model = model();
     let grey = model.forward([0.5; 3], ScreenPosition::CENTRE);
-    let image = chromacal::crf::scene::XyzImage {
+    let image = chromacal_crf::scene::XyzImage {
         width: 4,
         height: 3,
         xyz: vec![grey; 12],
     };
     let pfm = dir.path().join("grey.pfm");
-    chromacal::crf::scene::write_pfm(&pfm, &image).unwrap();
+    chromacal_crf::scene::write_pfm(&pfm, &image).unwrap();
     let png = dir.path().join("grey.png");
     let stdout = render_ok(&[
         "--image".as_ref(),
@@ -598,7 +598,7 @@ fn render_writes_codes_a_png_reader_gets_back() {
     assert!((centre - 0.5).abs() < 0.02, "{centre}");
     assert!(value(0, 1) > centre);
     // What the display shows for the corner pixel's codes is the grey asked for.
-    let position = chromacal::crf::scene::Placement::FULL.position(0, 0, 4, 3);
+    let position = chromacal_crf::scene::Placement::FULL.position(0, 0, 4, 3);
     let shown = model.forward([value(0, 0), value(0, 1), value(0, 2)], position);
     assert!(delta_e00_xyz(&grey, &shown, &model.white()) < 0.3);
 }
@@ -643,7 +643,7 @@ fn render_refuses_bad_scenes_naming_what_is_wrong() {
 
 #[test]
 fn explain_drops_the_spatial_map_for_a_centre_scene_and_keeps_it_for_a_full_screen_one() {
-    use chromacal::crf::explain::{Part, explain};
+    use chromacal_crf::explain::{Part, explain};
     let model = model();
     let colours = colorchecker(0.8 * model.white().y, Illuminant::D65);
     let cost = |scene: &Scene| {
@@ -866,9 +866,9 @@ fn a_two_plane_spectral_image_of_four_megapixels_renders_within_bounded_memory()
     let stack = dir.path().join("stack");
     std::fs::create_dir(&stack).unwrap();
     for (nm, y) in [(400, 0.01), (700, 0.02)] {
-        chromacal::crf::scene::write_pfm(
+        chromacal_crf::scene::write_pfm(
             &stack.join(format!("{nm}.pfm")),
-            &chromacal::crf::scene::XyzImage {
+            &chromacal_crf::scene::XyzImage {
                 width: 2048,
                 height: 2048,
                 xyz: vec![Xyz::new(y, y, y); 2048 * 2048],
@@ -905,9 +905,9 @@ fn an_openexr_image_renders_like_the_same_pfm() {
     let exr = dir.path().join("scene.exr");
     exr::prelude::write_rgb_file(&exr, 3, 2, |_, _| (x, y, z)).unwrap();
     let pfm = dir.path().join("scene.pfm");
-    chromacal::crf::scene::write_pfm(
+    chromacal_crf::scene::write_pfm(
         &pfm,
-        &chromacal::crf::scene::XyzImage {
+        &chromacal_crf::scene::XyzImage {
             width: 3,
             height: 2,
             xyz: vec![Xyz::new(x.into(), y.into(), z.into()); 6],
@@ -931,7 +931,7 @@ fn an_openexr_image_renders_like_the_same_pfm() {
 fn the_readme_example_writes_the_colorchecker_as_a_png_laid_out_on_the_screen() {
     let dir = tempfile::tempdir().unwrap();
     let checker = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("data/colorchecker/colorchecker_n_ohta_5nm.csv");
+        .join("crates/color/data/colorchecker/colorchecker_n_ohta_5nm.csv");
     let run = |output: &std::path::Path| {
         let mut args: Vec<&OsStr> = vec!["--reflectance".as_ref(), checker.as_os_str()];
         for a in [
@@ -1080,14 +1080,14 @@ fn spectra_and_a_spectral_image_render_as_their_xyz_would() {
     let stack = dir.path().join("stack");
     std::fs::create_dir(&stack).unwrap();
     for row in &spd {
-        let plane = chromacal::crf::scene::XyzImage {
+        let plane = chromacal_crf::scene::XyzImage {
             width: 3,
             height: 1,
             xyz: (1..4).map(|c| Xyz::new(0.0, row[c] * scale, 0.0)).collect(),
         };
         // Each plane a PFM whose Y is the radiance at its wavelength (the stack reader
         // takes Y from a three-channel plane and the value from a one-channel one).
-        chromacal::crf::scene::write_pfm(&stack.join(format!("{}.pfm", row[0])), &plane).unwrap();
+        chromacal_crf::scene::write_pfm(&stack.join(format!("{}.pfm", row[0])), &plane).unwrap();
     }
     let run = |args: &[&OsStr]| {
         let mut args = args.to_vec();
@@ -1551,7 +1551,7 @@ fn ward_adapts_to_the_mean_luminance_of_the_focus_area() {
             .unwrap();
         r.pixels[3].target[1] / scene.pixels[3].xyz.y
     };
-    let area = |left| chromacal::crf::scene::Placement {
+    let area = |left| chromacal_crf::scene::Placement {
         left,
         top: 0.0,
         width: 0.5,

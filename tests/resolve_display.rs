@@ -5,12 +5,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use chromacal::display::PatchDisplay;
-use chromacal::display::resolve::{
+use chromacal_display::PatchDisplay;
+use chromacal_display::resolve::{
     ClientOptions, Flavour, ResolveConfig, ResolveDisplay, run_client,
 };
-use chromacal::screen::{Codes, Geometry, Patch, ScreenContent};
-use chromacal::sim::monitor::VirtualMonitor;
+use chromacal_model::screen::{Codes, Geometry, Patch, ScreenContent};
+use chromacal_sim::monitor::VirtualMonitor;
 
 mod common;
 

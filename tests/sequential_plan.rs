@@ -8,9 +8,9 @@ use std::path::Path;
 use chromacal::calibrate::sequential::counted;
 use chromacal::calibrate::session::{CalibrateOptions, calibrate, measure_simulated};
 use chromacal::config::{load_config, parse_config};
-use chromacal::fit::fit_monitor;
 use chromacal::journal::Journal;
-use chromacal::measurement::Role;
+use chromacal_model::fit::fit_monitor;
+use chromacal_model::measurement::Role;
 
 mod common;
 use common::{chromacal, isetbio_monitor, simulate};

@@ -3,8 +3,8 @@
 //! the emulator's screen socket. The profile must be the one the in-process simulated
 //! instrument gives, within noise (colorimeters with ideal filters).
 
-use chromacal::instrument::devices::DeviceKind;
 use chromacal::profile::Profile;
+use chromacal_instruments::devices::DeviceKind;
 
 mod common;
 use common::{CRT_PRIMARIES, chromacal, emulate, in_process_profile};

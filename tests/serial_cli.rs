@@ -7,11 +7,11 @@ use std::time::Instant;
 
 use chromacal::calibrate::devices::open_devices;
 use chromacal::config::parse_config;
-use chromacal::fit::{FitError, FitOptions, fit_monitor};
-use chromacal::instrument::Instrument;
-use chromacal::instrument::transcript::{Direction, read_transcript};
 use chromacal::journal::Journal;
 use chromacal::profile::Profile;
+use chromacal_instruments::Instrument;
+use chromacal_instruments::transcript::{Direction, read_transcript};
+use chromacal_model::fit::{FitError, FitOptions, fit_monitor};
 
 mod common;
 use common::{Emulator, chromacal, emulate};
@@ -64,7 +64,7 @@ fn emulate_records_a_byte_exact_transcript_and_measure_reads_it() {
     );
     // The emulator's screen is black: at that light the driver averages 20 readings
     // for each measurement, as Argyll does.
-    let per_measurement = chromacal::instrument::klein::driver::readings_to_average(0.1);
+    let per_measurement = chromacal_instruments::klein::driver::readings_to_average(0.1);
     assert_eq!(
         host.windows(3).filter(|w| w == b"N5\r").count(),
         2 * per_measurement
@@ -159,7 +159,7 @@ fn instruments_identifies_each_emulator_and_bounds_a_silent_port() {
     assert!(found(&silent.device)["instrument"].is_null());
     // Ports are probed in parallel, each within its budget.
     assert!(
-        took < chromacal::instrument::scan::PORT_BUDGET_S + 4.0,
+        took < chromacal_instruments::scan::PORT_BUDGET_S + 4.0,
         "the scan took {took:.1} s"
     );
 }

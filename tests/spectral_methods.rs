@@ -2,10 +2,10 @@
 //! weighted-ordinate reference, on the ColorChecker under A, D65 and F11, the CIE
 //! illuminants and the measured display primaries of the shared data.
 
-use chromacal::color::spectrum::Spectrum;
-use chromacal::color::spectrum::{Illuminant, Observer, reflectance_to_xyz};
-use chromacal::crf::spectral::{Band, GRID_LEN, MethodKind, Operations, SpectralMethod, grid_nm};
-use chromacal::crf::spectral_table::{
+use chromacal_color::spectrum::Spectrum;
+use chromacal_color::spectrum::{Illuminant, Observer, reflectance_to_xyz};
+use chromacal_crf::spectral::{Band, GRID_LEN, MethodKind, Operations, SpectralMethod, grid_nm};
+use chromacal_crf::spectral_table::{
     Case, Family, Row, cheapest_below, colorchecker_family, display_family, family_table, findings,
     illuminant_family, standard_methods, survey_families, survey_methods,
 };

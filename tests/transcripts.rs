@@ -6,12 +6,12 @@
 
 use std::path::Path;
 
-use chromacal::instrument::Reading;
-use chromacal::instrument::devices::DeviceKind;
-use chromacal::instrument::driver::DriverOptions;
-use chromacal::instrument::emulator::faults::FaultSpec;
-use chromacal::instrument::emulator::pty::{PtyEmulator, PtyOptions};
-use chromacal::instrument::transcript::{Direction, ReplayTransport, read_transcript};
+use chromacal_instruments::Reading;
+use chromacal_instruments::devices::DeviceKind;
+use chromacal_instruments::driver::DriverOptions;
+use chromacal_instruments::emulator::faults::FaultSpec;
+use chromacal_instruments::emulator::pty::{PtyEmulator, PtyOptions};
+use chromacal_instruments::transcript::{Direction, ReplayTransport, read_transcript};
 
 mod common;
 use common::{fixture, meter, virtual_monitor};

@@ -14,10 +14,10 @@ mod common;
 use std::path::Path;
 
 use browser::Browser;
-use chromacal::color::Xyz;
-use chromacal::color::spectrum::{Observer, Spectrum, emission_to_xyz};
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
+use chromacal_color::Xyz;
+use chromacal_color::spectrum::{Observer, Spectrum, emission_to_xyz};
 use common::{chromacal, shared_path, shared_table, succeed};
 use serde_json::Value;
 

@@ -8,9 +8,9 @@ mod browser;
 use std::time::Duration;
 
 use browser::{Browser, Image};
-use chromacal::display::PatchDisplay;
-use chromacal::display::web::{WebConfig, WebDisplay};
-use chromacal::screen::{Codes, Geometry, Patch};
+use chromacal_display::PatchDisplay;
+use chromacal_display::web::{WebConfig, WebDisplay};
+use chromacal_model::screen::{Codes, Geometry, Patch};
 
 fn codes(rgb: [u32; 3]) -> Codes {
     Codes { rgb, bit_depth: 8 }

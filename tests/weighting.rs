@@ -2,12 +2,12 @@
 //! σ(Y)² = floor² + (relative · Y)², with `relative` and `floor` measured from the
 //! run's own repeats (the reference white and the blacks).
 
-use chromacal::color::Xyz;
-use chromacal::fit::laws::fit_law;
-use chromacal::fit::primaries::{ChannelRamp, RampPoint};
-use chromacal::fit::{FitOptions, fit_monitor};
 use chromacal::measurement_file::read_measurements;
-use chromacal::model::transfer::LawKind;
+use chromacal_color::Xyz;
+use chromacal_model::fit::laws::fit_law;
+use chromacal_model::fit::primaries::{ChannelRamp, RampPoint};
+use chromacal_model::fit::{FitOptions, fit_monitor};
+use chromacal_model::transfer::LawKind;
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};

@@ -12,12 +12,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use chromacal::display::PatchDisplay;
-use chromacal::display::window::{PatchWindow, WindowTarget};
-use chromacal::model::ScreenPosition;
 use chromacal::profile::Profile;
-use chromacal::screen::{Codes, Geometry, Patch};
-use chromacal::x11::{GammaRamp, OutputSelector, XDisplay};
+use chromacal_display::PatchDisplay;
+use chromacal_display::window::{PatchWindow, WindowTarget};
+use chromacal_display::x11::{GammaRamp, OutputSelector, XDisplay};
+use chromacal_model::ScreenPosition;
+use chromacal_model::screen::{Codes, Geometry, Patch};
 use rand::{Rng, SeedableRng};
 
 mod common;
@@ -512,9 +512,9 @@ fn measure(device: &str, count: usize) -> Vec<[f64; 3]> {
 }
 
 fn de00(a: [f64; 3], b: [f64; 3], white: [f64; 3]) -> f64 {
-    use chromacal::color::Xyz;
-    use chromacal::color::difference::delta_e_2000;
-    use chromacal::color::spaces::xyz_to_lab;
+    use chromacal_color::Xyz;
+    use chromacal_color::difference::delta_e_2000;
+    use chromacal_color::spaces::xyz_to_lab;
     let white = Xyz::new(white[0], white[1], white[2]);
     let lab = |v: [f64; 3]| xyz_to_lab(&Xyz::new(v[0], v[1], v[2]), &white);
     delta_e_2000(&lab(a), &lab(b))

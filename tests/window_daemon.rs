@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use chromacal::daemon::events::Event;
 use chromacal::profile::Profile;
-use chromacal::x11::{GammaRamp, OutputSelector, XDisplay};
+use chromacal_display::x11::{GammaRamp, OutputSelector, XDisplay};
 
 mod common;
 use common::daemon::{TestDaemon, events_until, get, start_daemon_with, start_job, subscribe};

@@ -15,13 +15,13 @@ use std::path::Path;
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
-use crate::color::Xyz;
-use crate::color::difference::delta_e_2000;
-use crate::color::spaces::xyz_to_lab;
-use crate::display::{DisplayError, PatchDisplay};
-use crate::instrument::{Instrument, InstrumentError, Reading, ReadingStatus};
-use crate::model::Drive;
-use crate::screen::{Codes, Geometry, Patch};
+use chromacal_color::Xyz;
+use chromacal_color::difference::delta_e_2000;
+use chromacal_color::spaces::xyz_to_lab;
+use chromacal_display::{DisplayError, PatchDisplay};
+use chromacal_instruments::{Instrument, InstrumentError, Reading, ReadingStatus};
+use chromacal_model::Drive;
+use chromacal_model::screen::{Codes, Geometry, Patch};
 
 /// Why no correction was made.
 #[derive(Debug, thiserror::Error)]
@@ -160,7 +160,7 @@ impl PairJournal {
                     "it holds readings of an earlier run: give --resume to go on with them, or remove it".into(),
                 ));
             }
-            let text = crate::durable::read_text_limited(path, 64 << 20)
+            let text = chromacal_formats::durable::read_text_limited(path, 64 << 20)
                 .map_err(|e| err(e.to_string()))?;
             let lines: Vec<&str> = text.lines().collect();
             for (n, line) in lines.iter().enumerate() {
@@ -177,7 +177,8 @@ impl PairJournal {
                 clean.push_str(&serde_json::to_string(p).map_err(|e| err(e.to_string()))?);
                 clean.push('\n');
             }
-            crate::durable::write_atomic(path, clean.as_bytes()).map_err(|e| err(e.to_string()))?;
+            chromacal_formats::durable::write_atomic(path, clean.as_bytes())
+                .map_err(|e| err(e.to_string()))?;
         }
         Ok(PairJournal {
             path: Some(path.to_path_buf()),
@@ -399,12 +400,12 @@ pub fn fit_pairs(pairs: &[PairedReading]) -> Result<CorrectionFit, CorrectionErr
             fit.len()
         )));
     }
-    let matrix = crate::linalg::weighted_linear_map(&fit).ok_or_else(|| {
+    let matrix = chromacal_color::linalg::weighted_linear_map(&fit).ok_or_else(|| {
         CorrectionError::Fit(
             "the colorimeter's readings do not span three dimensions: is it a colorimeter, aimed at the patch?".into(),
         )
     })?;
-    crate::ccmx::check_matrix(&matrix, "the fitted correction")
+    chromacal_formats::ccmx::check_matrix(&matrix, "the fitted correction")
         .map_err(|e| CorrectionError::Fit(e.to_string()))?;
     let de = |a: &Xyz, b: &Xyz| delta_e_2000(&xyz_to_lab(a, &white), &xyz_to_lab(b, &white));
     let score = |held: bool, corrected: bool| {
@@ -448,8 +449,8 @@ pub fn fit_pairs(pairs: &[PairedReading]) -> Result<CorrectionFit, CorrectionErr
 
 /// What `correction make` is asked.
 pub struct MakeRequest<'a> {
-    pub reference: crate::instrument::devices::InstrumentAddress,
-    pub colorimeter: crate::instrument::devices::InstrumentAddress,
+    pub reference: chromacal_instruments::devices::InstrumentAddress,
+    pub colorimeter: chromacal_instruments::devices::InstrumentAddress,
     /// The `.ccmx` to write; its pairs are journalled beside it (`<output>.pairs.jsonl`).
     pub output: std::path::PathBuf,
     pub resume: bool,
@@ -476,9 +477,9 @@ pub async fn make_correction(
     config: &crate::config::Config,
     base_dir: &Path,
     request: MakeRequest<'_>,
-) -> Result<(CorrectionFit, crate::ccmx::Ccmx), MakeError> {
+) -> Result<(CorrectionFit, chromacal_formats::ccmx::Ccmx), MakeError> {
     use crate::calibrate::devices::{open_devices, open_instrument};
-    use crate::instrument::Capability;
+    use chromacal_instruments::Capability;
     let mut config = config.clone();
     // Neither instrument is corrected while the correction is made: by chromacal or by
     // ArgyllCMS (the new matrix would be fitted on top of the old one).
@@ -521,7 +522,7 @@ pub async fn make_correction(
     let _ = devices.display.blank().await;
     measured?;
     let fit = fit_pairs(&journal.pairs)?;
-    let ccmx = crate::ccmx::Ccmx {
+    let ccmx = chromacal_formats::ccmx::Ccmx {
         matrix: fit.matrix,
         description: format!(
             "{} corrected against {}",
@@ -535,9 +536,9 @@ pub async fn make_correction(
         technology: request.technology,
     };
     let created = jiff::Timestamp::now().to_string();
-    crate::durable::write_atomic(
+    chromacal_formats::durable::write_atomic(
         &request.output,
-        crate::ccmx::ccmx_text(&ccmx, &created).as_bytes(),
+        chromacal_formats::ccmx::ccmx_text(&ccmx, &created).as_bytes(),
     )
     .map_err(|e| MakeError::Setup(format!("{}: {e}", request.output.display())))?;
     Ok((fit, ccmx))
@@ -558,20 +559,20 @@ pub enum MakeError {
 /// its filters) make on a virtual `monitor`, both in process over in-memory transports
 /// on virtual time, with noise seeded by `seed` (`chromacal bench corrections`).
 pub async fn emulated_correction(
-    monitor: crate::sim::monitor::MonitorSpec,
-    colorimeter: crate::instrument::devices::DeviceKind,
+    monitor: chromacal_sim::monitor::MonitorSpec,
+    colorimeter: chromacal_instruments::devices::DeviceKind,
     seed: u64,
 ) -> Result<CorrectionFit, MakeError> {
-    use crate::instrument::devices::DeviceKind;
-    use crate::instrument::driver::{AsyncSerialInstrument, DriverOptions};
-    use crate::instrument::emulator::Meter;
-    use crate::instrument::emulator::faults::FaultSpec;
-    use crate::instrument::emulator::memory::MemoryTransport;
-    use crate::instrument::simulated::{SimulatedInstrumentSpec, SimulatedKind};
+    use chromacal_instruments::devices::DeviceKind;
+    use chromacal_instruments::driver::{AsyncSerialInstrument, DriverOptions};
+    use chromacal_instruments::emulator::Meter;
+    use chromacal_instruments::emulator::faults::FaultSpec;
+    use chromacal_instruments::emulator::memory::MemoryTransport;
+    use chromacal_instruments::simulated::{SimulatedInstrumentSpec, SimulatedKind};
     use std::sync::{Arc, Mutex};
-    let clock = Arc::new(crate::sim::clock::VirtualClock::new(None));
+    let clock = Arc::new(chromacal_sim::clock::VirtualClock::new(None));
     let monitor = Arc::new(Mutex::new(
-        crate::sim::monitor::VirtualMonitor::new(monitor, clock)
+        chromacal_sim::monitor::VirtualMonitor::new(monitor, clock)
             .map_err(|e| MakeError::Setup(e.to_string()))?,
     ));
     let open = |kind: DeviceKind, seed: u64| -> Result<AsyncSerialInstrument, MakeError> {
@@ -596,7 +597,7 @@ pub async fn emulated_correction(
     };
     let mut reference = open(DeviceKind::Pr670, seed)?;
     let mut colorimeter = open(colorimeter, seed.wrapping_add(1))?;
-    let mut display = crate::display::simulated::SimulatedDisplay::new(monitor.clone(), 0.0);
+    let mut display = chromacal_display::simulated::SimulatedDisplay::new(monitor.clone(), 0.0);
     let mut journal = PairJournal::in_memory();
     measure_pairs(
         &mut display,

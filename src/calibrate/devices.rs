@@ -9,21 +9,21 @@ use nalgebra::Matrix3;
 
 use crate::calibrate::rig::SimulatedRig;
 use crate::config::{Config, Correction, Sink};
-use crate::display::emulator_link::EmulatorScreen;
-use crate::display::resolve::ResolveDisplay;
-use crate::display::simulated::SimulatedDisplay;
-use crate::display::web::WebDisplay;
-use crate::display::window::{PatchWindow, WindowTarget};
-use crate::display::{DisplayError, PatchDisplay};
-use crate::instrument::devices::InstrumentAddress;
-use crate::instrument::driver::AsyncSerialInstrument;
-use crate::instrument::simulated::SimulatedInstrument;
-use crate::instrument::{Capability, Instrument, InstrumentError, InstrumentInfo, Reading};
-use crate::model::target::CalibrationCurves;
-use crate::screen::Patch;
-use crate::sim::clock::VirtualClock;
-use crate::sim::monitor::SimError;
-use crate::time::{TimeSource, WallClock};
+use chromacal_display::emulator_link::EmulatorScreen;
+use chromacal_display::resolve::ResolveDisplay;
+use chromacal_display::simulated::SimulatedDisplay;
+use chromacal_display::web::WebDisplay;
+use chromacal_display::window::{PatchWindow, WindowTarget};
+use chromacal_display::{DisplayError, PatchDisplay};
+use chromacal_formats::time::{TimeSource, WallClock};
+use chromacal_instruments::devices::InstrumentAddress;
+use chromacal_instruments::driver::AsyncSerialInstrument;
+use chromacal_instruments::simulated::SimulatedInstrument;
+use chromacal_instruments::{Capability, Instrument, InstrumentError, InstrumentInfo, Reading};
+use chromacal_model::screen::Patch;
+use chromacal_model::target::CalibrationCurves;
+use chromacal_sim::clock::VirtualClock;
+use chromacal_sim::monitor::SimError;
 
 /// Why the devices of a run could not be opened.
 #[derive(Debug, thiserror::Error)]
@@ -49,7 +49,7 @@ pub struct Overrides {
     pub listen: Option<String>,
     pub prompt_positions: bool,
     /// The window sink's output (`--display window:OUTPUT`).
-    pub output: Option<crate::x11::OutputSelector>,
+    pub output: Option<chromacal_display::x11::OutputSelector>,
     /// The window sink's X display (`--x-display`).
     pub x_display: Option<String>,
 }
@@ -281,7 +281,7 @@ pub async fn open_instrument(
     // ArgyllCMS knows them (for the ones it drives). It is handed to Argyll.
     let correction: Option<Matrix3<f64>> = match (&config.instrument.correction, address) {
         (Some(Correction::File(path)), InstrumentAddress::Argyll { .. })
-            if crate::ccss::is_ccss_path(path) =>
+            if chromacal_formats::ccss::is_ccss_path(path) =>
         {
             if options.argyll_correction.is_some() {
                 return Err(DevicesError::Config(
@@ -292,7 +292,7 @@ pub async fn open_instrument(
             None
         }
         (Some(Correction::File(path)), InstrumentAddress::Serial { kind, .. })
-            if crate::ccss::is_ccss_path(path) =>
+            if chromacal_formats::ccss::is_ccss_path(path) =>
         {
             return Err(DevicesError::Config(format!(
                 "{}: a .ccss needs the colorimeter's spectral sensitivities, which chromacal does not have for the {kind}; make a .ccmx against a spectroradiometer with `chromacal correction make`",

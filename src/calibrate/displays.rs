@@ -8,9 +8,9 @@ use serde::Serialize;
 
 use crate::config::devices::device_configs;
 use crate::config::{LoadedConfig, Sink};
-use crate::edid::Edid;
 use crate::profile::store::ProfileStore;
-use crate::x11::{OutputInfo, X11Error, XDisplay};
+use chromacal_display::x11::{OutputInfo, X11Error, XDisplay};
+use chromacal_formats::edid::Edid;
 
 /// One output, as `chromacal displays` shows it.
 #[derive(Debug, Clone, Serialize)]

@@ -15,16 +15,16 @@
 //! figures reported are measured, not predicted.
 
 use super::run::RunError;
-use crate::color::Xyz;
 use crate::config::TargetConfig;
-use crate::display::PatchDisplay;
-use crate::instrument::Instrument;
-use crate::model::MonitorModel;
-use crate::model::target::{
+use crate::profile::{LevelCheck, StoredCalibration};
+use chromacal_color::Xyz;
+use chromacal_display::PatchDisplay;
+use chromacal_instruments::Instrument;
+use chromacal_model::MonitorModel;
+use chromacal_model::screen::{Codes, Geometry, Patch};
+use chromacal_model::target::{
     CalibrationCurves, TargetError, calibration_curves, target_luminance, white_error,
 };
-use crate::profile::{LevelCheck, StoredCalibration};
-use crate::screen::{Codes, Geometry, Patch};
 
 /// Why the curves could not be measured into place.
 #[derive(Debug, thiserror::Error)]

@@ -3,10 +3,10 @@
 
 use std::sync::{Arc, Mutex};
 
-use crate::display::simulated::SimulatedDisplay;
-use crate::instrument::simulated::{SimulatedInstrument, SimulatedInstrumentSpec};
-use crate::sim::clock::VirtualClock;
-use crate::sim::monitor::{MonitorSpec, SimError, VirtualMonitor};
+use chromacal_display::simulated::SimulatedDisplay;
+use chromacal_instruments::simulated::{SimulatedInstrument, SimulatedInstrumentSpec};
+use chromacal_sim::clock::VirtualClock;
+use chromacal_sim::monitor::{MonitorSpec, SimError, VirtualMonitor};
 
 /// Everything a simulated calibration needs.
 #[derive(Debug, Clone)]

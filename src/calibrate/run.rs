@@ -3,13 +3,13 @@
 //! the next patch. Killed at any point, a run loses at most the reading under way.
 
 use crate::config::Stability;
-use crate::display::{DisplayError, PatchDisplay};
-use crate::instrument::{Instrument, InstrumentError, Reading, ReadingStatus};
 use crate::journal::{Journal, JournalError};
-use crate::measurement::{Measurement, Role};
-use crate::model::ScreenPosition;
-use crate::plan::PlannedPatch;
-use crate::time::TimeSource;
+use chromacal_display::{DisplayError, PatchDisplay};
+use chromacal_formats::time::TimeSource;
+use chromacal_instruments::{Instrument, InstrumentError, Reading, ReadingStatus};
+use chromacal_model::ScreenPosition;
+use chromacal_model::measurement::{Measurement, Role};
+use chromacal_model::plan::PlannedPatch;
 
 /// Attempts per patch before a run gives up on an instrument error.
 pub const DEFAULT_ATTEMPTS: usize = 3;
@@ -44,7 +44,7 @@ pub struct RunHooks<'a> {
     /// Asked before each patch whether to stop (a cancelled job, SIGTERM): the
     /// reading under way is finished and journaled first. The fit after the readings
     /// asks it between its steps.
-    pub stop: Option<crate::fit::cancel::StopCheck>,
+    pub stop: Option<chromacal_model::fit::cancel::StopCheck>,
 }
 
 impl<'a> RunHooks<'a> {
@@ -87,8 +87,8 @@ pub struct Progress {
     pub index: usize,
     pub role: Role,
     pub luminance: Option<f64>,
-    pub xyz: Option<crate::color::Xyz>,
-    pub drive: crate::model::Drive,
+    pub xyz: Option<chromacal_color::Xyz>,
+    pub drive: chromacal_model::Drive,
     pub position: ScreenPosition,
     pub status: ReadingStatus,
 }

@@ -22,17 +22,17 @@
 use super::run::{
     Devices, RunError, RunHooks, RunOptions, RunSummary, Tally, measure_patch, run_plan_with,
 };
-use crate::color::Xyz;
 use crate::config::Config;
-use crate::display::PatchDisplay;
-use crate::fit::uncertainty::{FoldModels, fold_models, prediction_spread};
-use crate::fit::{FitError, FittedModel, fit_monitor};
-use crate::instrument::Instrument;
 use crate::journal::{Journal, JournalHeader};
-use crate::measurement::{MeasurementSet, Role};
-use crate::model::Drive;
-use crate::plan::{Plan, PlannedPatch};
-use crate::screen::{Codes, Geometry, Patch};
+use chromacal_color::Xyz;
+use chromacal_display::PatchDisplay;
+use chromacal_instruments::Instrument;
+use chromacal_model::Drive;
+use chromacal_model::fit::uncertainty::{FoldModels, fold_models, prediction_spread};
+use chromacal_model::fit::{FitError, FittedModel, fit_monitor};
+use chromacal_model::measurement::{MeasurementSet, Role};
+use chromacal_model::plan::{Plan, PlannedPatch};
+use chromacal_model::screen::{Codes, Geometry, Patch};
 
 /// Candidate levels: k / `GRID` for k = 1 … GRID − 1.
 const GRID: usize = 32;
@@ -320,7 +320,7 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
         let (header, owned) = (journal.header().clone(), config.clone());
         let stop = hooks.stop.clone();
         let step = tokio::task::spawn_blocking(move || {
-            crate::fit::cancel::with_stop(stop, || next_step_for(&header, &set, &owned))
+            chromacal_model::fit::cancel::with_stop(stop, || next_step_for(&header, &set, &owned))
         })
         .await
         .unwrap_or_else(|e| {

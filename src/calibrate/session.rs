@@ -7,20 +7,21 @@ use std::time::{Instant, SystemTime};
 use super::devices::{Devices, DevicesError, Overrides, open_devices};
 use super::run::{PositionPrompt, Progress, RunError, RunHooks, RunOptions, RunSummary};
 use super::sequential::measure_run;
+use super::video_lut::{self, RunEnd};
 use crate::calibrate::rig::SimulatedRig;
 use crate::config::digest;
 use crate::config::{
     Config, ConfigError, LoadedConfig, PublishConfig, Sink, check_config, parse_config_unchecked,
 };
-use crate::display::PatchDisplay;
-use crate::fit::{FitError, FitOptions, FittedModel, fit_monitor};
-use crate::instrument::Instrument;
 use crate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalError, JournalHeader};
-use crate::measurement::{MeasurementSet, Units};
-use crate::plan::{Plan, PlanError, make_plan};
 use crate::profile::store::ProfileStore;
 use crate::profile::{Cost, Profile, ProfileError, Provenance, SCHEMA_VERSION};
-use crate::sim::monitor::SimError;
+use chromacal_display::PatchDisplay;
+use chromacal_instruments::Instrument;
+use chromacal_model::fit::{FitError, FitOptions, FittedModel, fit_monitor};
+use chromacal_model::measurement::{MeasurementSet, Units};
+use chromacal_model::plan::{Plan, PlanError, make_plan};
+use chromacal_sim::monitor::SimError;
 
 /// Name of the file in a run's directory that says the run ended: the profile's
 /// path, or `discarded`.
@@ -108,7 +109,7 @@ pub enum CalibrateError {
     #[error(transparent)]
     Devices(#[from] DevicesError),
     #[error("video LUT: {0}")]
-    Lut(#[from] crate::display::lut::LutError),
+    Lut(#[from] chromacal_display::lut::LutError),
     #[error("cannot write the config: {0}")]
     Serialize(String),
     #[error(
@@ -133,7 +134,7 @@ pub struct CalibrateOptions {
     pub overrides: Overrides,
     /// Asked before each patch whether to stop (Ctrl-C): the reading under way is
     /// finished and journaled, the display blanked, and the run left to `--resume`.
-    pub stop: Option<crate::fit::cancel::StopCheck>,
+    pub stop: Option<chromacal_model::fit::cancel::StopCheck>,
 }
 
 /// Which unfinished run to resume.
@@ -179,11 +180,11 @@ pub struct CalibrationOutcome {
     pub lut: Option<String>,
 }
 
-pub(crate) use crate::time::now_rfc3339;
+pub(crate) use chromacal_formats::time::now_rfc3339;
 
 /// A new run id: the UTC time and a few random-ish hex digits.
 pub fn new_run_id() -> String {
-    let stamp = crate::time::now_rfc3339().replace([':', '-'], "");
+    let stamp = chromacal_formats::time::now_rfc3339().replace([':', '-'], "");
     let nanos = SystemTime::now()
         .duration_since(SystemTime::UNIX_EPOCH)
         .map_or(0, |d| d.subsec_nanos());
@@ -273,7 +274,7 @@ fn count_journal_readings(path: &Path) -> usize {
     let Ok(file) = std::fs::File::open(path) else {
         return 0;
     };
-    let mut reader = file.take(crate::durable::limits::JOURNAL);
+    let mut reader = file.take(chromacal_formats::durable::limits::JOURNAL);
     let mut buffer = vec![0u8; 1 << 16];
     let mut lines = 0;
     while let Ok(n) = reader.read(&mut buffer) {
@@ -322,7 +323,7 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
     config: &Config,
     display: &mut D,
     instrument: &mut I,
-    clock: &dyn crate::time::TimeSource,
+    clock: &dyn chromacal_formats::time::TimeSource,
     hooks: &mut RunHooks<'_>,
 ) -> Result<(RunSummary, FittedModel, f64), CalibrateError> {
     let options = RunOptions {
@@ -360,10 +361,10 @@ pub async fn measure_and_fit<D: PatchDisplay, I: Instrument>(
 pub async fn fit_off_the_workers(
     set: MeasurementSet,
     options: FitOptions,
-    stop: Option<crate::fit::cancel::StopCheck>,
+    stop: Option<chromacal_model::fit::cancel::StopCheck>,
 ) -> Result<FittedModel, FitError> {
     tokio::task::spawn_blocking(move || {
-        crate::fit::cancel::with_stop(stop, || fit_monitor(&set, &options))
+        chromacal_model::fit::cancel::with_stop(stop, || fit_monitor(&set, &options))
     })
     .await
     .unwrap_or_else(|e| std::panic::resume_unwind(e.into_panic()))
@@ -422,7 +423,7 @@ pub fn adopt_settings_at_resume(
     let note = format!("{} (sha256 {})", given.origin, given.digest());
     if let Some(dir) = run.journal.path().parent() {
         let path = dir.join(SETTINGS_AT_RESUME_FILE);
-        crate::durable::write_atomic(
+        chromacal_formats::durable::write_atomic(
             &path,
             format!("# given at --resume: {note}\n{}", given.text).as_bytes(),
         )
@@ -438,7 +439,7 @@ pub fn start_run(
     config: &Config,
     base_dir: &Path,
     display: String,
-    instrument: crate::instrument::InstrumentInfo,
+    instrument: chromacal_instruments::InstrumentInfo,
 ) -> Result<PreparedRun, CalibrateError> {
     let as_run = grid_the_instrument_can_see(config);
     if as_run.plan != config.plan {
@@ -508,11 +509,14 @@ pub fn reopen_run(dir: &Path) -> Result<PreparedRun, CalibrateError> {
     let mut settings_at_resume = None;
     let saved = dir.join(SETTINGS_AT_RESUME_FILE);
     if saved.exists() {
-        let text = crate::durable::read_text_limited(&saved, crate::durable::limits::CONFIG)
-            .map_err(|source| CalibrateError::Store {
-                path: saved.clone(),
-                source,
-            })?;
+        let text = chromacal_formats::durable::read_text_limited(
+            &saved,
+            chromacal_formats::durable::limits::CONFIG,
+        )
+        .map_err(|source| CalibrateError::Store {
+            path: saved.clone(),
+            source,
+        })?;
         let given = parse_config_unchecked(&text, &saved.display().to_string())?;
         take_settings(&mut config, &given);
         settings_at_resume = text
@@ -638,7 +642,7 @@ pub async fn finish_run(
                 .display
                 .window()
                 .and_then(|w| w.output().edid.as_deref())
-                .and_then(|bytes| crate::edid::Edid::parse(bytes).ok()),
+                .and_then(|bytes| chromacal_formats::edid::Edid::parse(bytes).ok()),
         },
         report: fitted.report.clone(),
         calibration,
@@ -707,7 +711,7 @@ pub async fn calibrate<'a>(
     // Held for the whole run: one writer per state directory.
     let _store_lock = store.lock("chromacal calibrate")?;
     // A run killed before it put the video LUT back left the ramp it saved.
-    crate::display::lut::restore_pending_logged(store.root());
+    chromacal_display::lut::restore_pending_logged(store.root());
     // A resumed run goes on with the config it started with (and the overrides).
     let (run, mut devices) = if let Some(resume) = &options.resume {
         let dir = match resume {
@@ -750,14 +754,21 @@ pub async fn calibrate<'a>(
         stop: options.stop.clone(),
     };
     // Characterised through a straight LUT; the user's ramp kept until the end.
-    if let Err(e) = crate::calibrate::video_lut::hold(store.root(), &mut devices) {
-        let _ = crate::calibrate::video_lut::release(store.root(), &mut devices, None);
+    if let Err(e) = video_lut::hold(store.root(), &mut devices) {
+        let _ = video_lut::release(store.root(), &mut devices, RunEnd::Unpublished);
         devices.instrument.close();
         return Err(e.into());
     }
     let mut outcome = finish_run(run, &mut devices, &store, &mut hooks).await;
     devices.instrument.close();
-    match crate::calibrate::video_lut::release(store.root(), &mut devices, outcome.as_ref().ok()) {
+    let end = match &outcome {
+        Ok(o) if o.rejection.is_none() => RunEnd::Published {
+            curves: o.profile.calibration.as_ref().map(|c| &c.curves),
+            why_no_curves: o.calibration_error.as_deref(),
+        },
+        _ => RunEnd::Unpublished,
+    };
+    match video_lut::release(store.root(), &mut devices, end) {
         Ok(what) => {
             if let Ok(o) = &mut outcome {
                 o.lut = what;
@@ -845,7 +856,7 @@ pub fn rig_for(
 mod tests {
     use super::{ProfileStore, adopt_settings_at_resume, reopen_run, resume_command, start_run};
     use crate::config::{Config, LoadedConfig, Sink};
-    use crate::model::spatial::ScreenPosition;
+    use chromacal_model::spatial::ScreenPosition;
     use std::path::Path;
 
     /// The window sink measures the centre only unless someone moves the instrument.
@@ -867,10 +878,10 @@ mod tests {
                 &config,
                 dir.path(),
                 "a screen".into(),
-                crate::instrument::InstrumentInfo {
+                chromacal_instruments::InstrumentInfo {
                     name: "a meter".into(),
                     serial: None,
-                    capability: crate::instrument::Capability::Tristimulus,
+                    capability: chromacal_instruments::Capability::Tristimulus,
                 },
             )
             .unwrap();

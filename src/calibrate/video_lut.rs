@@ -8,9 +8,9 @@
 use std::path::Path;
 
 use super::devices::Devices;
-use super::session::CalibrationOutcome;
-use crate::display::lut::{self, LutError, SavedLut};
-use crate::x11::GammaRamp;
+use chromacal_display::lut::{self, LutError, SavedLut};
+use chromacal_display::x11::GammaRamp;
+use chromacal_model::target::CalibrationCurves;
 
 /// Save the window's LUT (unless an earlier run's saved ramp is still waiting to be
 /// put back: that one is the user's) and load the straight ramp. Nothing for other
@@ -52,12 +52,26 @@ pub fn hold(state_dir: &Path, devices: &mut Devices) -> Result<(), LutError> {
     Ok(())
 }
 
+/// How a run ended, as far as its video LUT is concerned.
+#[derive(Debug, Clone, Copy)]
+pub enum RunEnd<'a> {
+    /// No profile became current (stopped, failed, or rejected by `[publish]`): the
+    /// user's ramp goes back.
+    Unpublished,
+    /// A profile became current, measured through the straight LUT, with these
+    /// curves (or none, and why none when `[target]` asked for them).
+    Published {
+        curves: Option<&'a CalibrationCurves>,
+        why_no_curves: Option<&'a str>,
+    },
+}
+
 /// Load what the run leaves in the LUT and forget the saved ramp; says what was left
 /// (for the summary). `None` for a display without a LUT.
 pub fn release(
     state_dir: &Path,
     devices: &mut Devices,
-    outcome: Option<&CalibrationOutcome>,
+    end: RunEnd,
 ) -> Result<Option<String>, LutError> {
     let Some(window) = devices.display.window() else {
         return Ok(None);
@@ -66,27 +80,32 @@ pub fn release(
     if output.gamma_size < 2 {
         return Ok(None);
     }
-    let published = outcome.filter(|o| o.rejection.is_none());
-    let (ramp, what) = match published.map(|o| o.profile.calibration.as_ref()) {
-        Some(Some(calibration)) => (
-            GammaRamp::from_curves(&calibration.curves, output.gamma_size),
+    let (ramp, what) = match end {
+        RunEnd::Published {
+            curves: Some(curves),
+            ..
+        } => (
+            GammaRamp::from_curves(curves, output.gamma_size),
             format!(
                 "the new calibration curves are loaded in the video LUT of {}",
                 output.name
             ),
         ),
-        Some(None) => (
+        RunEnd::Published {
+            curves: None,
+            why_no_curves,
+        } => (
             GammaRamp::identity(output.gamma_size),
             format!(
                 "the video LUT of {} is straight, as the profile was measured ({})",
                 output.name,
-                match outcome.and_then(|o| o.calibration_error.as_deref()) {
+                match why_no_curves {
                     Some(why) => format!("the curves could not be made: {why}"),
                     None => "no [target], so no curves".to_string(),
                 }
             ),
         ),
-        None => match lut::pending(state_dir)? {
+        RunEnd::Unpublished => match lut::pending(state_dir)? {
             Some(saved) if saved.output == output.name => (
                 saved.ramp,
                 format!("the video LUT of {} is back as it was", output.name),
@@ -142,10 +161,10 @@ pub struct LutStatus {
 
 /// The LUT of `output` now, set against `curves` when given.
 pub fn lut_status(
-    x: &crate::x11::XDisplay,
-    output: &crate::x11::OutputInfo,
-    curves: Option<&crate::model::target::CalibrationCurves>,
-) -> Result<LutStatus, crate::x11::X11Error> {
+    x: &chromacal_display::x11::XDisplay,
+    output: &chromacal_display::x11::OutputInfo,
+    curves: Option<&chromacal_model::target::CalibrationCurves>,
+) -> Result<LutStatus, chromacal_display::x11::X11Error> {
     let ramp = x.gamma(output)?;
     Ok(LutStatus {
         output: output.name.clone(),

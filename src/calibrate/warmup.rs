@@ -9,9 +9,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::config::WarmupConfig;
-use crate::display::PatchDisplay;
-use crate::instrument::Instrument;
-use crate::screen::{Codes, Geometry, Patch};
+use chromacal_display::PatchDisplay;
+use chromacal_instruments::Instrument;
+use chromacal_model::screen::{Codes, Geometry, Patch};
 
 /// One reading of the warm-up.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

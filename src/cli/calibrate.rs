@@ -8,18 +8,17 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use chromacal::calibrate::devices::Overrides;
 use chromacal::calibrate::run::Progress;
-use chromacal::calibrate::session::{
-    CalibrateOptions, Resume, calibrate as calibrate_session, newest_resumable, unfinished_runs,
-};
+use chromacal::calibrate::session::{CalibrateOptions, Resume, calibrate as calibrate_session};
 use chromacal::config::devices::find_device;
 use chromacal::config::{
     LoadedConfig, Sink, check_config, config_search_paths, device_configs, load_config_searching,
 };
-use chromacal::model::ScreenPosition;
 use chromacal::profile::store::default_state_dir;
 use chromacal::report;
+use chromacal_model::ScreenPosition;
 
-use super::shared::{DeviceArgs, Failure, INTERRUPTED, NOT_PUBLISHED};
+use super::args::DeviceArgs;
+use super::shared::{Failure, INTERRUPTED, NOT_PUBLISHED};
 
 /// Run a calibration (by default of the simulated CRT, no hardware needed) and
 /// publish the profile to the state directory.
@@ -189,79 +188,7 @@ fn calibrate(
         });
         outln!("{}", serde_json::to_string_pretty(&summary)?)?;
     } else {
-        let mut out = format!(
-            "chromacal: calibrated {} with {}\n",
-            outcome.display,
-            outcome
-                .profile
-                .provenance
-                .instrument
-                .as_ref()
-                .map_or("an instrument", |i| i.name.as_str())
-        );
-        out += &format!(
-            "  patches measured: {}\n",
-            report::budget_line(&outcome.plan.budget)
-        );
-        if let Some(stop) = &outcome.run.sequential_stop {
-            out += &format!(
-                "  sequential plan: {} patches added to the seed plan's; stopped: {stop}\n",
-                outcome.run.sequential_added
-            );
-        }
-        if outcome.run.extra_reads > 0 || outcome.run.unsettled > 0 {
-            out += &format!(
-                "  stability check: {} extra readings; {} patches never agreed (last reading kept)\n",
-                outcome.run.extra_reads, outcome.run.unsettled
-            );
-        }
-        if outcome.run.already_measured > 0 {
-            out += &format!(
-                "  resumed: {} patches were in the journal, {} measured now\n",
-                outcome.run.already_measured, outcome.run.measured_now
-            );
-        }
-        // "Simulated" only when the instrument was: an emulated or real serial one
-        // spent (or reported) this time itself.
-        let simulated = outcome
-            .profile
-            .provenance
-            .instrument
-            .as_ref()
-            .is_some_and(|i| i.name.starts_with("simulated"));
-        out += &format!(
-            "  {}instrument time {} (integration and settling), fit time {}\n\n",
-            if simulated { "simulated " } else { "" },
-            report::duration(outcome.instrument_seconds),
-            report::duration(outcome.fit_seconds)
-        );
-        out += &report::edid_summary(&outcome.profile);
-        out += &report::fit_summary(&outcome.fitted.report);
-        if let Some(c) = &outcome.profile.calibration {
-            out += &report::calibration_summary(c);
-        }
-        if let Some(why) = &outcome.calibration_error {
-            out += &format!("\ncalibration curves: none ({why})\n");
-        }
-        if let Some(lut) = &outcome.lut {
-            out += &format!("video LUT: {lut}\n");
-        }
-        out += &format!("\njournal: {}\n", outcome.journal_path.display());
-        match &outcome.rejection {
-            None => {
-                out += &format!(
-                    "profile: {} (published as current)\n",
-                    outcome.profile_path.display()
-                )
-            }
-            Some(why) => {
-                out += &format!(
-                    "profile: {} (NOT published: {why})\n",
-                    outcome.profile_path.display()
-                )
-            }
-        }
-        out!("{out}")?;
+        out!("{}", report::calibration_outcome(&outcome))?;
     }
     match outcome.rejection {
         None => Ok(()),
@@ -316,49 +243,6 @@ fn aim_prompt(bar: &indicatif::ProgressBar, position: ScreenPosition) -> Result<
             Err(e) => Err(format!("cannot read the terminal: {e}")),
         }
     })
-}
-
-/// List the unfinished calibration runs of a state directory: the ones
-/// `calibrate --resume [RUN]` can go on with.
-#[derive(clap::Args)]
-pub struct RunsArgs {
-    /// Profile store and run journals (as for `calibrate`).
-    #[arg(long)]
-    state_dir: Option<PathBuf>,
-    /// Print JSON.
-    #[arg(long)]
-    json: bool,
-}
-
-pub fn run_runs(args: RunsArgs) -> Result<(), Failure> {
-    let store = chromacal::profile::store::ProfileStore::new(
-        &args.state_dir.unwrap_or_else(default_state_dir),
-    );
-    let runs = unfinished_runs(&store);
-    if args.json {
-        outln!("{}", serde_json::to_string_pretty(&runs)?)?;
-        return Ok(());
-    }
-    if runs.is_empty() {
-        outln!("no unfinished runs in {}", store.runs_dir().display())?;
-        return Ok(());
-    }
-    let newest = newest_resumable(&runs).map(|r| &r.id);
-    outln!("{:<30} {:>9}  state", "run", "readings")?;
-    for run in &runs {
-        let state = if !run.resumable() {
-            format!(
-                "its fit failed {} times: resumed only by name",
-                run.fit_failures
-            )
-        } else if Some(&run.id) == newest {
-            "resumed by `calibrate --resume`".to_string()
-        } else {
-            "resume with `calibrate --resume <run>`".to_string()
-        };
-        outln!("{:<30} {:>9}  {state}", run.id, run.readings)?;
-    }
-    Ok(())
 }
 
 /// The first Ctrl-C or SIGTERM asks the run to stop after the reading under way (the

@@ -3,20 +3,20 @@
 use super::shared::{out, outln};
 use std::path::{Path, PathBuf};
 
-use chromacal::crf::ScenePixel;
-use chromacal::crf::explain::{SceneWeighted, WeighedPatch, scene_weighted};
-use chromacal::crf::scene::read_xyz_csv;
-use chromacal::crf::spectral_file::SpectralFile;
-use chromacal::fit::checks::AssumptionChecks;
-use chromacal::fit::validate::{Evaluation, evaluate};
 use chromacal::html_report::{ReportInput, readings_of};
-use chromacal::measurement::Units;
 use chromacal::measurement_file::read_measurements;
-use chromacal::model::ScreenPosition;
-use chromacal::numeric_csv::NumericTable;
 use chromacal::profile::Profile;
 use chromacal::report;
 use chromacal::verification::{Criteria, verify};
+use chromacal_crf::ScenePixel;
+use chromacal_crf::explain::{SceneWeighted, WeighedPatch, scene_weighted};
+use chromacal_crf::scene::read_xyz_csv;
+use chromacal_crf::spectral_file::SpectralFile;
+use chromacal_formats::numeric_csv::NumericTable;
+use chromacal_model::ScreenPosition;
+use chromacal_model::fit::checks::AssumptionChecks;
+use chromacal_model::fit::validate::{Evaluation, evaluate};
+use chromacal_model::measurement::Units;
 
 use super::shared::{Failure, is_stdout};
 

@@ -24,11 +24,11 @@ pub struct ManArgs {
     output: Option<PathBuf>,
 }
 
-pub fn run_completions(args: CompletionsArgs, mut command: clap::Command) -> Result<(), Failure> {
+pub fn run_completions(args: CompletionsArgs, command: clap::Command) -> Result<(), Failure> {
     // Made in memory, then written: `generate` panics when its writer fails, and a
     // reader that stops early (`| head`) is not a failure.
     let mut script = Vec::new();
-    clap_complete::generate(args.shell, &mut command, "chromacal", &mut script);
+    clap_complete::generate(args.shell, &mut visible(&command), "chromacal", &mut script);
     write_stdout(&script)
 }
 
@@ -48,4 +48,44 @@ pub fn run_man(args: ManArgs, command: clap::Command) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+/// The command as a user sees it: what `--help` hides (the developer's tools, the
+/// options only tests use) left out. `clap_mangen` leaves hidden parts out itself;
+/// `clap_complete` would offer them. `command` must not be built yet (its `--help` and
+/// `--version` are added when it is).
+fn visible(command: &clap::Command) -> clap::Command {
+    let mut shown = clap::Command::new(command.get_name().to_string());
+    if let Some(about) = command.get_about() {
+        shown = shown.about(about.clone());
+    }
+    if let Some(about) = command.get_long_about() {
+        shown = shown.long_about(about.clone());
+    }
+    if let Some(version) = command.get_version() {
+        shown = shown.version(version.to_string());
+    }
+    let kept: Vec<&clap::Arg> = command
+        .get_arguments()
+        .filter(|a| !a.is_hide_set())
+        .collect();
+    for arg in &kept {
+        shown = shown.arg((*arg).clone());
+    }
+    // The groups the derive makes (one a struct of arguments) lose the hidden ones too.
+    for group in command.get_groups() {
+        let members = group
+            .get_args()
+            .filter(|id| kept.iter().any(|a| a.get_id() == *id));
+        shown = shown.group(
+            clap::ArgGroup::new(group.get_id().clone())
+                .args(members.cloned())
+                .multiple(group.clone().is_multiple())
+                .required(group.is_required_set()),
+        );
+    }
+    for sub in command.get_subcommands().filter(|s| !s.is_hide_set()) {
+        shown = shown.subcommand(visible(sub));
+    }
+    shown
 }

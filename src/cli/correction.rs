@@ -14,7 +14,8 @@ use chromacal::calibrate::devices::Overrides;
 use chromacal::config::{config_search_paths, load_config_searching};
 use chromacal::report::table;
 
-use super::shared::{Failure, parse_instrument, parse_sink, parse_sink_output};
+use super::args::{parse_instrument, parse_sink, parse_sink_output};
+use super::shared::Failure;
 
 /// Colorimeter corrections.
 #[derive(clap::Args)]

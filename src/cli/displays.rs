@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use chromacal::calibrate::displays::{describe_displays, list_displays};
 use chromacal::config::{config_search_paths, load_config_searching};
 use chromacal::profile::store::default_state_dir;
-use chromacal::x11::XDisplay;
+use chromacal_display::x11::XDisplay;
 
 use super::shared::Failure;
 

@@ -8,19 +8,18 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 
 use chromacal::config::load_config;
-use chromacal::display::resolve::{ClientOptions, run_client};
-use chromacal::instrument::devices::DeviceKind;
-use chromacal::instrument::emulator::Meter;
-use chromacal::instrument::emulator::faults::FaultSpec;
-use chromacal::instrument::emulator::pty::{PtyEmulator, PtyOptions};
-use chromacal::instrument::emulator::screen::serve_screen;
-use chromacal::instrument::minolta;
-use chromacal::instrument::simulated::SimulatedInstrumentSpec;
-use chromacal::sim::clock::VirtualClock;
-use chromacal::sim::monitor::VirtualMonitor;
+use chromacal_display::resolve::{ClientOptions, run_client};
+use chromacal_instruments::devices::{DeviceKind, EmulatorQuirks};
+use chromacal_instruments::emulator::Meter;
+use chromacal_instruments::emulator::faults::FaultSpec;
+use chromacal_instruments::emulator::pty::{PtyEmulator, PtyOptions};
+use chromacal_instruments::emulator::screen::serve_screen;
+use chromacal_instruments::simulated::SimulatedInstrumentSpec;
+use chromacal_sim::clock::VirtualClock;
+use chromacal_sim::monitor::VirtualMonitor;
 
-use chromacal::x11::OutputSelector;
-use chromacal::x11::capture::watch_output;
+use chromacal_display::x11::OutputSelector;
+use chromacal_display::x11::capture::watch_output;
 
 use super::shared::Failure;
 
@@ -54,11 +53,13 @@ pub struct EmulateArgs {
     /// config is looked for].
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Faults to inject, e.g. "no_reply=0.05,garbage=0.02,low_light=0.1,seed=7".
-    #[arg(long, default_value = "")]
+    /// Faults to inject, e.g. "no_reply=0.05,garbage=0.02,low_light=0.1,seed=7"
+    /// (for tests; hidden from --help).
+    #[arg(long, default_value = "", hide = true)]
     pub faults: String,
-    /// Record the session, byte for byte, to this transcript file.
-    #[arg(long)]
+    /// Record the session, byte for byte, to this transcript file (for fixtures;
+    /// hidden from --help).
+    #[arg(long, hide = true)]
     pub record: Option<PathBuf>,
     /// Real seconds per instrument second (0.01 answers a hundred times faster).
     #[arg(long, default_value_t = 1.0, value_parser = super::shared::positive_number)]
@@ -66,16 +67,18 @@ pub struct EmulateArgs {
     /// Where to put the screen socket [default: a file in the temporary directory].
     #[arg(long)]
     pub screen: Option<PathBuf>,
-    /// Emulate a Minolta meter that was switched on without F held (not in remote mode).
-    #[arg(long)]
+    /// Emulate a Minolta meter that was switched on without F held (not in remote
+    /// mode; for tests, hidden from --help).
+    #[arg(long, hide = true)]
     pub not_remote: bool,
     /// Also be a Resolve pattern generator: connect to chromacal's Resolve server at
     /// ADDR and show what it sends on the virtual monitor (reconnecting when the
     /// connection drops).
     #[arg(long, value_name = "ADDR")]
     pub resolve: Option<String>,
-    /// A fault for tests: drop the generator's connection once, after N patterns.
-    #[arg(long, value_name = "N", requires = "resolve")]
+    /// A fault for tests: drop the generator's connection once, after N patterns
+    /// (hidden from --help).
+    #[arg(long, value_name = "N", requires = "resolve", hide = true)]
     pub resolve_drop_after: Option<usize>,
     /// The generator reads video levels (16–235) rather than full range.
     #[arg(long, requires = "resolve")]
@@ -87,12 +90,12 @@ pub struct EmulateArgs {
     #[arg(long, value_name = "DISPLAY")]
     pub x_display: Option<String>,
     /// An emulated colorimeter (k10a, cs100a, colorcal2) reads exact CIE XYZ instead of
-    /// reading through its filters.
-    #[arg(long)]
+    /// reading through its filters (for tests; hidden from --help).
+    #[arg(long, hide = true)]
     pub ideal_filters: bool,
     /// The baud rate an emulated specbos 1211 is set to [default: 115200, so that a
-    /// driver has to look past the factory 921600].
-    #[arg(long, value_name = "BAUD")]
+    /// driver has to look past the factory 921600; for tests, hidden from --help].
+    #[arg(long, value_name = "BAUD", hide = true)]
     pub baud: Option<u32>,
     /// Also emulate this instrument, on a pseudo-terminal of its own, aimed at the same
     /// virtual monitor (e.g. a colorimeter beside a reference spectroradiometer, for
@@ -141,7 +144,7 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
     // A colorimeter reads through its filters, as the real one does.
     let through_filters = |kind: DeviceKind, spec: &mut SimulatedInstrumentSpec| {
         if let Some(model) = kind.filter_model().filter(|_| !args.ideal_filters) {
-            spec.kind = chromacal::instrument::simulated::SimulatedKind::Tristimulus;
+            spec.kind = chromacal_instruments::simulated::SimulatedKind::Tristimulus;
             spec.filters = spec.filters.or(Some(model));
         }
     };
@@ -179,41 +182,12 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
         let mut watch = watch_output(Some(display), &selector, aim).map_err(|e| e.to_string())?;
         meter = meter.with_screen_source(Box::new(move || watch().map_err(|e| e.to_string())));
     }
-    let device: Box<dyn chromacal::instrument::emulator::DeviceModel> = match kind {
-        DeviceKind::Ls100 | DeviceKind::Ls110 | DeviceKind::Cs100a if args.not_remote => {
-            let model = match kind {
-                DeviceKind::Ls110 => minolta::protocol::Model::Ls110,
-                DeviceKind::Cs100a => minolta::protocol::Model::Cs100a,
-                _ => minolta::protocol::Model::Ls100,
-            };
-            Box::new(minolta::emulator::MinoltaEmulator::new(model, meter, false))
-        }
-        // The PR-650's arming window is a human's time (switch on, connect at once),
-        // so it lasts 5 real seconds however fast the device's time runs: scaled, it
-        // would be 10 ms at --time-scale 0.002, less than a loaded machine takes to
-        // start the host program.
-        DeviceKind::Pr650 => Box::new(chromacal::instrument::pr650::emulator::Pr650Emulator::new(
-            meter,
-            chromacal::instrument::pr650::protocol::ARMING_WINDOW_S
-                / if args.time_scale > 0.0 {
-                    args.time_scale
-                } else {
-                    1.0
-                },
-        )),
-        DeviceKind::Specbos1211 if args.baud.is_some() => {
-            Box::new(chromacal::instrument::jeti::emulator::SpecbosEmulator::new(
-                meter,
-                args.baud.unwrap_or_default(),
-            ))
-        }
-        _ if args.baud.is_some() => {
-            return Err(format!(
-                "--baud is for the specbos1211, whose rate is a setting; the {kind} has a fixed rate"
-            ));
-        }
-        _ => kind.emulator(meter),
+    let quirks = EmulatorQuirks {
+        not_remote: args.not_remote,
+        baud: args.baud,
+        time_scale: args.time_scale,
     };
+    let device = kind.emulator_with(meter, quirks)?;
     let screen = args.screen.unwrap_or_else(|| {
         std::env::temp_dir().join(format!(
             "chromacal-emulate-{}-{}.sock",

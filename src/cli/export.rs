@@ -7,7 +7,8 @@ use chromacal::export::{ExportOptions, Format};
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
 
-use super::shared::{COLORD_UNAVAILABLE, Failure, TargetArgs, is_stdout, outln, write_stdout};
+use super::args::TargetArgs;
+use super::shared::{COLORD_UNAVAILABLE, Failure, is_stdout, outln, write_stdout};
 
 /// Write a profile for other tools: ICC v4 or v2 display profiles (with vcgt when a
 /// target is given), ArgyllCMS .ti3 (the run's measurements) and .cal (calibration

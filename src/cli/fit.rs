@@ -5,11 +5,11 @@ use std::path::{Path, PathBuf};
 use clap::ValueEnum;
 
 use chromacal::config::{config_search_paths, load_config_searching};
-use chromacal::fit::fit_monitor;
 use chromacal::measurement_file::read_measurements;
-use chromacal::model::transfer::LawKind;
 use chromacal::profile::{Cost, Profile, Provenance, SCHEMA_VERSION};
 use chromacal::report;
+use chromacal_model::fit::fit_monitor;
+use chromacal_model::transfer::LawKind;
 
 use super::shared::{Failure, absolute_path, is_stdout, out, outln, write_stdout};
 
@@ -98,7 +98,7 @@ fn fit(
     let profile = Profile {
         schema_version: SCHEMA_VERSION,
         id,
-        created: chromacal::time::now_rfc3339(),
+        created: chromacal_formats::time::now_rfc3339(),
         units: set.units,
         model: fitted.model.clone(),
         provenance: Provenance {

@@ -2,9 +2,9 @@
 //! the instruments ArgyllCMS sees.
 
 use super::shared::outln;
-use chromacal::instrument::argyll::driver::list_ports;
-use chromacal::instrument::argyll::transport::spotread_program;
-use chromacal::instrument::scan::{PortFinding, candidate_ports, scan};
+use chromacal_instruments::argyll::driver::list_ports;
+use chromacal_instruments::argyll::transport::spotread_program;
+use chromacal_instruments::scan::{PortFinding, candidate_ports, scan};
 
 use super::shared::Failure;
 

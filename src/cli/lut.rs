@@ -7,14 +7,15 @@ use std::path::PathBuf;
 use clap::Subcommand;
 
 use chromacal::calibrate::video_lut::{desktop_lut_loader, lut_status};
-use chromacal::display::lut::restore_pending_logged;
-use chromacal::export::cal::curves_cal_text;
 use chromacal::export::calibration_for;
 use chromacal::profile::Profile;
 use chromacal::profile::store::{ProfileStore, default_state_dir};
-use chromacal::x11::{GammaRamp, OutputSelector, XDisplay};
+use chromacal_display::lut::restore_pending_logged;
+use chromacal_display::x11::{GammaRamp, OutputSelector, XDisplay};
+use chromacal_formats::cal::curves_cal_text;
 
-use super::shared::{Failure, TargetArgs};
+use super::args::TargetArgs;
+use super::shared::Failure;
 
 /// The video LUT (CRTC gamma ramp) of an X11 output.
 #[derive(clap::Args)]
@@ -130,7 +131,7 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
         }
         LutCommand::Save { file } => {
             let ramp = x.gamma(&output)?;
-            let created = chromacal::time::now_rfc3339();
+            let created = chromacal_formats::time::now_rfc3339();
             let text = curves_cal_text(
                 |v| [ramp.output(0, v), ramp.output(1, v), ramp.output(2, v)],
                 &format!("video LUT of {} on {}", output.name, x.name()),

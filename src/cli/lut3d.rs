@@ -1,14 +1,14 @@
 //! `chromacal lut3d`: a 3D LUT from a source encoding to this display
-//! (`chromacal::crf::lut3d`), as a `.cube` or a `.3dl` file.
+//! (`chromacal_crf::lut3d`), as a `.cube` or a `.3dl` file.
 
 use std::path::PathBuf;
 
-use chromacal::crf::lut3d::{LutOptions, SourceSpace, build_lut};
 use chromacal::profile::Profile;
+use chromacal_crf::lut3d::{LutOptions, SourceSpace, build_lut};
 
-use super::render::GamutArg;
+use super::args::GamutArg;
 use super::shared::{Failure, is_stdout, write_stdout};
-use chromacal::crf::gamut::{ScbOptions, SgckSource};
+use chromacal_crf::gamut::{ScbOptions, SgckSource};
 
 /// Write a 3D LUT that shows a source encoding (sRGB, BT.709/BT.1886, Display P3,
 /// Rec. 2020) on this display, for mpv, madVR, Resolve or ffmpeg's lut3d filter.
@@ -88,7 +88,7 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
     if is_stdout(&args.output) {
         write_stdout(text.as_bytes())?;
     } else {
-        chromacal::durable::write_atomic_named(&args.output, text.as_bytes())
+        chromacal_formats::durable::write_atomic_named(&args.output, text.as_bytes())
             .map_err(|e| Failure::from(format!("cannot write {}: {e}", args.output.display())))?;
     }
     let moved = match &lut.mapping {

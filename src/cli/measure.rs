@@ -1,10 +1,11 @@
 //! `chromacal measure`: read what the screen shows now with a serial instrument.
 
 use super::shared::outln;
-use chromacal::color::spaces::xyz_to_xyy;
-use chromacal::instrument::driver::DriverOptions;
+use chromacal_color::spaces::xyz_to_xyy;
+use chromacal_instruments::driver::DriverOptions;
 
-use super::shared::{Failure, parse_instrument};
+use super::args::parse_instrument;
+use super::shared::Failure;
 
 /// Measure what the display shows now with a serial instrument.
 #[derive(clap::Args)]

@@ -2,13 +2,9 @@
 //! that runs it, and ends in `run(args) -> Result<(), Failure>`. `main.rs` only parses
 //! and dispatches; what the commands share is in `shared`.
 
+pub mod api;
+pub mod args;
 pub mod bench;
-pub mod bench_corrections;
-pub mod bench_fleet;
-mod bench_gamut;
-pub mod bench_laws;
-pub mod bench_render;
-pub mod bench_spectral;
 pub mod calibrate;
 pub mod check;
 pub mod completions;
@@ -19,15 +15,19 @@ pub mod displays;
 pub mod emulate;
 pub mod export;
 pub mod fit;
+pub mod history;
 pub mod instruments;
+pub mod job;
 pub mod lut;
 pub mod lut3d;
 pub mod measure;
 pub mod profile;
 pub mod render;
 pub mod report;
+pub mod runs;
 pub mod shared;
 pub mod spectrum;
+pub mod status;
 
 #[cfg(test)]
 mod tests {

@@ -9,8 +9,10 @@ use clap::Subcommand;
 use chromacal::profile::Profile;
 use chromacal::report;
 
-use super::daemon::{ApiArgs, current_profile};
-use super::shared::{Failure, TargetArgs};
+use super::api::ApiArgs;
+use super::args::TargetArgs;
+use super::history::current_profile;
+use super::shared::Failure;
 
 /// Work with profiles.
 #[derive(clap::Args)]

@@ -5,10 +5,10 @@
 use std::path::{Path, PathBuf};
 
 use chromacal::html_report::{ReportInput, readings_of, report_html};
-use chromacal::measurement::MeasurementSet;
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
 use chromacal::verification::Criteria;
+use chromacal_model::measurement::MeasurementSet;
 
 use super::shared::{Failure, is_stdout, write_stdout};
 
@@ -65,7 +65,7 @@ pub fn check_output_dir(output: &Path) -> Result<(), Failure> {
     if is_stdout(output) {
         return Ok(());
     }
-    chromacal::durable::require_parent_dir(output).map_err(|e| {
+    chromacal_formats::durable::require_parent_dir(output).map_err(|e| {
         Failure::from(format!(
             "cannot write the report to {}: {e}",
             output.display()
@@ -80,7 +80,7 @@ pub fn write_page(input: &ReportInput, output: &Path) -> Result<(), Failure> {
     if is_stdout(output) {
         return write_stdout(page.as_bytes());
     }
-    chromacal::durable::write_atomic_named(output, page.as_bytes())
+    chromacal_formats::durable::write_atomic_named(output, page.as_bytes())
         .map_err(|e| Failure::from(format!("cannot write {}: {e}", output.display())))?;
     eprintln!("chromacal: report written to {}", output.display());
     Ok(())

@@ -3,16 +3,17 @@
 use super::shared::{out, outln};
 use std::path::{Path, PathBuf};
 
-use chromacal::color::spaces::{Xyz, xyz_to_luv, xyz_to_uv_prime, xyz_to_xyy};
-use chromacal::color::spectrum::{
+use chromacal::report;
+use chromacal_color::spaces::{Xyz, xyz_to_luv, xyz_to_uv_prime, xyz_to_xyy};
+use chromacal_color::spectrum::{
     Illuminant, Observer, Spectrum, SpectrumError, emission_to_relative_xyz, emission_to_xyz,
     photopic_luminance, reflectance_to_xyz, scotopic_luminance,
 };
-use chromacal::color::{UvPrime, xyz_to_lab};
-use chromacal::crf::spectral_file::SpectralFile;
-use chromacal::report;
+use chromacal_color::{UvPrime, xyz_to_lab};
+use chromacal_crf::spectral_file::SpectralFile;
 
-use super::shared::{Failure, IlluminantArg};
+use super::args::IlluminantArg;
+use super::shared::Failure;
 
 /// Integrate spectra to XYZ, xyY, u′v′, L*a*b* and L*u*v*.
 ///

@@ -3,8 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::instrument::Reading;
-use crate::model::target::{Target, TargetError, parse_tone, parse_white};
+use chromacal_instruments::Reading;
+use chromacal_model::target::{Target, TargetError, parse_tone, parse_white};
 
 /// `[display.stability]`: after the settle time, read again until two readings in a
 /// row agree, for displays whose settle time is not known well enough (slow LCD

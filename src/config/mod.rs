@@ -17,16 +17,16 @@ pub use calibration::{Stability, TargetConfig, WarmupConfig};
 pub use daemon::{DaemonConfig, MqttConfig, OnStart, ScheduleConfig};
 pub use devices::{DEFAULT_DEVICE, DeviceConfig, device_configs};
 
-use crate::display::resolve::ResolveConfig;
-use crate::display::web::WebConfig;
-use crate::fit::FitOptions;
-use crate::fit::stats::ErrorStats;
-use crate::instrument::devices::InstrumentAddress;
-use crate::instrument::driver::DriverOptions;
-use crate::instrument::simulated::SimulatedInstrumentSpec;
-use crate::plan::PlanConfig;
 use crate::profile::toml_error_position;
-use crate::sim::presets::MonitorConfig;
+use chromacal_display::resolve::ResolveConfig;
+use chromacal_display::web::WebConfig;
+use chromacal_instruments::devices::InstrumentAddress;
+use chromacal_instruments::driver::DriverOptions;
+use chromacal_instruments::simulated::SimulatedInstrumentSpec;
+use chromacal_model::fit::FitOptions;
+use chromacal_model::fit::stats::ErrorStats;
+use chromacal_model::plan::PlanConfig;
+use chromacal_sim::presets::MonitorConfig;
 
 /// The default configuration, as shipped.
 pub const DEFAULT_CONFIG: &str = include_str!("../../config/default.toml");
@@ -84,11 +84,11 @@ impl Correction {
     pub fn matrix(
         &self,
         base_dir: &Path,
-    ) -> Result<nalgebra::Matrix3<f64>, crate::ccmx::CcmxError> {
+    ) -> Result<nalgebra::Matrix3<f64>, chromacal_formats::ccmx::CcmxError> {
         match self {
             Correction::Matrix(rows) => {
                 let m = nalgebra::Matrix3::from_fn(|r, c| rows[r][c]);
-                crate::ccmx::check_matrix(&m, "instrument.correction")?;
+                chromacal_formats::ccmx::check_matrix(&m, "instrument.correction")?;
                 Ok(m)
             }
             Correction::File(path) => {
@@ -97,7 +97,7 @@ impl Correction {
                 } else {
                     base_dir.join(path)
                 };
-                Ok(crate::ccmx::read_ccmx(&path)?.matrix)
+                Ok(chromacal_formats::ccmx::read_ccmx(&path)?.matrix)
             }
         }
     }
@@ -183,7 +183,7 @@ pub struct DisplayConfig {
     pub x_display: Option<String>,
     /// The window's output: a RandR name (`output = "DP-1"`) or the monitor's EDID
     /// serial (`output = { edid_serial = "…" }`); unset: the primary output.
-    pub output: Option<crate::x11::OutputSelector>,
+    pub output: Option<chromacal_display::x11::OutputSelector>,
     /// Put the current profile's curves back into the video LUT whenever something else
     /// overwrote them (the daemon checks every `lut_check_s`).
     pub keep_lut: bool,
@@ -433,7 +433,7 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     // A light meter's readings make no model without the primaries' chromaticities:
     // say so now, not after every patch has been measured.
     if let Some(InstrumentAddress::Serial { kind, .. }) = &serial
-        && kind.capability() == crate::instrument::Capability::Luminance
+        && kind.capability() == chromacal_instruments::Capability::Luminance
         && config.fit.primaries_xy.is_none()
     {
         return Err(format!(
@@ -464,7 +464,7 @@ pub fn check_config(config: &Config) -> Result<(), String> {
         ));
     }
     if sink == Sink::Resolve
-        && config.display.resolve.flavour == crate::display::resolve::Flavour::Ls
+        && config.display.resolve.flavour == chromacal_display::resolve::Flavour::Ls
         && config.plan.bit_depth != 8
     {
         return Err(format!(
@@ -487,7 +487,8 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     }
     if let Some(Correction::Matrix(rows)) = &config.instrument.correction {
         let m = nalgebra::Matrix3::from_fn(|r, c| rows[r][c]);
-        crate::ccmx::check_matrix(&m, "instrument.correction").map_err(|e| e.to_string())?;
+        chromacal_formats::ccmx::check_matrix(&m, "instrument.correction")
+            .map_err(|e| e.to_string())?;
     }
     Ok(())
 }
@@ -502,11 +503,14 @@ pub fn load_config(path: Option<&Path>) -> Result<LoadedConfig, ConfigError> {
             base_dir: std::env::current_dir().unwrap_or_else(|_| PathBuf::from(".")),
         }),
         Some(path) => {
-            let text = crate::durable::read_text_limited(path, crate::durable::limits::CONFIG)
-                .map_err(|source| ConfigError::Io {
-                    path: path.to_path_buf(),
-                    source,
-                })?;
+            let text = chromacal_formats::durable::read_text_limited(
+                path,
+                chromacal_formats::durable::limits::CONFIG,
+            )
+            .map_err(|source| ConfigError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
             let origin = path.display().to_string();
             Ok(LoadedConfig {
                 config: parse_config(&text, &origin)?,

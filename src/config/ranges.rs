@@ -201,7 +201,7 @@ mod tests {
         config.monitor.black_luminance = Some(0.1);
         config.monitor.flare_luminance = Some(0.0);
         config.monitor.bit_depth = Some(8);
-        config.monitor.falloff = Some(crate::sim::presets::FalloffConfig::PerChannel([0.9; 3]));
+        config.monitor.falloff = Some(chromacal_sim::presets::FalloffConfig::PerChannel([0.9; 3]));
         config.fit.primaries_xy = Some([[0.64, 0.33], [0.3, 0.6], [0.15, 0.06]]);
         config.fit.white_xy = Some([0.3127, 0.329]);
         config.instrument.correction = Some(crate::config::Correction::Matrix([

@@ -47,27 +47,11 @@ use serde_json::json;
 use tokio_stream::StreamExt;
 use tokio_stream::wrappers::BroadcastStream;
 
+use super::access::{Access, Peer, bearer_credentials, same_secret};
 use super::browser;
 use super::events::{JobKind, JobOutcome, JobStatus};
 use super::{Daemon, Device, JobRefused};
 use crate::config::devices::NoDevice;
-use crate::profile::Profile;
-
-/// Who may use the API.
-#[derive(Debug, Clone)]
-pub struct Access {
-    /// The uid that owns the socket (the daemon's); it and root are answered.
-    pub owner: u32,
-    /// The bearer token TCP clients must send.
-    pub token: Option<String>,
-}
-
-/// Who is calling: a local process (with its uid) or a TCP peer.
-#[derive(Debug, Clone, Copy)]
-pub enum Peer {
-    Local { uid: Option<u32> },
-    Tcp(SocketAddr),
-}
 
 /// A token bucket. Token holders on TCP share one, and clients without a token (who
 /// may only read `/metrics`, when `daemon.metrics_token` is off) another, so that a
@@ -185,25 +169,6 @@ pub fn router(daemon: Arc<Daemon>, access: Access) -> Router {
         .layer(DefaultBodyLimit::max(max_body))
         .layer(middleware::from_fn_with_state(state.clone(), guard))
         .with_state(state)
-}
-
-/// The credentials of an `Authorization` value in the Bearer scheme: the scheme's
-/// name is case-insensitive (RFC 9110 §11.1, RFC 6750 §2.1), so `bearer` and `BEARER`
-/// are accepted as `Bearer` is; `None` for any other scheme.
-fn bearer_credentials(value: &str) -> Option<&str> {
-    let (scheme, credentials) = value.trim_start().split_once(' ')?;
-    scheme
-        .eq_ignore_ascii_case("bearer")
-        .then(|| credentials.trim())
-}
-
-/// Compare without an early exit, so that timing tells nothing of the token.
-pub(crate) fn same_secret(a: &str, b: &str) -> bool {
-    a.len() == b.len()
-        && a.bytes()
-            .zip(b.bytes())
-            .fold(0u8, |acc, (x, y)| acc | (x ^ y))
-            == 0
 }
 
 /// Who may call, how often, and how much they may send.
@@ -454,21 +419,8 @@ pub struct StatusReply {
 pub struct CurrentProfile {
     pub id: String,
     pub created: String,
-    pub held_out: Option<crate::fit::stats::ErrorStats>,
+    pub held_out: Option<chromacal_model::fit::stats::ErrorStats>,
     pub path: String,
-}
-
-/// The current profile and its text; an error says why it does not read.
-pub(crate) fn read_current(device: &Device) -> Result<Option<(Profile, String)>, String> {
-    let path = device.store().current_path();
-    let text = match crate::durable::read_text_limited(&path, crate::durable::limits::PROFILE) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(format!("{}: {e}", path.display())),
-    };
-    Profile::from_toml(&text, &path.display().to_string())
-        .map(|p| Some((p, text)))
-        .map_err(|e| e.to_string())
 }
 
 /// A device's status.
@@ -482,7 +434,7 @@ async fn device_status(daemon: &Daemon, device: &Arc<Device>) -> Result<StatusRe
         .await
         .unwrap_or_default()
     };
-    let current = read_current(device)?.map(|(p, _)| CurrentProfile {
+    let current = device.read_current()?.map(|(p, _)| CurrentProfile {
         id: p.id,
         created: p.created,
         held_out: p.report.held_out,
@@ -501,7 +453,9 @@ async fn device_status(daemon: &Daemon, device: &Arc<Device>) -> Result<StatusRe
             .last_outcome()
             .map(|(job, outcome)| LastJob { job, outcome }),
         current_profile: current,
-        next_verification: device.next_verification().map(crate::time::rfc3339_seconds),
+        next_verification: device
+            .next_verification()
+            .map(chromacal_formats::time::rfc3339_seconds),
         unfinished_runs,
     })
 }
@@ -714,7 +668,7 @@ async fn profile(
             );
         }
     };
-    let (profile, text) = match read_current(&device) {
+    let (profile, text) = match device.read_current() {
         Ok(Some(c)) => c,
         Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
         Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),
@@ -783,7 +737,7 @@ async fn profile(
 async fn report(Dev(device): Dev) -> Response {
     use crate::html_report::{HistoryView, ReportInput, readings_of, report_html};
     use crate::verification::Criteria;
-    let profile = match read_current(&device) {
+    let profile = match device.read_current() {
         Ok(Some((profile, _))) => profile,
         Ok(None) => return refusal(StatusCode::NOT_FOUND, "there is no current profile yet"),
         Err(e) => return refusal(StatusCode::INTERNAL_SERVER_ERROR, e),

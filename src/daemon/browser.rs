@@ -124,7 +124,7 @@ pub fn see_other(to: &'static str, cookie: Option<String>) -> Response {
 
 /// `GET /login`.
 pub fn login_page() -> Response {
-    html(StatusCode::OK, login_html(&super::mqtt::host_name(), None))
+    html(StatusCode::OK, login_html(&super::host_name(), None))
 }
 
 /// `POST /login` with the form's `token`: a session cookie and back to the fleet page,
@@ -132,7 +132,7 @@ pub fn login_page() -> Response {
 pub fn login(sessions: &Sessions, token: Option<&str>, form: &[u8]) -> Response {
     let sent = form_value(form, "token");
     let right = match (token, sent.as_deref()) {
-        (Some(token), Some(sent)) => super::api::same_secret(token, sent.trim()),
+        (Some(token), Some(sent)) => super::access::same_secret(token, sent.trim()),
         _ => false,
     };
     if !right {
@@ -140,7 +140,7 @@ pub fn login(sessions: &Sessions, token: Option<&str>, form: &[u8]) -> Response 
         return html(
             StatusCode::UNAUTHORIZED,
             login_html(
-                &super::mqtt::host_name(),
+                &super::host_name(),
                 Some("That is not the daemon's API token."),
             ),
         );
@@ -178,10 +178,7 @@ fn form_value(body: &[u8], key: &str) -> Option<String> {
 pub async fn fleet_page(daemon: &Daemon, logout: bool) -> Response {
     let mut rows = Vec::new();
     for device in daemon.devices() {
-        let profile = super::api::read_current(&device)
-            .ok()
-            .flatten()
-            .map(|(p, _)| p);
+        let profile = device.read_current().ok().flatten().map(|(p, _)| p);
         let metrics = &daemon.bus.metrics;
         let (whites, drift) = metrics.whites(&device.name);
         let verification = profile
@@ -205,7 +202,9 @@ pub async fn fleet_page(daemon: &Daemon, logout: bool) -> Response {
             retiring: device.is_retired(),
             profile: profile.map(|p| (p.id, p.report.held_out.map(|h| h.mean))),
             verification,
-            next_verification: device.next_verification().map(crate::time::rfc3339_seconds),
+            next_verification: device
+                .next_verification()
+                .map(chromacal_formats::time::rfc3339_seconds),
             whites,
             drift,
         });
@@ -213,7 +212,7 @@ pub async fn fleet_page(daemon: &Daemon, logout: bool) -> Response {
     html(
         StatusCode::OK,
         fleet_html(
-            &super::mqtt::host_name(),
+            &super::host_name(),
             env!("CARGO_PKG_VERSION"),
             &rows,
             logout,

@@ -4,9 +4,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::calibrate::warmup::WarmupStep;
-use crate::fit::stats::ErrorStats;
-use crate::measurement::Role;
 use crate::profile::store::{HistoryEntry, VerificationRecord};
+use chromacal_model::fit::stats::ErrorStats;
+use chromacal_model::measurement::Role;
 
 /// The jobs the daemon runs, one at a time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

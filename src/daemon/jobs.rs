@@ -15,22 +15,22 @@ use crate::calibrate::session::{
     CalibrateError, discard_run, finish_run, new_run_id, now_rfc3339, reopen_run, start_run,
 };
 use crate::calibrate::warmup::wait_for_warmup;
-use crate::color::spaces::xyz_to_xyy;
-use crate::display::PatchDisplay;
-use crate::fit::FitError;
-use crate::fit::cancel::StopCheck;
-use crate::fit::primaries::Corrected;
-use crate::fit::spatial::choose_spatial_map;
-use crate::fit::stats::ErrorStats;
-use crate::fit::validate::{delta_e00_xyz, evaluate};
-use crate::instrument::{Instrument, ReadingStatus};
 use crate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalHeader};
-use crate::measurement::{Role, Units};
-use crate::model::{MonitorModel, ScreenPosition};
-use crate::plan::{Plan, make_uniformity_plan, make_verification_plan};
 use crate::profile::store::VerificationRecord;
 use crate::profile::{Profile, Provenance, SCHEMA_VERSION};
-use crate::time::TimeSource;
+use chromacal_color::spaces::xyz_to_xyy;
+use chromacal_display::PatchDisplay;
+use chromacal_formats::time::TimeSource;
+use chromacal_instruments::{Instrument, ReadingStatus};
+use chromacal_model::fit::FitError;
+use chromacal_model::fit::cancel::StopCheck;
+use chromacal_model::fit::primaries::Corrected;
+use chromacal_model::fit::spatial::choose_spatial_map;
+use chromacal_model::fit::stats::ErrorStats;
+use chromacal_model::fit::validate::{delta_e00_xyz, evaluate};
+use chromacal_model::measurement::{Role, Units};
+use chromacal_model::plan::{Plan, make_uniformity_plan, make_verification_plan};
+use chromacal_model::{MonitorModel, ScreenPosition};
 
 /// A job id: the kind and a run id.
 pub fn new_job_id(kind: JobKind) -> String {
@@ -170,7 +170,11 @@ pub(crate) async fn run_job(
     drop(turn);
     // The window leaves the screen, and its LUT, to the user between jobs.
     if let Some(hardware) = guard.as_mut() {
-        if let Err(e) = crate::calibrate::video_lut::release(device.store.root(), hardware, None) {
+        if let Err(e) = crate::calibrate::video_lut::release(
+            device.store.root(),
+            hardware,
+            crate::calibrate::video_lut::RunEnd::Unpublished,
+        ) {
             tracing::warn!(device = %device.name, error = %e, "cannot put the video LUT back after the job");
         }
         if let Some(window) = hardware.display.window() {
@@ -689,7 +693,10 @@ async fn uniformity(
         }
     };
     // The grid readings, scaled to the centre white of their time.
-    let grid: Vec<(crate::measurement::Measurement, crate::color::Xyz)> = journal
+    let grid: Vec<(
+        chromacal_model::measurement::Measurement,
+        chromacal_color::Xyz,
+    )> = journal
         .entries()
         .iter()
         .filter(|m| m.role == Role::Uniformity && m.reading.status == ReadingStatus::Ok)
@@ -701,7 +708,7 @@ async fn uniformity(
         let noise = profile.report.noise.clone();
         let stop = stop.clone();
         tokio::task::spawn_blocking(move || {
-            crate::fit::cancel::with_stop(Some(stop), || {
+            chromacal_model::fit::cancel::with_stop(Some(stop), || {
                 let grid: Vec<Corrected<'_>> = grid
                     .iter()
                     .map(|(measurement, xyz)| Corrected {
@@ -710,7 +717,7 @@ async fn uniformity(
                     })
                     .collect();
                 let chosen = choose_spatial_map(&model, &grid, &noise);
-                (!crate::fit::cancel::requested()).then_some(chosen)
+                (!chromacal_model::fit::cancel::requested()).then_some(chosen)
             })
         })
         .await

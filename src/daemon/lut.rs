@@ -17,16 +17,14 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use tokio::sync::broadcast::error::TryRecvError;
-use x11rb::connection::Connection;
-use x11rb::protocol::Event as XEvent;
-use x11rb::protocol::randr::{ConnectionExt as _, NotifyMask};
 
 use super::events::Event;
 use super::jobs::current_profile;
 use super::{Device, DeviceEvent};
 use crate::calibrate::video_lut::desktop_lut_loader;
 use crate::config::Sink;
-use crate::x11::{GammaRamp, OutputInfo, OutputSelector, X11Error, XDisplay};
+use chromacal_display::x11::watch::Watch;
+use chromacal_display::x11::{GammaRamp, OutputSelector, X11Error};
 
 /// How often the keeper looks at its inputs.
 const TICK: Duration = Duration::from_millis(100);
@@ -43,47 +41,6 @@ pub(crate) fn start(device: &Arc<Device>) {
         .spawn(move || Keeper::new(device).run(events));
     if let Err(e) = spawned {
         tracing::error!(error = %e, "cannot start the video LUT keeper");
-    }
-}
-
-/// The X connection the keeper watches RandR events on, and its output.
-struct Watch {
-    x: XDisplay,
-    output: OutputInfo,
-}
-
-impl Watch {
-    fn open(x_display: Option<&str>, selector: &OutputSelector) -> Result<Self, X11Error> {
-        let x = XDisplay::open(x_display)?;
-        let output = x.output(selector)?;
-        x.conn
-            .randr_select_input(
-                x.root,
-                NotifyMask::SCREEN_CHANGE | NotifyMask::CRTC_CHANGE | NotifyMask::OUTPUT_CHANGE,
-            )
-            .map_err(|e| x.protocol(e))?;
-        x.sync()?;
-        Ok(Watch { x, output })
-    }
-
-    /// Whether a RandR event came since the last call; an error when the
-    /// connection is gone.
-    fn randr_changed(&self) -> Result<bool, X11Error> {
-        let mut changed = false;
-        while let Some(event) = self
-            .x
-            .conn
-            .poll_for_event()
-            .map_err(|e| self.x.protocol(e))?
-        {
-            if matches!(
-                event,
-                XEvent::RandrScreenChangeNotify(_) | XEvent::RandrNotify(_)
-            ) {
-                changed = true;
-            }
-        }
-        Ok(changed)
     }
 }
 
@@ -237,7 +194,7 @@ impl Keeper {
             w.output
                 .edid
                 .as_deref()
-                .and_then(|b| crate::edid::Edid::parse(b).ok()),
+                .and_then(|b| chromacal_formats::edid::Edid::parse(b).ok()),
         ) && (made_on.manufacturer != here.manufacturer
             || made_on.product_code != here.product_code
             || made_on.serial() != here.serial())

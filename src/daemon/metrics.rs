@@ -19,8 +19,8 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::Registry;
 
 use super::events::Event;
-use crate::fit::stats::ErrorStats;
-use crate::instrument::ReadingStatus;
+use chromacal_instruments::ReadingStatus;
+use chromacal_model::fit::stats::ErrorStats;
 
 /// The content type of the answer (OpenMetrics text, which Prometheus reads).
 pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";

@@ -12,6 +12,7 @@
 //! daemon stopped any way (SIGTERM, a crash, a power cut) resumes the calibration at its
 //! next start with nothing lost or measured twice.
 
+pub mod access;
 pub mod api;
 pub mod browser;
 pub mod client;
@@ -36,6 +37,7 @@ use crate::calibrate::devices::Devices;
 use crate::calibrate::session::{discard_run, newest_resumable, unfinished_runs};
 use crate::config::devices::{NoDevice, find_device};
 use crate::config::{DeviceConfig, LoadedConfig, OnStart, device_configs};
+use crate::profile::Profile;
 use crate::profile::store::ProfileStore;
 use events::{Event, JobKind, JobStatus};
 
@@ -143,6 +145,17 @@ impl Bus {
     }
 }
 
+/// This machine's host name (the kernel's): the daemon's name in MQTT topics and on
+/// the fleet's login page.
+pub fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .map(|h| h.trim().to_string())
+        .filter(|h| !h.is_empty())
+        .or_else(|| std::env::var("HOSTNAME").ok().filter(|h| !h.is_empty()))
+        .unwrap_or_else(|| "localhost".into())
+}
+
 /// One display–instrument pair of the daemon, with its own config, store, schedule
 /// and job slot (`[[device]]`; a config without them is one device).
 pub struct Device {
@@ -188,6 +201,22 @@ pub enum JobRefused {
 }
 
 impl Device {
+    /// The current profile and its text; an error says why it does not read.
+    pub fn read_current(&self) -> Result<Option<(Profile, String)>, String> {
+        let path = self.store().current_path();
+        let text = match chromacal_formats::durable::read_text_limited(
+            &path,
+            chromacal_formats::durable::limits::PROFILE,
+        ) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(format!("{}: {e}", path.display())),
+        };
+        Profile::from_toml(&text, &path.display().to_string())
+            .map(|p| Some((p, text)))
+            .map_err(|e| e.to_string())
+    }
+
     /// A device on `store`, holding its lock (`ProfileStore::lock`) while it lives.
     pub fn new(
         config: DeviceConfig,
@@ -281,7 +310,7 @@ impl Device {
         // map of it, or one rolled back to).
         let calibrated = self.store.history().ok().and_then(|h| {
             let entry = h.entries.iter().rev().find(|e| e.how == "calibration")?;
-            crate::time::parse_rfc3339(&entry.at)
+            chromacal_formats::time::parse_rfc3339(&entry.at)
         });
         let verification = profile
             .as_ref()
@@ -293,7 +322,7 @@ impl Device {
             calibrated,
             verification
                 .as_ref()
-                .and_then(|v| Some((crate::time::parse_rfc3339(&v.at)?, v.stats))),
+                .and_then(|v| Some((chromacal_formats::time::parse_rfc3339(&v.at)?, v.stats))),
             self.loaded.config.schedule.threshold_de00,
         );
         if let Some(mqtt) = self.bus.mqtt.get() {
@@ -332,7 +361,7 @@ impl Device {
             id: jobs::new_job_id(kind),
             kind,
             origin: origin.to_string(),
-            started: crate::time::now_rfc3339(),
+            started: chromacal_formats::time::now_rfc3339(),
             phase: "starting".into(),
             done: 0,
             total: 0,
@@ -572,7 +601,10 @@ fn load_or_create_token(path: &Path) -> Result<String, DaemonError> {
             path.display()
         )));
     }
-    match crate::durable::read_text_limited(path, crate::durable::limits::PROFILE) {
+    match chromacal_formats::durable::read_text_limited(
+        path,
+        chromacal_formats::durable::limits::PROFILE,
+    ) {
         Ok(text) if !text.trim().is_empty() => {
             // Others could read it, so it may be known; but it is the user's, and
             // clients may hold it: never overwritten, the start refused instead.
@@ -634,7 +666,7 @@ fn open_device(
     let lock = store.lock("chromacal daemon")?;
     refuse_a_simulation_over_a_measured_screen(&config, &store)?;
     // A calibration killed while it held a window's LUT left the user's ramp.
-    crate::display::lut::restore_pending_logged(store.root());
+    chromacal_display::lut::restore_pending_logged(store.root());
     let turn = config.shared_instrument.as_ref().map(|name| {
         let mut turns = turns.lock().unwrap_or_else(|e| e.into_inner());
         turns.entry(name.clone()).or_default().clone()
@@ -660,7 +692,7 @@ fn refuse_a_simulation_over_a_measured_screen(
     let Some(display) = profile.provenance.display.as_deref() else {
         return Ok(());
     };
-    if crate::display::simulated::is_simulated_display(display) {
+    if chromacal_display::simulated::is_simulated_display(display) {
         return Ok(());
     }
     let instrument = profile
@@ -807,7 +839,7 @@ pub async fn run(loaded: LoadedConfig, options: DaemonOptions) -> Result<(), Dae
         restore_device(&device);
     }
     tokio::spawn(lut::watch_resume(daemon.bus.clone()));
-    let app = api::router(daemon.clone(), api::Access { owner, token });
+    let app = api::router(daemon.clone(), access::Access { owner, token });
     serve::raise_descriptor_limit();
     tokio::spawn(serve::serve(
         serve::Listener::Unix(unix),
@@ -862,7 +894,7 @@ pub async fn run(loaded: LoadedConfig, options: DaemonOptions) -> Result<(), Dae
         if let Ok(mut hardware) = device.hardware.try_lock()
             && let Some(hardware) = hardware.as_mut()
         {
-            use crate::display::PatchDisplay;
+            use chromacal_display::PatchDisplay;
             let _ = tokio::time::timeout(Duration::from_secs(2), hardware.display.blank()).await;
             hardware.instrument.close();
         }

@@ -37,8 +37,8 @@ use super::events::Event;
 use super::metrics::Metrics;
 use super::serve::LogThrottle;
 use crate::config::MqttConfig;
-use crate::fit::stats::ErrorStats;
 use crate::profile::store::VerificationRecord;
+use chromacal_model::fit::stats::ErrorStats;
 
 /// The largest packet sent or taken, bytes.
 const MAX_PACKET: usize = 1 << 20;
@@ -139,16 +139,6 @@ fn topic_level(text: &str) -> String {
         .collect()
 }
 
-/// This machine's host name (the kernel's), for the topics.
-pub fn host_name() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .ok()
-        .map(|h| h.trim().to_string())
-        .filter(|h| !h.is_empty())
-        .or_else(|| std::env::var("HOSTNAME").ok().filter(|h| !h.is_empty()))
-        .unwrap_or_else(|| "localhost".into())
-}
-
 /// A user name on the first line and a password on the second; the file must not be
 /// readable by others.
 /// What a broker's refusal of the connection (its CONNACK code, MQTT 3.1.1 §3.2.2.3)
@@ -202,8 +192,11 @@ fn read_credentials(path: &Path) -> Result<(String, String), MqttError> {
             mode & 0o777
         )));
     }
-    let text = crate::durable::read_text_limited(path, crate::durable::limits::PROFILE)
-        .map_err(|e| error(e.to_string()))?;
+    let text = chromacal_formats::durable::read_text_limited(
+        path,
+        chromacal_formats::durable::limits::PROFILE,
+    )
+    .map_err(|e| error(e.to_string()))?;
     let mut lines = text.lines();
     match (lines.next(), lines.next()) {
         (Some(user), Some(password)) if !user.trim().is_empty() => {
@@ -249,7 +242,7 @@ impl Mqtt {
             .rsplit_once(':')
             .and_then(|(a, p)| Some((a.trim_matches(['[', ']']), p.parse::<u16>().ok()?)))
             .ok_or_else(|| MqttError::Broker(config.broker.clone()))?;
-        let host = topic_level(&config.host.clone().unwrap_or_else(host_name));
+        let host = topic_level(&config.host.clone().unwrap_or_else(super::host_name));
         let root = format!("{}/{host}", config.prefix.trim_end_matches('/'));
         let client_id = config
             .client_id
@@ -608,7 +601,7 @@ fn verification_state(record: &VerificationRecord) -> Value {
 }
 
 fn now() -> String {
-    crate::time::now_rfc3339_millis()
+    chromacal_formats::time::now_rfc3339_millis()
 }
 
 /// Update a device's state with `event`; true if it changed what the state says

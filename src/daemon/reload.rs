@@ -183,7 +183,7 @@ impl Daemon {
         // Leave the screen black and the instrument out of remote mode; the
         // successor opens them again.
         if let Some(mut hardware) = old.hardware.lock().await.take() {
-            use crate::display::PatchDisplay;
+            use chromacal_display::PatchDisplay;
             let _ = tokio::time::timeout(Duration::from_secs(2), hardware.display.blank()).await;
             hardware.instrument.close();
         }

@@ -31,7 +31,7 @@ use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 use tower::ServiceExt;
 
-use super::api::Peer;
+use super::access::Peer;
 use crate::config::daemon::DaemonConfig;
 
 /// The per-connection limits, from `[daemon]`.

@@ -9,22 +9,18 @@
 //! primary-constancy check, and a surround dependence are listed in the profile's
 //! description and returned as notes.
 
-pub mod cal;
 pub mod colord;
-pub mod icc;
-pub mod icc_lut;
-pub mod matrix_trc;
-pub mod psychopy;
 
 use std::path::Path;
 
-use crate::fit::checks::Verdict;
-use crate::measurement::{MeasurementSet, Units};
 use crate::measurement_file::read_measurements;
-use crate::model::target::{CalibrationCurves, Target, TargetError, calibration_curves};
 use crate::profile::Profile;
-use icc::{IccText, IccVersion};
-use matrix_trc::MatrixTrc;
+use chromacal_formats::icc::{self, IccText, IccVersion};
+use chromacal_formats::matrix_trc::MatrixTrc;
+use chromacal_formats::{cal, psychopy};
+use chromacal_model::fit::checks::Verdict;
+use chromacal_model::measurement::{MeasurementSet, Units};
+use chromacal_model::target::{CalibrationCurves, Target, TargetError, calibration_curves};
 
 /// The formats `export` writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -142,7 +138,7 @@ pub struct Exported {
 pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
     let report = &profile.report;
     let mut notes = Vec::new();
-    if !matches!(profile.model.spatial, crate::model::SpatialMap::Uniform) {
+    if !matches!(profile.model.spatial, chromacal_model::SpatialMap::Uniform) {
         let falloff = report
             .spatial
             .largest_falloff_percent
@@ -270,7 +266,7 @@ fn short_description(profile: &Profile, calibration: Option<&CalibrationCurves>)
         .to_zoned(jiff::tz::TimeZone::UTC)
         .date();
     let calibrated = calibration.map_or("native".to_string(), |k| {
-        use crate::model::target::WhiteTarget;
+        use chromacal_model::target::WhiteTarget;
         let white = match k.target.white {
             WhiteTarget::Native => "native white".to_string(),
             WhiteTarget::Chromaticity([x, y])
@@ -397,7 +393,7 @@ pub fn export(
         }
         Format::Ti3 => {
             let set = measurements(profile, options)?;
-            crate::cgats::to_ti3(&set).into_bytes()
+            chromacal_formats::cgats::to_ti3(&set).into_bytes()
         }
         Format::Cal => {
             let curves = calibration.as_ref().ok_or(ExportError::NoTarget)?;
@@ -466,7 +462,7 @@ pub fn parse_target(
     tone: Option<&str>,
     luminance: Option<&str>,
 ) -> Result<Option<Target>, ExportError> {
-    use crate::model::target::{ToneCurve, WhiteTarget, parse_tone, parse_white};
+    use chromacal_model::target::{ToneCurve, WhiteTarget, parse_tone, parse_white};
     if white.is_none() && tone.is_none() && luminance.is_none() {
         return Ok(None);
     }

@@ -15,17 +15,17 @@ mod page;
 
 use std::path::Path;
 
-use crate::color::adaptation::{AdaptationTransform, adapt};
-use crate::color::gamut::{REFERENCE_SPACES, space_uv};
-use crate::color::spaces::{Xyy, xyy_to_xyz, xyz_to_srgb8, xyz_to_uv_prime};
-use crate::color::spectrum::Observer;
-use crate::color::{UvPrime, Xyz};
-use crate::measurement::{MeasurementSet, Role};
-use crate::model::transfer::{Cowan, GainOffsetGamma, LawKind, Power, ThreeTerm, TransferLaw};
-use crate::model::{MonitorModel, ScreenPosition};
 use crate::profile::Profile;
 use crate::profile::store::ProfileStore;
 use crate::verification::Criteria;
+use chromacal_color::adaptation::{AdaptationTransform, adapt};
+use chromacal_color::gamut::{REFERENCE_SPACES, space_uv};
+use chromacal_color::spaces::{Xyy, xyy_to_xyz, xyz_to_srgb8, xyz_to_uv_prime};
+use chromacal_color::spectrum::Observer;
+use chromacal_color::{UvPrime, Xyz};
+use chromacal_model::measurement::{MeasurementSet, Role};
+use chromacal_model::transfer::{Cowan, GainOffsetGamma, LawKind, Power, ThreeTerm, TransferLaw};
+use chromacal_model::{MonitorModel, ScreenPosition};
 
 use figures::{Chromaticities, Curve, FigureError, GridPoint, TimeSeries};
 
@@ -153,7 +153,7 @@ fn sampled(law: &TransferLaw) -> Curve {
 /// smallest drive measured) stands in for it.
 pub fn candidate_curve(
     kind: LawKind,
-    parameters: &[crate::fit::laws::FittedParameter],
+    parameters: &[chromacal_model::fit::laws::FittedParameter],
     toe: f64,
 ) -> Option<Curve> {
     let get = |name: &str| parameters.iter().find(|p| p.name == name).map(|p| p.value);
@@ -320,7 +320,7 @@ pub struct HistoryView {
 }
 
 fn epoch_seconds(rfc3339: &str) -> Option<f64> {
-    crate::time::parse_rfc3339(rfc3339)?
+    chromacal_formats::time::parse_rfc3339(rfc3339)?
         .duration_since(std::time::UNIX_EPOCH)
         .ok()
         .map(|d| d.as_secs_f64())
@@ -411,7 +411,7 @@ pub fn readings_of(profile: &Profile) -> Result<MeasurementSet, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::laws::FittedParameter;
+    use chromacal_model::fit::laws::FittedParameter;
 
     fn parameter(name: &str, value: f64) -> FittedParameter {
         FittedParameter {

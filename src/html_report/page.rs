@@ -13,15 +13,15 @@ use super::{
     ReportError, ReportInput, candidate_curve, chromaticities, measured_greys, measured_shares,
     sampled, smallest_drive, swatch, uniformity_data,
 };
-use crate::color::Xyz;
-use crate::color::spaces::xyz_to_xyy;
-use crate::fit::checks::Verdict;
-use crate::fit::stats::ErrorStats;
-use crate::model::CHANNELS;
-use crate::model::spatial::SpatialMap;
-use crate::model::transfer::LawKind;
 use crate::profile::Profile;
 use crate::verification::{PatchUse, Verification, verify};
+use chromacal_color::Xyz;
+use chromacal_color::spaces::xyz_to_xyy;
+use chromacal_model::CHANNELS;
+use chromacal_model::fit::checks::Verdict;
+use chromacal_model::fit::stats::ErrorStats;
+use chromacal_model::spatial::SpatialMap;
+use chromacal_model::transfer::LawKind;
 
 const STYLE: &str = "
 body { font-family: sans-serif; max-width: 1100px; margin: 1.5em auto; padding: 0 1em; color: #222; }
@@ -341,7 +341,8 @@ fn patches(verified: Option<&Verification>) -> Markup {
         return html! {};
     };
     let white = v.white.white;
-    let lab = |l: &crate::color::Lab| format!("{:.2} {} {}", l.l, signed(l.a, 2), signed(l.b, 2));
+    let lab =
+        |l: &chromacal_color::Lab| format!("{:.2} {} {}", l.l, signed(l.a, 2), signed(l.b, 2));
     html! {
         section #patches {
             h2 { "Patches" }
@@ -484,7 +485,7 @@ fn transfer(input: &ReportInput) -> Result<Markup, ReportError> {
             .map(|set| smallest_drive(set, channel))
             .unwrap_or(1.0 / 255.0);
         let (title, corrected) = law_title(profile, channel);
-        let candidate = |kind: LawKind, params: &[crate::fit::laws::FittedParameter]| {
+        let candidate = |kind: LawKind, params: &[chromacal_model::fit::laws::FittedParameter]| {
             candidate_curve(kind, params, toe)
         };
         let candidates: Vec<(String, Curve)> = profile
@@ -748,7 +749,7 @@ fn uniformity(input: &ReportInput, verified: Option<&Verification>) -> Result<Ma
         note(&format!(
             "{} grid reading(s) under {:.0} % of the centre's light were left out of the spatial map: the instrument did not see the patch there (a real instrument has to be moved to each position: --prompt-positions). The table below shows them as read.",
             spatial.unseen,
-            100.0 * crate::fit::spatial::MIN_PLAUSIBLE_GAIN
+            100.0 * chromacal_model::fit::spatial::MIN_PLAUSIBLE_GAIN
         ))
     });
     let cells = verified

@@ -11,11 +11,11 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::fit::FitReport;
-use crate::instrument::InstrumentInfo;
-use crate::measurement::Units;
-use crate::model::MonitorModel;
-use crate::model::target::CalibrationCurves;
+use chromacal_instruments::InstrumentInfo;
+use chromacal_model::MonitorModel;
+use chromacal_model::fit::FitReport;
+use chromacal_model::measurement::Units;
+use chromacal_model::target::CalibrationCurves;
 
 /// Version of the profile file format. Readers refuse other versions.
 pub const SCHEMA_VERSION: u32 = 1;
@@ -76,7 +76,7 @@ pub struct Provenance {
     /// native window on an output that has one: its identity, and the primaries and
     /// white its maker states, set beside the measured ones.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub edid: Option<crate::edid::Edid>,
+    pub edid: Option<chromacal_formats::edid::Edid>,
 }
 
 /// A monitor profile.
@@ -177,7 +177,7 @@ impl Profile {
     /// an EDID.
     pub fn edid_comparison(&self) -> Option<EdidComparison> {
         let edid = self.provenance.edid.as_ref()?;
-        let xy = |xyz: crate::color::Xyz| {
+        let xy = |xyz: chromacal_color::Xyz| {
             let sum = xyz.x + xyz.y + xyz.z;
             (sum > 0.0).then(|| [xyz.x / sum, xyz.y / sum])
         };
@@ -249,16 +249,19 @@ impl Profile {
         };
         // Binary (an ICC profile) does not read as text: only then is the file's head
         // read again, to say what it is.
-        let text = crate::durable::read_text_limited(path, crate::durable::limits::PROFILE)
-            .map_err(
-                |source| match file_head(path).as_deref().and_then(other_kind) {
-                    Some(kind) => other(kind),
-                    None => ProfileError::Io {
-                        path: path.display().to_string(),
-                        source,
-                    },
+        let text = chromacal_formats::durable::read_text_limited(
+            path,
+            chromacal_formats::durable::limits::PROFILE,
+        )
+        .map_err(
+            |source| match file_head(path).as_deref().and_then(other_kind) {
+                Some(kind) => other(kind),
+                None => ProfileError::Io {
+                    path: path.display().to_string(),
+                    source,
                 },
-            )?;
+            },
+        )?;
         let head = &text.as_bytes()[..text.len().min(HEAD_BYTES)];
         if let Some(kind) = other_kind(head) {
             return Err(other(kind));
@@ -281,10 +284,10 @@ impl Profile {
     }
 
     /// Write to `path`, a file the user named, atomically (see
-    /// [`crate::durable::write_atomic_named`]).
+    /// [`chromacal_formats::durable::write_atomic_named`]).
     pub fn write(&self, path: &Path) -> Result<(), ProfileError> {
         let text = self.to_toml()?;
-        crate::durable::write_atomic_named(path, text.as_bytes()).map_err(|source| {
+        chromacal_formats::durable::write_atomic_named(path, text.as_bytes()).map_err(|source| {
             ProfileError::Io {
                 path: path.display().to_string(),
                 source,
@@ -353,7 +356,7 @@ const HEAD_BYTES: usize = 128;
 fn file_head(path: &Path) -> Option<Vec<u8>> {
     use std::io::Read as _;
     let mut head = Vec::with_capacity(HEAD_BYTES);
-    crate::durable::open_regular(path)
+    chromacal_formats::durable::open_regular(path)
         .ok()?
         .take(HEAD_BYTES as u64)
         .read_to_end(&mut head)

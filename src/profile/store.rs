@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::durable::write_atomic;
-use crate::fit::stats::ErrorStats;
+use chromacal_formats::durable::write_atomic;
+use chromacal_model::fit::stats::ErrorStats;
 
 /// Why the store could not do what was asked.
 #[derive(Debug, thiserror::Error)]
@@ -118,7 +118,7 @@ pub struct VerificationRecord {
 }
 
 fn now_rfc3339() -> String {
-    crate::time::now_rfc3339()
+    chromacal_formats::time::now_rfc3339()
 }
 
 /// Profiles kept in the history unless configured otherwise.
@@ -266,7 +266,10 @@ impl ProfileStore {
     /// The history (empty when nothing was published yet).
     pub fn history(&self) -> Result<History, StoreError> {
         let path = self.history_path();
-        match crate::durable::read_text_limited(&path, crate::durable::limits::PROFILE) {
+        match chromacal_formats::durable::read_text_limited(
+            &path,
+            chromacal_formats::durable::limits::PROFILE,
+        ) {
             Ok(text) => serde_json::from_str(&text).map_err(|e| StoreError::Corrupt {
                 path: path.clone(),
                 message: e.to_string(),
@@ -354,10 +357,13 @@ impl ProfileStore {
                 })?,
         };
         let path = self.profile_path(&target)?;
-        let text = crate::durable::read_text_limited(&path, crate::durable::limits::PROFILE)
-            .map_err(|e| {
-                StoreError::NoRollback(format!("profile '{target}' is not in the store ({e})"))
-            })?;
+        let text = chromacal_formats::durable::read_text_limited(
+            &path,
+            chromacal_formats::durable::limits::PROFILE,
+        )
+        .map_err(|e| {
+            StoreError::NoRollback(format!("profile '{target}' is not in the store ({e})"))
+        })?;
         let profile =
             super::Profile::from_toml(&text, &path.display().to_string()).map_err(|e| {
                 StoreError::NoRollback(format!(
@@ -406,7 +412,10 @@ impl ProfileStore {
     /// Every verification, oldest first (a line torn by a crash is skipped).
     pub fn verifications(&self) -> Result<Vec<VerificationRecord>, StoreError> {
         let path = self.verifications_path();
-        let text = match crate::durable::read_text_limited(&path, crate::durable::limits::JOURNAL) {
+        let text = match chromacal_formats::durable::read_text_limited(
+            &path,
+            chromacal_formats::durable::limits::JOURNAL,
+        ) {
             Ok(t) => t,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
             Err(e) => return Err(io_error(&path)(e)),
@@ -467,7 +476,8 @@ mod tests {
     /// A real profile's TOML with id `id` (rollback reads what it restores), fitted
     /// once to a simulated run.
     fn profile_text(id: &str) -> String {
-        static FITTED: std::sync::OnceLock<crate::fit::FittedModel> = std::sync::OnceLock::new();
+        static FITTED: std::sync::OnceLock<chromacal_model::fit::FittedModel> =
+            std::sync::OnceLock::new();
         let fitted = FITTED.get_or_init(|| {
             let config = crate::config::parse_config("", "test").unwrap();
             let dir = tempfile::tempdir().unwrap();
@@ -480,13 +490,14 @@ mod tests {
                 ))
                 .unwrap()
                 .unwrap();
-            crate::fit::fit_monitor(&journal.measurement_set(), &Default::default()).unwrap()
+            chromacal_model::fit::fit_monitor(&journal.measurement_set(), &Default::default())
+                .unwrap()
         });
         super::super::Profile {
             schema_version: super::super::SCHEMA_VERSION,
             id: id.to_string(),
             created: "2026-12-01T00:00:00Z".into(),
-            units: crate::measurement::Units::Absolute,
+            units: chromacal_model::measurement::Units::Absolute,
             model: fitted.model.clone(),
             provenance: super::super::Provenance {
                 source: "test".into(),

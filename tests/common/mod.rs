@@ -9,9 +9,9 @@ pub mod xserver;
 
 use std::path::PathBuf;
 
-use chromacal::color::Xyz;
-use chromacal::instrument::{Reading, ReadingStatus};
-use chromacal::measurement::{Measurement, MeasurementSet, Role, Units};
+use chromacal_color::Xyz;
+use chromacal_instruments::{Reading, ReadingStatus};
+use chromacal_model::measurement::{Measurement, MeasurementSet, Role, Units};
 
 /// `../shared/data`, relative to the crate root.
 pub fn shared_data_dir() -> PathBuf {
@@ -110,7 +110,7 @@ pub fn with_fixed_plan(config_text: &str) -> String {
 pub fn simulate(
     config_text: &str,
     base_dir: &std::path::Path,
-) -> (MeasurementSet, chromacal::model::MonitorModel) {
+) -> (MeasurementSet, chromacal_model::MonitorModel) {
     let config_text = &with_fixed_plan(config_text);
     let config = chromacal::config::parse_config(config_text, "test config").unwrap();
     let dir = tempfile::tempdir().unwrap();
@@ -142,33 +142,33 @@ pub fn isetbio_monitor(stem: &str, extra: &str) -> String {
 pub fn virtual_monitor(
     preset: &str,
     drive: [f64; 3],
-) -> std::sync::Arc<std::sync::Mutex<chromacal::sim::monitor::VirtualMonitor>> {
-    let clock = std::sync::Arc::new(chromacal::sim::clock::VirtualClock::new(None));
-    let mut monitor = chromacal::sim::monitor::VirtualMonitor::new(
-        chromacal::sim::presets::preset(preset).unwrap(),
+) -> std::sync::Arc<std::sync::Mutex<chromacal_sim::monitor::VirtualMonitor>> {
+    let clock = std::sync::Arc::new(chromacal_sim::clock::VirtualClock::new(None));
+    let mut monitor = chromacal_sim::monitor::VirtualMonitor::new(
+        chromacal_sim::presets::preset(preset).unwrap(),
         clock,
     )
     .unwrap();
-    monitor.show(chromacal::sim::monitor::centre_patch(drive));
+    monitor.show(chromacal_sim::monitor::centre_patch(drive));
     std::sync::Arc::new(std::sync::Mutex::new(monitor))
 }
 
 /// The true XYZ the monitor shows at its patch now.
 pub fn true_xyz(
-    monitor: &std::sync::Arc<std::sync::Mutex<chromacal::sim::monitor::VirtualMonitor>>,
-) -> chromacal::color::Xyz {
+    monitor: &std::sync::Arc<std::sync::Mutex<chromacal_sim::monitor::VirtualMonitor>>,
+) -> chromacal_color::Xyz {
     let m = monitor.lock().unwrap();
     m.xyz_at(m.patch_centre()).unwrap()
 }
 
 /// A meter on `monitor` with the default simulated instrument and these faults.
 pub fn meter(
-    monitor: &std::sync::Arc<std::sync::Mutex<chromacal::sim::monitor::VirtualMonitor>>,
-    faults: &chromacal::instrument::emulator::faults::FaultSpec,
-) -> chromacal::instrument::emulator::Meter {
-    chromacal::instrument::emulator::Meter::new(
+    monitor: &std::sync::Arc<std::sync::Mutex<chromacal_sim::monitor::VirtualMonitor>>,
+    faults: &chromacal_instruments::emulator::faults::FaultSpec,
+) -> chromacal_instruments::emulator::Meter {
+    chromacal_instruments::emulator::Meter::new(
         monitor.clone(),
-        chromacal::instrument::simulated::SimulatedInstrumentSpec::default(),
+        chromacal_instruments::simulated::SimulatedInstrumentSpec::default(),
         faults.device(),
         faults.seed,
     )
@@ -255,7 +255,7 @@ pub fn assert_same_model(
     profile: &chromacal::profile::Profile,
     reference: &chromacal::profile::Profile,
 ) {
-    use chromacal::color::spaces::xyz_to_xyy;
+    use chromacal_color::spaces::xyz_to_xyy;
     let (white, reference_white) = (profile.model.white(), reference.model.white());
     assert!(
         (white - reference_white).norm() / reference_white.norm() < 0.015,

@@ -1,0 +1,561 @@
+//! The colour reproduction function (seed §4): the XYZ a scene asks for, turned into
+//! the codes a calibrated display must be sent to show it.
+//!
+//! The path of one pixel, in order:
+//!
+//! 1. **tone** (`tone`): the scene's luminance mapped to what the display can give,
+//!    chromaticity kept;
+//! 2. **gamut** (`gamut`): a colour the display cannot show at that pixel's position
+//!    (the spatial map makes a corner's gamut smaller than the centre's) brought in
+//!    by the chosen mapping;
+//! 3. **inverse model**: linear light per channel (the primary matrix inverted, the
+//!    spatial gain of the position divided out, the additivity terms' fixed point
+//!    when the profile has them), then each channel's transfer law inverted, exactly
+//!    where the law has an inverse and by monotone search for tables;
+//! 4. **codes** at the display's bit depth, and what the model says they show, so
+//!    every pixel's remaining error (quantisation, mapping) is known.
+//!
+//! Spectra become XYZ before this (`spectral`), by one of the survey's methods.
+
+pub mod explain;
+pub mod gamut;
+pub mod gamut_bench;
+pub mod inverse_table;
+pub mod lut3d;
+pub mod render;
+pub mod scene;
+pub mod spectral;
+pub mod spectral_file;
+pub mod spectral_image;
+pub mod spectral_table;
+pub mod tone;
+
+use nalgebra::Matrix3;
+use serde::Serialize;
+
+use chromacal_color::Xyz;
+use chromacal_color::adaptation::{AdaptationTransform, adaptation_matrix};
+use chromacal_model::fit::stats::ErrorStats;
+use chromacal_model::fit::validate::delta_e00_xyz;
+use chromacal_model::{Drive, MonitorModel, ScreenPosition};
+use gamut::{GamutAt, GamutMapping, Smith, StoneCowanBeatty};
+use inverse_table::InverseTable;
+use tone::{SceneLuminance, ToneCurve, ToneOperator};
+
+/// Why a scene could not be rendered.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CrfError {
+    #[error("the profile's primary matrix is singular: no drive reproduces a given XYZ")]
+    SingularMatrix,
+    #[error("a bit depth of {0} (1 to 16)")]
+    BitDepth(u32),
+    #[error("the scene has no lit pixel, so the {0} tone operator has nothing to adapt to")]
+    NothingLit(String),
+    #[error(
+        "no lit pixel of the scene lies in Ward's focus area: give a --focus rectangle the scene covers"
+    )]
+    NothingLitInFocus,
+    #[error("pixel {index}: {what}")]
+    BadPixel { index: usize, what: String },
+    #[error("chromatic adaptation needs the scene's white, and none was given")]
+    NoSceneWhite,
+}
+
+/// How a scene is rendered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    /// Carry the scene's white to the display's (von Kries in the cone space of the
+    /// transform), for an observer adapted to the screen as in a dark room (seed
+    /// §4.2.3, §4.2.5); needs the scene's white. `None`: the XYZ as asked.
+    pub adaptation: Option<AdaptationTransform>,
+    pub tone: ToneOperator,
+    pub gamut: GamutMapping,
+    /// Bits per channel of the codes sent to the display.
+    pub bits: u32,
+    /// How the continuous drive becomes codes.
+    pub codes: CodeChoice,
+}
+
+/// How a pixel's continuous drive becomes codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CodeChoice {
+    /// Each channel rounded on its own.
+    Rounded,
+    /// Of the 8 codes around the drive (each channel's code below and above it), the
+    /// one the forward model shows nearest the colour asked for, in ΔE00. Rounding each
+    /// channel on its own is not that: at 8 bits, for 42 of 660 in-gamut colours a
+    /// neighbouring code was closer by more than 0.1 ΔE00 (worst 0.89 against 0.38),
+    /// since a code step moves the colour by different amounts, in different
+    /// directions, in each channel. Eight forward evaluations a pixel.
+    #[default]
+    NearestInDeltaE00,
+}
+
+/// One pixel of a scene: its XYZ (in the profile's units, cd/m² for an absolute
+/// profile) and where on the screen it is shown.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScenePixel {
+    pub xyz: Xyz,
+    pub position: ScreenPosition,
+}
+
+/// A scene: its pixels and, when known, its white (the XYZ of a perfect white in
+/// it, in the pixels' units).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    pub pixels: Vec<ScenePixel>,
+    pub white: Option<Xyz>,
+}
+
+/// What one pixel became.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RenderedPixel {
+    /// Codes per channel, 0 … 2^bits − 1.
+    pub codes: [u32; 3],
+    /// The colour asked for after tone reproduction.
+    pub target: [f64; 3],
+    /// What the gamut mapping made of it.
+    pub mapped: [f64; 3],
+    /// What the display shows for `codes` there, by the profile's forward model.
+    pub shown: [f64; 3],
+    /// The target lay outside the gamut at this position.
+    pub outside: bool,
+    /// ΔE00 between target and mapped colour (what the mapping changed).
+    pub mapping_delta_e00: f64,
+    /// ΔE00 between mapped and shown colour (the codes' quantisation and the
+    /// inversion).
+    pub inversion_delta_e00: f64,
+}
+
+/// What a rendering did, for the user.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RenderSummary {
+    pub pixels: usize,
+    pub outside: usize,
+    pub tone: String,
+    pub gamut: String,
+    /// ΔE00 the mapping introduced, over every pixel.
+    pub mapping_all: Option<ErrorStats>,
+    /// The same over the pixels that were outside.
+    pub mapping_outside: Option<ErrorStats>,
+    /// ΔE00 between mapped colour and what the codes show.
+    pub inversion: Option<ErrorStats>,
+    /// Stone–Cowan–Beatty's chosen transform, when that mapping was used.
+    pub stone_cowan_beatty: Option<StoneCowanBeatty>,
+    /// Smith's transform, when that mapping was used.
+    pub smith: Option<Smith>,
+}
+
+/// The scene-wide transform a mapping chose, if it is one.
+#[derive(Debug, Clone, PartialEq)]
+enum SceneTransform {
+    StoneCowanBeatty(StoneCowanBeatty),
+    Smith(Smith),
+    /// SGCK's source gamut, put on the display's centre white and black.
+    SgckSource(GamutAt),
+}
+
+/// A scene rendered for one display.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rendering {
+    pub pixels: Vec<RenderedPixel>,
+    pub summary: RenderSummary,
+}
+
+impl Rendering {
+    /// What `model` says the display shows for each pixel's codes, where `scene`
+    /// puts it: `shown`, `inversion_delta_e00` and the summary's inversion
+    /// recomputed. For codes chosen with a reduced model (`--explain`), this is the
+    /// full profile's prediction of what the screen will show.
+    pub fn shown_by(&mut self, model: &MonitorModel, scene: &Scene, bits: u32) {
+        let top = ((1u64 << bits) - 1) as f64;
+        let white = model.white();
+        for (pixel, at) in self.pixels.iter_mut().zip(&scene.pixels) {
+            let shown = model.forward(pixel.codes.map(|c| f64::from(c) / top), at.position);
+            pixel.shown = shown.into();
+            pixel.inversion_delta_e00 = delta_e00_xyz(&Xyz::from(pixel.mapped), &shown, &white);
+        }
+        let inversion: Vec<f64> = self.pixels.iter().map(|p| p.inversion_delta_e00).collect();
+        self.summary.inversion = ErrorStats::of(&inversion);
+    }
+}
+
+/// The colour reproduction function of one display: its model, prepared once.
+#[derive(Debug, Clone)]
+pub struct ColourReproduction<'a> {
+    model: &'a MonitorModel,
+    /// M⁻¹, computed once.
+    matrix_inverse: Matrix3<f64>,
+    /// E_c(1) of each channel.
+    full: [f64; 3],
+    /// Each law's inverse, tabulated.
+    tables: [InverseTable; 3],
+    /// The display's centre white: the reference white of every ΔE00 here.
+    white: Xyz,
+}
+
+impl<'a> ColourReproduction<'a> {
+    pub fn new(model: &'a MonitorModel) -> Result<Self, CrfError> {
+        let matrix_inverse = model.matrix.try_inverse().ok_or(CrfError::SingularMatrix)?;
+        Ok(ColourReproduction {
+            model,
+            matrix_inverse,
+            full: [0, 1, 2].map(|c| model.laws[c].full_drive_excitation()),
+            tables: [0, 1, 2].map(|c| InverseTable::of(&model.laws[c])),
+            white: model.white(),
+        })
+    }
+
+    pub fn white(&self) -> Xyz {
+        self.white
+    }
+
+    /// The gamut at `position`: P_c = K_c(p) E_c(1) m_c; `None` where a channel's
+    /// spatial gain gives no light (a hand-made map), which no colour can be shown at.
+    pub fn gamut_at(&self, position: ScreenPosition) -> Option<GamutAt> {
+        let k = self.model.spatial.gains(position);
+        let mut primaries = self.model.matrix;
+        for (c, (gain, full)) in k.iter().zip(self.full).enumerate() {
+            let scale = gain * full;
+            if !(scale > 0.0 && scale.is_finite()) {
+                return None;
+            }
+            primaries.column_mut(c).scale_mut(scale);
+        }
+        GamutAt::new(self.model.black, primaries)
+    }
+
+    /// The drive that shows `xyz` (inside the gamut) at `position`: cube coordinates
+    /// to excitations, each law inverted; through the whole model's fixed point when
+    /// the profile has additivity terms.
+    /// Each law's inverse comes from its table (`inverse_table`); `drive_exact_for`
+    /// inverts the laws themselves.
+    pub fn drive_for(&self, xyz: &Xyz, position: ScreenPosition) -> Drive {
+        if !self.model.terms.is_empty() {
+            return self.drive_exact_for(xyz, position);
+        }
+        let k = self.model.spatial.gains(position);
+        let light = self.matrix_inverse * (xyz - self.model.black);
+        [0, 1, 2].map(|c| {
+            let scale = k[c] * self.full[c];
+            let share = if scale > 0.0 { light[c] / scale } else { 0.0 };
+            self.tables[c].drive(share)
+        })
+    }
+
+    /// 16-bit codes for many colours at one position each, the inner loop of a large
+    /// scene: `drive_for` written out for throughput (the matrix rows scaled by each
+    /// channel's full light at the position, the tables read in place). Profiles with
+    /// additivity terms go through `drive_for`.
+    pub fn codes16(
+        &self,
+        xyz: &[Xyz],
+        positions: impl Fn(usize) -> ScreenPosition,
+        out: &mut [[u16; 3]],
+    ) {
+        if !self.model.terms.is_empty() {
+            for (k, (x, o)) in xyz.iter().zip(out.iter_mut()).enumerate() {
+                *o = self
+                    .drive_for(x, positions(k))
+                    .map(|d| (d * 65535.0 + 0.5) as u16);
+            }
+            return;
+        }
+        let uniform = matches!(
+            self.model.spatial,
+            chromacal_model::spatial::SpatialMap::Uniform
+        );
+        let m = &self.matrix_inverse;
+        let rows =
+            [0, 1, 2].map(|c| [m[(c, 0)], m[(c, 1)], m[(c, 2)]].map(|v| (v / self.full[c]) as f32));
+        let black = self.model.black.map(|v| v as f32);
+        let tables = [&self.tables[0], &self.tables[1], &self.tables[2]];
+        use inverse_table::BLOCK;
+        let mut shares = [[0f32; BLOCK]; 3];
+        for (b, (block, codes)) in xyz.chunks(BLOCK).zip(out.chunks_mut(BLOCK)).enumerate() {
+            for (j, x) in block.iter().enumerate() {
+                let d = [
+                    x.x as f32 - black.x,
+                    x.y as f32 - black.y,
+                    x.z as f32 - black.z,
+                ];
+                let gains = if uniform {
+                    [1.0; 3]
+                } else {
+                    self.model
+                        .spatial
+                        .gains(positions(b * BLOCK + j))
+                        .map(|g| g as f32)
+                };
+                for c in 0..3 {
+                    let r = &rows[c];
+                    shares[c][j] = (r[0] * d[0] + r[1] * d[1] + r[2] * d[2]) / gains[c];
+                }
+            }
+            inverse_table::codes16_of_shares(tables, &mut shares, block.len(), codes);
+        }
+    }
+
+    /// As `drive_for`, each law inverted exactly (and the additivity terms' fixed
+    /// point when the profile has them): slower, for checking the tables.
+    pub fn drive_exact_for(&self, xyz: &Xyz, position: ScreenPosition) -> Drive {
+        if !self.model.terms.is_empty() {
+            return match self.model.inverse(xyz, position) {
+                Ok(r) => r.drive,
+                Err(_) => [0.0; 3],
+            };
+        }
+        let k = self.model.spatial.gains(position);
+        let light = self.matrix_inverse * (xyz - self.model.black);
+        [0, 1, 2].map(|c| {
+            let e = if k[c] > 0.0 { light[c] / k[c] } else { 0.0 };
+            self.model.laws[c].drive(e.clamp(0.0, self.full[c]))
+        })
+    }
+
+    /// Render `scene` with `settings`.
+    pub fn render(&self, scene: &Scene, settings: &RenderSettings) -> Result<Rendering, CrfError> {
+        if !(1..=16).contains(&settings.bits) {
+            return Err(CrfError::BitDepth(settings.bits));
+        }
+        if let Some((index, p)) = scene
+            .pixels
+            .iter()
+            .enumerate()
+            .find(|(_, p)| !p.xyz.iter().all(|v| v.is_finite()))
+        {
+            return Err(CrfError::BadPixel {
+                index,
+                what: format!("XYZ {:?} is not finite", p.xyz.as_slice()),
+            });
+        }
+        let adapted = self.adapt(scene, settings.adaptation)?;
+        let curve = self.tone_curve(&adapted, settings.tone)?;
+        let targets: Vec<Xyz> = adapted
+            .pixels
+            .iter()
+            .map(|p| p.xyz * curve.factor(p.xyz.y))
+            .collect();
+        let gamuts: Vec<GamutAt> = scene
+            .pixels
+            .iter()
+            .enumerate()
+            .map(|(index, p)| {
+                self.gamut_at(p.position).ok_or_else(|| CrfError::BadPixel {
+                    index,
+                    what: format!(
+                        "the profile's spatial map gives a channel no light at ({}, {})",
+                        p.position.x, p.position.y
+                    ),
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        let centre = self
+            .gamut_at(ScreenPosition::CENTRE)
+            .ok_or(CrfError::SingularMatrix)?;
+        // The scene's white after tone reproduction: its neutrals' direction and the
+        // level above which a colour is a highlight.
+        let scene_white = adapted.white.map(|w| w * curve.factor(w.y));
+        let transform = match settings.gamut {
+            GamutMapping::StoneCowanBeatty(options) => {
+                let with: Vec<(Xyz, &GamutAt)> =
+                    targets.iter().copied().zip(gamuts.iter()).collect();
+                let grey = scene_white.filter(|w| w.y > 0.0).unwrap_or(self.white);
+                StoneCowanBeatty::fit(&with, &centre, &grey, scene_white.map(|w| w.y), options)
+                    .map(SceneTransform::StoneCowanBeatty)
+            }
+            GamutMapping::Smith => {
+                Smith::fit(targets.iter().map(|t| t.y), scene_white.map(|w| w.y))
+                    .map(SceneTransform::Smith)
+            }
+            GamutMapping::Sgck(source) => source
+                .gamut(&centre.white(), &centre.black())
+                .map(SceneTransform::SgckSource),
+            _ => None,
+        };
+        let top = ((1u64 << settings.bits) - 1) as f64;
+        let pixels: Vec<RenderedPixel> = scene
+            .pixels
+            .iter()
+            .zip(targets.iter().zip(&gamuts))
+            .map(|(pixel, (target, gamut))| {
+                let outside = !gamut.contains(target);
+                let mapped = self.map(settings.gamut, transform.as_ref(), gamut, target);
+                let drive = self.drive_for(&mapped, pixel.position);
+                let (codes, shown) =
+                    self.codes_for(drive, &mapped, pixel.position, top, settings.codes);
+                RenderedPixel {
+                    codes,
+                    target: (*target).into(),
+                    mapped: mapped.into(),
+                    shown: shown.into(),
+                    outside,
+                    mapping_delta_e00: delta_e00_xyz(target, &mapped, &self.white),
+                    inversion_delta_e00: delta_e00_xyz(&mapped, &shown, &self.white),
+                }
+            })
+            .collect();
+        let summary = summarise(&pixels, settings, transform);
+        Ok(Rendering { pixels, summary })
+    }
+
+    /// The codes (0 … `top`) for `drive`, chosen as `choice` says to show `mapped` at
+    /// `position`, and what the display shows for them.
+    fn codes_for(
+        &self,
+        drive: Drive,
+        mapped: &Xyz,
+        position: ScreenPosition,
+        top: f64,
+        choice: CodeChoice,
+    ) -> ([u32; 3], Xyz) {
+        let scaled = drive.map(|d| d.clamp(0.0, 1.0) * top);
+        let shows = |codes: [u32; 3]| self.model.forward(codes.map(|c| c as f64 / top), position);
+        let rounded = scaled.map(|v| v.round() as u32);
+        let rounded_shows = shows(rounded);
+        if choice == CodeChoice::Rounded {
+            return (rounded, rounded_shows);
+        }
+        let mut best = (
+            rounded,
+            rounded_shows,
+            delta_e00_xyz(mapped, &rounded_shows, &self.white),
+        );
+        let low = scaled.map(|v| v.floor() as u32);
+        let high = scaled.map(|v| (v.ceil() as u32).min(top as u32));
+        for corner in 0..8 {
+            let codes = [0, 1, 2].map(|c| {
+                if corner >> c & 1 == 1 {
+                    high[c]
+                } else {
+                    low[c]
+                }
+            });
+            if codes == rounded {
+                continue;
+            }
+            let shown = shows(codes);
+            let error = delta_e00_xyz(mapped, &shown, &self.white);
+            if error < best.2 {
+                best = (codes, shown, error);
+            }
+        }
+        (best.0, best.1)
+    }
+
+    /// The scene with its white carried to the display's chromaticity (luminance
+    /// kept), or as it is.
+    fn adapt(
+        &self,
+        scene: &Scene,
+        transform: Option<AdaptationTransform>,
+    ) -> Result<Scene, CrfError> {
+        let Some(transform) = transform else {
+            return Ok(scene.clone());
+        };
+        let source = scene.white.ok_or(CrfError::NoSceneWhite)?;
+        let destination = self.white * (source.y / self.white.y);
+        let m = adaptation_matrix(transform, &source, &destination);
+        Ok(Scene {
+            pixels: scene
+                .pixels
+                .iter()
+                .map(|p| ScenePixel {
+                    xyz: m * p.xyz,
+                    position: p.position,
+                })
+                .collect(),
+            white: Some(destination),
+        })
+    }
+
+    fn tone_curve(&self, scene: &Scene, tone: ToneOperator) -> Result<ToneCurve, CrfError> {
+        if tone == ToneOperator::Colorimetric {
+            return Ok(ToneCurve::Scale(1.0));
+        }
+        let mut stats = SceneLuminance::of(
+            scene.pixels.iter().map(|p| p.xyz.y),
+            scene.white.map(|w| w.y),
+        )
+        .ok_or_else(|| CrfError::NothingLit(tone.name()))?;
+        if let ToneOperator::Ward { focus: Some(area) } = tone {
+            let looked_at = SceneLuminance::of(
+                scene
+                    .pixels
+                    .iter()
+                    .filter(|p| area.contains(p.position.x, p.position.y))
+                    .map(|p| p.xyz.y),
+                None,
+            )
+            .ok_or(CrfError::NothingLitInFocus)?;
+            stats.mean = looked_at.mean;
+        }
+        Ok(tone.curve(&stats, self.white.y))
+    }
+
+    fn map(
+        &self,
+        mapping: GamutMapping,
+        transform: Option<&SceneTransform>,
+        gamut: &GamutAt,
+        target: &Xyz,
+    ) -> Xyz {
+        match mapping {
+            GamutMapping::Clip => gamut::clip(gamut, target),
+            GamutMapping::GreyAxis(space) => {
+                gamut::grey_axis_clip(gamut, target, space, &self.white)
+            }
+            GamutMapping::Perpendicular => gamut::perpendicular(gamut, target),
+            GamutMapping::PerpendicularLab => gamut::perpendicular_lab(gamut, target, &self.white),
+            GamutMapping::Hpminde => gamut::hpminde(gamut, target, &self.white),
+            GamutMapping::Sgck(_) => match transform {
+                Some(SceneTransform::SgckSource(source)) => {
+                    gamut::sgck(gamut, source, target, &self.white)
+                }
+                _ => gamut::clip(gamut, target),
+            },
+            GamutMapping::Smith => match transform {
+                Some(SceneTransform::Smith(t)) => t.apply(gamut, target),
+                _ => gamut::clip(gamut, target),
+            },
+            GamutMapping::StoneCowanBeatty(_) => {
+                let moved = match transform {
+                    Some(SceneTransform::StoneCowanBeatty(t)) => t.apply(target),
+                    _ => *target,
+                };
+                gamut::perpendicular_lab(gamut, &moved, &self.white)
+            }
+        }
+    }
+}
+
+fn summarise(
+    pixels: &[RenderedPixel],
+    settings: &RenderSettings,
+    transform: Option<SceneTransform>,
+) -> RenderSummary {
+    let all: Vec<f64> = pixels.iter().map(|p| p.mapping_delta_e00).collect();
+    let outside: Vec<f64> = pixels
+        .iter()
+        .filter(|p| p.outside)
+        .map(|p| p.mapping_delta_e00)
+        .collect();
+    let inversion: Vec<f64> = pixels.iter().map(|p| p.inversion_delta_e00).collect();
+    RenderSummary {
+        pixels: pixels.len(),
+        outside: outside.len(),
+        tone: settings.tone.name(),
+        gamut: settings.gamut.name(),
+        mapping_all: ErrorStats::of(&all),
+        mapping_outside: ErrorStats::of(&outside),
+        inversion: ErrorStats::of(&inversion),
+        stone_cowan_beatty: match transform {
+            Some(SceneTransform::StoneCowanBeatty(t)) => Some(t),
+            _ => None,
+        },
+        smith: match transform {
+            Some(SceneTransform::Smith(t)) => Some(t),
+            _ => None,
+        },
+    }
+}

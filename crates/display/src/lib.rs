@@ -1,0 +1,49 @@
+//! Showing patches: the patch-display trait and its sinks (the simulated display, a
+//! Resolve pattern generator over TCP, a browser page, chromacal's own full-screen
+//! X11 window, an emulator's screen socket), and the screen in front of the user
+//! through X11 (`x11`: outputs, EDID, the CRTC gamma ramp, pixels), with the video
+//! LUT the calibration curves go into (`lut`).
+//!
+//! A sink resolves `show` once the patch is on the screen and settled, so the run
+//! measures straight after it returns.
+
+pub mod emulator_link;
+pub mod lut;
+pub mod resolve;
+pub mod simulated;
+pub mod web;
+pub mod window;
+pub mod x11;
+
+use std::future::Future;
+
+use chromacal_model::screen::Patch;
+use chromacal_model::target::CalibrationCurves;
+
+/// Why a display could not show a patch.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DisplayError {
+    #[error("the display is gone: {0}")]
+    Lost(String),
+    #[error("the display cannot show this patch: {0}")]
+    Unsupported(String),
+}
+
+/// Something that puts patches on the screen being measured.
+pub trait PatchDisplay {
+    /// A short name for logs and provenance.
+    fn name(&self) -> String;
+
+    /// Show `patch`; resolves when it is on the screen and settled.
+    fn show(&mut self, patch: &Patch) -> impl Future<Output = Result<(), DisplayError>> + Send;
+
+    /// Blank the screen (black), as when a run stops.
+    fn blank(&mut self) -> impl Future<Output = Result<(), DisplayError>> + Send;
+
+    /// Load calibration curves (identity for `None`) into the video LUT behind the
+    /// patches, for a display that has one it may set (the native window's CRTC
+    /// gamma). `Ok(false)`: it has none, and curves must go into the codes instead.
+    fn load_curves(&mut self, _curves: Option<&CalibrationCurves>) -> Result<bool, DisplayError> {
+        Ok(false)
+    }
+}
