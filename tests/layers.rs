@@ -48,7 +48,7 @@ const APP_LAYERS: &[&[&str]] = &[
     // The calibration loop.
     &["calibrate"],
     // A profile verified against readings, in the terms calibration people use.
-    &["verification"],
+    &["verification", "verify"],
     // The HTML report: a profile, its readings and its history as a page.
     &["html_report"],
     // The service, the text a command prints, comparisons with other tools.
@@ -509,4 +509,29 @@ fn no_function_in_the_fit_is_longer_than_80_lines() {
     assert!(files.len() > 10, "the fit's files: {files:?}");
     let long: Vec<String> = files.iter().flat_map(|f| long_functions(f, 80)).collect();
     assert!(long.is_empty(), "{}", long.join("\n"));
+}
+
+#[test]
+fn every_crate_says_what_it_is_and_can_be_published() {
+    for (name, dir) in CRATES {
+        let folder = root().join(dir);
+        let manifest = fs::read_to_string(folder.join("Cargo.toml")).unwrap();
+        for key in ["description", "license", "readme"] {
+            assert!(
+                manifest.lines().any(|l| l.starts_with(&format!("{key} "))
+                    || l.starts_with(&format!("{key}.workspace"))),
+                "{name}: no {key} in its Cargo.toml"
+            );
+        }
+        let readme = folder.join("README.md");
+        assert!(readme.is_file(), "{name}: no README.md");
+        // A crate doc of at least a paragraph, first in its root file.
+        let lib = fs::read_to_string(folder.join("src/lib.rs")).unwrap();
+        let doc: Vec<&str> = lib.lines().take_while(|l| l.starts_with("//!")).collect();
+        assert!(
+            doc.len() >= 3,
+            "{name}: src/lib.rs opens with {} lines of crate doc",
+            doc.len()
+        );
+    }
 }

@@ -93,6 +93,13 @@ fn pages() -> Vec<(String, String)> {
     pages
 }
 
+/// The README is read to the end: the rest is in `docs/`.
+#[test]
+fn the_readme_is_short_enough_to_read_to_the_end() {
+    let lines = readme().lines().count();
+    assert!(lines <= 300, "README.md has {lines} lines");
+}
+
 /// Every `sh` block of the README but the first (the two setup commands, which build a
 /// release binary and run this very suite), and every one in `docs/`, runs as written,
 /// in a fresh directory with a home of its own; `../shared/data` is where the shared
