@@ -350,3 +350,76 @@ fn sgck_keeps_rec2020_reds_apart_where_clipping_merges_them() {
         assert!(sgck[i][0] >= sgck[i - 1][0] - 1e-9, "red falls at {i}");
     }
 }
+
+/// The usual desk set-up: calibration curves in the video card, a 3D LUT in the
+/// player. Calibrated to D65 at 80 cd/m² (the simulated CRT's own white is near 8300 K
+/// at 100), the LUT made `--through-calibration`, applied by ffmpeg to a ramp of sRGB
+/// greys 16 to 235 (at 16 bits), and the codes it gives shown through the curves:
+/// every grey keeps a* and b* within 0.5 of the calibrated white's, with and without
+/// `--absolute` (the source's white is D65, the white the curves make). The grey was
+/// turned blue by some 7 ΔE when the source white was carried to the native white.
+#[test]
+fn greys_through_a_lut_and_the_calibration_curves_stay_neutral() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    std::fs::write(
+        &config,
+        "[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nluminance = 80.0\n",
+    )
+    .unwrap();
+    let state = dir.path().join("state");
+    succeed(
+        chromacal()
+            .arg("calibrate")
+            .arg("--config")
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state),
+    );
+    let profile = Profile::read(&state.join("current.toml")).unwrap();
+    let calibration = profile.calibration.as_ref().expect("curves to D65");
+    let curves = &calibration.curves;
+    let white = Xyz::new(curves.white[0], curves.white[1], curves.white[2]);
+    // sRGB greys 16…235 in 8-bit steps of 1, at 16 bits (code × 257).
+    let greys: Vec<[u16; 3]> = (16..=235u16).map(|g| [g * 257; 3]).collect();
+    let image = dir.path().join("greys.png");
+    write_png16(&image, greys.len() as u32, &greys);
+    for absolute in [false, true] {
+        let cube = dir.path().join(format!("through-{absolute}.cube"));
+        let mut command = chromacal();
+        command.arg("lut3d").arg(state.join("current.toml")).args([
+            "--source",
+            "srgb",
+            "--size",
+            "33",
+            "--through-calibration",
+        ]);
+        if absolute {
+            command.arg("--absolute");
+        }
+        succeed(command.arg("-o").arg(&cube));
+        let shown = ffmpeg_lut3d(
+            &image,
+            &cube,
+            &dir.path().join(format!("out-{absolute}.png")),
+        );
+        let mut worst: f64 = 0.0;
+        for (grey, codes) in greys.iter().zip(&shown) {
+            let input = codes.map(|c| f64::from(c) / 65535.0);
+            let drive = curves.apply(input);
+            let xyz = profile.model.forward(drive, ScreenPosition::CENTRE);
+            let lab = chromacal_color::xyz_to_lab(&xyz, &white);
+            let off = lab.a.abs().max(lab.b.abs());
+            assert!(
+                off <= 0.5,
+                "absolute {absolute}: sRGB grey {} shows a* {:.2}, b* {:.2} (L* {:.1})",
+                grey[0] / 257,
+                lab.a,
+                lab.b,
+                lab.l
+            );
+            worst = worst.max(off);
+        }
+        eprintln!("absolute {absolute}: greys 16–235 within {worst:.3} of neutral");
+    }
+}

@@ -9,6 +9,7 @@
 pub mod adaptation;
 pub mod difference;
 pub mod gamut;
+pub mod ictcp;
 pub mod linalg;
 pub mod spaces;
 pub mod spectrum;

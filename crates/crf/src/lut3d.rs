@@ -176,11 +176,12 @@ pub enum LutError {
 }
 
 /// The colour the display is asked to show for source codes `rgb`, in the model's
-/// units: decoded, to XYZ by the source's primaries, to the display's white (or kept
-/// absolute) and its luminance, with the display's black.
-pub fn source_target(rgb: [f64; 3], model: &MonitorModel, options: &LutOptions) -> Xyz {
-    let white = model.white();
-    let black_share = (model.black.y / white.y).clamp(0.0, 1.0);
+/// units: decoded, to XYZ by the source's primaries, to the display's `white` (or kept
+/// absolute) and its luminance, with the display's `black`. The white is the one the
+/// display shows: the native white, or, through calibration curves, the calibrated one.
+pub fn source_target(rgb: [f64; 3], white: &Xyz, black: &Xyz, options: &LutOptions) -> Xyz {
+    let white = *white;
+    let black_share = (black.y / white.y).clamp(0.0, 1.0);
     let space = options.source.primaries();
     let to_xyz = space_matrix(&space);
     let linear = rgb.map(|v| options.source.decode(v, black_share));
@@ -234,7 +235,7 @@ fn grid(size: usize) -> Vec<[f64; 3]> {
 
 /// Input of a monotone curve (sampled at i/(n−1)) that gives `drive`: the
 /// calibration curve inverted by bisection and linear interpolation between samples.
-fn curve_input(curve: &[f64], drive: f64) -> f64 {
+pub fn curve_input(curve: &[f64], drive: f64) -> f64 {
     let n = curve.len();
     if n < 2 {
         return drive;
@@ -283,11 +284,20 @@ pub fn build_lut(
         other => other,
     };
     let crf = ColourReproduction::new(model)?;
+    // The white the display shows: through calibration curves, the one they make,
+    // which a source white is carried to (the native white is not on the screen).
+    let (white, black) = match curves {
+        Some(k) => (
+            Xyz::new(k.white[0], k.white[1], k.white[2]),
+            Xyz::new(k.black[0], k.black[1], k.black[2]),
+        ),
+        None => (model.white(), model.black),
+    };
     let scene = Scene {
         pixels: grid(options.size)
             .into_iter()
             .map(|rgb| ScenePixel {
-                xyz: source_target(rgb, model, options),
+                xyz: source_target(rgb, &white, &black, options),
                 position: ScreenPosition::CENTRE,
             })
             .collect(),
