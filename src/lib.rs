@@ -31,3 +31,4 @@ pub mod measurement_file;
 pub mod profile;
 pub mod report;
 pub mod verification;
+pub mod verify;

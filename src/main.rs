@@ -10,7 +10,7 @@ mod cli;
 use cli::{
     bench, calibrate, check, completions, config, correction, daemon, displays, emulate, export,
     fit, history, instruments, job, lut, lut3d, measure, profile, render, report, runs, spectrum,
-    status,
+    status, verify,
 };
 
 #[derive(Parser)]
@@ -49,6 +49,7 @@ enum Command {
     Displays(displays::DisplaysArgs),
     Lut(lut::LutArgs),
     Lut3d(lut3d::Lut3dArgs),
+    Verify(verify::VerifyArgs),
     Export(export::ExportArgs),
     Profile(profile::ProfileArgs),
     Daemon(daemon::DaemonArgs),
@@ -86,6 +87,7 @@ fn main() -> ExitCode {
         Command::Displays(args) => displays::run(args),
         Command::Lut(args) => lut::run(args),
         Command::Lut3d(args) => lut3d::run(args),
+        Command::Verify(args) => verify::run(args),
         Command::Export(args) => export::run(args),
         Command::Profile(args) => profile::run(args),
         Command::Daemon(args) => daemon::run(args),

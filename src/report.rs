@@ -689,6 +689,12 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
     if let Some(lut) = &outcome.lut {
         out += &format!("video LUT: {lut}\n");
     }
+    if let Some(verified) = &outcome.verified {
+        out += &format!("\n{}\n", verification_summary(verified));
+    }
+    if let Some(why) = &outcome.verify_error {
+        out += &format!("\nverification through the curves: not made ({why})\n");
+    }
     out += &format!("\njournal: {}\n", outcome.journal_path.display());
     match &outcome.rejection {
         None => {
@@ -704,6 +710,98 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
             )
         }
     }
+    out
+}
+
+/// What `chromacal verify` says: the calibrated white, black and contrast, the grey
+/// balance and the tone, each criterion with its interval and verdict, and the worst
+/// patches.
+pub fn verification_summary(v: &crate::verify::VerifyReport) -> String {
+    let s = &v.state;
+    let metric = v.metric.name();
+    let mut out = format!(
+        "chromacal: verified against {} with the {} chart ({} readings, instrument {})\n",
+        v.against,
+        v.chart,
+        v.readings,
+        duration(v.instrument_s)
+    );
+    out += &format!(
+        "  white: {:.2} cd/m², x {:.4} y {:.4}, {}, Duv {}; {metric} {:.3} [{:.3}, {:.3}] from the target\n",
+        s.luminance,
+        s.xy[0],
+        s.xy[1],
+        s.cct_k.map_or("–".into(), |k| format!("{k:.0} K")),
+        s.duv.map_or("–".into(), |d| format!("{d:+.4}")),
+        s.white_delta_e,
+        s.white_interval[0],
+        s.white_interval[1]
+    );
+    out += &format!(
+        "  black: {:.4} cd/m², contrast {}\n",
+        s.black_luminance,
+        s.contrast.map_or("–".into(), |c| format!("{c:.0}:1"))
+    );
+    out += &format!(
+        "  grey balance over {} greys: mean {:.2}, a*/b* range {:.2}; tone within {:.1} % of the target\n",
+        s.greys.len(),
+        s.grey_balance_mean,
+        s.grey_balance_range,
+        100.0 * s.tone_error
+    );
+    out += &format!("criteria: {}\n", v.criteria);
+    let rows: Vec<Vec<String>> = v
+        .results
+        .iter()
+        .map(|r| {
+            vec![
+                r.description.clone(),
+                format!("{}", r.limit),
+                format!("{:.3}", r.value),
+                format!("[{:.3}, {:.3}]", r.interval[0], r.interval[1]),
+                r.verdict.name().to_string(),
+            ]
+        })
+        .collect();
+    out += &table(
+        &["criterion", "limit", "value", "95 % interval", "verdict"],
+        &rows,
+    );
+    let mut worst: Vec<&crate::verify::PatchResult> = v.patches.iter().collect();
+    worst.sort_by(|a, b| b.delta_e.total_cmp(&a.delta_e));
+    out += &format!("worst patches ({metric}):\n");
+    for p in worst.iter().take(5) {
+        out += &format!(
+            "  {:<28} {:.3} [{:.3}, {:.3}]{}\n",
+            p.label,
+            p.delta_e,
+            p.interval[0],
+            p.interval[1],
+            if p.outside {
+                " (outside the gamut: against its clipped colour)"
+            } else {
+                ""
+            }
+        );
+    }
+    let failed: Vec<String> = v
+        .results
+        .iter()
+        .filter(|r| r.verdict != crate::verify::Verdict::Pass)
+        .map(|r| {
+            format!(
+                "{} {:.3} ({}, limit {})",
+                r.description,
+                r.value,
+                r.verdict.name(),
+                r.limit
+            )
+        })
+        .collect();
+    if !failed.is_empty() {
+        out += &format!("what misses: {}\n", failed.join("; "));
+    }
+    out += &format!("verdict: {}", v.verdict.name());
     out
 }
 

@@ -400,6 +400,7 @@ fn a_grid_the_instrument_did_not_see_is_left_out_and_said() {
         device: None,
         checked: None,
         criteria: Default::default(),
+        verified: None,
     })
     .unwrap();
     let section = &page[page.find("id=\"uniformity\"").unwrap()..];

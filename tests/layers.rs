@@ -45,10 +45,12 @@ const APP_LAYERS: &[&[&str]] = &[
     &["profile"],
     &["export"],
     &["config"],
+    // The calibrated display verified: charts, criteria, judgement.
+    &["verify"],
     // The calibration loop.
     &["calibrate"],
     // A profile verified against readings, in the terms calibration people use.
-    &["verification", "verify"],
+    &["verification"],
     // The HTML report: a profile, its readings and its history as a page.
     &["html_report"],
     // The service, the text a command prints, comparisons with other tools.

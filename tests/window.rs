@@ -830,3 +830,165 @@ fn displays_name_the_outputs_their_monitors_and_the_device_on_each() {
     assert_eq!(none.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&none.stderr).contains("cannot open the X display ':4999'"));
 }
+
+/// `chromacal verify` with the emulator looking at the X screen, through the LUT as
+/// it is: `args` besides the config, state and devices; exit code and JSON.
+fn verify_window(
+    x: &XServer,
+    config: &Path,
+    state: &Path,
+    device: &str,
+    args: &[&str],
+) -> (Option<i32>, serde_json::Value) {
+    let out = chromacal()
+        .arg("verify")
+        .arg("--config")
+        .arg(config)
+        .arg("--state-dir")
+        .arg(state)
+        .args(["--display", "window", "--x-display", &x.display])
+        .args([
+            "--instrument",
+            &format!("pr670:{device}"),
+            "--timing-scale",
+            "0.002",
+        ])
+        .arg("--json")
+        .args(args)
+        .output()
+        .unwrap();
+    let json = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stderr)));
+    (out.status.code(), json)
+}
+
+/// The verdict of each criterion, by statistic.
+fn verdicts(report: &serde_json::Value) -> Vec<(String, String)> {
+    report["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            (
+                r["statistic"].as_str().unwrap().to_string(),
+                r["verdict"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect()
+}
+
+/// The desk flow's end: calibrated in the window to D65, gamma 2.2 and 80 cd/m² (the
+/// CRT's own white is near 8300 K at 100), `verify --against srgb` measures the chart
+/// through the curves in the LUT and passes DisplayCAL's recommended set with the
+/// white within the instrument's repeatability of D65 and of 80 cd/m²; a ramp set
+/// from outside (`xrandr --gamma`) fails it on the white and the greys, and a
+/// straight LUT on the tone curve.
+#[test]
+fn the_calibrated_window_verifies_through_the_lut_and_a_foreign_ramp_fails() {
+    let x = XServer::start();
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    // The LUT's output reaches the panel at 10 bits, as `[target] bit_depth` says.
+    std::fs::write(
+        &config,
+        format!("{WINDOW_CONFIG}luminance = 80.0\nbit_depth = 10\n"),
+    )
+    .unwrap();
+    let emulator = emulate(&[
+        "--instrument",
+        "pr670",
+        "--time-scale",
+        "0.002",
+        "--config",
+        config.to_str().unwrap(),
+        "--x-display",
+        &x.display,
+    ]);
+    let state = dir.path().join("state");
+    let (_, summary) = calibrate(
+        &config,
+        &state,
+        &[
+            "--display",
+            "window",
+            "--x-display",
+            &x.display,
+            "--instrument",
+            &format!("pr670:{}", emulator.device),
+            "--timing-scale",
+            "0.002",
+        ],
+    );
+    assert!(summary.contains("verified against sRGB"), "{summary}");
+    let (code, report) = verify_window(
+        &x,
+        &config,
+        &state,
+        &emulator.device,
+        &["--against", "srgb", "--criteria", "displaycal-recommended"],
+    );
+    eprintln!("{:?}", verdicts(&report));
+    let s = &report["state"];
+    eprintln!(
+        "through the LUT: white {} cd/m² at {:?}, {} from D65 {:?}; grey balance {} over {} greys",
+        s["luminance"],
+        s["xy"],
+        s["white_delta_e"],
+        s["white_interval"],
+        s["grey_balance_mean"],
+        s["greys"].as_array().unwrap().len()
+    );
+    assert_eq!(code, Some(0), "{:?}", verdicts(&report));
+    let patches = report["patches"].as_array().unwrap();
+    assert!(patches.len() >= 40);
+    assert!(
+        patches
+            .iter()
+            .all(|p| p["interval"].as_array().is_some_and(|i| i.len() == 2))
+    );
+    // D65 within the repeatability: the white's interval reaches the target.
+    assert_eq!(s["white_interval"][0].as_f64().unwrap(), 0.0, "{s}");
+    let noise = &report["noise"];
+    let sigma = noise["floor"]
+        .as_f64()
+        .unwrap()
+        .hypot(noise["relative"].as_f64().unwrap() * 80.0);
+    let luminance = s["luminance"].as_f64().unwrap();
+    assert!(
+        (luminance - 80.0).abs() <= 3.0 * sigma,
+        "{luminance} cd/m², σ {sigma}"
+    );
+    assert!(s["greys"].as_array().unwrap().len() >= 17);
+    assert!(s["grey_balance_mean"].as_f64().unwrap() <= 0.5, "{s}");
+
+    // A ramp from outside replaces the curves: the white and the greys move.
+    x.run("xrandr", &["--output", "DUMMY0", "--gamma", "1.2:1:1"]);
+    let (code, report) = verify_window(&x, &config, &state, &emulator.device, &[]);
+    let failed: Vec<String> = verdicts(&report)
+        .into_iter()
+        .filter(|(_, v)| v == "fail")
+        .map(|(s, _)| s)
+        .collect();
+    eprintln!("with xrandr --gamma 1.2:1:1: {failed:?}");
+    assert_eq!(code, Some(5));
+    assert!(
+        failed.iter().any(|s| s == "white-to-target")
+            && failed.iter().any(|s| s.starts_with("grey-balance")),
+        "{failed:?}"
+    );
+    // A straight LUT: the tone curve is the native one.
+    succeed(
+        chromacal()
+            .args(["lut", "reset", "--x-display", &x.display, "--state-dir"])
+            .arg(&state),
+    );
+    let (code, report) = verify_window(&x, &config, &state, &emulator.device, &[]);
+    let failed: Vec<String> = verdicts(&report)
+        .into_iter()
+        .filter(|(_, v)| v == "fail")
+        .map(|(s, _)| s)
+        .collect();
+    eprintln!("with the LUT straight: {failed:?}");
+    assert_eq!(code, Some(5));
+    assert!(failed.iter().any(|s| s == "tone"), "{failed:?}");
+}

@@ -9,5 +9,6 @@ pub mod rig;
 pub mod run;
 pub mod sequential;
 pub mod session;
+pub mod verify;
 pub mod video_lut;
 pub mod warmup;

@@ -13,11 +13,22 @@
 //! instrument's repeatability, and a white that misses the target is what a user
 //! checks first. A last pass measures the result (white read three times), so the
 //! figures reported are measured, not predicted.
+//!
+//! What reaches the panel is quantised: the codes at their bit depth, or the video
+//! LUT's output at the depth the display takes it (`[target] bit_depth`, the plan's by
+//! default). At 8 bits one code of blue near the top is about 1 % of its light, so a
+//! white aimed between two codes lands up to half a step (some 0.5 ΔE00) away, and
+//! correcting it pass after pass only hops between the two. So after each pass every
+//! curve entry is set to the codes at that depth whose colour, by the model corrected
+//! by what was measured at the levels around it (the measured over the predicted XYZ,
+//! interpolated over the input), is nearest the target grey of its input in ΔE00
+//! (`snap_to_depth`): the white and every grey land on the best colour the display can
+//! show, not on a rounding.
 
 use super::run::RunError;
 use crate::config::TargetConfig;
 use crate::profile::{LevelCheck, StoredCalibration};
-use chromacal_color::Xyz;
+use chromacal_color::{Xyz, delta_e_2000, xyz_to_lab};
 use chromacal_display::PatchDisplay;
 use chromacal_instruments::Instrument;
 use chromacal_model::MonitorModel;
@@ -155,6 +166,98 @@ fn white_balance(model: &MonitorModel, measured: &Xyz, target: &Xyz) -> Option<[
     (keep.is_finite() && keep > 0.0).then(|| factors.map(|f| f * keep))
 }
 
+/// `drive` as the panel gets it at `depth` bits.
+fn quantised(drive: [f64; 3], depth: u32) -> [f64; 3] {
+    let top = ((1u64 << depth.min(24)) - 1) as f64;
+    drive.map(|d| (d.clamp(0.0, 1.0) * top).round() / top)
+}
+
+/// Measured over predicted, per component; `None` where either is not positive.
+fn ratio(measured: &Xyz, predicted: &Xyz) -> Option<[f64; 3]> {
+    let r = [0, 1, 2].map(|c| measured[c] / predicted[c]);
+    r.iter().all(|v| v.is_finite() && *v > 0.0).then_some(r)
+}
+
+/// The ratio at `x`, linearly between the levels measured and held beyond them.
+fn ratio_at(ratios: &[(f64, [f64; 3])], x: f64) -> [f64; 3] {
+    [0, 1, 2].map(|c| {
+        let points: Vec<(f64, f64)> = ratios.iter().map(|(x, r)| (*x, r[c])).collect();
+        interpolate_gain(&points, x)
+    })
+}
+
+/// The grey the curves aim each input at: the tone's luminance on the line from the
+/// black to the white aimed at.
+struct Grey {
+    tone: chromacal_model::target::ToneCurve,
+    black: Xyz,
+    white: Xyz,
+}
+
+impl Grey {
+    fn at(&self, x: f64) -> Xyz {
+        let y = target_luminance(self.tone, x, self.black.y, self.white.y);
+        let share = (y - self.black.y) / (self.white.y - self.black.y);
+        self.black + (self.white - self.black) * share
+    }
+}
+
+/// Each curve entry above black set to the codes at `depth` bits, within a code or two
+/// of what it asks for and no lower than the entry before, whose colour by the model
+/// corrected by the measured `ratios` is nearest in ΔE00 the grey `aim` asks for at its
+/// input: the best the quantised output can show, chosen rather than rounded to.
+fn snap_to_depth(
+    curves: &mut CalibrationCurves,
+    model: &MonitorModel,
+    ratios: &[(f64, [f64; 3])],
+    aim: &Grey,
+    depth: u32,
+) {
+    if ratios.is_empty() || depth > 16 {
+        return;
+    }
+    let top = ((1u64 << depth) - 1) as f64;
+    let n = curves.curves[0].len();
+    let mut floor = [0.0f64; 3];
+    for i in 1..n {
+        let x = i as f64 / (n - 1) as f64;
+        let target = aim.at(x);
+        let r = ratio_at(ratios, x);
+        let ideal = [0, 1, 2].map(|c| curves.curves[c][i] * top);
+        let options = |c: usize| -> Vec<f64> {
+            let base = ideal[c].floor();
+            (-1..=2)
+                .map(|k| base + f64::from(k))
+                .filter(|q| (0.0..=top).contains(q) && *q >= floor[c])
+                .collect()
+        };
+        let (reds, greens, blues) = (options(0), options(1), options(2));
+        let mut best: Option<([f64; 3], f64)> = None;
+        for &qr in &reds {
+            for &qg in &greens {
+                for &qb in &blues {
+                    let codes = [qr, qg, qb];
+                    let shown = model.forward_centre(codes.map(|q| q / top));
+                    let corrected = Xyz::new(shown.x * r[0], shown.y * r[1], shown.z * r[2]);
+                    let de = delta_e_2000(
+                        &xyz_to_lab(&corrected, &aim.white),
+                        &xyz_to_lab(&target, &aim.white),
+                    );
+                    if best.is_none_or(|(_, d)| de < d) {
+                        best = Some((codes, de));
+                    }
+                }
+            }
+        }
+        if let Some((codes, _)) = best {
+            for c in 0..3 {
+                curves.curves[c][i] = codes[c] / top;
+                floor[c] = codes[c];
+            }
+        }
+    }
+}
+
 /// The model's curves for `config`, measured into place on `display` and `instrument`.
 pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
     model: &MonitorModel,
@@ -175,6 +278,8 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
     } else {
         Through::Codes(config.bit_depth.unwrap_or(plan_bit_depth))
     };
+    // The depth the curves' output reaches the panel at.
+    let depth = config.bit_depth.unwrap_or(plan_bit_depth);
     let inputs: Vec<f64> = (1..config.levels)
         .map(|k| {
             let x = k as f64 / (config.levels - 1) as f64;
@@ -197,6 +302,8 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
         // over what it was.
         let mut gains: Vec<(f64, f64)> = Vec::new();
         let mut balance = [1.0; 3];
+        // What the model misses at each level: measured over predicted, per component.
+        let mut ratios: Vec<(f64, [f64; 3])> = Vec::new();
         for &x in &inputs {
             // The white three times: its chromaticity is corrected too.
             let reads = if x == 1.0 { WHITE_READS } else { 1 };
@@ -204,6 +311,10 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
                 read_mean(&curves, x, reads, through, geometry, display, instrument).await?;
             readings += reads;
             instrument_s += seconds;
+            let predicted = model.forward_centre(quantised(curves.apply([x; 3]), depth));
+            if let Some(r) = ratio(&measured, &predicted) {
+                ratios.push((x, r));
+            }
             let above = measured.y - black.y;
             if above > 0.0 {
                 gains.push((x, ((want(x, &white) - black.y) / above).clamp(0.5, 2.0)));
@@ -251,6 +362,12 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
                 floor = *drive;
             }
         }
+        let aim = Grey {
+            tone: target.tone,
+            black,
+            white,
+        };
+        snap_to_depth(&mut curves, model, &ratios, &aim, depth);
         display.load_curves(Some(&curves)).map_err(RunError::from)?;
     }
     // The check, through the final curves; white three times, for its chromaticity.
@@ -311,6 +428,7 @@ mod tests {
             refine_passes: 2,
             levels: 9,
             bit_depth: None,
+            verify: true,
         };
         let err = config.check().unwrap_err();
         assert!(

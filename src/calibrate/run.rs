@@ -93,6 +93,23 @@ pub struct Progress {
     pub status: ReadingStatus,
 }
 
+impl Progress {
+    /// A reading of a verification chart: `done` of `total`.
+    pub fn verification(done: usize, total: usize) -> Progress {
+        Progress {
+            done,
+            total,
+            index: done,
+            role: Role::Verification,
+            luminance: None,
+            xyz: None,
+            drive: [0.0; 3],
+            position: ScreenPosition::CENTRE,
+            status: ReadingStatus::Ok,
+        }
+    }
+}
+
 /// What a run did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunSummary {

@@ -178,6 +178,10 @@ pub struct CalibrationOutcome {
     pub calibration_error: Option<String>,
     /// What the run left in the display's video LUT (the native window only).
     pub lut: Option<String>,
+    /// The display verified through the new curves (`[target] verify`).
+    pub verified: Option<crate::verify::VerifyReport>,
+    /// Why that verification could not be made (the profile is fine).
+    pub verify_error: Option<String>,
 }
 
 pub(crate) use chromacal_formats::time::now_rfc3339;
@@ -695,6 +699,8 @@ pub async fn finish_run(
         display: display_name,
         calibration_error,
         lut: None,
+        verified: None,
+        verify_error: None,
     })
 }
 
@@ -759,8 +765,9 @@ pub async fn calibrate<'a>(
         devices.instrument.close();
         return Err(e.into());
     }
+    let verify_after = run.config.target.as_ref().is_some_and(|t| t.verify);
+    let (bits, criteria) = (run.config.plan.bit_depth, run.config.verify.clone());
     let mut outcome = finish_run(run, &mut devices, &store, &mut hooks).await;
-    devices.instrument.close();
     let end = match &outcome {
         Ok(o) if o.rejection.is_none() => RunEnd::Published {
             curves: o.profile.calibration.as_ref().map(|c| &c.curves),
@@ -778,6 +785,30 @@ pub async fn calibrate<'a>(
             tracing::error!(error = %e, "the video LUT could not be set at the end of the run")
         }
     }
+    // The display through its new curves, as `chromacal verify` measures it.
+    if let Ok(o) = &mut outcome
+        && verify_after
+        && o.rejection.is_none()
+        && o.profile.calibration.is_some()
+    {
+        let mut progress = |done: usize, total: usize| {
+            (hooks.progress)(&Progress::verification(done, total));
+        };
+        match super::verify::after_calibration(
+            &store,
+            &o.profile,
+            &criteria,
+            bits,
+            &mut devices,
+            &mut progress,
+        )
+        .await
+        {
+            Ok(report) => o.verified = Some(report),
+            Err(e) => o.verify_error = Some(e.to_string()),
+        }
+    }
+    devices.instrument.close();
     outcome
 }
 

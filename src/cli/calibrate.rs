@@ -171,7 +171,13 @@ fn calibrate(
         let readings = chromacal::measurement_file::read_measurements(&outcome.journal_path)?;
         // Judged by the limits the run publishes by.
         let criteria = chromacal::verification::Criteria::from_publish(&loaded.config.publish);
-        super::report::write_for(&outcome.profile, Some(&readings), criteria, path)?;
+        super::report::write_for(
+            &outcome.profile,
+            Some(&readings),
+            criteria,
+            outcome.verified.as_ref(),
+            path,
+        )?;
     }
     if json {
         let summary = serde_json::json!({

@@ -158,6 +158,7 @@ fn check(args: &CheckArgs) -> Result<(), Failure> {
                 history: None,
                 device: None,
                 checked: Some(&set),
+                verified: None,
                 criteria: criteria.clone(),
             },
             path,

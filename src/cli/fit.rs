@@ -126,7 +126,7 @@ fn fit(
         profile.write(output)?;
     }
     if let Some(path) = report_path {
-        super::report::write_for(&profile, Some(&set), Default::default(), path)?;
+        super::report::write_for(&profile, Some(&set), Default::default(), None, path)?;
     }
     if json && to_stdout {
         eprintln!("{}", serde_json::to_string_pretty(&fitted.report)?);

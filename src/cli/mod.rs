@@ -28,6 +28,7 @@ pub mod runs;
 pub mod shared;
 pub mod spectrum;
 pub mod status;
+pub mod verify;
 
 #[cfg(test)]
 mod tests {

@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use chromacal::calibrate::verify::{VerifyOutcome, saved_for};
 use chromacal::html_report::{ReportInput, readings_of, report_html};
 use chromacal::measurement_file::read_measurements;
 use chromacal::profile::Profile;
@@ -45,6 +46,7 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
     if let Some(why) = &note {
         eprintln!("chromacal: {why}");
     }
+    let verified = saved_for(&args.profile, &profile);
     write_page(
         &ReportInput {
             profile: &profile,
@@ -54,6 +56,7 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
             device: None,
             checked: None,
             criteria: args.criteria.unwrap_or_default(),
+            verified: verified.as_ref(),
         },
         &args.output,
     )
@@ -92,6 +95,7 @@ pub fn write_for(
     profile: &Profile,
     readings: Option<&MeasurementSet>,
     criteria: Criteria,
+    verified: Option<&chromacal::verify::VerifyReport>,
     output: &Path,
 ) -> Result<(), Failure> {
     write_page(
@@ -103,6 +107,29 @@ pub fn write_for(
             device: None,
             checked: None,
             criteria,
+            verified,
+        },
+        output,
+    )
+}
+
+/// The report of a profile just verified: it opens with the calibrated display.
+pub fn write_verification(outcome: &VerifyOutcome, output: &Path) -> Result<(), Failure> {
+    let profile = &outcome.profile;
+    let (readings, note) = match readings_of(profile) {
+        Ok(set) => (Some(set), None),
+        Err(why) => (None, Some(why)),
+    };
+    write_page(
+        &ReportInput {
+            profile,
+            readings: readings.as_ref(),
+            readings_note: note,
+            history: None,
+            device: None,
+            checked: None,
+            criteria: Criteria::default(),
+            verified: Some(&outcome.report),
         },
         output,
     )

@@ -144,6 +144,7 @@ pub fn contrast_ratio(text: &str) -> Result<f64, String> {
 pub const EXIT_CODES: &str = "Exit codes: 0 done; 1 failed (the message says why); 2 the command line is wrong; \
 3 a profile was made but missed the [publish] limits (kept, not made current); \
 4 an export was written but colord could not take it; \
+5 a verification ran and failed; 6 a verification ran and is undecided (`--until-decided` reads again); \
 130 stopped by Ctrl-C or SIGTERM (the journal keeps every reading: `chromacal calibrate --resume`).";
 
 /// Exit code when a profile was made but did not pass the publishing limits.
@@ -155,6 +156,10 @@ pub const INTERRUPTED: u8 = 130;
 
 /// Exit code when an export was written but colord could not take it.
 pub const COLORD_UNAVAILABLE: u8 = 4;
+
+/// Exit codes of a verification that ran and failed, or stayed undecided.
+pub const VERIFICATION_FAILED: u8 = 5;
+pub const VERIFICATION_UNDECIDED: u8 = 6;
 
 /// The log level: a service logs what it does, a command only what went wrong; each
 /// `-v` one level more, `-q` errors only.

@@ -111,9 +111,18 @@ pub struct TargetConfig {
     /// Grey levels measured in each pass, black to white inclusive.
     #[serde(default = "nine")]
     pub levels: usize,
-    /// Bit depth the curves' output is shown at while refining (the video card's
-    /// output; default: the plan's).
+    /// Bit depth the curves' output reaches the panel at: the codes' while refining,
+    /// the video LUT's output as the display takes it (the video card's); the curves
+    /// are set to what that depth can show (default: the plan's).
     pub bit_depth: Option<u32>,
+    /// After the curves, measure `chromacal verify`'s default chart through them
+    /// against sRGB, so that the calibration report leads with the calibrated display.
+    #[serde(default = "yes")]
+    pub verify: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 fn native() -> String {

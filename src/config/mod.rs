@@ -8,6 +8,7 @@ pub mod calibration;
 pub mod daemon;
 pub mod devices;
 pub mod ranges;
+pub mod verify;
 
 use std::path::{Path, PathBuf};
 
@@ -16,6 +17,7 @@ use serde::{Deserialize, Serialize};
 pub use calibration::{Stability, TargetConfig, WarmupConfig};
 pub use daemon::{DaemonConfig, MqttConfig, OnStart, ScheduleConfig};
 pub use devices::{DEFAULT_DEVICE, DeviceConfig, device_configs};
+pub use verify::VerifyConfig;
 
 use crate::profile::toml_error_position;
 use chromacal_display::resolve::ResolveConfig;
@@ -313,6 +315,9 @@ pub struct Config {
     /// Publish the daemon's state and events to an MQTT broker.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mqtt: Option<MqttConfig>,
+    /// What `chromacal verify` judges by.
+    #[serde(default, skip_serializing_if = "VerifyConfig::is_default")]
+    pub verify: VerifyConfig,
     /// Instruments shared by several devices, declared once (`devices`).
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub instruments: std::collections::BTreeMap<String, InstrumentConfig>,
@@ -418,6 +423,7 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     }
     check_between_keys(config)?;
     config.publish.check()?;
+    config.verify.check()?;
     config.schedule.check()?;
     config.warmup.check()?;
     if let Some(target) = &config.target {

@@ -117,6 +117,8 @@ pub const RANGES: &[Range] = &[
     r("target.refine_passes", 0.0, 5.0),
     r("target.levels", 3.0, 33.0),
     r("target.bit_depth", 8.0, 16.0),
+    // [verify]: limits of one's own (ΔE, percent for the tone).
+    r("verify.criterion[].limit", 1e-6, 1000.0),
 ];
 
 /// Keys whose numbers are checked by their own type, not by a range: the virtual

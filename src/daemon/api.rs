@@ -761,10 +761,12 @@ async fn report(Dev(device): Dev) -> Response {
             .find_map(|v| {
                 crate::measurement_file::read_measurements(std::path::Path::new(&v.journal?)).ok()
             });
+        let verified = crate::calibrate::verify::saved_in(device.store().root(), &profile.id);
         report_html(&ReportInput {
             profile: &profile,
             readings: readings.as_ref(),
             readings_note,
+            verified: verified.as_ref(),
             history: Some(HistoryView::from_store(device.store())),
             device: Some(device.name.clone()),
             checked: checked.as_ref(),

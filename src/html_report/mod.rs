@@ -9,8 +9,10 @@
 //! fitted on (for measured points and residuals): what the page cannot show without
 //! them it says, rather than leaving a figure out in silence.
 
+mod calibrated;
 pub mod figures;
 pub mod fleet;
+mod markup;
 mod page;
 
 use std::path::Path;
@@ -49,6 +51,9 @@ pub struct ReportInput<'a> {
     pub checked: Option<&'a MeasurementSet>,
     /// What the verified patches must achieve.
     pub criteria: Criteria,
+    /// The newest verification of the calibrated display (`chromacal verify`): the
+    /// page then opens with the display as measured through its calibration.
+    pub verified: Option<&'a crate::verify::VerifyReport>,
 }
 
 /// Why a report could not be made.

@@ -9,13 +9,13 @@
 use maud::{DOCTYPE, Markup, PreEscaped, html};
 
 use super::figures::{self, Curve};
+use super::markup::{facts, figure, note, signed, swatch_span, table};
 use super::{
     ReportError, ReportInput, candidate_curve, chromaticities, measured_greys, measured_shares,
-    sampled, smallest_drive, swatch, uniformity_data,
+    sampled, smallest_drive, uniformity_data,
 };
 use crate::profile::Profile;
 use crate::verification::{PatchUse, Verification, verify};
-use chromacal_color::Xyz;
 use chromacal_color::spaces::xyz_to_xyy;
 use chromacal_model::CHANNELS;
 use chromacal_model::fit::checks::Verdict;
@@ -42,45 +42,6 @@ figcaption { font-size: 0.85em; color: #555; max-width: 520px; }
 @media print { body { max-width: none; } section { break-inside: avoid; } figure { break-inside: avoid; } }
 ";
 
-fn figure(id: &str, svg: &str, caption: &str) -> Markup {
-    html! {
-        figure id=(id) { (PreEscaped(svg)) figcaption { (caption) } }
-    }
-}
-
-fn note(text: &str) -> Markup {
-    html! { p.note { (text) } }
-}
-
-/// Figures to the right, so that their decimals line up; words to the left.
-fn is_numeric(cell: &str) -> bool {
-    let trimmed = cell.trim_end_matches(" %").trim_end_matches(" K");
-    trimmed.parse::<f64>().is_ok() || cell == "–"
-}
-
-/// A table with a header row.
-fn table(headers: &[&str], rows: &[Vec<String>]) -> Markup {
-    html! {
-        table {
-            tr { @for h in headers { th { (h) } } }
-            @for row in rows {
-                tr { @for cell in row { td.text[!is_numeric(cell)] { (cell) } } }
-            }
-        }
-    }
-}
-
-/// A two-column table of names and values.
-fn facts(rows: &[(&str, String)]) -> Markup {
-    html! {
-        table {
-            @for (name, value) in rows {
-                tr { th { (name) } td style="text-align:left" { (value) } }
-            }
-        }
-    }
-}
-
 fn stats_cells(stats: Option<&ErrorStats>) -> [String; 3] {
     match stats {
         Some(s) => [
@@ -100,17 +61,6 @@ fn parameter(name: &str, value: f64) -> String {
     }
 }
 
-/// `v` with its sign and `decimals` decimals, and a value that rounds to zero as an
-/// unsigned zero (not "-0.00").
-fn signed(v: f64, decimals: usize) -> String {
-    let text = format!("{v:+.decimals$}");
-    if text[1..].chars().all(|c| c == '0' || c == '.') {
-        text[1..].to_string()
-    } else {
-        text
-    }
-}
-
 fn seconds(s: f64) -> String {
     if !(s.is_finite() && s >= 0.0) {
         // A run's cost read from a file written by hand, say: nothing to print.
@@ -122,16 +72,6 @@ fn seconds(s: f64) -> String {
     } else {
         format!("{:.1} ms", s * 1000.0)
     }
-}
-
-/// `#rrggbb` of a swatch showing `xyz` against `white`.
-fn hex(xyz: &Xyz, white: &Xyz) -> String {
-    let [r, g, b] = swatch(xyz, white);
-    format!("#{r:02x}{g:02x}{b:02x}")
-}
-
-fn swatch_span(xyz: &Xyz, white: &Xyz) -> Markup {
-    html! { span.swatch style={ "background:" (hex(xyz, white)) } {} }
 }
 
 /// The verification of the profile: against the readings measured to verify it, or
@@ -169,7 +109,12 @@ pub fn report_html(input: &ReportInput) -> Result<String, ReportError> {
         .unwrap_or_else(|| profile.id.clone());
     let verification = verification_of(input);
     let verified = verification.as_ref().map(|(v, what)| (v, what.as_str()));
+    let calibrated = match input.verified {
+        Some(v) => super::calibrated::calibrated(profile, v)?,
+        None => html! {},
+    };
     let sections = [
+        calibrated,
         identity(profile),
         summary(profile, verified),
         patches(verified.map(|v| v.0)),

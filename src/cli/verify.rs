@@ -1,0 +1,148 @@
+//! `chromacal verify`: measure a chart through what the display holds now and judge
+//! it (`chromacal::verify`), with a progress bar, a summary or JSON, a `.ti3` of the
+//! readings and an HTML report.
+
+use std::path::PathBuf;
+
+use chromacal::calibrate::verify::{VerifyOptions, verify};
+use chromacal::config::{config_search_paths, load_config_searching};
+use chromacal::profile::store::default_state_dir;
+use chromacal::verify::criteria::{CriteriaSet, PRESETS, preset};
+use chromacal::verify::{Against, Metric, Verdict, chart};
+
+use super::args::DeviceArgs;
+use super::shared::{Failure, VERIFICATION_FAILED, VERIFICATION_UNDECIDED, outln};
+
+/// Verify the calibrated display: show a chart through the video LUT as it is now
+/// (and the profile's curves where the display has no LUT), read it, and set every
+/// patch against what a colour-managed application asked for (--against) and against
+/// the profile's prediction; the calibrated white, black, contrast, grey balance and
+/// tone; a verdict for each criterion (pass, fail or undecided, from each value's 95 %
+/// interval). Exit 0 when it passes, 5 when it fails, 6 when undecided.
+#[derive(clap::Args)]
+pub struct VerifyArgs {
+    /// The profile to verify (a chromacal .toml) [default: the store's current one].
+    profile: Option<PathBuf>,
+    /// Verify the store's current profile (the default when no profile is named).
+    #[arg(long, conflicts_with = "profile")]
+    current: bool,
+    /// What each patch is set against: srgb, bt709, bt1886, p3, rec2020 (what an
+    /// application asks for in that encoding) or profile (the profile's prediction).
+    #[arg(long, default_value = "srgb")]
+    against: Against,
+    /// default (≥ 17 greys, primaries and secondaries at four levels, the
+    /// ColorChecker, white and black read three times), short (26 patches), long
+    /// (≥ 100), or a file: a .ti1/.ti3 (RGB_R RGB_G RGB_B, 0–100) or a CSV (R, G, B,
+    /// 0–1), in the --against encoding.
+    #[arg(long, default_value = "default")]
+    chart: String,
+    /// de00 (CIEDE2000) or itp (ITU-R BT.2124 ΔE ITP).
+    #[arg(long, default_value = "de00")]
+    metric: Metric,
+    /// displaycal (DisplayCAL's default tolerances), displaycal-recommended, iso14861
+    /// [default: the config's [verify] criteria, else displaycal].
+    #[arg(long)]
+    criteria: Option<String>,
+    /// Read the patches whose verdict is undecided again, up to N more readings in
+    /// all, until every verdict is settled.
+    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "60")]
+    until_decided: Option<usize>,
+    /// Print the whole result as JSON.
+    #[arg(long)]
+    json: bool,
+    /// Write the readings as an ArgyllCMS .ti3.
+    #[arg(long, value_name = "FILE")]
+    ti3: Option<PathBuf>,
+    /// Write the verification report (HTML).
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
+    /// Configuration file (TOML), for the instrument and the display [default: as for
+    /// calibrate].
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Profile store [default: as for calibrate].
+    #[arg(long)]
+    state_dir: Option<PathBuf>,
+    #[command(flatten)]
+    devices: DeviceArgs,
+}
+
+pub fn run(args: VerifyArgs) -> Result<(), Failure> {
+    let loaded = load_config_searching(args.config.as_deref(), &config_search_paths())?;
+    let criteria = criteria(args.criteria.as_deref(), &loaded.config.verify, args.metric)?;
+    if let Some(path) = &args.report {
+        super::report::check_output_dir(path)?;
+    }
+    let options = VerifyOptions {
+        state_dir: args.state_dir.unwrap_or_else(default_state_dir),
+        profile: args.profile,
+        chart: chart::chart(&args.chart)?,
+        against: args.against,
+        metric: args.metric,
+        criteria,
+        until_decided: args.until_decided,
+        overrides: args.devices.overrides()?,
+    };
+    let bar = indicatif::ProgressBar::new(0);
+    let mut progress = |done: usize, total: usize| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let outcome = runtime.block_on(verify(&loaded, &options, &mut progress));
+    bar.finish_and_clear();
+    let outcome = outcome?;
+    if let Some(path) = &args.ti3 {
+        chromacal_formats::durable::write_atomic_named(path, outcome.ti3.as_bytes())
+            .map_err(|e| Failure::from(format!("{}: {e}", path.display())))?;
+    }
+    if let Some(path) = &args.report {
+        super::report::write_verification(&outcome, path)?;
+    }
+    if args.json {
+        outln!("{}", serde_json::to_string_pretty(&outcome.report)?)?;
+    } else {
+        outln!(
+            "{}",
+            chromacal::report::verification_summary(&outcome.report)
+        )?;
+    }
+    match outcome.report.verdict {
+        Verdict::Pass => Ok(()),
+        Verdict::Fail => Err(Failure {
+            message: "the display fails the verification".into(),
+            code: VERIFICATION_FAILED,
+        }),
+        Verdict::Undecided => Err(Failure {
+            message: "the verification is undecided: read again with --until-decided".into(),
+            code: VERIFICATION_UNDECIDED,
+        }),
+    }
+}
+
+/// The criteria asked for: by name, else the config's, else DisplayCAL's defaults.
+fn criteria(
+    name: Option<&str>,
+    config: &chromacal::config::VerifyConfig,
+    metric: Metric,
+) -> Result<CriteriaSet, Failure> {
+    let name = name.or(config.criteria.as_deref());
+    match name {
+        Some(name) => preset(name, metric).ok_or_else(|| {
+            Failure::from(format!(
+                "no criteria '{name}' ({}, or [[verify.criterion]] in the config)",
+                PRESETS.join(", ")
+            ))
+        }),
+        None if !config.criterion.is_empty() => Ok(CriteriaSet {
+            name: "the config's [[verify.criterion]]".into(),
+            criteria: config.criterion.clone(),
+        }),
+        None => Ok(preset("displaycal", metric).unwrap_or_else(|| CriteriaSet {
+            name: "none".into(),
+            criteria: Vec::new(),
+        })),
+    }
+}

@@ -1,0 +1,144 @@
+//! Showing the chart and reading it: each patch once, and again where a verdict is
+//! still undecided (`verify --until-decided`).
+
+use chromacal_color::Xyz;
+use chromacal_display::PatchDisplay;
+use chromacal_instruments::{Instrument, ReadingStatus};
+use chromacal_model::screen::{Codes, Geometry, Patch};
+
+use chromacal_display::DisplayError;
+use chromacal_instruments::InstrumentError;
+
+use super::PlannedPatch;
+
+/// Why a chart could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum MeasureError {
+    #[error(transparent)]
+    Display(#[from] DisplayError),
+    #[error("patch {index} ('{label}'): {source}")]
+    Instrument {
+        index: usize,
+        label: String,
+        source: InstrumentError,
+    },
+}
+
+/// How the patches are shown.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasureOptions {
+    /// The patch's side, a fraction of the screen.
+    pub patch_size: f64,
+}
+
+impl Default for MeasureOptions {
+    fn default() -> Self {
+        MeasureOptions { patch_size: 0.2 }
+    }
+}
+
+/// Every reading of every patch, in the chart's order, with the instrument time.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Readings {
+    pub xyz: Vec<Vec<Xyz>>,
+    pub instrument_s: f64,
+}
+
+impl Readings {
+    /// The mean of a patch's readings.
+    pub fn mean(&self, index: usize) -> Option<Xyz> {
+        let reads = self.xyz.get(index)?;
+        (!reads.is_empty()).then(|| reads.iter().sum::<Xyz>() / reads.len() as f64)
+    }
+
+    pub fn count(&self) -> usize {
+        self.xyz.iter().map(Vec::len).sum()
+    }
+}
+
+/// Show `patch` and read it once.
+async fn read<D: PatchDisplay, I: Instrument>(
+    patch: &PlannedPatch,
+    index: usize,
+    options: &MeasureOptions,
+    display: &mut D,
+    instrument: &mut I,
+) -> Result<(Xyz, f64), MeasureError> {
+    let shown = Patch {
+        codes: patch.codes,
+        background: Codes::from_drive([0.0; 3], patch.codes.bit_depth),
+        geometry: Geometry::centred(options.patch_size),
+    };
+    display.show(&shown).await?;
+    let reading = instrument
+        .measure()
+        .await
+        .map_err(|source| MeasureError::Instrument {
+            index,
+            label: patch.patch.label.clone(),
+            source,
+        })?;
+    // Light above the instrument's range has no value; below it, the value it
+    // indicated is kept (the black of a good display is there).
+    let xyz = match (reading.status, reading.xyz) {
+        (ReadingStatus::Overload, _) | (_, None) => {
+            return Err(MeasureError::Instrument {
+                index,
+                label: patch.patch.label.clone(),
+                source: InstrumentError::Protocol(format!(
+                    "no XYZ ({:?}): verify needs a colorimeter or spectroradiometer within its range",
+                    reading.status
+                )),
+            });
+        }
+        (_, Some(xyz)) => xyz,
+    };
+    if !xyz.iter().all(|v| v.is_finite()) {
+        return Err(MeasureError::Instrument {
+            index,
+            label: patch.patch.label.clone(),
+            source: InstrumentError::Protocol(format!("read as {xyz:?}")),
+        });
+    }
+    Ok((xyz, reading.integration_s))
+}
+
+/// Read every planned patch once, calling `progress(done, total)` after each.
+pub async fn measure_chart<D: PatchDisplay, I: Instrument>(
+    planned: &[PlannedPatch],
+    options: &MeasureOptions,
+    display: &mut D,
+    instrument: &mut I,
+    progress: &mut (dyn FnMut(usize, usize) + Send),
+) -> Result<Readings, MeasureError> {
+    let mut readings = Readings {
+        xyz: vec![Vec::new(); planned.len()],
+        instrument_s: 0.0,
+    };
+    for (index, patch) in planned.iter().enumerate() {
+        let (xyz, seconds) = read(patch, index, options, display, instrument).await?;
+        readings.xyz[index].push(xyz);
+        readings.instrument_s += seconds;
+        progress(index + 1, planned.len());
+    }
+    let _ = display.blank().await;
+    Ok(readings)
+}
+
+/// Read the patches at `indices` once more each, into `readings`.
+pub async fn read_again<D: PatchDisplay, I: Instrument>(
+    planned: &[PlannedPatch],
+    indices: &[usize],
+    readings: &mut Readings,
+    options: &MeasureOptions,
+    display: &mut D,
+    instrument: &mut I,
+) -> Result<(), MeasureError> {
+    for &index in indices {
+        let (xyz, seconds) = read(&planned[index], index, options, display, instrument).await?;
+        readings.xyz[index].push(xyz);
+        readings.instrument_s += seconds;
+    }
+    let _ = display.blank().await;
+    Ok(())
+}
