@@ -8,9 +8,9 @@ use clap::{CommandFactory, Parser, Subcommand};
 mod cli;
 
 use cli::{
-    bench, calibrate, check, completions, config, correction, daemon, displays, emulate, export,
-    fit, history, instruments, job, lut, lut3d, measure, profile, render, report, runs, spectrum,
-    status, verify,
+    adjust, bench, calibrate, check, completions, config, correction, daemon, displays, emulate,
+    export, fit, history, instruments, job, lut, lut3d, measure, profile, render, report, runs,
+    spectrum, status, verify,
 };
 
 #[derive(Parser)]
@@ -36,6 +36,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     Calibrate(calibrate::CalibrateArgs),
+    Adjust(adjust::AdjustArgs),
     Runs(runs::RunsArgs),
     Fit(fit::FitArgs),
     Check(check::CheckArgs),
@@ -74,6 +75,7 @@ fn main() -> ExitCode {
     );
     let result = match cli.command {
         Command::Calibrate(args) => calibrate::run(args),
+        Command::Adjust(args) => adjust::run(args),
         Command::Runs(args) => runs::run(args),
         Command::Fit(args) => fit::run(args),
         Command::Check(args) => check::run(args),

@@ -362,9 +362,12 @@ fn sgck_keeps_rec2020_reds_apart_where_clipping_merges_them() {
 fn greys_through_a_lut_and_the_calibration_curves_stay_neutral() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("config.toml");
+    // A 10-bit panel, the curves set at its depth: what the LUT's interpolation is
+    // judged on here is continuous, and at 8 bits the greys' own steps (the best an
+    // 8-bit panel can show, some tenths of b*) would be judged with it.
     std::fs::write(
         &config,
-        "[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nluminance = 80.0\n",
+        "[monitor]\nbit_depth = 10\n[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nluminance = 80.0\nbit_depth = 10\n",
     )
     .unwrap();
     let state = dir.path().join("state");

@@ -345,10 +345,10 @@ fn journal_lines(state: &Path) -> usize {
 }
 
 /// The config of the window calibrations: the CRT at 10 bits behind an 8-bit
-/// framebuffer (the LUT's output reaches the panel at 10), no uniformity grid (the
-/// emulated instrument is aimed at the centre and stays there), and a target whose
-/// curves are measured into place at 10 grey levels.
-const WINDOW_CONFIG: &str = "[monitor]\npreset = \"crt\"\nbit_depth = 10\n[plan]\nuniformity_grid = 0\n[display]\nsettle_s = 0.0\n[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nlevels = 10\n";
+/// framebuffer (the LUT's output reaches the panel at 10, as `[target] bit_depth`
+/// says), no uniformity grid (the emulated instrument is aimed at the centre and stays
+/// there), and a target whose curves are measured into place at 10 grey levels.
+const WINDOW_CONFIG: &str = "[monitor]\npreset = \"crt\"\nbit_depth = 10\n[plan]\nuniformity_grid = 0\n[display]\nsettle_s = 0.0\n[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nlevels = 10\nbit_depth = 10\n";
 
 #[test]
 fn ctrl_c_puts_the_lut_back_and_after_kill_9_any_start_does() {
@@ -888,12 +888,7 @@ fn the_calibrated_window_verifies_through_the_lut_and_a_foreign_ramp_fails() {
     let x = XServer::start();
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("config.toml");
-    // The LUT's output reaches the panel at 10 bits, as `[target] bit_depth` says.
-    std::fs::write(
-        &config,
-        format!("{WINDOW_CONFIG}luminance = 80.0\nbit_depth = 10\n"),
-    )
-    .unwrap();
+    std::fs::write(&config, format!("{WINDOW_CONFIG}luminance = 80.0\n")).unwrap();
     let emulator = emulate(&[
         "--instrument",
         "pr670",

@@ -1,5 +1,6 @@
 //! A calibration run: the plan, the measuring loop, the journal.
 
+pub mod adjust;
 pub mod correction;
 pub mod devices;
 pub mod displays;

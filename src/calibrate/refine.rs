@@ -15,8 +15,8 @@
 //! figures reported are measured, not predicted.
 //!
 //! What reaches the panel is quantised: the codes at their bit depth, or the video
-//! LUT's output at the depth the display takes it (`[target] bit_depth`, the plan's by
-//! default). At 8 bits one code of blue near the top is about 1 % of its light, so a
+//! LUT's output at the depth the display takes it (`[target] bit_depth`; unstated, a
+//! LUT's curves are left as the passes make them). At 8 bits one code of blue near the top is about 1 % of its light, so a
 //! white aimed between two codes lands up to half a step (some 0.5 ΔE00) away, and
 //! correcting it pass after pass only hops between the two. So after each pass every
 //! curve entry is set to the codes at that depth whose colour, by the model corrected
@@ -278,8 +278,14 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
     } else {
         Through::Codes(config.bit_depth.unwrap_or(plan_bit_depth))
     };
-    // The depth the curves' output reaches the panel at.
-    let depth = config.bit_depth.unwrap_or(plan_bit_depth);
+    // The depth the curves' output reaches the panel at, where it is known: the codes'
+    // (chromacal quantises them itself), or the video LUT's output as `bit_depth`
+    // states it (a card's output depth is not something X11 says: unstated, the
+    // curves stay as the model and the passes make them).
+    let depth = match through {
+        Through::Codes(bits) => Some(bits),
+        Through::Lut(_) => config.bit_depth,
+    };
     let inputs: Vec<f64> = (1..config.levels)
         .map(|k| {
             let x = k as f64 / (config.levels - 1) as f64;
@@ -311,7 +317,10 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
                 read_mean(&curves, x, reads, through, geometry, display, instrument).await?;
             readings += reads;
             instrument_s += seconds;
-            let predicted = model.forward_centre(quantised(curves.apply([x; 3]), depth));
+            let predicted = model.forward_centre(match depth {
+                Some(bits) => quantised(curves.apply([x; 3]), bits),
+                None => curves.apply([x; 3]),
+            });
             if let Some(r) = ratio(&measured, &predicted) {
                 ratios.push((x, r));
             }
@@ -367,7 +376,9 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
             black,
             white,
         };
-        snap_to_depth(&mut curves, model, &ratios, &aim, depth);
+        if let Some(bits) = depth {
+            snap_to_depth(&mut curves, model, &ratios, &aim, bits);
+        }
         display.load_curves(Some(&curves)).map_err(RunError::from)?;
     }
     // The check, through the final curves; white three times, for its chromaticity.

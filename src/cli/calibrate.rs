@@ -57,12 +57,21 @@ pub struct CalibrateArgs {
     /// <state>/NAME/ (as the daemon keeps it). Needed when the config names devices.
     #[arg(long, value_name = "NAME")]
     device: Option<String>,
+    /// First set the monitor's own controls toward the [target] white and luminance
+    /// (`chromacal adjust`: a readout until Enter), so that the curves have less to do.
+    #[arg(long, conflicts_with = "resume")]
+    adjust: bool,
     #[command(flatten)]
     devices: DeviceArgs,
 }
 
 pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
     let overrides = args.devices.overrides()?;
+    if args.adjust {
+        let loaded = load_config_searching(args.config.as_deref(), &config_search_paths())?;
+        let target = super::adjust::target(&loaded, None, None)?;
+        super::adjust::adjust(&loaded, &args.devices, &target, false)?;
+    }
     calibrate(
         args.config.as_deref(),
         args.device.as_deref(),

@@ -2,6 +2,7 @@
 //! that runs it, and ends in `run(args) -> Result<(), Failure>`. `main.rs` only parses
 //! and dispatches; what the commands share is in `shared`.
 
+pub mod adjust;
 pub mod api;
 pub mod args;
 pub mod bench;

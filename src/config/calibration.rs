@@ -111,9 +111,10 @@ pub struct TargetConfig {
     /// Grey levels measured in each pass, black to white inclusive.
     #[serde(default = "nine")]
     pub levels: usize,
-    /// Bit depth the curves' output reaches the panel at: the codes' while refining,
-    /// the video LUT's output as the display takes it (the video card's); the curves
-    /// are set to what that depth can show (default: the plan's).
+    /// Bit depth the curves' output reaches the panel at: the codes' where chromacal
+    /// applies the curves itself (default: the plan's), the video LUT's output as the
+    /// display takes it (the video card's; unknown unless given). Where it is known
+    /// the curves are set to the best colours that depth can show.
     pub bit_depth: Option<u32>,
     /// After the curves, measure `chromacal verify`'s default chart through them
     /// against sRGB, so that the calibration report leads with the calibrated display.

@@ -233,6 +233,23 @@ fn falloff_shape(r: f64) -> f64 {
     h(r) / h(std::f64::consts::SQRT_2)
 }
 
+/// The monitor's own controls, as its on-screen display sets them: a gain on each
+/// channel's light and a brightness on all three (the black stays), 1 as it came.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Osd {
+    pub gains: [f64; 3],
+    pub brightness: f64,
+}
+
+impl Default for Osd {
+    fn default() -> Self {
+        Osd {
+            gains: [1.0; 3],
+            brightness: 1.0,
+        }
+    }
+}
+
 /// A virtual monitor showing some content, on a shared clock.
 #[derive(Debug)]
 pub struct VirtualMonitor {
@@ -245,6 +262,7 @@ pub struct VirtualMonitor {
     previous: ScreenContent,
     changed_at: f64,
     clock: Arc<VirtualClock>,
+    osd: Osd,
 }
 
 impl VirtualMonitor {
@@ -303,6 +321,7 @@ impl VirtualMonitor {
             previous: ScreenContent::default(),
             changed_at: f64::NEG_INFINITY,
             clock,
+            osd: Osd::default(),
         })
     }
 
@@ -327,6 +346,28 @@ impl VirtualMonitor {
 
     pub fn screen(&self) -> &ScreenContent {
         &self.screen
+    }
+
+    /// Set the monitor's own controls (`chromacal adjust` tells a user which way).
+    /// Controls that are not finite and positive are refused.
+    pub fn set_osd(&mut self, osd: Osd) -> Result<(), SimError> {
+        if !osd
+            .gains
+            .iter()
+            .chain([&osd.brightness])
+            .all(|v| v.is_finite() && *v > 0.0)
+        {
+            return Err(SimError::BadSpec {
+                name: self.spec.name.clone(),
+                what: format!("the monitor's controls must be positive: {osd:?}"),
+            });
+        }
+        self.osd = osd;
+        Ok(())
+    }
+
+    pub fn osd(&self) -> Osd {
+        self.osd
     }
 
     fn quantise(&self, v: f64) -> f64 {
@@ -402,7 +443,7 @@ impl VirtualMonitor {
             .collect();
         for c in 0..3 {
             let k = 1.0 - self.spec.falloff[c] * shape;
-            let weight = gain * k * output[c];
+            let weight = gain * k * output[c] * self.osd.brightness * self.osd.gains[c];
             let admixture = f.primary_nonconstancy * (1.0 - above[c]);
             let next = (c + 1) % 3;
             for (i, v) in values.iter_mut().enumerate() {

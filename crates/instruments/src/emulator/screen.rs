@@ -1,6 +1,7 @@
-//! The emulator's screen link: until the display issue brings the Resolve link, a
-//! calibration run tells an emulator in another process what the screen shows over a
-//! local (Unix) socket. One JSON line per patch, answered with `ok`.
+//! The emulator's screen link: a calibration run tells an emulator in another process
+//! what the screen shows over a local (Unix) socket, one JSON line per patch, answered
+//! with `ok`; and a test sets the monitor's own controls (its on-screen display) on the
+//! same socket, as a user would press its buttons.
 
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
@@ -10,13 +11,21 @@ use std::sync::{Arc, Mutex};
 use serde::{Deserialize, Serialize};
 
 use chromacal_model::screen::ScreenContent;
-use chromacal_sim::monitor::VirtualMonitor;
+use chromacal_sim::monitor::{Osd, VirtualMonitor};
 
 /// One message: what to show, and how long the display takes to settle.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ScreenMessage {
     pub content: ScreenContent,
     pub settle_s: f64,
+}
+
+/// The other message: the monitor's own controls set, as a user sets them on its
+/// on-screen display (`{"osd": {"gains": [1, 0.95, 0.9], "brightness": 0.8}}`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OsdMessage {
+    pub osd: Osd,
 }
 
 /// Serve screen updates for `monitor` on a socket at `path` (removed first if stale).
@@ -47,7 +56,16 @@ fn serve_client(stream: UnixStream, monitor: Arc<Mutex<VirtualMonitor>>) {
                 }
                 Err(_) => "error: the virtual monitor is gone\n".to_string(),
             },
-            Err(e) => format!("error: {e}\n"),
+            Err(e) => match serde_json::from_str::<OsdMessage>(&line) {
+                Ok(message) => match monitor.lock() {
+                    Ok(mut m) => match m.set_osd(message.osd) {
+                        Ok(()) => "ok\n".to_string(),
+                        Err(e) => format!("error: {e}\n"),
+                    },
+                    Err(_) => "error: the virtual monitor is gone\n".to_string(),
+                },
+                Err(_) => format!("error: {e}\n"),
+            },
         };
         if writer.write_all(reply.as_bytes()).is_err() {
             return;
