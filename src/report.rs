@@ -470,6 +470,17 @@ pub fn calibration_summary(c: &crate::profile::StoredCalibration) -> String {
 
 /// The monitor's EDID identity and its stated chromaticities beside the measured ones,
 /// with a warning when they are grossly apart.
+/// What the colorimeter's readings went through: the correction, by name and digest,
+/// or the warning that there was none.
+pub fn correction_summary(profile: &Profile) -> String {
+    let p = &profile.provenance;
+    match (&p.correction, &p.uncorrected) {
+        (Some(c), _) => format!("correction: {}\n", c.describe()),
+        (None, Some(warning)) => format!("WARNING: {warning}\n"),
+        (None, None) => String::new(),
+    }
+}
+
 pub fn edid_summary(profile: &Profile) -> String {
     let (Some(edid), Some(comparison)) = (&profile.provenance.edid, profile.edid_comparison())
     else {
@@ -506,6 +517,7 @@ pub fn describe_profile(profile: &Profile) -> String {
     }
     let _ = writeln!(out, "made by {}\n", p.program);
     out.push_str(&edid_summary(profile));
+    out.push_str(&correction_summary(profile));
     out.push_str(&describe_model(&profile.model, &profile.units.to_string()));
     let _ = writeln!(out, "\nprimaries with standard errors:");
     for pr in &profile.report.primaries {
@@ -679,6 +691,7 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
         duration(outcome.fit_seconds)
     );
     out += &edid_summary(&outcome.profile);
+    out += &correction_summary(&outcome.profile);
     out += &fit_summary(&outcome.fitted.report);
     if let Some(c) = &outcome.profile.calibration {
         out += &calibration_summary(c);
@@ -749,6 +762,12 @@ pub fn verification_summary(v: &crate::verify::VerifyReport) -> String {
         s.grey_balance_range,
         100.0 * s.tone_error
     );
+    if let Some(c) = &v.correction {
+        out += &format!("  correction: {}\n", c.describe());
+    }
+    if let Some(warning) = &v.uncorrected {
+        out += &format!("  WARNING: {warning}\n");
+    }
     out += &format!("criteria: {}\n", v.criteria);
     let rows: Vec<Vec<String>> = v
         .results

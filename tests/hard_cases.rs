@@ -38,6 +38,8 @@ fn profile_of(fit: &chromacal_model::fit::FittedModel) -> Profile {
             program: "test".into(),
             settings_at_resume: None,
             edid: None,
+            correction: None,
+            uncorrected: None,
         },
         report: fit.report.clone(),
         calibration: None,

@@ -148,7 +148,10 @@ impl PatchDisplay for RunDisplay {
 
 /// An instrument of any kind a run can use, with an optional correction matrix.
 pub enum RunInstrument {
-    Simulated(SimulatedInstrument),
+    Simulated {
+        instrument: SimulatedInstrument,
+        correction: Option<Matrix3<f64>>,
+    },
     Serial {
         instrument: AsyncSerialInstrument,
         correction: Option<Matrix3<f64>>,
@@ -161,7 +164,7 @@ pub enum RunInstrument {
 impl Instrument for RunInstrument {
     fn info(&self) -> InstrumentInfo {
         match self {
-            RunInstrument::Simulated(i) => i.info(),
+            RunInstrument::Simulated { instrument, .. } => instrument.info(),
             RunInstrument::Serial { instrument, .. } => instrument.info(),
             RunInstrument::Released(info) => info.clone(),
         }
@@ -169,16 +172,19 @@ impl Instrument for RunInstrument {
 
     async fn measure(&mut self) -> Result<Reading, InstrumentError> {
         match self {
-            RunInstrument::Simulated(i) => i.measure().await,
+            RunInstrument::Simulated {
+                instrument,
+                correction,
+            } => {
+                let reading = instrument.measure().await?;
+                Ok(corrected(reading, correction.as_ref()))
+            }
             RunInstrument::Serial {
                 instrument,
                 correction,
             } => {
-                let mut reading = instrument.measure().await?;
-                if let (Some(m), Some(xyz)) = (correction, reading.xyz) {
-                    reading.xyz = Some(*m * xyz);
-                }
-                Ok(reading)
+                let reading = instrument.measure().await?;
+                Ok(corrected(reading, correction.as_ref()))
             }
             RunInstrument::Released(info) => Err(InstrumentError::Disconnected(format!(
                 "the {} was handed to another display",
@@ -186,6 +192,14 @@ impl Instrument for RunInstrument {
             ))),
         }
     }
+}
+
+/// A colorimeter's reading through its correction matrix.
+fn corrected(mut reading: Reading, correction: Option<&Matrix3<f64>>) -> Reading {
+    if let (Some(m), Some(xyz)) = (correction, reading.xyz) {
+        reading.xyz = Some(m * xyz);
+    }
+    reading
 }
 
 impl RunInstrument {
@@ -221,9 +235,26 @@ pub async fn open_devices(
             config.display.settle_s,
             realtime_scale,
         )?;
+        // A simulated colorimeter (it reads through filters) takes a correction as a
+        // real one does; a simulated spectroradiometer has none to take.
+        let correction = match &config.instrument.correction {
+            Some(_) if rig.instrument.info().capability == Capability::Spectral => {
+                return Err(DevicesError::Config(
+                    "instrument.correction is for colorimeters; the simulated instrument is a spectroradiometer (instrument.simulated.kind)".into(),
+                ));
+            }
+            Some(c) => Some(
+                c.matrix(base_dir)
+                    .map_err(|e| DevicesError::Config(e.to_string()))?,
+            ),
+            None => None,
+        };
         return Ok(Devices {
             display: RunDisplay::Simulated(rig.display),
-            instrument: RunInstrument::Simulated(rig.instrument),
+            instrument: RunInstrument::Simulated {
+                instrument: rig.instrument,
+                correction,
+            },
             clock: rig.clock.clone(),
             virtual_clock: Some(rig.clock),
             base_dir: base_dir.to_path_buf(),
@@ -279,7 +310,14 @@ pub async fn open_instrument(
     // A .ccss is spectral samples of the display type: only a colorimeter whose
     // spectral sensitivities are known can use it, and of chromacal's instruments only
     // ArgyllCMS knows them (for the ones it drives). It is handed to Argyll.
-    let correction: Option<Matrix3<f64>> = match (&config.instrument.correction, address) {
+    // A correction named by its name is the installed file of that name.
+    let named = match &config.instrument.correction {
+        Some(Correction::File(path)) => Some(Correction::File(
+            crate::config::corrections::resolve(path, base_dir),
+        )),
+        other => other.clone(),
+    };
+    let correction: Option<Matrix3<f64>> = match (&named, address) {
         (Some(Correction::File(path)), InstrumentAddress::Argyll { .. })
             if chromacal_formats::ccss::is_ccss_path(path) =>
         {

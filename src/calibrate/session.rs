@@ -647,6 +647,8 @@ pub async fn finish_run(
                 .window()
                 .and_then(|w| w.output().edid.as_deref())
                 .and_then(|bytes| chromacal_formats::edid::Edid::parse(bytes).ok()),
+            correction: None,
+            uncorrected: None,
         },
         report: fitted.report.clone(),
         calibration,
@@ -656,6 +658,14 @@ pub async fn finish_run(
             fit_s: fit_seconds,
         }),
     };
+    let mut profile = profile;
+    profile.provenance.set_correction(
+        config
+            .instrument
+            .correction
+            .as_ref()
+            .map(|c| c.record(&header.config_dir)),
+    );
     let text = profile.to_toml()?;
     let rejection = publish_rejection(&fitted, &config.publish);
     let store_error = |source| CalibrateError::Store {

@@ -53,6 +53,8 @@ pub struct VerifyOptions {
     /// Readings more allowed for patches whose verdict is undecided.
     pub until_decided: Option<usize>,
     pub overrides: Overrides,
+    /// The correction the instrument's readings go through (the config's).
+    pub correction: Option<crate::profile::CorrectionRecord>,
 }
 
 /// What a verification did and found.
@@ -132,7 +134,12 @@ pub async fn verify(
     )
     .await;
     devices.instrument.close();
-    let (report, planned, readings) = result?;
+    let (mut report, planned, readings) = result?;
+    said_of_the_instrument(
+        &mut report,
+        devices.instrument.info(),
+        options.correction.clone(),
+    );
     let ti3 = chromacal_formats::cgats::to_ti3(&measurement_set(
         &planned,
         &readings,
@@ -180,10 +187,40 @@ pub async fn after_calibration(
         criteria,
         until_decided: None,
         overrides: Overrides::default(),
+        correction: profile.provenance.correction.clone(),
     };
-    let (report, _, _) = verify_on(profile, &options, bits, devices, progress).await?;
+    let (mut report, _, _) = verify_on(profile, &options, bits, devices, progress).await?;
+    said_of_the_instrument(
+        &mut report,
+        devices.instrument.info(),
+        profile.provenance.correction.clone(),
+    );
     keep(store, profile, &report)?;
     Ok(report)
+}
+
+/// The instrument, its correction, or the warning that a colorimeter had none.
+fn said_of_the_instrument(
+    report: &mut VerifyReport,
+    instrument: chromacal_instruments::InstrumentInfo,
+    correction: Option<crate::profile::CorrectionRecord>,
+) {
+    let mut provenance = crate::profile::Provenance {
+        source: String::new(),
+        display: None,
+        instrument: Some(instrument.clone()),
+        measured_at: None,
+        config_digest: None,
+        program: String::new(),
+        settings_at_resume: None,
+        edid: None,
+        correction: None,
+        uncorrected: None,
+    };
+    provenance.set_correction(correction);
+    report.instrument = Some(instrument.name);
+    report.correction = provenance.correction;
+    report.uncorrected = provenance.uncorrected;
 }
 
 /// Keep `report` beside `profile` in `store`, and a line of it in the store's log.

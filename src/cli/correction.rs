@@ -31,6 +31,15 @@ enum CorrectionCommand {
     /// taking the colorimeter's XYZ to the reference's is fitted and scored on patches
     /// held out of the fit.
     Make(MakeArgs),
+    /// The corrections installed where ArgyllCMS's oeminst puts them
+    /// ($XDG_DATA_HOME/ArgyllCMS, $XDG_DATA_DIRS/ArgyllCMS, /usr/share/color/argyll/ref)
+    /// and the user's own ($XDG_DATA_HOME/chromacal/corrections): their names are what
+    /// [instrument] correction takes.
+    List {
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(clap::Args)]
@@ -77,7 +86,26 @@ struct MakeArgs {
 pub fn run(args: CorrectionArgs) -> Result<(), Failure> {
     match args.command {
         CorrectionCommand::Make(args) => make(args),
+        CorrectionCommand::List { json } => list(json),
     }
+}
+
+fn list(json: bool) -> Result<(), Failure> {
+    let found = chromacal::config::corrections::installed();
+    if json {
+        return outln!("{}", serde_json::to_string_pretty(&found)?);
+    }
+    if found.is_empty() {
+        let dirs: Vec<String> = chromacal::config::corrections::correction_dirs()
+            .iter()
+            .map(|d| d.display().to_string())
+            .collect();
+        return outln!("no .ccmx or .ccss files in {}", dirs.join(", "));
+    }
+    for c in found {
+        outln!("{}\n    {}", c.describe(), c.path.unwrap_or_default())?;
+    }
+    Ok(())
 }
 
 fn make(args: MakeArgs) -> Result<(), Failure> {

@@ -111,6 +111,8 @@ fn fit(
             program: format!("chromacal {}", env!("CARGO_PKG_VERSION")),
             settings_at_resume: None,
             edid: None,
+            correction: None,
+            uncorrected: None,
         },
         report: fitted.report.clone(),
         calibration: None,

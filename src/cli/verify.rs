@@ -82,6 +82,12 @@ pub fn run(args: VerifyArgs) -> Result<(), Failure> {
         criteria,
         until_decided: args.until_decided,
         overrides: args.devices.overrides()?,
+        correction: loaded
+            .config
+            .instrument
+            .correction
+            .as_ref()
+            .map(|c| c.record(&loaded.base_dir)),
     };
     let bar = indicatif::ProgressBar::new(0);
     let mut progress = |done: usize, total: usize| {

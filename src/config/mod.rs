@@ -5,6 +5,7 @@
 //! given: a calibration of the simulated CRT with a simulated spectroradiometer.
 
 pub mod calibration;
+pub mod corrections;
 pub mod daemon;
 pub mod devices;
 pub mod ranges;
@@ -94,11 +95,7 @@ impl Correction {
                 Ok(m)
             }
             Correction::File(path) => {
-                let path = if path.is_absolute() {
-                    path.clone()
-                } else {
-                    base_dir.join(path)
-                };
+                let path = corrections::resolve(path, base_dir);
                 Ok(chromacal_formats::ccmx::read_ccmx(&path)?.matrix)
             }
         }

@@ -120,6 +120,7 @@ pub fn calibrated(profile: &Profile, v: &VerifyReport) -> Result<Markup, ReportE
                 " readings), set against " (v.against) ". Criteria: " (v.criteria) ". Verdict: "
                 (verdict_span(v.verdict, Some("calibrated-verdict"))) ". Every figure comes with its 95 % interval, from this session's repeats of the white and the black."
             }
+            @if let Some(warning) = &v.uncorrected { p.note #verify-uncorrected { "Warning: " (warning) } }
             table #before-after {
                 tr { th { "" } th { "native (the profile)" } th { "calibrated (measured)" } th { "" } }
                 tr { th { "white luminance" } td { (format!("{:.2}", native_white.y)) } td #cal-luminance { (format!("{:.2}", s.luminance)) } td.text { (unit) } }

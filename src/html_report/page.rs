@@ -198,12 +198,16 @@ fn identity(profile: &Profile) -> Markup {
             "not recorded (a profile made before chromacal recorded it)".into(),
         )),
     }
+    if let Some(c) = &p.correction {
+        rows.push(("correction", c.describe()));
+    }
     rows.push(("program", p.program.clone()));
     html! {
         section #identity {
             h2 { "Run and cost" }
             (facts(&rows))
             @if let Some(why) = &profile.report.luminance_only { (note(why)) }
+            @if let Some(warning) = &p.uncorrected { p.note #uncorrected { "Warning: " (warning) } }
         }
     }
 }

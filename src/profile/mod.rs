@@ -77,6 +77,74 @@ pub struct Provenance {
     /// white its maker states, set beside the measured ones.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub edid: Option<chromacal_formats::edid::Edid>,
+    /// The colorimeter correction the readings went through: its name, file digest,
+    /// display type and reference.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correction: Option<CorrectionRecord>,
+    /// Said when a colorimeter was used without a correction: what that costs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncorrected: Option<String>,
+}
+
+impl Provenance {
+    /// Record the colorimeter correction the readings went through, or, for a
+    /// colorimeter without one, the warning.
+    pub fn set_correction(&mut self, correction: Option<CorrectionRecord>) {
+        self.uncorrected = match (&correction, &self.instrument) {
+            (None, Some(i)) if i.capability == chromacal_instruments::Capability::Tristimulus => {
+                Some(uncorrected_warning(&i.name))
+            }
+            _ => None,
+        };
+        self.correction = correction;
+    }
+}
+
+/// A correction file, as `chromacal correction list` shows it and a profile records it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CorrectionRecord {
+    /// Its file name, or "a matrix in the config".
+    pub name: String,
+    /// `ccmx`, `ccss`, or `matrix`.
+    pub kind: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub path: Option<String>,
+    /// SHA-256 of the file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sha256: Option<String>,
+    /// The display (type) it was made on, as the file says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub display: Option<String>,
+    /// The instrument it corrects, and the reference it was made against.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instrument: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<String>,
+}
+
+impl CorrectionRecord {
+    /// A correction in one line: name, kind, display type, reference, digest.
+    pub fn describe(&self) -> String {
+        let mut parts = vec![format!("{} ({})", self.name, self.kind)];
+        if let Some(d) = &self.display {
+            parts.push(format!("display {d}"));
+        }
+        if let Some(r) = &self.reference {
+            parts.push(format!("made against {r}"));
+        }
+        if let Some(s) = &self.sha256 {
+            parts.push(format!("SHA-256 {s}"));
+        }
+        parts.join(", ")
+    }
+}
+
+/// What a colorimeter reads off without a correction, said beside its readings: its
+/// filters are not the CIE's, and the error depends on the display's spectra.
+pub fn uncorrected_warning(instrument: &str) -> String {
+    format!(
+        "the {instrument} is a colorimeter used without a correction: its filters are not the CIE observer's, so its XYZ depends on the display's spectra (chromacal's emulated K-10A, CS-100A and ColorCAL MKII read CRT, LCD and OLED displays 0.3 to 2.7 ΔE00 off; wide-gamut and LED-backlit displays are the worst). Make one against a spectroradiometer with `chromacal correction make`, or name one in [instrument] correction (`chromacal correction list`)"
+    )
 }
 
 /// A monitor profile.

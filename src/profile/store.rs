@@ -508,6 +508,8 @@ mod tests {
                 program: "test".into(),
                 settings_at_resume: None,
                 edid: None,
+                correction: None,
+                uncorrected: None,
             },
             report: fitted.report.clone(),
             calibration: None,

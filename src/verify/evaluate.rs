@@ -139,6 +139,14 @@ pub struct VerifyReport {
     pub noise: NoiseModel,
     /// The part of the relative noise that moves each of X, Y, Z on its own.
     pub independent_noise: f64,
+    /// The instrument, the correction its readings went through, or the warning that
+    /// a colorimeter had none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instrument: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correction: Option<crate::profile::CorrectionRecord>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncorrected: Option<String>,
     pub readings: usize,
     pub instrument_s: f64,
 }
@@ -534,6 +542,9 @@ pub fn evaluate(
         results,
         noise: noise.model,
         independent_noise: noise.independent,
+        instrument: None,
+        correction: None,
+        uncorrected: None,
         readings: readings.count(),
         instrument_s: readings.instrument_s,
     })
