@@ -30,7 +30,7 @@ enum CorrectionCommand {
     /// spectroradiometer: each patch of a set is read by both, and the 3 × 3 matrix
     /// taking the colorimeter's XYZ to the reference's is fitted and scored on patches
     /// held out of the fit.
-    Make(MakeArgs),
+    Make(Box<MakeArgs>),
     /// The corrections installed where ArgyllCMS's oeminst puts them
     /// ($XDG_DATA_HOME/ArgyllCMS, $XDG_DATA_DIRS/ArgyllCMS, /usr/share/color/argyll/ref)
     /// and the user's own ($XDG_DATA_HOME/chromacal/corrections): their names are what
@@ -85,7 +85,7 @@ struct MakeArgs {
 
 pub fn run(args: CorrectionArgs) -> Result<(), Failure> {
     match args.command {
-        CorrectionCommand::Make(args) => make(args),
+        CorrectionCommand::Make(args) => make(*args),
         CorrectionCommand::List { json } => list(json),
     }
 }
