@@ -47,7 +47,7 @@ fn a_colorimeter_without_a_correction_is_said_everywhere() {
     let (summary, profile, page) = calibrate(dir.path(), COLORIMETER, dir.path());
     let said = "is a colorimeter used without a correction";
     assert!(
-        summary.contains(&format!("WARNING: the simulated")) && summary.contains(said),
+        summary.contains("WARNING: the simulated") && summary.contains(said),
         "{summary}"
     );
     assert!(
