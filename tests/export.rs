@@ -1053,31 +1053,43 @@ fn terms_are_carried_by_icc_luts_and_named_where_a_file_cannot_carry_them() {
 fn export_says_only_what_it_writes_and_where() {
     let dir = tempfile::tempdir().unwrap();
     let (_, path) = calibrate(dir.path(), "crt", "[monitor]\npreset = \"crt\"\n");
-    // A PsychoPy file or a .ti3 has no place for calibration curves: asked for, they
-    // are said not carried (on stderr), never said written.
-    for format in ["psychopy", "ti3"] {
-        let file = dir.path().join(format!("x.{format}"));
-        let (stdout, stderr) =
-            export_said(&path, format, &file, &["--white", "D65", "--tone", "srgb"]);
-        assert!(stdout.contains("wrote"), "{stdout}");
-        assert!(!stdout.contains("calibration curves"), "{stdout}");
-        assert!(!stdout.contains("not carried"), "{stdout}");
-        assert!(
-            stderr.contains("not carried: calibration curves to white x 0.3127 y 0.3290"),
-            "{stderr}"
-        );
-        // The readings are of the screen without the curves: a .ti3 says so, since
-        // colprof would profile the uncalibrated screen from it.
-        assert_eq!(
-            stderr.contains("readings are of the screen without its calibration curves"),
-            format == "ti3",
-            "{format}: {stderr}"
-        );
-    }
-    let (_, stderr) = export_said(&path, "ti3", &dir.path().join("plain.ti3"), &[]);
+    // A PsychoPy file has no place for calibration curves: asked for, they are said
+    // not carried (on stderr), never said written.
+    let file = dir.path().join("x.psychopy");
+    let (stdout, stderr) = export_said(
+        &path,
+        "psychopy",
+        &file,
+        &["--white", "D65", "--tone", "srgb"],
+    );
+    assert!(stdout.contains("wrote"), "{stdout}");
+    assert!(!stdout.contains("calibration curves"), "{stdout}");
+    assert!(!stdout.contains("not carried"), "{stdout}");
     assert!(
-        !stderr.contains("without its calibration curves"),
+        stderr.contains("not carried: calibration curves to white x 0.3127 y 0.3290"),
         "{stderr}"
+    );
+    // A .ti3 carries them as dispread does: its readings through the curves and the
+    // CAL table after them; without curves it is the readings alone.
+    let file = dir.path().join("x.ti3");
+    let (stdout, stderr) = export_said(&path, "ti3", &file, &["--white", "D65", "--tone", "srgb"]);
+    assert!(stdout.contains("calibration curves to white"), "{stdout}");
+    assert!(
+        !stderr.contains("not carried: calibration curves"),
+        "{stderr}"
+    );
+    let text = std::fs::read_to_string(&file).unwrap();
+    let tables = chromacal_formats::cgats::parse_cgats(&text, "x.ti3").unwrap();
+    assert_eq!(tables.len(), 2, "{text}");
+    assert_eq!(tables[1].rows.len(), 256);
+    let plain = dir.path().join("plain.ti3");
+    export_said(&path, "ti3", &plain, &[]);
+    let text = std::fs::read_to_string(&plain).unwrap();
+    assert_eq!(
+        chromacal_formats::cgats::parse_cgats(&text, "plain.ti3")
+            .unwrap()
+            .len(),
+        1
     );
     // An ICC profile carries them, and says so on stdout; what it leaves out goes to
     // stderr.
@@ -1309,4 +1321,80 @@ fn crosstalk_answers_for_the_greys_below_full_drive_only() {
     white.xyz_departure_percent = Some([0.4, 0.5, -6.5]);
     let note = named(&profile).expect("the white's departure is named");
     assert!(note.contains("the white's Z -6.5 %"), "{note}");
+}
+
+/// A profile with calibration curves exports the display through them: a `.ti3` as
+/// dispread writes one after dispcal (the readings at the curves' inputs, the CAL
+/// table after them), which colprof makes a profile with a vcgt of, and which our ICC
+/// (curves and all) describes; `--native` writes the screen as measured, without the
+/// curves, in both. Each pair agrees under profcheck, and the crossed pair does not.
+#[test]
+fn a_calibrated_profile_exports_through_its_curves_and_native_without_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let config = d.join("target.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "{}[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nluminance = 80.0\nverify = false\n",
+            isetbio_monitor("isetbio_lcd_dell", "")
+        ),
+    )
+    .unwrap();
+    let state = d.join("state");
+    common::succeed(
+        chromacal()
+            .arg("calibrate")
+            .arg("--config")
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state),
+    );
+    let path = state.join("current.toml");
+    export(&path, "icc2", &d.join("through.icc"), &[]);
+    export(&path, "icc2", &d.join("native.icc"), &["--native"]);
+    let said = export(&path, "ti3", &d.join("readings.ti3"), &[]);
+    export(&path, "ti3", &d.join("as_measured.ti3"), &["--native"]);
+    assert!(!said.contains("uncalibrated screen"), "{said}");
+    assert!(argyll("iccdump", &["-v1", "through.icc"], d).contains("'vcgt'"));
+    assert!(!argyll("iccdump", &["-v1", "native.icc"], d).contains("'vcgt'"));
+
+    // colprof reads both; the readings through the curves give it their vcgt.
+    argyll("colprof", &["-qm", "-as", "readings"], d);
+    argyll("colprof", &["-qm", "-as", "as_measured"], d);
+    assert!(argyll("iccdump", &["-v1", "readings.icc"], d).contains("'vcgt'"));
+    assert!(!argyll("iccdump", &["-v1", "as_measured.icc"], d).contains("'vcgt'"));
+
+    let average = |ti3: &str, icc: &str| -> f64 {
+        let text = argyll("profcheck", &[ti3, icc], d);
+        let line = text
+            .lines()
+            .find(|l| l.contains("avg."))
+            .unwrap_or_else(|| panic!("{text}"));
+        let rest = &line[line.find("avg.").unwrap() + 4..];
+        rest.trim_start_matches([' ', '='])
+            .split(',')
+            .next()
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap()
+    };
+    let through = average("readings.ti3", "through.icc");
+    let native = average("as_measured.ti3", "native.icc");
+    let crossed = average("as_measured.ti3", "through.icc");
+    eprintln!("profcheck ΔE: through {through:.3}, native {native:.3}, crossed {crossed:.3}");
+    assert!(through < 0.5 && native < 0.5, "{through} {native}");
+    assert!(crossed > 2.0, "{crossed}");
+
+    // --native with a target asks for curves and none at once.
+    let out = chromacal()
+        .arg("export")
+        .arg(&path)
+        .args(["--format", "icc2", "--native", "--white", "D50", "-o"])
+        .arg(d.join("both.icc"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--native"));
 }

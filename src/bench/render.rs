@@ -431,6 +431,7 @@ fn peer_tools<'a>(
         &ExportOptions {
             target: None,
             measurements: None,
+            native: false,
         },
     )
     .map_err(|e| e.to_string())?;

@@ -16,14 +16,15 @@
 //!
 //! What reaches the panel is quantised: the codes at their bit depth, or the video
 //! LUT's output at the depth the display takes it (`[target] bit_depth`; unstated, a
-//! LUT's curves are left as the passes make them). At 8 bits one code of blue near the top is about 1 % of its light, so a
-//! white aimed between two codes lands up to half a step (some 0.5 ΔE00) away, and
-//! correcting it pass after pass only hops between the two. So after each pass every
-//! curve entry is set to the codes at that depth whose colour, by the model corrected
-//! by what was measured at the levels around it (the measured over the predicted XYZ,
-//! interpolated over the input), is nearest the target grey of its input in ΔE00
-//! (`snap_to_depth`): the white and every grey land on the best colour the display can
-//! show, not on a rounding.
+//! LUT's curves are left as the passes make them). At 8 bits one code of blue near the
+//! top is about 1 % of its light, so a white aimed between two codes lands up to half
+//! a step (some 0.5 ΔE00) away, and correcting it pass after pass only hops between
+//! the two. So after each pass every curve entry is set to the codes at that depth, on
+//! either side of what the pass asks for, whose colour by the model corrected by what
+//! was measured at the levels around it (the measured over the predicted XYZ,
+//! interpolated over the input) is nearest the target grey of its input in ΔE00, its
+//! luminance kept near the tone's (`snap_to_depth`): the white and every grey land on
+//! the best colour the display can show, not on a rounding.
 
 use super::run::RunError;
 use crate::config::TargetConfig;
@@ -166,6 +167,12 @@ fn white_balance(model: &MonitorModel, measured: &Xyz, target: &Xyz) -> Option<[
     (keep.is_finite() && keep > 0.0).then(|| factors.map(|f| f * keep))
 }
 
+/// The least a curve entry's codes may be further off its grey's luminance (a
+/// fraction) than the codes nearest in luminance, for a colour nearer in ΔE00
+/// ([`snap_to_depth`]; else half a code's step). Unbounded, a 10-bit OLED's mid grey
+/// went 1 % dark for 0.1 ΔE00 of chromaticity.
+const TONE_SLACK: f64 = 0.0025;
+
 /// `drive` as the panel gets it at `depth` bits.
 fn quantised(drive: [f64; 3], depth: u32) -> [f64; 3] {
     let top = ((1u64 << depth.min(24)) - 1) as f64;
@@ -202,8 +209,8 @@ impl Grey {
     }
 }
 
-/// Each curve entry above black set to the codes at `depth` bits, within a code or two
-/// of what it asks for and no lower than the entry before, whose colour by the model
+/// Each curve entry above black set to the codes at `depth` bits on either side of what
+/// it asks for and no lower than the entry before, whose colour by the model
 /// corrected by the measured `ratios` is nearest in ΔE00 the grey `aim` asks for at its
 /// input: the best the quantised output can show, chosen rather than rounded to.
 fn snap_to_depth(
@@ -226,13 +233,15 @@ fn snap_to_depth(
         let ideal = [0, 1, 2].map(|c| curves.curves[c][i] * top);
         let options = |c: usize| -> Vec<f64> {
             let base = ideal[c].floor();
-            (-1..=2)
+            (0..=1)
                 .map(|k| base + f64::from(k))
                 .filter(|q| (0.0..=top).contains(q) && *q >= floor[c])
                 .collect()
         };
         let (reds, greens, blues) = (options(0), options(1), options(2));
-        let mut best: Option<([f64; 3], f64)> = None;
+        // Every combination: its ΔE00 to the grey asked for, and how far its
+        // luminance is off that grey's.
+        let mut scored: Vec<([f64; 3], f64, f64)> = Vec::new();
         for &qr in &reds {
             for &qg in &greens {
                 for &qb in &blues {
@@ -243,13 +252,28 @@ fn snap_to_depth(
                         &xyz_to_lab(&corrected, &aim.white),
                         &xyz_to_lab(&target, &aim.white),
                     );
-                    if best.is_none_or(|(_, d)| de < d) {
-                        best = Some((codes, de));
-                    }
+                    scored.push((codes, de, (corrected.y / target.y - 1.0).abs()));
                 }
             }
         }
-        if let Some((codes, _)) = best {
+        // The colour nearest in ΔE00 among those whose luminance is within half a
+        // code's step (one code more of all three), and no less than TONE_SLACK, of
+        // the nearest luminance: ΔE00 weighs a light miss little at mid greys, and
+        // left alone trades the tone for chromaticity where the codes are fine.
+        let nearest_tone = scored.iter().map(|s| s.2).fold(f64::INFINITY, f64::min);
+        let base = ideal.map(|q| q.floor().clamp(0.0, top - 1.0));
+        let step = model.forward_centre(base.map(|q| (q + 1.0) / top)).y
+            / model.forward_centre(base.map(|q| q / top)).y
+            - 1.0;
+        let slack = match step.is_finite() {
+            true => (0.5 * step).max(TONE_SLACK),
+            false => f64::INFINITY,
+        };
+        let best = scored
+            .into_iter()
+            .filter(|s| s.2 <= nearest_tone + slack)
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((codes, _, _)) = best {
             for c in 0..3 {
                 curves.curves[c][i] = codes[c] / top;
                 floor[c] = codes[c];

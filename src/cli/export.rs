@@ -1,7 +1,7 @@
 //! `chromacal export`: the profile for other tools (ICC, .ti3, .cal, PsychoPy, JSON,
 //! TOML), optionally registered with colord.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use chromacal::export::{ExportOptions, Format};
 use chromacal::measurement_file::read_measurements;
@@ -38,27 +38,22 @@ pub struct ExportArgs {
     /// D-Bus ($DBUS_SYSTEM_BUS_ADDRESS). Exit 4 when colord cannot be reached.
     #[arg(long, value_name = "DEVICE_ID")]
     register_colord: Option<String>,
+    /// The display as it was measured, without the profile's calibration curves: an
+    /// ICC of the uncalibrated screen (no vcgt), a .ti3 of the readings as taken.
+    /// Without it a profile with curves is written through them (a .ti3 as dispread
+    /// writes it: the readings at the curves' inputs, and the CAL table).
+    #[arg(long)]
+    native: bool,
 }
 
 pub fn run(args: ExportArgs) -> Result<(), Failure> {
-    export(
-        &args.profile,
-        &args.format,
-        &args.output,
-        args.measurements.as_deref(),
-        &args.target,
-        args.register_colord.as_deref(),
-    )
+    export(&args)
 }
 
-fn export(
-    profile_path: &Path,
-    format: &str,
-    output: &Path,
-    measurements: Option<&Path>,
-    target: &TargetArgs,
-    register_colord: Option<&str>,
-) -> Result<(), Failure> {
+fn export(args: &ExportArgs) -> Result<(), Failure> {
+    let (profile_path, format, output) = (&args.profile, args.format.as_str(), &args.output);
+    let (measurements, target) = (args.measurements.as_deref(), &args.target);
+    let (register_colord, native) = (args.register_colord.as_deref(), args.native);
     let profile = Profile::read(profile_path).map_err(Failure::from)?;
     let format = Format::parse(format).map_err(|e| Failure::from(e.to_string()))?;
     if register_colord.is_some() && is_stdout(output) {
@@ -80,6 +75,7 @@ fn export(
     let options = ExportOptions {
         target,
         measurements,
+        native,
     };
     let exported = chromacal::export::export(&profile, format, &options)
         .map_err(|e| Failure::from(e.to_string()))?;
@@ -108,7 +104,7 @@ fn export(
     let curves = exported.calibration.as_ref();
     match (&options.target, &profile.calibration, curves) {
         (Some(_), _, Some(k)) if !format.carries_curves() => eprintln!(
-            "not carried: calibration curves to {} (a {} file has no place for them: icc4, icc2 and cal do)",
+            "not carried: calibration curves to {} (a {} file has no place for them: icc4, icc2, cal and ti3 do)",
             k.describe(),
             format.name()
         ),

@@ -691,6 +691,7 @@ async fn profile(
     let options = ExportOptions {
         target,
         measurements: None,
+        native: false,
     };
     let id = profile.id.clone();
     let exported = tokio::task::spawn_blocking(move || export(&profile, format, &options)).await;

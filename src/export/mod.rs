@@ -50,10 +50,13 @@ impl Format {
         })
     }
 
-    /// The formats with a place for calibration curves: the ICC `vcgt` tag and the
-    /// ArgyllCMS `.cal` file.
+    /// The formats with a place for calibration curves: the ICC `vcgt` tag, the
+    /// ArgyllCMS `.cal` file, and the CAL table a `.ti3` ends with.
     pub fn carries_curves(self) -> bool {
-        matches!(self, Format::Icc4 | Format::Icc2 | Format::Cal)
+        matches!(
+            self,
+            Format::Icc4 | Format::Icc2 | Format::Cal | Format::Ti3
+        )
     }
 
     pub fn name(self) -> &'static str {
@@ -109,6 +112,10 @@ pub enum ExportError {
     Singular,
     #[error("cannot write the profile: {0}")]
     Serialize(String),
+    #[error(
+        "--native writes the display without calibration curves, and a target asks for curves: give one or the other"
+    )]
+    NativeWithTarget,
 }
 
 /// What the export needs besides the profile.
@@ -118,6 +125,9 @@ pub struct ExportOptions {
     pub target: Option<Target>,
     /// The measurements (default: the journal named in the profile's provenance).
     pub measurements: Option<MeasurementSet>,
+    /// The display as measured, without the curves the profile has (an ICC of the
+    /// uncalibrated screen, a `.ti3` of its readings as they were taken).
+    pub native: bool,
 }
 
 /// An exported file and what it could not carry.
@@ -334,13 +344,76 @@ pub fn calibration_for(
     })
 }
 
+/// The readings of `set` as readings through `curves`: each was taken at a drive the
+/// panel got straight, which through the curves is the input that gives that drive
+/// (every channel's curve inverted), so the device values become the curves' inputs
+/// and the colours stay as measured. Readings at drives no input gives are left out,
+/// and counted.
+fn through_curves(set: &MeasurementSet, curves: &CalibrationCurves) -> (MeasurementSet, usize) {
+    // Within a 16-bit step of a curve's ends still counts as reached.
+    const REACH: f64 = 1.0 / 65535.0;
+    let mut through = set.clone();
+    through.measurements.clear();
+    let mut unreachable = 0;
+    for m in &set.measurements {
+        let reachable = (0..3).all(|c| {
+            let curve = &curves.curves[c];
+            let (lo, hi) = (curve[0], curve[curve.len() - 1]);
+            m.drive[c] >= lo - REACH && m.drive[c] <= hi + REACH
+        });
+        if !reachable {
+            unreachable += 1;
+            continue;
+        }
+        let mut m = m.clone();
+        m.drive =
+            [0, 1, 2].map(|c| chromacal_crf::lut3d::curve_input(&curves.curves[c], m.drive[c]));
+        m.codes = None;
+        through.measurements.push(m);
+    }
+    (through, unreachable)
+}
+
+/// The grey levels a calibration measured through its curves, as readings at their
+/// inputs, numbered from `first`.
+fn checked_levels(
+    stored: &crate::profile::StoredCalibration,
+    first: usize,
+) -> Vec<chromacal_model::measurement::Measurement> {
+    use chromacal_model::measurement::{Measurement, Role};
+    stored
+        .levels
+        .iter()
+        .enumerate()
+        .map(|(k, level)| Measurement {
+            index: first + k,
+            role: Role::Grey,
+            drive: [level.input; 3],
+            codes: None,
+            position: chromacal_model::ScreenPosition::CENTRE,
+            background: [0.0; 3],
+            time_s: None,
+            reading: chromacal_instruments::Reading {
+                xyz: Some(chromacal_color::Xyz::from(level.measured_xyz)),
+                ..Default::default()
+            },
+        })
+        .collect()
+}
+
 /// Export `profile` as `format`.
 pub fn export(
     profile: &Profile,
     format: Format,
     options: &ExportOptions,
 ) -> Result<Exported, ExportError> {
-    let calibration = calibration_for(profile, options.target.as_ref())?;
+    if options.native && options.target.is_some() {
+        return Err(ExportError::NativeWithTarget);
+    }
+    let calibration = match options.native {
+        true => None,
+        false => calibration_for(profile, options.target.as_ref())?,
+    };
     let mut notes = limitations(profile, matches!(format, Format::Icc4 | Format::Icc2));
     let mut warnings = Vec::new();
     if let Some(k) = &calibration
@@ -393,7 +466,32 @@ pub fn export(
         }
         Format::Ti3 => {
             let set = measurements(profile, options)?;
-            chromacal_formats::cgats::to_ti3(&set).into_bytes()
+            match &calibration {
+                None => chromacal_formats::cgats::to_ti3(&set).into_bytes(),
+                Some(curves) => {
+                    let (mut through, unreachable) = through_curves(&set, curves);
+                    // The readings the calibration took through its own curves (the
+                    // grey ramp up to the calibrated white) are through them already.
+                    if options.target.is_none()
+                        && let Some(stored) = &profile.calibration
+                    {
+                        through
+                            .measurements
+                            .extend(checked_levels(stored, through.measurements.len()));
+                    }
+                    if unreachable > 0 {
+                        warnings.push(format!(
+                            "{unreachable} readings at drives the curves never send (beyond the calibrated white, or below what they start at) are left out"
+                        ));
+                    }
+                    // As dispread writes it: the readings, then the CAL table of the
+                    // curves they are through.
+                    let mut text = chromacal_formats::cgats::to_ti3(&through);
+                    text.push('\n');
+                    text += &cal::cal_text(curves, &profile.created);
+                    text.into_bytes()
+                }
+            }
         }
         Format::Cal => {
             let curves = calibration.as_ref().ok_or(ExportError::NoTarget)?;
@@ -430,15 +528,7 @@ pub fn export(
         // leaves things out.
         notes.clear();
     }
-    if format == Format::Ti3 && calibration.is_some() {
-        // The readings were taken through the straight video LUT: a profile made of
-        // them (ArgyllCMS colprof) describes the screen without the curves, while
-        // the ICC export describes it through them (`profcheck` of the one against
-        // the other found 5 ΔE00 on average).
-        warnings.push(
-            "these readings are of the screen without its calibration curves (measured through the straight video LUT): a profile made from them (colprof) describes the uncalibrated screen; the icc4/icc2 exports describe it through the curves".into(),
-        );
-    }
+
     Ok(Exported {
         bytes,
         not_carried: notes,

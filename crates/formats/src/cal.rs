@@ -35,7 +35,11 @@ fn cal_document(keywords: &str, created: &str, at: impl Fn(f64) -> [f64; 3]) -> 
     out += &format!("ORIGINATOR \"chromacal {}\"\n", env!("CARGO_PKG_VERSION"));
     out += &format!("CREATED \"{created}\"\n");
     out += "DEVICE_CLASS \"DISPLAY\"\nCOLOR_REP \"RGB\"\n";
-    out += "VIDEO_LUT_CALIBRATION_POSSIBLE \"YES\"\nTV_OUTPUT_ENCODING \"NO\"\n";
+    // No TV_OUTPUT_ENCODING: "NO" is what its absence means, and ArgyllCMS (xcal.c)
+    // finds that keyword in the table it reads but takes its value from the file's
+    // first table, so in a .ti3 with this table appended colprof reads past the
+    // readings' keywords (and crashed on ours).
+    out += "VIDEO_LUT_CALIBRATION_POSSIBLE \"YES\"\n";
     out += keywords;
     out += "\nNUMBER_OF_FIELDS 4\nBEGIN_DATA_FORMAT\nRGB_I RGB_R RGB_G RGB_B\nEND_DATA_FORMAT\n\n";
     out += &format!("NUMBER_OF_SETS {CURVE_ENTRIES}\nBEGIN_DATA\n");
