@@ -43,6 +43,8 @@ have_browser() {
 have_browser || need_package chromium
 # The systemd units are checked by systemd-analyze; the API's refusals by curl.
 command -v systemd-analyze >/dev/null || need_package systemd
+# The XDG autostart entry is checked by the freedesktop validator.
+command -v desktop-file-validate >/dev/null || need_package desktop-file-utils
 command -v curl >/dev/null || need_package curl
 # Exports are read back by independent readers: ArgyllCMS, Little CMS's transicc,
 # and PsychoPy's loader (json_tricks with numpy, in Debian's Python).

@@ -73,6 +73,8 @@ fn the_package_installs_the_binary_units_user_config_manuals_and_completions() {
         "usr/lib/systemd/system/chromacal-verify.service",
         "usr/lib/systemd/system/chromacal-verify.timer",
         "usr/lib/sysusers.d/chromacal.conf",
+        "usr/lib/systemd/user/chromacal-lut.service",
+        "etc/xdg/autostart/chromacal-lut.desktop",
         "usr/share/man/man1/chromacal.1.gz",
         "usr/share/man/man1/chromacal-calibrate.1.gz",
         "usr/share/bash-completion/completions/chromacal",

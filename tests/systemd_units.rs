@@ -120,3 +120,62 @@ fn under_systemd_the_socket_goes_to_the_runtime_directory() {
     );
     assert!(String::from_utf8_lossy(&status.stdout).contains("chromacal daemon"));
 }
+
+/// The user unit and the XDG autostart entry that keep the curves at login: systemd
+/// (as a user manager) and the freedesktop validator accept them, and both run the
+/// same command, one the parser takes.
+#[test]
+fn the_login_keeper_unit_and_autostart_entry_are_valid_and_run_the_same_command() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let binary = env!("CARGO_BIN_EXE_chromacal");
+    let dir = tempfile::tempdir().unwrap();
+    let unit = std::fs::read_to_string(units_dir().join("user/chromacal-lut.service")).unwrap();
+    let path = dir.path().join("chromacal-lut.service");
+    std::fs::write(&path, unit.replace("/usr/bin/chromacal", binary)).unwrap();
+    // A user manager needs a runtime directory of its own.
+    let runtime = dir.path().join("runtime");
+    std::fs::create_dir(&runtime).unwrap();
+    let out = std::process::Command::new("systemd-analyze")
+        .args(["--user", "--man=no", "verify"])
+        .arg(&path)
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .output()
+        .expect("systemd-analyze");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.trim().is_empty(), "warnings: {stderr}");
+
+    let desktop = root.join("xdg/chromacal-lut.desktop");
+    let out = std::process::Command::new("desktop-file-validate")
+        .arg(&desktop)
+        .output()
+        .expect("desktop-file-validate (scripts/test.sh installs desktop-file-utils)");
+    let said =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && said.trim().is_empty(), "{said}");
+
+    let exec_start = settings(&unit)
+        .into_iter()
+        .find(|(k, _)| k == "ExecStart")
+        .map(|(_, v)| v)
+        .unwrap();
+    let desktop_text = std::fs::read_to_string(&desktop).unwrap();
+    let exec = desktop_text
+        .lines()
+        .find_map(|l| l.strip_prefix("Exec="))
+        .unwrap();
+    assert_eq!(exec_start.trim_start_matches("/usr/bin/"), exec);
+    // The command is one chromacal takes: its arguments parse (--help stops it
+    // before it opens a display).
+    let args: Vec<&str> = exec.split_whitespace().skip(1).collect();
+    let out = std::process::Command::new(binary)
+        .args(&args)
+        .arg("--help")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -774,6 +774,15 @@ fn displays_name_the_outputs_their_monitors_and_the_device_on_each() {
     assert_eq!(outputs[0]["edid"]["manufacturer"], "DEL");
     assert_eq!(outputs[0]["devices"][0]["name"], "default");
     assert!(outputs[1]["edid"].is_null() && outputs[1]["devices"].as_array().unwrap().is_empty());
+    // The id colord knows each by, as GNOME registers it (the maker by its PNP name
+    // where hwdata's pnp.ids is installed, else by its three letters).
+    let id = outputs[0]["colord_device_id"].as_str().unwrap();
+    assert!(
+        id.starts_with("xrandr-") && id.ends_with("-DELL U2415-7MT0186J1T3L"),
+        "{id}"
+    );
+    assert!(text.contains(&format!("colord device: {id}")), "{text}");
+    assert_eq!(outputs[1]["colord_device_id"], "xrandr-DUMMY1");
     // The LUT commands take the serial too; an unknown one names what there is.
     let show = succeed(chromacal().args([
         "lut",
@@ -986,4 +995,121 @@ fn the_calibrated_window_verifies_through_the_lut_and_a_foreign_ramp_fails() {
     eprintln!("with the LUT straight: {failed:?}");
     assert_eq!(code, Some(5));
     assert!(failed.iter().any(|s| s == "tone"), "{failed:?}");
+}
+
+/// How far (16-bit steps) the LUT of DUMMY0 on `x` is from `profile`'s curves.
+fn lut_distance(x: &XServer, profile: &Path) -> f64 {
+    let curves = Profile::read(profile).unwrap().calibration.unwrap().curves;
+    let display = XDisplay::open(Some(&x.display)).unwrap();
+    let output = display.output(&OutputSelector::default()).unwrap();
+    let ramp = display.gamma(&output).unwrap();
+    ramp.max_difference(&GammaRamp::from_curves(&curves, ramp.len()))
+}
+
+/// The next line the keeper prints that contains `what`, within 20 s.
+fn keeper_says(lines: &std::sync::mpsc::Receiver<String>, what: &str) -> String {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match lines.recv_timeout(left) {
+            Ok(line) if line.contains(what) => return line,
+            Ok(_) => {}
+            Err(e) => panic!("the keeper never said '{what}': {e}"),
+        }
+    }
+}
+
+#[test]
+fn the_keeper_at_login_loads_the_curves_and_again_after_a_mode_change_or_a_new_profile() {
+    let x = XServer::start();
+    let dir = tempfile::tempdir().unwrap();
+    let first = profile_with_curves(dir.path());
+    let state = dir.path().join("state");
+    std::fs::create_dir_all(&state).unwrap();
+    std::fs::copy(&first, state.join("current.toml")).unwrap();
+    // What the user service and the autostart entry run.
+    let mut keeper = chromacal()
+        .args([
+            "lut",
+            "load",
+            "--current",
+            "--watch",
+            "--x-display",
+            &x.display,
+            "--state-dir",
+        ])
+        .arg(&state)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = keeper.stdout.take().unwrap();
+    let (send, lines) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+        {
+            let _ = send.send(line);
+        }
+    });
+    let said = keeper_says(&lines, "loaded the curves");
+    assert!(
+        said.contains("DUMMY0") && said.contains("(start)"),
+        "{said}"
+    );
+    assert!(lut_distance(&x, &first) <= 1.0);
+
+    // Installed both ways, the second keeper sees the first and leaves quietly.
+    let second = chromacal()
+        .args([
+            "lut",
+            "load",
+            "--current",
+            "--watch",
+            "--x-display",
+            &x.display,
+            "--state-dir",
+        ])
+        .arg(&state)
+        .output()
+        .unwrap();
+    assert!(second.status.success());
+    assert!(
+        String::from_utf8_lossy(&second.stderr).contains("another chromacal keeps the video LUT"),
+        "{}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+
+    // Something else sets a ramp (no RandR event: left alone), then the mode
+    // changes: the curves are loaded again.
+    x.run("xrandr", &["--output", "DUMMY0", "--gamma", "1.2:1:1"]);
+    assert!(lut_distance(&x, &first) > 100.0);
+    x.run("xrandr", &["--output", "DUMMY0", "--mode", "800x600"]);
+    keeper_says(&lines, "the X screen changed");
+    assert!(lut_distance(&x, &first) <= 1.0);
+
+    // A new profile made current (here: one with other curves) is loaded.
+    let other_dir = dir.path().join("other");
+    std::fs::create_dir_all(&other_dir).unwrap();
+    let config = other_dir.join("curves.toml");
+    std::fs::write(
+        &config,
+        "[monitor]\npreset = \"lcd\"\n[target]\nwhite = \"6000K\"\ntone = \"gamma:2.0\"\n",
+    )
+    .unwrap();
+    succeed(
+        chromacal()
+            .args(["calibrate", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&other_dir),
+    );
+    let second_profile = other_dir.join("current.toml");
+    assert!(lut_distance(&x, &second_profile) > 100.0);
+    std::fs::copy(&second_profile, state.join("current.toml")).unwrap();
+    keeper_says(&lines, "a new profile is current");
+    assert!(lut_distance(&x, &second_profile) <= 1.0);
+    let _ = keeper.kill();
+    let _ = keeper.wait();
 }

@@ -10,7 +10,23 @@ use crate::config::devices::device_configs;
 use crate::config::{LoadedConfig, Sink};
 use crate::profile::store::ProfileStore;
 use chromacal_display::x11::{OutputInfo, X11Error, XDisplay};
-use chromacal_formats::edid::Edid;
+use chromacal_formats::edid::{Edid, colord_device_id};
+
+/// Where the desktops' colour plugins look up a monitor maker's name by its PNP id
+/// (Debian's hwdata, older systems' misc).
+const PNP_IDS: [&str; 2] = ["/usr/share/hwdata/pnp.ids", "/usr/share/misc/pnp.ids"];
+
+/// The maker's name for a three-letter PNP id, from the first `pnp.ids` there is
+/// (lines `ABC<tab>Name`); none where there is none or it does not list the id.
+fn pnp_vendor_name(code: &str) -> Option<String> {
+    let text = PNP_IDS
+        .iter()
+        .find_map(|p| std::fs::read_to_string(p).ok())?;
+    text.lines().find_map(|line| {
+        let (id, name) = line.split_once('\t')?;
+        (id.trim() == code).then(|| name.trim().to_string())
+    })
+}
 
 /// One output, as `chromacal displays` shows it.
 #[derive(Debug, Clone, Serialize)]
@@ -23,6 +39,8 @@ pub struct DisplayEntry {
     pub edid_error: Option<String>,
     /// The video LUT is the straight ramp.
     pub lut_identity: Option<bool>,
+    /// The id colord knows the output's monitor by (`export --register-colord`).
+    pub colord_device_id: String,
     /// Configured devices whose window is on this output.
     pub devices: Vec<DeviceOnOutput>,
 }
@@ -79,6 +97,7 @@ pub fn list_displays(
                 })
                 .collect();
             DisplayEntry {
+                colord_device_id: colord_device_id(edid.as_ref(), &output.name, pnp_vendor_name),
                 output: output.clone(),
                 edid,
                 edid_error,
@@ -151,6 +170,7 @@ pub fn describe_displays(x_display: &str, entries: &[DisplayEntry]) -> String {
             (None, Some(err)) => out += &format!("    EDID: unreadable ({err})\n"),
             (None, None) => out += "    EDID: none\n",
         }
+        out += &format!("    colord device: {}\n", e.colord_device_id);
         for d in &e.devices {
             out += &format!(
                 "    device {}: {}\n",

@@ -4,6 +4,7 @@ pub mod adjust;
 pub mod correction;
 pub mod devices;
 pub mod displays;
+pub mod keep_lut;
 pub mod refine;
 pub mod retention;
 pub mod rig;

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use clap::Subcommand;
 
+use chromacal::calibrate::keep_lut::{KeepError, KeepEvent, keep_loaded, made_on_another_monitor};
 use chromacal::calibrate::video_lut::{desktop_lut_loader, lut_status};
 use chromacal::export::calibration_for;
 use chromacal::profile::Profile;
@@ -44,6 +45,12 @@ enum LutCommand {
         /// The state directory's current profile instead.
         #[arg(long, conflicts_with = "profile")]
         current: bool,
+        /// Stay, and load the current profile's curves again whenever the X screen
+        /// changes (a monitor plugged in, a mode set) or a new profile becomes
+        /// current; until the X display goes away. What the user service and the
+        /// autostart entry run at login. One keeper a state directory.
+        #[arg(long, requires = "current")]
+        watch: bool,
         /// Curves computed now from the profile's model for a target, instead of
         /// the curves it carries.
         #[command(flatten)]
@@ -67,6 +74,9 @@ enum LutCommand {
 
 pub fn run(args: LutArgs) -> Result<(), Failure> {
     let state_dir = args.state_dir.clone().unwrap_or_else(default_state_dir);
+    if let LutCommand::Load { watch: true, .. } = args.command {
+        return watch(&args, &state_dir);
+    }
     // A calibration killed while it held the LUT left the user's ramp behind; put it
     // back first, unless a calibration holds the directory now.
     let store = ProfileStore::new(&state_dir);
@@ -89,11 +99,17 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
     let output = x.output(&selector)?;
     match args.command {
         LutCommand::Load {
-            profile, target, ..
+            profile,
+            target,
+            current,
+            ..
         } => {
             // Without a path, --current (clap requires one of the two).
             let path = profile.unwrap_or_else(|| store.current_path());
             let profile = Profile::read(&path)?;
+            if let Some(why) = made_on_another_monitor(&profile, &output).filter(|_| current) {
+                return Err(Failure::from(why));
+            }
             let curves = calibration_for(&profile, target.target()?.as_ref())?.ok_or_else(|| {
                 format!(
                     "{} carries no calibration curves: calibrate with a [target], or give --white/--tone to compute them from its model",
@@ -146,5 +162,53 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
             )?;
         }
     }
+    Ok(())
+}
+
+/// `lut load --current --watch`: the keeper, printing what it does.
+fn watch(args: &LutArgs, state_dir: &std::path::Path) -> Result<(), Failure> {
+    let selector = args
+        .output
+        .as_deref()
+        .map(OutputSelector::parse)
+        .unwrap_or_default();
+    if let Some(loader) = desktop_lut_loader() {
+        eprintln!(
+            "chromacal: note: {loader} also loads curves into the video LUT and may replace these"
+        );
+    }
+    let store = ProfileStore::new(state_dir);
+    let mut said = Ok(());
+    let kept = keep_loaded(
+        args.x_display.as_deref(),
+        &selector,
+        &store,
+        &|| false,
+        &mut |event| {
+            let line = match event {
+                KeepEvent::Loaded {
+                    output,
+                    profile,
+                    curves,
+                    reason,
+                } => format!(
+                    "loaded the curves of profile {profile} ({curves}) into the video LUT of {output} ({reason})"
+                ),
+                KeepEvent::Skipped { reason } => format!("not loaded: {reason}"),
+                KeepEvent::DisplayGone { message } => {
+                    format!("the X display is gone ({message}): stopping")
+                }
+            };
+            if said.is_ok() {
+                said = outln!("{line}");
+            }
+        },
+    );
+    match kept {
+        // Both the user service and the autostart entry installed: one keeps it.
+        Err(e @ KeepError::AlreadyKept { .. }) => eprintln!("chromacal: {e}: nothing to do"),
+        other => other?,
+    }
+    said?;
     Ok(())
 }

@@ -21,6 +21,7 @@ use tokio::sync::broadcast::error::TryRecvError;
 use super::events::Event;
 use super::jobs::current_profile;
 use super::{Device, DeviceEvent};
+use crate::calibrate::keep_lut::made_on_another_monitor;
 use crate::calibrate::video_lut::desktop_lut_loader;
 use crate::config::Sink;
 use chromacal_display::x11::watch::Watch;
@@ -189,22 +190,8 @@ impl Keeper {
         }
         // The profile of another monitor (a laptop docked: the external monitor
         // became the primary output) is not loaded onto this one.
-        if let (Some(made_on), Some(here)) = (
-            &profile.provenance.edid,
-            w.output
-                .edid
-                .as_deref()
-                .and_then(|b| chromacal_formats::edid::Edid::parse(b).ok()),
-        ) && (made_on.manufacturer != here.manufacturer
-            || made_on.product_code != here.product_code
-            || made_on.serial() != here.serial())
-        {
-            self.warn_once(format!(
-                "the current profile was made on {} but {} now shows {}: its curves are not loaded",
-                made_on.describe(),
-                w.output.name,
-                here.describe()
-            ));
+        if let Some(why) = made_on_another_monitor(&profile, &w.output) {
+            self.warn_once(why);
             self.expected = None;
             return Ok(());
         }

@@ -168,6 +168,39 @@ impl Edid {
     }
 }
 
+/// The id colord knows an X output's monitor by, as GNOME's and MATE's colour plugins
+/// and mutter register it (colord's device and profile naming spec): `xrandr`, then
+/// `-` and each of the EDID's maker, monitor name and serial it has, the maker by the
+/// name `vendor_name` gives its three-letter PNP id (the hwdata `pnp.ids` those
+/// desktops read) or else by the three letters; with none of them, or no EDID,
+/// `xrandr-` and the output's name. `export --register-colord` takes it.
+pub fn colord_device_id(
+    edid: Option<&Edid>,
+    output: &str,
+    vendor_name: impl Fn(&str) -> Option<String>,
+) -> String {
+    let mut id = String::from("xrandr");
+    let parts: Vec<String> = edid
+        .map(|e| {
+            let maker = (!e.manufacturer.is_empty())
+                .then(|| vendor_name(&e.manufacturer).unwrap_or_else(|| e.manufacturer.clone()));
+            [maker, e.name.clone(), e.serial()]
+                .into_iter()
+                .flatten()
+                .collect()
+        })
+        .unwrap_or_default();
+    if parts.is_empty() {
+        id.push('-');
+        id.push_str(output);
+    }
+    for part in parts {
+        id.push('-');
+        id.push_str(&part);
+    }
+    id
+}
+
 /// A descriptor's text: ASCII up to the line feed that ends it, spaces trimmed.
 fn descriptor_text(bytes: &[u8]) -> String {
     let end = bytes.iter().position(|&c| c == 0x0A).unwrap_or(bytes.len());
@@ -220,5 +253,28 @@ mod tests {
         let mut b = block();
         b[40] ^= 0x10;
         assert!(matches!(Edid::parse(&b), Err(EdidError::Checksum(_))));
+    }
+
+    #[test]
+    fn colord_ids_as_the_desktops_register_them() {
+        let mut e = Edid::parse(&block()).unwrap();
+        let pnp = |code: &str| (code == "ABC").then(|| "Abc Displays".to_string());
+        assert_eq!(
+            colord_device_id(Some(&e), "DP-1", pnp),
+            "xrandr-Abc Displays"
+        );
+        assert_eq!(colord_device_id(Some(&e), "DP-1", |_| None), "xrandr-ABC");
+        e.name = Some("View 27".into());
+        e.serial_number = Some(1234);
+        assert_eq!(
+            colord_device_id(Some(&e), "DP-1", pnp),
+            "xrandr-Abc Displays-View 27-1234"
+        );
+        e.serial_text = Some("SN9".into());
+        assert_eq!(
+            colord_device_id(Some(&e), "DP-1", |_| None),
+            "xrandr-ABC-View 27-SN9"
+        );
+        assert_eq!(colord_device_id(None, "DUMMY0", pnp), "xrandr-DUMMY0");
     }
 }

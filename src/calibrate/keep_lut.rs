@@ -1,0 +1,210 @@
+//! The calibration kept in the video LUT without the daemon: what `chromacal lut load
+//! --current --watch` does from a user service or an XDG autostart entry at login. The
+//! current profile's curves are loaded, and loaded again when the X screen changes
+//! (RandR: a monitor plugged in, a mode changed, both of which may hand the output a
+//! new CRTC with a straight ramp) and when a new profile becomes current.
+//!
+//! One keeper a state directory (a lock file beside the store's own), so the systemd
+//! user unit and the autostart entry, both installed, never run two. The store's lock
+//! is taken only for the moment of a load: a calibration holds it for its whole run,
+//! sets the LUT itself meanwhile, and its end publishes a profile, which the keeper
+//! then loads.
+
+use std::fs::{File, OpenOptions, TryLockError};
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::{Duration, SystemTime};
+
+use crate::profile::Profile;
+use crate::profile::store::ProfileStore;
+use chromacal_display::x11::watch::Watch;
+use chromacal_display::x11::{GammaRamp, OutputInfo, OutputSelector, X11Error};
+use chromacal_formats::edid::Edid;
+
+/// How often the keeper looks for RandR events and a new current profile.
+const TICK: Duration = Duration::from_millis(200);
+
+/// Why the keeper could not start or stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum KeepError {
+    #[error(transparent)]
+    X11(#[from] X11Error),
+    #[error("another chromacal keeps the video LUT for {dir} ({holder})")]
+    AlreadyKept { dir: PathBuf, holder: String },
+    #[error("{path}: {message}")]
+    Io { path: PathBuf, message: String },
+}
+
+/// What the keeper did, for the caller to print.
+#[derive(Debug, Clone, PartialEq)]
+pub enum KeepEvent {
+    /// The curves of `profile` went into `output`'s LUT.
+    Loaded {
+        output: String,
+        profile: String,
+        curves: String,
+        reason: &'static str,
+    },
+    /// Nothing was loaded, and why (no current profile, no curves, another monitor,
+    /// a calibration holds the directory).
+    Skipped { reason: String },
+    /// The X display went away (the session ended): the keeper stops.
+    DisplayGone { message: String },
+}
+
+/// Why `profile` is not for the monitor on `output`: made on another one (by their
+/// EDIDs' maker, product and serial), as after docking a laptop.
+pub fn made_on_another_monitor(profile: &Profile, output: &OutputInfo) -> Option<String> {
+    let made_on = profile.provenance.edid.as_ref()?;
+    let here = output.edid.as_deref().and_then(|b| Edid::parse(b).ok())?;
+    let same = made_on.manufacturer == here.manufacturer
+        && made_on.product_code == here.product_code
+        && made_on.serial() == here.serial();
+    (!same).then(|| {
+        format!(
+            "the current profile was made on {} but {} now shows {}: its curves are not loaded",
+            made_on.describe(),
+            output.name,
+            here.describe()
+        )
+    })
+}
+
+/// The keeper's own lock, held while it runs.
+fn keeper_lock(store: &ProfileStore) -> Result<File, KeepError> {
+    let dir = store.root().to_path_buf();
+    let io = |path: &PathBuf, e: std::io::Error| KeepError::Io {
+        path: path.clone(),
+        message: e.to_string(),
+    };
+    std::fs::create_dir_all(&dir).map_err(|e| io(&dir, e))?;
+    let path = dir.join("lut-keeper.lock");
+    let mut file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(|e| io(&path, e))?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(TryLockError::WouldBlock) => {
+            let holder = std::fs::read_to_string(&path)
+                .map(|t| t.trim().to_string())
+                .unwrap_or_default();
+            return Err(KeepError::AlreadyKept { dir, holder });
+        }
+        Err(TryLockError::Error(e)) => return Err(io(&path, e)),
+    }
+    file.set_len(0)
+        .and_then(|()| {
+            writeln!(
+                file,
+                "chromacal lut load --watch (pid {})",
+                std::process::id()
+            )
+        })
+        .map_err(|e| io(&path, e))?;
+    Ok(file)
+}
+
+/// When the current profile file last changed (none: there is none).
+fn current_stamp(store: &ProfileStore) -> Option<SystemTime> {
+    std::fs::metadata(store.current_path())
+        .and_then(|m| m.modified())
+        .ok()
+}
+
+/// Load the current profile's curves into `w`'s output, or say why not.
+fn load_current(
+    w: &Watch,
+    store: &ProfileStore,
+    reason: &'static str,
+) -> Result<KeepEvent, X11Error> {
+    let skipped = |reason: String| Ok(KeepEvent::Skipped { reason });
+    // A calibration holds the directory: it owns the LUT until it publishes.
+    let _lock = match store.lock("chromacal lut load --watch") {
+        Ok(lock) => lock,
+        Err(e) => return skipped(e.to_string()),
+    };
+    let path = store.current_path();
+    let profile = match Profile::read(&path) {
+        Ok(p) => p,
+        Err(e) => return skipped(format!("no current profile to load ({e})")),
+    };
+    let Some(stored) = &profile.calibration else {
+        return skipped(format!(
+            "{} carries no calibration curves (calibrate with a [target])",
+            path.display()
+        ));
+    };
+    if let Some(why) = made_on_another_monitor(&profile, &w.output) {
+        return skipped(why);
+    }
+    if w.output.gamma_size < 2 {
+        return skipped(format!(
+            "{} has no video LUT chromacal can set",
+            w.output.name
+        ));
+    }
+    w.x.set_gamma(
+        &w.output,
+        &GammaRamp::from_curves(&stored.curves, w.output.gamma_size),
+    )?;
+    Ok(KeepEvent::Loaded {
+        output: w.output.name.clone(),
+        profile: profile.id,
+        curves: stored.curves.describe(),
+        reason,
+    })
+}
+
+/// Keep the current profile of `store` in the LUT of the output `selector` picks on
+/// `x_display`, telling `report` what happened, until the display goes away (then
+/// `Ok`) or `stop` says so.
+pub fn keep_loaded(
+    x_display: Option<&str>,
+    selector: &OutputSelector,
+    store: &ProfileStore,
+    stop: &dyn Fn() -> bool,
+    report: &mut dyn FnMut(&KeepEvent),
+) -> Result<(), KeepError> {
+    let _keeper = keeper_lock(store)?;
+    let mut w = Watch::open(x_display, selector)?;
+    let mut due = Some("start");
+    let mut stamp = current_stamp(store);
+    while !stop() {
+        let changed = match w.randr_changed() {
+            Ok(changed) => changed,
+            Err(e) => {
+                report(&KeepEvent::DisplayGone {
+                    message: e.to_string(),
+                });
+                return Ok(());
+            }
+        };
+        if changed {
+            // The output may have a new CRTC, or be another monitor now.
+            w.output = w.x.output(selector)?;
+            due = Some("the X screen changed (RandR)");
+        }
+        let now = current_stamp(store);
+        if now != stamp {
+            stamp = now;
+            due = Some("a new profile is current");
+        }
+        if let Some(reason) = due.take() {
+            match load_current(&w, store, reason) {
+                Ok(event) => report(&event),
+                Err(e) => {
+                    report(&KeepEvent::DisplayGone {
+                        message: e.to_string(),
+                    });
+                    return Ok(());
+                }
+            }
+        }
+        std::thread::sleep(TICK);
+    }
+    Ok(())
+}
