@@ -298,3 +298,47 @@ async fn a_uniformity_job_gives_the_profile_a_new_spatial_map() {
     let history = get(&api, "/history").await.json().unwrap();
     assert_eq!(history["profiles"][1]["how"], "uniformity");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_verify_job_on_a_calibrated_display_judges_it_through_its_curves() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = "[daemon]\nsimulated_time_scale = 0.001\n[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nluminance = 80.0\n";
+    let daemon = start_daemon(dir.path(), config);
+    let api = daemon.endpoint();
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let first = start_job(&api, "calibrate").await;
+    let (_, outcome) = events_of_job(&mut events, &first, Duration::from_secs(60)).await;
+    assert!(outcome.published, "{outcome:?}");
+    let profile = outcome.profile_id.unwrap();
+
+    let job = start_job(&api, "verify").await;
+    let (_, outcome) = events_of_job(&mut events, &job, Duration::from_secs(60)).await;
+    assert_eq!(outcome.result, "ok", "{outcome:?}");
+    // The profile's own check, then the display through its curves under
+    // DisplayCAL's default tolerances.
+    assert!(
+        outcome
+            .message
+            .contains("through the curves: pass under DisplayCAL"),
+        "{}",
+        outcome.message
+    );
+    assert!(!outcome.escalated);
+    let saved = daemon
+        .state
+        .join("verifications")
+        .join(format!("{profile}.json"));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();
+    assert_eq!(report["verdict"], "pass");
+    assert!(report["state"]["white_delta_e"].as_f64().unwrap() < 1.0);
+    let history = get(&api, "/history").await.json().unwrap();
+    let verdicts: Vec<&str> = history["verifications"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|v| v["verdict"].as_str())
+        .collect();
+    assert!(verdicts.contains(&"pass"), "{history}");
+}

@@ -250,6 +250,7 @@ fn keep(
             .map_or(f64::NAN, |r| r.limit),
         escalated: false,
         journal: None,
+        verdict: Some(report.verdict.name().to_string()),
     })?;
     Ok(saved)
 }

@@ -597,14 +597,25 @@ async fn verify(
     let evaluation = evaluate(&profile.model, usable);
     let threshold = config.schedule.threshold_de00;
     let past = evaluation.stats.is_some_and(|s| s.mean > threshold);
+    // A profile with curves: the display as its user sees it, through them, judged
+    // as `chromacal verify` judges it (and kept beside the profile).
+    let through = match &profile.calibration {
+        Some(_) if config.target.as_ref().is_none_or(|t| t.verify) => {
+            Some(verify_through_curves(device, &profile, devices).await)
+        }
+        _ => None,
+    };
+    let failed =
+        matches!(&through, Some(Ok(r)) if r.verdict == crate::verify::criteria::Verdict::Fail);
     let record = VerificationRecord {
         at: now_rfc3339(),
         profile_id: profile.id.clone(),
         stats: evaluation.stats,
         delta_e00: evaluation.patches.iter().map(|p| p.delta_e00).collect(),
         threshold,
-        escalated: past && config.schedule.escalate,
+        escalated: (past || failed) && config.schedule.escalate,
         journal: Some(crate::journal::stored_path(journal.path())),
+        verdict: None,
     };
     device
         .store
@@ -614,14 +625,25 @@ async fn verify(
         record: record.clone(),
     });
     let mean = record.stats.map_or(f64::NAN, |s| s.mean);
+    let calibrated = match &through {
+        None => String::new(),
+        Some(Ok(report)) => format!(
+            "; through the curves: {} under {} (white {:.2} ΔE00 from the target, grey balance {:.2})",
+            report.verdict.name(),
+            report.criteria,
+            report.state.white_delta_e,
+            report.state.grey_balance_mean
+        ),
+        Some(Err(e)) => format!("; not verified through the curves: {e}"),
+    };
     Ok(JobSuccess {
         message: format!(
-            "profile {}: mean ΔE00 {mean:.3} over {} patches (threshold {threshold}){}",
+            "profile {}: mean ΔE00 {mean:.3} over {} patches (threshold {threshold}){calibrated}{}",
             profile.id,
             record.delta_e00.len(),
             if record.escalated {
                 "; recalibrating"
-            } else if past {
+            } else if past || failed {
                 "; past the threshold (schedule.escalate is off)"
             } else {
                 ""
@@ -631,6 +653,40 @@ async fn verify(
         published: false,
         escalated: record.escalated,
     })
+}
+
+/// The current curves loaded (a window's video LUT; elsewhere they go in the codes),
+/// then the default chart through them against sRGB under `[verify]`'s criteria.
+async fn verify_through_curves(
+    device: &Arc<Device>,
+    profile: &Profile,
+    devices: &mut Devices,
+) -> Result<crate::verify::VerifyReport, String> {
+    let config = &device.loaded.config;
+    let curves = profile.calibration.as_ref().map(|c| &c.curves);
+    crate::calibrate::video_lut::release(
+        device.store.root(),
+        devices,
+        crate::calibrate::video_lut::RunEnd::Published {
+            curves,
+            why_no_curves: None,
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    device.update_job(|j| j.phase = "verifying through the curves".into());
+    let mut progress = |done: usize, total: usize| {
+        device.update_job(|j| j.phase = format!("verifying through the curves: {done}/{total}"));
+    };
+    crate::calibrate::verify::after_calibration(
+        &device.store,
+        profile,
+        &config.verify,
+        config.plan.bit_depth,
+        devices,
+        &mut progress,
+    )
+    .await
+    .map_err(|e| e.to_string())
 }
 
 /// Measure the uniformity grid again and give the current profile a new spatial map.

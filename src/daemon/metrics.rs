@@ -806,6 +806,7 @@ mod tests {
                     threshold: 1.0,
                     escalated: false,
                     journal: None,
+                    verdict: None,
                 },
             },
         );

@@ -696,6 +696,7 @@ mod tests {
             threshold: 1.0,
             escalated: false,
             journal: None,
+            verdict: None,
         };
         assert!(update_state(
             &mut state,

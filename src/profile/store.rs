@@ -115,6 +115,11 @@ pub struct VerificationRecord {
     /// sections.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub journal: Option<String>,
+    /// For a chart measured through the calibration curves (`chromacal verify`, and
+    /// the end of a calibration or of the daemon's verify job): the verdict under its
+    /// criteria, pass, fail or undecided. None for the profile's own check.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<String>,
 }
 
 fn now_rfc3339() -> String {
@@ -701,6 +706,7 @@ mod tests {
             threshold: 1.0,
             escalated: true,
             journal: None,
+            verdict: None,
         };
         store.append_verification(&record).unwrap();
         // A torn line from a crash is skipped.
