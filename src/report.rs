@@ -726,6 +726,35 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
     out
 }
 
+/// The uniformity lines of a verification's summary.
+fn uniformity_summary(u: &crate::verify::uniformity::Uniformity) -> String {
+    use crate::verify::uniformity::{DELTA_UV_LIMIT, LEVELS};
+    let levels: Vec<String> = LEVELS
+        .iter()
+        .zip(&u.worst_luminance)
+        .map(|((level, limit, _), worst)| {
+            format!(
+                "{:.0} % within {:.1} % (≤ {:.0} %)",
+                100.0 * level,
+                100.0 * worst,
+                100.0 * limit
+            )
+        })
+        .collect();
+    format!(
+        "uniformity over a {n} × {n} grid (ISO 12646 tolerances): {}{}; luminance against the centre's at {}; greys within Δu′v′ {:.4} of the centre's (≤ {DELTA_UV_LIMIT})\n",
+        u.verdict.name(),
+        if u.recommended {
+            ", within the recommended tolerances too"
+        } else {
+            ""
+        },
+        levels.join(", "),
+        u.worst_delta_uv,
+        n = u.grid
+    )
+}
+
 /// What `chromacal verify` says: the calibrated white, black and contrast, the grey
 /// balance and the tone, each criterion with its interval and verdict, and the worst
 /// patches.
@@ -803,7 +832,7 @@ pub fn verification_summary(v: &crate::verify::VerifyReport) -> String {
             }
         );
     }
-    let failed: Vec<String> = v
+    let mut failed: Vec<String> = v
         .results
         .iter()
         .filter(|r| r.verdict != crate::verify::Verdict::Pass)
@@ -817,6 +846,25 @@ pub fn verification_summary(v: &crate::verify::VerifyReport) -> String {
             )
         })
         .collect();
+    if let Some(u) = &v.uniformity {
+        out += &uniformity_summary(u);
+        failed.extend(
+            u.points
+                .iter()
+                .filter(|p| p.verdict != crate::verify::Verdict::Pass)
+                .map(|p| {
+                    format!(
+                        "uniformity at column {} row {}, {:.0} % grey: luminance {:+.1} %, Δu′v′ {:.4} ({})",
+                        p.column + 1,
+                        p.row + 1,
+                        100.0 * p.level,
+                        100.0 * p.luminance_deviation,
+                        p.delta_uv,
+                        p.verdict.name()
+                    )
+                }),
+        );
+    }
     if !failed.is_empty() {
         out += &format!("what misses: {}\n", failed.join("; "));
     }

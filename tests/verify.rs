@@ -307,3 +307,127 @@ fn the_readings_go_to_a_ti3_argyll_reads_and_bad_charts_are_named() {
         assert!(said.contains(expected), "{said}");
     }
 }
+
+/// `verify --uniformity` reads white, grey and dark grey over a grid and judges each
+/// position against the centre by ISO 12646's tolerances: an even screen passes; one
+/// whose corners fall 13 % (red more than blue) fails there, named by position, in the
+/// summary, the JSON and the report, while the centre's chart still passes.
+#[test]
+fn uniformity_passes_an_even_screen_and_names_the_positions_of_an_uneven_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let (state, even, _) = calibrated(dir.path(), "[monitor]\nfalloff = 0.02\n");
+    let (code, report) = verify(&state, &even, &["--uniformity"]);
+    let u = &report["uniformity"];
+    assert_eq!(code, Some(0), "{u}");
+    assert_eq!(u["grid"], 5);
+    assert_eq!(u["verdict"], "pass");
+    assert_eq!(u["points"].as_array().unwrap().len(), 24 * 3);
+    assert!(f(&u["worst_luminance"][0]) < 0.05, "{u}");
+    // The same profile on a screen whose corners fall off, red most.
+    let uneven = dir.path().join("uneven.toml");
+    let text = std::fs::read_to_string(&even)
+        .unwrap()
+        .replace("falloff = 0.02", "falloff = [0.35, 0.2, 0.05]");
+    std::fs::write(&uneven, text).unwrap();
+    let page = dir.path().join("uniformity.html");
+    let (code, report) = verify(
+        &state,
+        &uneven,
+        &["--uniformity", "3", "--report", page.to_str().unwrap()],
+    );
+    let u = &report["uniformity"];
+    assert_eq!(code, Some(5), "{u}");
+    assert_eq!(report["verdict"], "fail");
+    assert_eq!(u["verdict"], "fail");
+    // The chart at the centre is untouched by the falloff.
+    assert!(
+        report["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|r| r["verdict"] != "fail"),
+        "{}",
+        report["results"]
+    );
+    let points = u["points"].as_array().unwrap();
+    let white_at = |column: u64, row: u64| {
+        points
+            .iter()
+            .find(|p| p["column"] == column && p["row"] == row && f(&p["level"]) == 1.0)
+            .unwrap()
+    };
+    for (column, row) in [(0, 0), (2, 0), (0, 2), (2, 2)] {
+        let corner = white_at(column, row);
+        assert_eq!(corner["verdict"], "fail", "{corner}");
+        assert!(f(&corner["luminance_deviation"]) < -0.10, "{corner}");
+        assert!(f(&corner["luminance_interval"][1]) < -0.10, "{corner}");
+    }
+    // The edge's middles fall less than the corners.
+    let edge = white_at(1, 0);
+    assert!(
+        f(&edge["luminance_deviation"]) > f(&white_at(0, 0)["luminance_deviation"]),
+        "{edge}"
+    );
+    // The page shows the grid, one table a level, with the failing cells.
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(html.contains("id=\"uniformity-verdict\""), "no verdict");
+    for k in 0..3 {
+        let table = html
+            .split(&format!("id=\"uniformity-grid-{k}\""))
+            .nth(1)
+            .and_then(|rest| rest.split("</table>").next())
+            .unwrap_or_else(|| panic!("no uniformity-grid-{k}"));
+        assert_eq!(table.matches("<td").count(), 9, "{table}");
+        assert!(table.contains(">centre<"), "{table}");
+    }
+    // A summary names the positions; an even grid is refused before anything is read.
+    let out = chromacal()
+        .args(["verify", "--uniformity", "3", "--state-dir"])
+        .arg(&state)
+        .arg("--config")
+        .arg(&uneven)
+        .output()
+        .unwrap();
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("uniformity at column 1 row 1, 100 % grey"),
+        "{summary}"
+    );
+    let out = chromacal()
+        .args(["verify", "--uniformity", "4", "--state-dir"])
+        .arg(&state)
+        .arg("--config")
+        .arg(&uneven)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("odd size from 3 to 15"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// On a real screen the grid's patches move away from the instrument: without
+/// --prompt-positions the uniformity is refused before anything is shown.
+#[test]
+fn uniformity_on_a_real_screen_asks_for_prompt_positions() {
+    let dir = tempfile::tempdir().unwrap();
+    let (state, config, _) = calibrated(dir.path(), "");
+    let out = chromacal()
+        .args(["verify", "--uniformity", "--display", "window"])
+        .args([
+            "--instrument",
+            "pr670:/dev/chromacal-no-such-port",
+            "--state-dir",
+        ])
+        .arg(&state)
+        .arg("--config")
+        .arg(&config)
+        .env_remove("DISPLAY")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("add --prompt-positions"), "{stderr}");
+}

@@ -20,8 +20,8 @@ use crate::profile::Profile;
 use crate::profile::store::{ProfileStore, VerificationRecord};
 use crate::verify::criteria::{CriteriaSet, Statistic, Verdict};
 use crate::verify::{
-    Against, Chart, Loaded, MeasureOptions, Metric, PlannedPatch, Readings, Setting, VerifyReport,
-    evaluate, measure_chart, plan, read_again,
+    Against, AimPrompt, Chart, Loaded, MeasureOptions, Metric, PlannedPatch, Readings, Setting,
+    VerifyReport, evaluate, measure_chart, plan, read_again,
 };
 
 /// Why a verification could not be made.
@@ -39,6 +39,14 @@ pub enum VerifyError {
     Store(#[from] crate::profile::store::StoreError),
     #[error("{0}")]
     Judge(String),
+    #[error(
+        "the uniformity grid is read by moving the instrument to each position: the display shows the patch off the centre and the instrument stays where it is aimed; add --prompt-positions to be asked for each move"
+    )]
+    UniformityUnseen,
+    #[error(
+        "display.prompt_positions is set, but nothing here can ask someone to move the instrument"
+    )]
+    NoPrompt,
 }
 
 /// What to verify, and how.
@@ -55,6 +63,9 @@ pub struct VerifyOptions {
     pub overrides: Overrides,
     /// The correction the instrument's readings go through (the config's).
     pub correction: Option<crate::profile::CorrectionRecord>,
+    /// Read white, grey and dark grey on an n × n grid too, and judge the screen's
+    /// uniformity (`crate::verify::uniformity`).
+    pub uniformity: Option<usize>,
 }
 
 /// What a verification did and found.
@@ -94,12 +105,18 @@ pub fn saved_for(profile_path: &Path, profile: &Profile) -> Option<VerifyReport>
 
 /// Run the verification `options` asks for, on the devices of `loaded` (with the
 /// command line's overrides); `progress(done, total)` after each reading.
+/// With `options.uniformity`, `aim` asks for the instrument to be moved to each
+/// position where the config says someone must (`display.prompt_positions`).
 pub async fn verify(
     loaded: &LoadedConfig,
     options: &VerifyOptions,
     progress: &mut (dyn FnMut(usize, usize) + Send),
+    aim: Option<AimPrompt<'_>>,
 ) -> Result<VerifyOutcome, VerifyError> {
     options.criteria.check().map_err(VerifyError::Config)?;
+    if let Some(grid) = options.uniformity {
+        crate::verify::uniformity::check_grid(grid).map_err(VerifyError::Config)?;
+    }
     let store = ProfileStore::new(&options.state_dir);
     let _lock = store.lock("chromacal verify")?;
     let profile_path = options
@@ -124,8 +141,25 @@ pub async fn verify(
     let mut config = loaded.config.clone();
     options.overrides.apply(&mut config);
     check_config(&config).map_err(VerifyError::Config)?;
+    let aim = match (options.uniformity, config.display.prompt_positions, aim) {
+        (None, _, _) | (Some(_), false, _) => None,
+        (Some(_), true, Some(aim)) => Some(aim),
+        (Some(_), true, None) => return Err(VerifyError::NoPrompt),
+    };
+    // A real screen shows the grid's patches away from where the instrument is aimed;
+    // only the simulated screens' instruments follow the patch.
+    use crate::config::Sink;
+    if options.uniformity.is_some()
+        && aim.is_none()
+        && matches!(
+            config.display.sink(),
+            Sink::Window | Sink::Resolve | Sink::Web
+        )
+    {
+        return Err(VerifyError::UniformityUnseen);
+    }
     let mut devices = open_devices(&config, &loaded.base_dir, None).await?;
-    let result = verify_on(
+    let mut result = verify_on(
         &profile,
         options,
         config.plan.bit_depth,
@@ -133,6 +167,14 @@ pub async fn verify(
         progress,
     )
     .await;
+    if let (Ok((report, _, _)), Some(grid)) = (&mut result, options.uniformity) {
+        let bits = config.plan.bit_depth;
+        if let Err(e) =
+            uniformity_on(&profile, report, grid, bits, &mut devices, aim, progress).await
+        {
+            result = Err(e);
+        }
+    }
     devices.instrument.close();
     let (mut report, planned, readings) = result?;
     said_of_the_instrument(
@@ -188,6 +230,7 @@ pub async fn after_calibration(
         until_decided: None,
         overrides: Overrides::default(),
         correction: profile.provenance.correction.clone(),
+        uniformity: None,
     };
     let (mut report, _, _) = verify_on(profile, &options, bits, devices, progress).await?;
     said_of_the_instrument(
@@ -270,6 +313,48 @@ fn loaded_now(devices: &mut Devices, profile: &Profile) -> Result<Loaded, Verify
         Some(c) => Loaded::Curves(c.curves.clone()),
         None => Loaded::Straight,
     })
+}
+
+/// Read the uniformity grid through what the display holds, judge it with the
+/// session's noise (the chart's), and let its verdict join the report's.
+async fn uniformity_on(
+    profile: &Profile,
+    report: &mut VerifyReport,
+    grid: usize,
+    bits: u32,
+    devices: &mut Devices,
+    aim: Option<AimPrompt<'_>>,
+    progress: &mut (dyn FnMut(usize, usize) + Send),
+) -> Result<(), VerifyError> {
+    use crate::verify::uniformity;
+    let loaded = loaded_now(devices, profile)?;
+    let setting = Setting {
+        model: &profile.model,
+        curves: None,
+        against: Against::Profile,
+        bits,
+    };
+    let levels = plan(&uniformity::chart(), &setting, &loaded).map_err(VerifyError::Judge)?;
+    let (readings, seconds) = crate::verify::measure_grid(
+        &levels,
+        grid,
+        &mut devices.display,
+        &mut devices.instrument,
+        aim,
+        progress,
+    )
+    .await?;
+    let noise = uniformity::Noise {
+        relative: report.noise.relative,
+        independent: report.independent_noise,
+        floor: report.noise.floor,
+    };
+    let judged = uniformity::judge(grid, &readings, noise).map_err(VerifyError::Judge)?;
+    report.readings += grid * grid * levels.len();
+    report.instrument_s += seconds;
+    report.verdict = Verdict::all([report.verdict, judged.verdict]);
+    report.uniformity = Some(judged);
+    Ok(())
 }
 
 /// Plan, measure, judge, and read again while undecided.

@@ -245,7 +245,10 @@ fn announce_display(loaded: &LoadedConfig, options: &CalibrateOptions) {
 }
 
 /// Ask on the terminal to aim the instrument at `position`; Enter goes on.
-fn aim_prompt(bar: &indicatif::ProgressBar, position: ScreenPosition) -> Result<(), String> {
+pub(super) fn aim_prompt(
+    bar: &indicatif::ProgressBar,
+    position: ScreenPosition,
+) -> Result<(), String> {
     bar.suspend(|| {
         eprintln!(
             "chromacal: aim the instrument at the patch now shown at ({:.3}, {:.3}) (fractions of the screen's width and height from the top left), then press Enter",

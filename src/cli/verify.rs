@@ -47,6 +47,12 @@ pub struct VerifyArgs {
     /// all, until every verdict is settled.
     #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "60")]
     until_decided: Option<usize>,
+    /// Read white, grey 128 and grey 64 on an N × N grid (N odd, default 5) and judge
+    /// the screen's uniformity against its centre as ISO 12646 does (luminance within
+    /// 10, 13 and 15 %, Δu′v′ within 0.01). In the window, with --prompt-positions:
+    /// you are asked to move the instrument to each position.
+    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "5", value_parser = grid_size)]
+    uniformity: Option<usize>,
     /// Print the whole result as JSON.
     #[arg(long)]
     json: bool,
@@ -88,6 +94,7 @@ pub fn run(args: VerifyArgs) -> Result<(), Failure> {
             .correction
             .as_ref()
             .map(|c| c.record(&loaded.base_dir)),
+        uniformity: args.uniformity,
     };
     let bar = indicatif::ProgressBar::new(0);
     let mut progress = |done: usize, total: usize| {
@@ -97,7 +104,8 @@ pub fn run(args: VerifyArgs) -> Result<(), Failure> {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
-    let outcome = runtime.block_on(verify(&loaded, &options, &mut progress));
+    let mut aim = |position| super::calibrate::aim_prompt(&bar, position);
+    let outcome = runtime.block_on(verify(&loaded, &options, &mut progress, Some(&mut aim)));
     bar.finish_and_clear();
     let outcome = outcome?;
     if let Some(path) = &args.ti3 {
@@ -126,6 +134,14 @@ pub fn run(args: VerifyArgs) -> Result<(), Failure> {
             code: VERIFICATION_UNDECIDED,
         }),
     }
+}
+
+/// An odd grid size from 3 to 15.
+fn grid_size(text: &str) -> Result<usize, String> {
+    let n: usize = text
+        .parse()
+        .map_err(|_| format!("'{text}' is not a grid size"))?;
+    chromacal::verify::uniformity::check_grid(n).map(|()| n)
 }
 
 /// The criteria asked for: by name, else the config's, else DisplayCAL's defaults.

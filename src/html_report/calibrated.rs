@@ -11,6 +11,7 @@ use super::ReportError;
 use super::figures::{self, Curve};
 use super::markup::{note, signed, swatch_span};
 use crate::profile::Profile;
+use crate::verify::uniformity::{DELTA_UV_LIMIT, LEVELS, Uniformity};
 use crate::verify::{GreyBalance, Metric, Verdict, VerifyReport, grey_chroma};
 use chromacal_color::Xyz;
 use chromacal_color::spaces::xyz_to_xyy;
@@ -184,6 +185,44 @@ pub fn calibrated(profile: &Profile, v: &VerifyReport) -> Result<Markup, ReportE
             @if v.patches.iter().any(|p| p.outside) {
                 (note("Patches outside the gamut ask for a colour the display cannot show: their reference is the nearest colour it can show (clipped, as a colour-managed application asks for it), so their ΔE is what the calibration and the profile miss, not the gamut."))
             }
+            @if let Some(u) = &v.uniformity { (uniformity(u)) }
         }
     })
+}
+
+/// The uniformity grid, one table a level: each position's luminance against the
+/// centre's and its Δu′v′ from the centre's chromaticity, with its verdict.
+fn uniformity(u: &Uniformity) -> Markup {
+    let at = |row: usize, column: usize, level: f64| {
+        u.points
+            .iter()
+            .find(|p| p.row == row && p.column == column && p.level == level)
+    };
+    html! {
+        h3 { "Uniformity" }
+        p {
+            "White, grey and dark grey read on a " (u.grid) " × " (u.grid)
+            " grid and set against the centre, by ISO 12646's tolerances (luminance within 10, 13 and 15 %, 5, 6.5 and 7.5 % recommended; Δu′v′ within "
+            (DELTA_UV_LIMIT) "). Verdict: " (verdict_span(u.verdict, Some("uniformity-verdict")))
+            @if u.recommended { ", within the recommended tolerances too" } "."
+        }
+        @for (k, &(level, limit, _)) in LEVELS.iter().enumerate() {
+            table.uniformity id=(format!("uniformity-grid-{k}")) {
+                caption { (format!("{:.0} % grey: luminance against the centre (≤ {:.0} %) and Δu′v′", 100.0 * level, 100.0 * limit)) }
+                @for row in 0..u.grid {
+                    tr {
+                        @for column in 0..u.grid {
+                            @match at(row, column, level) {
+                                Some(p) => td title=(format!("95 % interval {:+.1} to {:+.1} %", 100.0 * p.luminance_interval[0], 100.0 * p.luminance_interval[1])) {
+                                    (format!("{:+.1} %", 100.0 * p.luminance_deviation)) br;
+                                    (format!("{:.4}", p.delta_uv)) " " (verdict_span(p.verdict, None))
+                                },
+                                None => td.text { "centre" },
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
 }

@@ -149,6 +149,9 @@ pub struct VerifyReport {
     pub uncorrected: Option<String>,
     pub readings: usize,
     pub instrument_s: f64,
+    /// The screen's uniformity, where it was measured (`verify --uniformity`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uniformity: Option<super::uniformity::Uniformity>,
 }
 
 /// The colour difference `metric` measures between `a` and `b`; CIELAB against `white`.
@@ -547,6 +550,7 @@ pub fn evaluate(
         uncorrected: None,
         readings: readings.count(),
         instrument_s: readings.instrument_s,
+        uniformity: None,
     })
 }
 

@@ -16,6 +16,8 @@ use super::PlannedPatch;
 pub enum MeasureError {
     #[error(transparent)]
     Display(#[from] DisplayError),
+    #[error("the instrument was not aimed: {0}")]
+    Position(String),
     #[error("patch {index} ('{label}'): {source}")]
     Instrument {
         index: usize,
@@ -70,6 +72,15 @@ async fn read<D: PatchDisplay, I: Instrument>(
         geometry: Geometry::centred(options.patch_size),
     };
     display.show(&shown).await?;
+    read_shown(patch, index, instrument).await
+}
+
+/// Read the patch on the screen, `patch` of the chart.
+async fn read_shown<I: Instrument>(
+    patch: &PlannedPatch,
+    index: usize,
+    instrument: &mut I,
+) -> Result<(Xyz, f64), MeasureError> {
     let reading = instrument
         .measure()
         .await
@@ -141,4 +152,56 @@ pub async fn read_again<D: PatchDisplay, I: Instrument>(
     }
     let _ = display.blank().await;
     Ok(())
+}
+
+/// Asked to aim the instrument at a position before it is read there.
+pub type AimPrompt<'a> =
+    &'a mut (dyn FnMut(chromacal_model::ScreenPosition) -> Result<(), String> + Send);
+
+/// Read `levels` at every position of a `grid` × `grid` grid, in rows from the top
+/// left: `readings[position][level]`. With `aim`, the instrument is asked to be moved
+/// to each position once its first patch is shown there.
+pub async fn measure_grid<D: PatchDisplay, I: Instrument>(
+    levels: &[PlannedPatch],
+    grid: usize,
+    display: &mut D,
+    instrument: &mut I,
+    mut aim: Option<AimPrompt<'_>>,
+    progress: &mut (dyn FnMut(usize, usize) + Send),
+) -> Result<(Vec<Vec<Xyz>>, f64), MeasureError> {
+    let size = (1.0 / grid as f64).min(MeasureOptions::default().patch_size);
+    let total = grid * grid * levels.len();
+    let (mut readings, mut seconds) = (Vec::new(), 0.0);
+    for row in 0..grid {
+        for column in 0..grid {
+            let centre = chromacal_model::ScreenPosition::new(
+                (column as f64 + 0.5) / grid as f64,
+                (row as f64 + 0.5) / grid as f64,
+            );
+            let mut here = Vec::new();
+            for (k, level) in levels.iter().enumerate() {
+                let index = readings.len() * levels.len() + k;
+                let shown = Patch {
+                    codes: level.codes,
+                    background: Codes::from_drive([0.0; 3], level.codes.bit_depth),
+                    geometry: Geometry::around(centre, size),
+                };
+                display.show(&shown).await?;
+                if k == 0
+                    && let Some(aim) = aim.as_mut()
+                    && let Err(message) = aim(centre)
+                {
+                    let _ = display.blank().await;
+                    return Err(MeasureError::Position(message));
+                }
+                let (xyz, s) = read_shown(level, index, instrument).await?;
+                here.push(xyz);
+                seconds += s;
+                progress(index + 1, total);
+            }
+            readings.push(here);
+        }
+    }
+    let _ = display.blank().await;
+    Ok((readings, seconds))
 }

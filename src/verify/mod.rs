@@ -30,6 +30,7 @@ pub mod chart;
 pub mod criteria;
 mod evaluate;
 mod measure;
+pub mod uniformity;
 
 use serde::{Deserialize, Serialize};
 
@@ -49,7 +50,9 @@ pub use evaluate::{
     CalibratedState, CriterionResult, GreyBalance, PatchResult, ToneLevel, VerifyReport, evaluate,
     grey_chroma,
 };
-pub use measure::{MeasureError, MeasureOptions, Readings, measure_chart, read_again};
+pub use measure::{
+    AimPrompt, MeasureError, MeasureOptions, Readings, measure_chart, measure_grid, read_again,
+};
 
 /// What each patch is set against.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
