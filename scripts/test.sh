@@ -46,6 +46,8 @@ command -v systemd-analyze >/dev/null || need_package systemd
 # The XDG autostart entry is checked by the freedesktop validator.
 command -v desktop-file-validate >/dev/null || need_package desktop-file-utils
 command -v curl >/dev/null || need_package curl
+# GNU time: a test reads peak memory with it.
+[ -x /usr/bin/time ] || need_package time
 # Exports are read back by independent readers: ArgyllCMS, Little CMS's transicc,
 # and PsychoPy's loader (json_tricks with numpy, in Debian's Python).
 command -v iccdump >/dev/null || need_package argyll

@@ -182,21 +182,28 @@ fn run(
     command: &mut Command,
     input: Option<String>,
 ) -> Result<String, ArgyllError> {
-    use std::io::Write;
-    let mut child = command
-        .stdin(Stdio::piped())
+    use chromacal_formats::child::output_within;
+    let child = command
+        .stdin(if input.is_some() {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        })
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .map_err(|source| ArgyllError::Missing { program, source })?;
-    if let (Some(text), Some(mut stdin)) = (input, child.stdin.take()) {
-        stdin
-            .write_all(text.as_bytes())
-            .map_err(|source| ArgyllError::Missing { program, source })?;
-    }
-    let output = child
-        .wait_with_output()
-        .map_err(|source| ArgyllError::Missing { program, source })?;
+    let output = output_within(
+        program,
+        child,
+        input.map(String::into_bytes),
+        OUTPUT_LIMIT,
+        std::time::Duration::from_secs(TIME_LIMIT_S),
+    )
+    .map_err(|e| ArgyllError::Failed {
+        program,
+        stderr: e.to_string(),
+    })?;
     if !output.status.success() {
         return Err(ArgyllError::Failed {
             program,
@@ -205,6 +212,13 @@ fn run(
     }
     Ok(String::from_utf8_lossy(&output.stdout).into_owned())
 }
+
+/// The most an ArgyllCMS tool may print here: `xicclu` on a few thousand colours
+/// prints some hundred kilobytes.
+const OUTPUT_LIMIT: usize = 64 << 20;
+
+/// How long one may take: `colprof` on a few hundred patches takes seconds.
+const TIME_LIMIT_S: u64 = 600;
 
 #[cfg(test)]
 mod tests {

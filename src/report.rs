@@ -670,6 +670,12 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
             outcome.run.extra_reads, outcome.run.unsettled
         );
     }
+    if outcome.run.misreads > 0 {
+        out += &format!(
+            "  misreads: {} readings no display could have given (not a number, beyond 1e5 cd/m², or negative), read again\n",
+            outcome.run.misreads
+        );
+    }
     if outcome.run.already_measured > 0 {
         out += &format!(
             "  resumed: {} patches were in the journal, {} measured now\n",

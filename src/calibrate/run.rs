@@ -123,27 +123,36 @@ pub struct RunSummary {
     pub unsettled: usize,
     /// Integration seconds those extra readings took.
     pub extra_read_s: f64,
+    /// Readings no display could have given ([`Reading::implausible`]), read again.
+    pub misreads: usize,
     /// For a sequential plan: patches it added beyond its seed plan (in every call),
     /// and why it stopped adding, in words.
     pub sequential_added: usize,
     pub sequential_stop: Option<String>,
 }
 
-/// One reading, retried on instrument errors and on non-finite values.
+/// One reading, retried on instrument errors and on misreads (values no display can
+/// emit: [`Reading::implausible`]), each misread counted in `misreads`.
 async fn read<I: Instrument>(
     instrument: &mut I,
     attempts: usize,
     index: usize,
+    misreads: &mut usize,
 ) -> Result<Reading, RunError> {
     let mut last_error = None;
     for attempt in 1..=attempts.max(1) {
         match instrument.measure().await {
-            Ok(r) if r.xyz.is_none_or(|x| x.iter().all(|v| v.is_finite())) => return Ok(r),
-            Ok(_) => {
-                last_error = Some(InstrumentError::Protocol(
-                    "the reading has a value that is not a finite number".into(),
-                ));
-            }
+            Ok(r) => match r.implausible() {
+                None => return Ok(r),
+                Some(why) => {
+                    *misreads += 1;
+                    let raw = r
+                        .raw
+                        .map(|raw| format!(" (it sent: {raw})"))
+                        .unwrap_or_default();
+                    last_error = Some(InstrumentError::Protocol(format!("a misread: {why}{raw}")));
+                }
+            },
             Err(e) => last_error = Some(e),
         }
         tracing::warn!(index, attempt, error = ?last_error, "measurement failed");
@@ -163,6 +172,8 @@ pub struct Tally {
     pub extra_reads: usize,
     pub unsettled: usize,
     pub extra_read_s: f64,
+    /// Readings no display could have given, read again.
+    pub misreads: usize,
     /// Where the instrument was last aimed (asked again only when the patch moves).
     aimed_at: Option<ScreenPosition>,
 }
@@ -175,6 +186,7 @@ impl Tally {
             extra_reads: self.extra_reads,
             unsettled: self.unsettled,
             extra_read_s: self.extra_read_s,
+            misreads: self.misreads,
             sequential_added: 0,
             sequential_stop: None,
         }
@@ -287,7 +299,14 @@ pub async fn measure_patch<D: PatchDisplay, I: Instrument>(
         }
         tally.aimed_at = Some(position);
     }
-    let mut reading = match read(instrument, options.attempts, planned.index).await {
+    let mut reading = match read(
+        instrument,
+        options.attempts,
+        planned.index,
+        &mut tally.misreads,
+    )
+    .await
+    {
         Ok(r) => r,
         Err(e) => {
             let _ = display.blank().await;
@@ -298,7 +317,14 @@ pub async fn measure_patch<D: PatchDisplay, I: Instrument>(
         let mut reads = 1;
         let mut agreed = false;
         while reads < stability.max_reads.max(2) {
-            let next = match read(instrument, options.attempts, planned.index).await {
+            let next = match read(
+                instrument,
+                options.attempts,
+                planned.index,
+                &mut tally.misreads,
+            )
+            .await
+            {
                 Ok(r) => r,
                 Err(e) => {
                     let _ = display.blank().await;

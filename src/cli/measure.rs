@@ -64,7 +64,11 @@ fn measure(
     for _ in 0..count.max(1) {
         let reading = instrument.measure()?;
         if !json {
-            let status = format!("{:?}", reading.status).to_lowercase();
+            // What a display cannot emit is shown, and named as a misread.
+            let status = match reading.implausible() {
+                Some(why) => format!("misread: {why}"),
+                None => format!("{:?}", reading.status).to_lowercase(),
+            };
             match (reading.xyz, reading.luminance()) {
                 (Some(xyz), _) => {
                     let xyy = xyz_to_xyy(&xyz, [0.0, 0.0]);

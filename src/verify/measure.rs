@@ -75,43 +75,46 @@ async fn read<D: PatchDisplay, I: Instrument>(
     read_shown(patch, index, instrument).await
 }
 
-/// Read the patch on the screen, `patch` of the chart.
+/// Misreads (values no display can emit) read again before verify gives up.
+const MISREAD_ATTEMPTS: usize = 3;
+
+/// Read the patch on the screen, `patch` of the chart: again on a misread
+/// ([`chromacal_instruments::Reading::implausible`]), up to [`MISREAD_ATTEMPTS`] times.
 async fn read_shown<I: Instrument>(
     patch: &PlannedPatch,
     index: usize,
     instrument: &mut I,
 ) -> Result<(Xyz, f64), MeasureError> {
-    let reading = instrument
-        .measure()
-        .await
-        .map_err(|source| MeasureError::Instrument {
-            index,
-            label: patch.patch.label.clone(),
-            source,
-        })?;
+    let failed = |source| MeasureError::Instrument {
+        index,
+        label: patch.patch.label.clone(),
+        source,
+    };
+    let mut attempt = 1;
+    let reading = loop {
+        let reading = instrument.measure().await.map_err(failed)?;
+        match reading.implausible() {
+            None => break reading,
+            Some(why) if attempt >= MISREAD_ATTEMPTS => {
+                return Err(failed(InstrumentError::Protocol(format!(
+                    "{attempt} misreads, the last: {why}"
+                ))));
+            }
+            Some(why) => tracing::warn!(index, attempt, %why, "a misread; reading again"),
+        }
+        attempt += 1;
+    };
     // Light above the instrument's range has no value; below it, the value it
     // indicated is kept (the black of a good display is there).
-    let xyz = match (reading.status, reading.xyz) {
+    match (reading.status, reading.xyz) {
         (ReadingStatus::Overload, _) | (_, None) => {
-            return Err(MeasureError::Instrument {
-                index,
-                label: patch.patch.label.clone(),
-                source: InstrumentError::Protocol(format!(
-                    "no XYZ ({:?}): verify needs a colorimeter or spectroradiometer within its range",
-                    reading.status
-                )),
-            });
+            Err(failed(InstrumentError::Protocol(format!(
+                "no XYZ ({:?}): verify needs a colorimeter or spectroradiometer within its range",
+                reading.status
+            ))))
         }
-        (_, Some(xyz)) => xyz,
-    };
-    if !xyz.iter().all(|v| v.is_finite()) {
-        return Err(MeasureError::Instrument {
-            index,
-            label: patch.patch.label.clone(),
-            source: InstrumentError::Protocol(format!("read as {xyz:?}")),
-        });
+        (_, Some(xyz)) => Ok((xyz, reading.integration_s)),
     }
-    Ok((xyz, reading.integration_s))
 }
 
 /// Read every planned patch once, calling `progress(done, total)` after each.

@@ -11,6 +11,7 @@ pub mod cal;
 pub mod ccmx;
 pub mod ccss;
 pub mod cgats;
+pub mod child;
 pub mod durable;
 pub mod edid;
 pub mod icc;

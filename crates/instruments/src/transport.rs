@@ -62,6 +62,11 @@ pub const MIN_WAIT_S: f64 = 0.05;
 /// How long [`Link::drain`] waits for a late reply to start (protocol seconds).
 pub const DRAIN_WAIT_S: f64 = 6.0;
 
+/// The longest reply any instrument here gives is a spectrum of some kilobytes; a
+/// device (or emulator, or program on a pseudo-terminal) that sends more without ending
+/// its reply is answered with an error, not read into memory.
+pub const MAX_REPLY: usize = 1 << 20;
+
 /// A transport with a read buffer and framings. Every timeout given to it is in the
 /// protocol's seconds and multiplied by `timing_scale` (1 for real devices).
 pub struct Link {
@@ -153,6 +158,21 @@ impl Link {
         self.transport.reopen()
     }
 
+    /// Add `bytes` to the buffer, or drop it all when a reply would pass [`MAX_REPLY`].
+    fn take(&mut self, bytes: &[u8]) -> Result<(), TransportError> {
+        if self.buffer.len() + bytes.len() > MAX_REPLY {
+            let tail = self.buffer.len().saturating_sub(48);
+            let last = escape(&self.buffer[tail..]);
+            self.buffer.clear();
+            return Err(TransportError::Io(format!(
+                "{} sent more than {MAX_REPLY} bytes without ending its reply (it last sent: {last})",
+                self.transport.describe()
+            )));
+        }
+        self.buffer.extend_from_slice(bytes);
+        Ok(())
+    }
+
     /// Read until `frame_end` finds the end of a frame in the buffer (returning its
     /// length), within `timeout` protocol seconds. Returns the frame; what follows
     /// stays buffered.
@@ -175,7 +195,7 @@ impl Link {
                 });
             }
             match self.transport.read(remaining) {
-                Ok(bytes) => self.buffer.extend_from_slice(&bytes),
+                Ok(bytes) => self.take(&bytes)?,
                 Err(TransportError::Timeout { .. }) => {
                     return Err(TransportError::Timeout {
                         waited: limit,
@@ -235,7 +255,7 @@ impl Link {
         let quiet = self.wait(gap);
         loop {
             match self.transport.read(quiet) {
-                Ok(bytes) => self.buffer.extend_from_slice(&bytes),
+                Ok(bytes) => self.take(&bytes)?,
                 Err(TransportError::Timeout { .. }) => return Ok(std::mem::take(&mut self.buffer)),
                 Err(e) => return Err(e),
             }
@@ -350,6 +370,32 @@ mod tests {
             link(&[], 1.0).read_until_silence(1.0, 0.1),
             Err(TransportError::Timeout { .. })
         ));
+    }
+
+    #[test]
+    fn a_reply_without_end_is_refused_at_the_bound_not_read_into_memory() {
+        let chunk = vec![b'x'; 64 * 1024];
+        let arrivals: Vec<(f64, &[u8])> = (0..40).map(|i| (i as f64 * 0.001, &chunk[..])).collect();
+        let mut l = link(&arrivals, 1.0);
+        match l.read_line(b"\r\n", 10.0) {
+            Err(TransportError::Io(why)) => {
+                assert!(why.contains("more than 1048576 bytes"), "{why}");
+                assert!(why.contains("script"), "{why}");
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(l.buffer.is_empty());
+        let mut l = link(&arrivals, 1.0);
+        assert!(matches!(
+            l.read_until_silence(1.0, 0.1),
+            Err(TransportError::Io(_))
+        ));
+        // Under the bound a long reply is whole.
+        let mut l = link(&arrivals[..15], 1.0);
+        assert_eq!(
+            l.read_until_silence(1.0, 0.1).unwrap().len(),
+            15 * 64 * 1024
+        );
     }
 
     #[test]

@@ -209,10 +209,16 @@ impl Transport for SpotreadTransport {
     }
 }
 
+/// The most `spotread -?` may print: its usage text with a port list is a few
+/// kilobytes; one that prints without end is stopped here, not read into memory.
+pub const USAGE_LIMIT: usize = 1 << 20;
+
 /// Run `spotread -?` and return what it printed (its usage, with the port list), within
-/// `timeout`: Argyll scans every port, and a port that never answers must not hang us.
+/// `timeout`: Argyll scans every port, and a port that never answers must not hang us;
+/// and within [`USAGE_LIMIT`] bytes.
 pub fn usage_text(program: &str, timeout: Duration) -> Result<String, String> {
-    let mut child = Command::new(program)
+    use chromacal_formats::child::{ChildError, output_within};
+    let child = Command::new(program)
         .arg("-?")
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
@@ -220,35 +226,13 @@ pub fn usage_text(program: &str, timeout: Duration) -> Result<String, String> {
         .process_group(0)
         .spawn()
         .map_err(|e| missing_message(program, &e))?;
-    let mut out = child.stdout.take();
-    let mut err = child.stderr.take();
-    let reader = std::thread::spawn(move || {
-        let mut text = String::new();
-        if let Some(o) = out.as_mut() {
-            let _ = o.read_to_string(&mut text);
-        }
-        let mut e = String::new();
-        if let Some(r) = err.as_mut() {
-            let _ = r.read_to_string(&mut e);
-        }
-        text + &e
-    });
-    let deadline = Instant::now() + timeout;
-    loop {
-        match child.try_wait() {
-            Ok(Some(_)) => break,
-            Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
-            _ => {
-                let _ = child.kill();
-                let _ = child.wait();
-                return Err(format!(
-                    "{program} -? did not finish within {} s: its scan reads every serial port, and one never answered",
-                    timeout.as_secs()
-                ));
-            }
-        }
+    match output_within(&format!("{program} -?"), child, None, USAGE_LIMIT, timeout) {
+        Ok(out) => Ok(String::from_utf8_lossy(&out.stdout).into_owned()
+            + &String::from_utf8_lossy(&out.stderr)),
+        Err(ChildError::Timeout { .. }) => Err(format!(
+            "{program} -? did not finish within {} s: its scan reads every serial port, and one never answered",
+            timeout.as_secs()
+        )),
+        Err(e) => Err(format!("{e}: is it ArgyllCMS's spotread?")),
     }
-    reader
-        .join()
-        .map_err(|_| format!("{program} -?: its output could not be read"))
 }

@@ -22,6 +22,9 @@ pub struct FaultSpec {
     pub low_light: f64,
     pub overload: f64,
     pub sync_failure: f64,
+    /// A reading whose value is 10⁹ times the light (units lost on the way): more
+    /// than any display emits, even at its black.
+    pub misread: f64,
     /// How much later than due a late reply comes, in device seconds: past the short
     /// timeouts of settings and queries, inside the drivers' drain window.
     pub late_s: f64,
@@ -41,6 +44,7 @@ impl Default for FaultSpec {
             low_light: 0.0,
             overload: 0.0,
             sync_failure: 0.0,
+            misread: 0.0,
             late_s: 4.0,
             start_after: 0,
             seed: 1,
@@ -74,6 +78,7 @@ impl FaultSpec {
                 "low_light" => &mut spec.low_light,
                 "overload" => &mut spec.overload,
                 "sync_failure" => &mut spec.sync_failure,
+                "misread" => &mut spec.misread,
                 "late_s" => &mut spec.late_s,
                 "start_after" | "seed" => {
                     // Counts: whole, not negative, and small enough to be exact.
@@ -91,7 +96,7 @@ impl FaultSpec {
                 }
                 other => {
                     return Err(format!(
-                        "unknown fault '{other}' (known: no_reply, late, garbage, truncated, vanish, low_light, overload, sync_failure, late_s, start_after, seed)"
+                        "unknown fault '{other}' (known: no_reply, late, garbage, truncated, vanish, low_light, overload, sync_failure, misread, late_s, start_after, seed)"
                     ));
                 }
             };
@@ -116,6 +121,7 @@ impl FaultSpec {
             low_light: self.low_light,
             overload: self.overload,
             sync_failure: self.sync_failure,
+            misread: self.misread,
         }
     }
 }

@@ -72,6 +72,8 @@ pub struct DeviceFaults {
     pub overload: f64,
     /// Only when the host asked for sync.
     pub sync_failure: f64,
+    /// A value 10⁹ times the light (see `FaultSpec::misread`).
+    pub misread: f64,
 }
 
 /// What a measurement gives a device model to report.
@@ -186,6 +188,13 @@ impl Meter {
         }
         if draw >= f.low_light && draw < f.low_light + f.overload {
             return Measured::Overload { integration_s };
+        }
+        let draw = draw - f.low_light - f.overload;
+        if draw >= 0.0 && draw < f.misread && reading.status == ReadingStatus::Ok {
+            let mut wrong = reading;
+            wrong.xyz = wrong.xyz.map(|xyz| xyz * 1e9);
+            wrong.luminance = wrong.luminance.map(|l| l * 1e9);
+            return Measured::Ok(wrong);
         }
         match reading.status {
             ReadingStatus::Ok => Measured::Ok(reading),
