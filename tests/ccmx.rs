@@ -113,6 +113,33 @@ fn a_ccmx_file_corrects_a_colorimeter_and_a_bad_one_is_refused_before_measuring(
         !state.join("runs").exists(),
         "nothing is measured with a bad correction"
     );
+    // X and Z swapped, X and Z negated, a row zeroed: each refused before measuring,
+    // naming the light it spoils (a negated one once published a white of negative X).
+    for (matrix, named) in [
+        (
+            Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0),
+            "moves the chromaticity of a red primary",
+        ),
+        (
+            Matrix3::new(-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0),
+            "turns a red primary into X, Y, Z",
+        ),
+        (
+            Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0),
+            "singular",
+        ),
+    ] {
+        let bad = Ccmx {
+            matrix,
+            ..ccmx.clone()
+        };
+        std::fs::write(dir.path().join("crt.ccmx"), ccmx_text(&bad, "now")).unwrap();
+        let out = calibrate(&corrected, &state, &emulator.device, &emulator.screen);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{err}");
+        assert!(err.contains("crt.ccmx") && err.contains(named), "{err}");
+        assert!(!state.join("runs").exists(), "measured with {matrix}");
+    }
     // A matrix written in the config is checked the same way, when the config loads.
     std::fs::write(
         &corrected,

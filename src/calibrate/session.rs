@@ -315,8 +315,17 @@ fn count_fit_failure(journal: &Path) {
     }
 }
 
-/// Does the fitted profile meet the publishing limits? `None` if it does.
+/// Does the fitted profile meet the publishing limits? `None` if it does. A white
+/// with a component that is not positive is never light, however small the held-out
+/// error (a correction that negated X and Z once published such a white with 0.145).
 pub fn publish_rejection(fitted: &FittedModel, limits: &PublishConfig) -> Option<String> {
+    let white = fitted.model.white();
+    if !white.iter().all(|v| *v > 0.0 && v.is_finite()) {
+        return Some(format!(
+            "the model's white is X, Y, Z = {:.3}, {:.3}, {:.3}: light has no component that is not positive (is a correction turning the readings inside out?)",
+            white.x, white.y, white.z
+        ));
+    }
     limits.rejection(fitted.report.held_out.as_ref(), "held-out")
 }
 

@@ -43,6 +43,22 @@ pub enum CcmxError {
         light: &'static str,
         corrected: f64,
     },
+    #[error(
+        "{what}: the matrix turns {light} into X, Y, Z = {corrected:?}: light has no negative component, so the matrix is wrong (rows swapped or negated?)"
+    )]
+    Negative {
+        what: String,
+        light: &'static str,
+        corrected: [f64; 3],
+    },
+    #[error(
+        "{what}: the matrix moves the chromaticity of {light} by Δu′v′ {shift:.3} (more than {MAX_CHROMATICITY_SHIFT}, which no colorimeter's filters need: rows swapped?)"
+    )]
+    Chromaticity {
+        what: String,
+        light: &'static str,
+        shift: f64,
+    },
     #[error("{what}: the matrix holds a value that is not a finite number")]
     NotFinite { what: String },
 }
@@ -71,7 +87,45 @@ const TEST_LIGHTS: [(&str, [f64; 3]); 4] = [
     ("a D65 white", [0.9505, 1.0, 1.0890]),
 ];
 
+/// Lights whose colour a correction must keep light and near where it was: the
+/// sRGB and Rec. 2020 primaries (the latter near the spectrum locus: 630, 532 and
+/// 467 nm; ITU-R BT.2020 Table 4), D65 and illuminant A (CIE 15:2004 Table T.3), as
+/// CIE XYZ at Y = 1.
+const COLOUR_LIGHTS: [(&str, [f64; 3]); 8] = [
+    ("a red primary", [1.9154, 1.0, 0.0874]),
+    ("a green primary", [0.5000, 1.0, 0.1667]),
+    ("a blue primary", [2.5000, 1.0, 13.1667]),
+    ("a D65 white", [0.9505, 1.0, 1.0890]),
+    ("illuminant A", [1.0985, 1.0, 0.3558]),
+    ("a 630 nm red", [2.4247, 1.0, 0.0]),
+    ("a 532 nm green", [0.2133, 1.0, 0.0414]),
+    ("a 467 nm blue", [2.8478, 1.0, 17.8913]),
+];
+
+/// The most a correction may move a light's chromaticity (CIE 1976 u′v′). A
+/// colorimeter's filters are near the CIE functions: the corrections
+/// `tests/correction_make.rs` fits for the emulated colorimeters on measured display
+/// spectra move D65 by at most 0.0023 and any of these
+/// lights by at most 0.014 (the 630 nm red); a correction of the size published for an
+/// i1 Display Pro on a wide-gamut panel moves the 467 nm blue by about 0.06. Swapping X
+/// and Z moves a red primary by 0.44.
+pub const MAX_CHROMATICITY_SHIFT: f64 = 0.15;
+
+/// How far below zero a corrected component may go, as a share of the light's
+/// X + Y + Z.
+const NEGATIVE_SHARE: f64 = 0.05;
+
+/// CIE 1976 u′v′ of `xyz` (CIE 15:2004 eq. 8.11, 8.12).
+fn uv_prime(xyz: &Vector3<f64>) -> [f64; 2] {
+    let d = xyz.x + 15.0 * xyz.y + 3.0 * xyz.z;
+    [4.0 * xyz.x / d, 9.0 * xyz.y / d]
+}
+
 /// Refuse a matrix that cannot be a colorimeter correction; `what` names it in errors.
+/// It must be finite, invertible and well conditioned; keep the luminance of ordinary
+/// lights positive and within a factor of two; keep every component of
+/// [`COLOUR_LIGHTS`] positive; and move none of their chromaticities by more than
+/// [`MAX_CHROMATICITY_SHIFT`].
 pub fn check_matrix(matrix: &Matrix3<f64>, what: &str) -> Result<(), CcmxError> {
     let what = what.to_string();
     if matrix.iter().any(|v| !v.is_finite()) {
@@ -95,6 +149,25 @@ pub fn check_matrix(matrix: &Matrix3<f64>, what: &str) -> Result<(), CcmxError> 
                 light,
                 corrected,
             });
+        }
+    }
+    for (light, xyz) in COLOUR_LIGHTS {
+        let xyz = Vector3::from(xyz);
+        let corrected = matrix * xyz;
+        // A deep red's Z is nought, and a good matrix may take it a little below
+        // (the emulated colorimeters' corrections take a 630 nm red's to −1.8 % of X + Y + Z);
+        // a swapped or negated row takes a component far below.
+        if corrected.iter().any(|v| *v < -NEGATIVE_SHARE * xyz.sum()) {
+            return Err(CcmxError::Negative {
+                what,
+                light,
+                corrected: [corrected.x, corrected.y, corrected.z],
+            });
+        }
+        let (a, b) = (uv_prime(&xyz), uv_prime(&corrected));
+        let shift = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+        if !(shift <= MAX_CHROMATICITY_SHIFT) {
+            return Err(CcmxError::Chromaticity { what, light, shift });
         }
     }
     Ok(())
@@ -251,6 +324,37 @@ mod tests {
             "{err}"
         );
         assert!(check_matrix(&sample().matrix, "m").is_ok());
+        // A wide-gamut correction of the size real ones have passes.
+        let wide = Matrix3::new(
+            1.0386, -0.0098, -0.0194, 0.0267, 1.0032, -0.0312, 0.0015, -0.0168, 1.0542,
+        );
+        assert!(
+            check_matrix(&wide, "m").is_ok(),
+            "{:?}",
+            check_matrix(&wide, "m")
+        );
+        // X and Z swapped, X and Z negated, one row zeroed: refused, naming the light.
+        let swapped = Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0);
+        let err = check_matrix(&swapped, "m").unwrap_err();
+        assert!(
+            matches!(
+                err,
+                CcmxError::Chromaticity {
+                    light: "a red primary",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        let negated = Matrix3::new(-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0);
+        let err = check_matrix(&negated, "m").unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("a red primary into X, Y, Z = [-1.9154"),
+            "{err}"
+        );
+        let zeroed = Matrix3::new(0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        assert!(check_matrix(&zeroed, "m").is_err());
         let text = ccmx_text(&sample(), "now").replace("0.990000000", "nan");
         assert!(
             parse_ccmx(&text, "bad.ccmx")
