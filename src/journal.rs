@@ -122,9 +122,9 @@ impl Journal {
     /// Start a new journal at `path` (which must not exist) with `header`.
     pub fn create(path: &Path, header: JournalHeader) -> Result<Self, JournalError> {
         if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(io_error(dir))?;
+            chromacal_formats::durable::create_dir(dir).map_err(io_error(dir))?;
         }
-        let mut file = OpenOptions::new()
+        let mut file = chromacal_formats::durable::open_options(path)
             .append(true)
             .create_new(true)
             .open(path)

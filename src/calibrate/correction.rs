@@ -197,7 +197,7 @@ impl PairJournal {
         };
         let mut line = serde_json::to_string(&pair).map_err(|e| err(e.to_string()))?;
         line.push('\n');
-        let mut file = std::fs::OpenOptions::new()
+        let mut file = chromacal_formats::durable::open_options(path)
             .create(true)
             .append(true)
             .open(path)

@@ -10,7 +10,7 @@
 //! sets the LUT itself meanwhile, and its end publishes a profile, which the keeper
 //! then loads.
 
-use std::fs::{File, OpenOptions, TryLockError};
+use std::fs::{File, TryLockError};
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::{Duration, SystemTime};
@@ -77,9 +77,9 @@ fn keeper_lock(store: &ProfileStore) -> Result<File, KeepError> {
         path: path.clone(),
         message: e.to_string(),
     };
-    std::fs::create_dir_all(&dir).map_err(|e| io(&dir, e))?;
+    chromacal_formats::durable::create_dir(&dir).map_err(|e| io(&dir, e))?;
     let path = dir.join("lut-keeper.lock");
-    let mut file = OpenOptions::new()
+    let mut file = chromacal_formats::durable::open_options(&path)
         .read(true)
         .write(true)
         .create(true)

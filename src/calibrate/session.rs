@@ -303,7 +303,10 @@ fn count_fit_failure(journal: &Path) {
         return;
     };
     let failures = fit_failures(dir) + 1;
-    if let Err(e) = std::fs::write(dir.join(FIT_FAILURES_FILE), format!("{failures}\n")) {
+    let path = dir.join(FIT_FAILURES_FILE);
+    if let Err(e) =
+        chromacal_formats::durable::write_atomic(&path, format!("{failures}\n").as_bytes())
+    {
         tracing::warn!(error = %e, "cannot count the failed fit");
     }
     if failures >= MAX_FIT_FAILURES {
@@ -561,7 +564,7 @@ fn take_settings(config: &mut Config, given: &Config) {
 
 /// Mark an unfinished run as given up, so that it is not resumed.
 pub fn discard_run(dir: &Path) -> std::io::Result<()> {
-    std::fs::write(dir.join(DONE_MARKER), "discarded\n")
+    chromacal_formats::durable::write_atomic(&dir.join(DONE_MARKER), b"discarded\n")
 }
 
 /// Measure what `run` lacks on `devices`, fit, and publish if the profile passes the
@@ -699,9 +702,9 @@ pub async fn finish_run(
         .path()
         .parent()
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
-    std::fs::write(
-        run_dir.join(DONE_MARKER),
-        profile_path.display().to_string(),
+    chromacal_formats::durable::write_atomic(
+        &run_dir.join(DONE_MARKER),
+        profile_path.display().to_string().as_bytes(),
     )
     .map_err(store_error)?;
     Ok(CalibrationOutcome {

@@ -276,7 +276,7 @@ fn keep(
     let json =
         serde_json::to_string_pretty(report).map_err(|e| VerifyError::Judge(e.to_string()))?;
     if let Some(dir) = saved.parent() {
-        std::fs::create_dir_all(dir)
+        chromacal_formats::durable::create_dir(dir)
             .map_err(|e| VerifyError::Judge(format!("{}: {e}", dir.display())))?;
     }
     write_atomic_named(&saved, json.as_bytes()).map_err(|e| VerifyError::Judge(e.to_string()))?;

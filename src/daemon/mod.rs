@@ -656,7 +656,7 @@ fn open_device(
     bus: &Arc<Bus>,
 ) -> Result<Arc<Device>, DaemonError> {
     let root = config.store_dir(state_dir);
-    std::fs::create_dir_all(&root).map_err(|source| DaemonError::Io {
+    chromacal_formats::durable::keep_private(&root).map_err(|source| DaemonError::Io {
         path: root.clone(),
         source,
     })?;
@@ -756,9 +756,11 @@ fn resume_unfinished(device: &Arc<Device>) {
 pub async fn run(loaded: LoadedConfig, options: DaemonOptions) -> Result<(), DaemonError> {
     crate::config::check_config(&loaded.config).map_err(DaemonError::Config)?;
     let config = loaded.config.daemon.clone();
-    std::fs::create_dir_all(&options.state_dir).map_err(|source| DaemonError::Io {
-        path: options.state_dir.clone(),
-        source,
+    chromacal_formats::durable::keep_private(&options.state_dir).map_err(|source| {
+        DaemonError::Io {
+            path: options.state_dir.clone(),
+            source,
+        }
     })?;
     let configs = device_configs(&loaded).map_err(DaemonError::Config)?;
     let names: Vec<String> = configs.iter().map(|d| d.name.clone()).collect();

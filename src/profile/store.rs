@@ -13,7 +13,7 @@
 //! the store as it was before or after a change, and `current.toml` is always a whole
 //! profile that passed the publishing limits.
 
-use std::fs::{self, OpenOptions};
+use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -157,7 +157,10 @@ impl Drop for StoreLock {
 }
 
 impl ProfileStore {
+    /// The store at `root`; what is written in it is private (see
+    /// `durable::keep_private`, which [`ProfileStore::lock`] also checks).
     pub fn new(root: &Path) -> Self {
+        chromacal_formats::durable::mark_private(root);
         ProfileStore {
             root: root.to_path_buf(),
             keep: DEFAULT_KEEP,
@@ -173,9 +176,9 @@ impl ProfileStore {
     /// The holder's pid and `what` are written into the lock file for the next comer;
     /// the lock goes with the process (a kill -9 releases it).
     pub fn lock(&self, what: &str) -> Result<StoreLock, StoreError> {
-        fs::create_dir_all(&self.root).map_err(io_error(&self.root))?;
+        chromacal_formats::durable::keep_private(&self.root).map_err(io_error(&self.root))?;
         let path = self.lock_path();
-        let mut file = OpenOptions::new()
+        let mut file = chromacal_formats::durable::open_options(&path)
             .read(true)
             .write(true)
             .create(true)
@@ -403,8 +406,8 @@ impl ProfileStore {
             path: path.clone(),
             message: e.to_string(),
         })?;
-        fs::create_dir_all(&self.root).map_err(io_error(&self.root))?;
-        let mut file = OpenOptions::new()
+        chromacal_formats::durable::create_dir(&self.root).map_err(io_error(&self.root))?;
+        let mut file = chromacal_formats::durable::open_options(&path)
             .create(true)
             .append(true)
             .open(&path)
@@ -710,7 +713,7 @@ mod tests {
         };
         store.append_verification(&record).unwrap();
         // A torn line from a crash is skipped.
-        let mut f = OpenOptions::new()
+        let mut f = std::fs::OpenOptions::new()
             .append(true)
             .open(store.verifications_path())
             .unwrap();

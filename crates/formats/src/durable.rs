@@ -84,6 +84,76 @@ pub fn sync_directory(dir: &Path) {
     }
 }
 
+/// State directories: what chromacal keeps there (profiles it loads into the video
+/// LUT and serves, journals, tokens) is the user's alone, whatever the umask.
+static PRIVATE_ROOTS: std::sync::Mutex<Vec<std::path::PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+/// Keep `root` private: created (with any missing parent) 0700, everything written
+/// under it by [`write_atomic`], [`create_dir`] and [`open_options`] 0700 and 0600,
+/// whatever the process's umask. A `root` that exists and that others may write is
+/// refused, with the `chmod` that fixes it: another user could replace the current
+/// profile in it.
+pub fn keep_private(root: &Path) -> std::io::Result<()> {
+    use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
+    mark_private(root);
+    fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(root)?;
+    let mode = fs::metadata(root)?.permissions().mode();
+    if mode & 0o022 != 0 {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::PermissionDenied,
+            format!(
+                "{} may be written by other users (mode {:o}), who could replace the profiles chromacal loads and serves: run `chmod -R go-w {}` (or give another --state-dir)",
+                root.display(),
+                mode & 0o777,
+                root.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// What is written under `root` from now on is private, as with [`keep_private`],
+/// which also creates and checks it.
+pub fn mark_private(root: &Path) {
+    if let Ok(mut roots) = PRIVATE_ROOTS.lock()
+        && !roots.iter().any(|r| r == root)
+    {
+        roots.push(root.to_path_buf());
+    }
+}
+
+/// Whether `path` lies in a directory given to [`keep_private`].
+pub fn is_private(path: &Path) -> bool {
+    PRIVATE_ROOTS
+        .lock()
+        .map(|roots| roots.iter().any(|r| path.starts_with(r)))
+        .unwrap_or(false)
+}
+
+/// `fs::create_dir_all`, 0700 in a private directory.
+pub fn create_dir(dir: &Path) -> std::io::Result<()> {
+    use std::os::unix::fs::DirBuilderExt;
+    let mut builder = fs::DirBuilder::new();
+    builder.recursive(true);
+    if is_private(dir) {
+        builder.mode(0o700);
+    }
+    builder.create(dir)
+}
+
+/// `OpenOptions` for a file at `path`: created 0600 in a private directory.
+pub fn open_options(path: &Path) -> fs::OpenOptions {
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut options = fs::OpenOptions::new();
+    if is_private(path) {
+        options.mode(0o600);
+    }
+    options
+}
+
 /// [`write_atomic`] to a path a user named (`-o`): its directory must exist already.
 /// A mistyped directory is an error that names it, as any other program's would be,
 /// not a tree of new directories (`report -o /nonexistent/r.html` made `/nonexistent`).
@@ -117,7 +187,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    fs::create_dir_all(dir)?;
+    create_dir(dir)?;
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -127,10 +197,15 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let temporary = dir.join(format!(".{name}.tmp-{}-{n}", std::process::id()));
     // Whatever fails (a full disk while writing, the rename), no temporary is left.
-    let written = File::create(&temporary).and_then(|mut f| {
-        f.write_all(bytes)?;
-        f.sync_all()
-    });
+    let written = open_options(path)
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(&temporary)
+        .and_then(|mut f| {
+            f.write_all(bytes)?;
+            f.sync_all()
+        });
     if let Err(e) = written.and_then(|()| fs::rename(&temporary, path)) {
         let _ = fs::remove_file(&temporary);
         return Err(e);
