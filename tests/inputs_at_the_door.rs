@@ -403,3 +403,68 @@ fn command_line_numbers_that_make_nan_or_infinity_are_refused_by_name() {
         assert!(stderr.contains("--time-scale"), "{args:?}: {stderr}");
     }
 }
+
+/// Scene and spectrum values beyond any light (1e300: a unit or exponent gone wrong)
+/// are refused with the row named, not carried to "mean NaN, max -inf" or a Y of
+/// 3e302 cd/m² with success.
+#[test]
+fn scene_and_spectrum_values_beyond_any_light_are_refused_with_their_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let (code, _, stderr) = run(
+        &["calibrate", "--state-dir", state.to_str().unwrap()],
+        Duration::from_secs(120),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    let profile = state.join("current.toml");
+    let scene = write(dir.path(), "scene.csv", "X,Y,Z\n20,21,22\n1e300,1,1\n");
+    let (code, stdout, stderr) = run(
+        &[
+            "render",
+            profile.to_str().unwrap(),
+            "--xyz",
+            &scene,
+            "-o",
+            "-",
+        ],
+        Duration::from_secs(30),
+    );
+    assert_eq!(code, Some(1), "{stdout}{stderr}");
+    assert!(
+        stderr.contains("row 2") && stderr.contains("beyond any light"),
+        "{stderr}"
+    );
+    // The sun's luminance is a scene's; it renders.
+    let sunny = write(
+        dir.path(),
+        "sunny.csv",
+        "X,Y,Z\n20,21,22\n1.5e9,1.6e9,1.7e9\n",
+    );
+    let (code, stdout, stderr) = run(
+        &[
+            "render",
+            profile.to_str().unwrap(),
+            "--xyz",
+            &sunny,
+            "-o",
+            "-",
+        ],
+        Duration::from_secs(30),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(
+        !stdout.contains("NaN") && !stderr.contains("NaN"),
+        "{stdout}{stderr}"
+    );
+    let spectra = write(
+        dir.path(),
+        "huge.csv",
+        "wavelength_nm,lamp\n380,0.5\n500,1e300\n780,0.5\n",
+    );
+    let (code, stdout, stderr) = run(&["spectrum", &spectra], Duration::from_secs(10));
+    assert_eq!(code, Some(1), "{stdout}{stderr}");
+    assert!(
+        stderr.contains("row 2, column 'lamp'") && stderr.contains("beyond any spectrum"),
+        "{stderr}"
+    );
+}

@@ -145,6 +145,22 @@ fn too_large(width: usize, height: usize) -> String {
     )
 }
 
+/// The largest magnitude a scene's X, Y or Z may have: a thousand times the sun's
+/// luminance (1.6e9 cd/m²). Beyond it a value is a unit or an exponent gone wrong, and
+/// the arithmetic of tone mapping (squares, sums over the image) would overflow to
+/// inf and NaN.
+pub const MAX_SCENE_VALUE: f64 = 1e12;
+
+/// Why `v` cannot be a colour of a scene, if it cannot.
+fn implausible(v: &Xyz) -> Option<String> {
+    if !v.iter().all(|c| c.is_finite()) {
+        return Some("is not a finite number".into());
+    }
+    v.iter().find(|c| c.abs() > MAX_SCENE_VALUE).map(|c| {
+        format!("holds {c:e}, beyond any light a scene holds (at most {MAX_SCENE_VALUE:e})")
+    })
+}
+
 /// A list of colours: columns `X`, `Y`, `Z`, optionally `screen_x`, `screen_y`.
 /// Values are multiplied by `scale` (1 for cd/m²).
 pub fn read_xyz_csv(path: &Path, scale: f64) -> Result<Vec<ScenePixel>, SceneError> {
@@ -199,10 +215,14 @@ pub fn read_xyz_csv(path: &Path, scale: f64) -> Result<Vec<ScenePixel>, SceneErr
                     p
                 }
             };
-            Ok(ScenePixel {
-                xyz: Xyz::new(row[x], row[y], row[z]) * scale,
-                position,
-            })
+            let xyz = Xyz::new(row[x], row[y], row[z]) * scale;
+            if let Some(why) = implausible(&xyz) {
+                return Err(SceneError::Format {
+                    path: path.to_path_buf(),
+                    what: format!("row {}: X, Y, Z {why}", i + 1),
+                });
+            }
+            Ok(ScenePixel { xyz, position })
         })
         .collect()
 }
@@ -297,11 +317,8 @@ pub fn read_pfm(path: &Path, grey: &Xyz) -> Result<XyzImage, SceneError> {
             } else {
                 grey * (value(k) / grey.y)
             };
-            if !v.iter().all(|c| c.is_finite()) {
-                return Err(bad(format!(
-                    "pixel ({column}, {}) is not a finite number",
-                    height - 1 - row
-                )));
+            if let Some(why) = implausible(&v) {
+                return Err(bad(format!("pixel ({column}, {}) {why}", height - 1 - row)));
             }
             xyz.push(v);
         }
@@ -369,12 +386,12 @@ pub fn read_exr(path: &Path) -> Result<XyzImage, SceneError> {
         return Err(bad(too_large(width, height)));
     }
     let xyz = image.layer_data.channel_data.pixels.1;
-    if let Some(k) = xyz.iter().position(|v| !v.iter().all(|c| c.is_finite())) {
-        return Err(bad(format!(
-            "pixel ({}, {}) is not a finite number",
-            k % width,
-            k / width
-        )));
+    if let Some((k, why)) = xyz
+        .iter()
+        .enumerate()
+        .find_map(|(k, v)| implausible(v).map(|why| (k, why)))
+    {
+        return Err(bad(format!("pixel ({}, {}) {why}", k % width, k / width)));
     }
     Ok(XyzImage { width, height, xyz })
 }

@@ -69,6 +69,15 @@ pub enum SpectralFileError {
     Implausible { path: PathBuf, row: usize, nm: f64 },
     #[error("{path}: {}", too_narrow(*from, *to))]
     TooNarrow { path: PathBuf, from: f64, to: f64 },
+    #[error(
+        "{path}, row {row}, column '{column}': {value:e} is beyond any spectrum (at most {MAX_SPECTRAL_VALUE:e}: the sun's radiance peaks near 2e7 W·sr⁻¹·m⁻²·nm⁻¹)"
+    )]
+    ValueOutOfRange {
+        path: PathBuf,
+        row: usize,
+        column: String,
+        value: f64,
+    },
     #[error("{path}, column '{column}': {source}")]
     Sample {
         path: PathBuf,
@@ -106,6 +115,11 @@ pub struct SpectralFile {
     /// Whether the file's grid was interpolated onto the 5 nm grid.
     pub resampled: bool,
 }
+
+/// The largest magnitude a sample may have, in any unit a file here uses (radiance in
+/// W·sr⁻¹·m⁻²·nm⁻¹, reflectance, relative power): beyond it a value is a unit or an
+/// exponent gone wrong, and its integral would print as ∞ or 1e302 cd/m².
+pub const MAX_SPECTRAL_VALUE: f64 = 1e10;
 
 /// The coarsest uniform step a file keeps; others go onto the 5 nm grid.
 pub const COARSEST_KEPT_STEP_NM: f64 = 5.0;
@@ -165,6 +179,21 @@ impl SpectralFile {
                 from,
                 to,
             });
+        }
+        for k in 1..table.header.len() {
+            if let Some((row, &value)) = table
+                .column(k)
+                .iter()
+                .enumerate()
+                .find(|(_, v)| v.abs() > MAX_SPECTRAL_VALUE)
+            {
+                return Err(SpectralFileError::ValueOutOfRange {
+                    path: path_buf,
+                    row: row + 1,
+                    column: table.header[k].clone(),
+                    value,
+                });
+            }
         }
         let (below, above) = extension(&measured);
         let wavelengths: Vec<f64> = below
