@@ -147,8 +147,10 @@ impl PairJournal {
     }
 
     /// Open `path`: with `resume`, the pairs in it are kept (a torn last line, from a
-    /// crash, is dropped); without, it must not exist yet.
-    pub fn open(path: &Path, resume: bool) -> Result<Self, CorrectionError> {
+    /// crash, is dropped; a line repeated is kept once); without, it must not exist
+    /// yet. A damaged line elsewhere is named by its number, and with `discard_damaged`
+    /// set aside in `<path>.damaged` (its patch is read again).
+    pub fn open(path: &Path, resume: bool, discard_damaged: bool) -> Result<Self, CorrectionError> {
         let err = |reason: String| CorrectionError::Journal {
             path: path.display().to_string(),
             reason,
@@ -163,13 +165,34 @@ impl PairJournal {
             let text = chromacal_formats::durable::read_text_limited(path, 64 << 20)
                 .map_err(|e| err(e.to_string()))?;
             let lines: Vec<&str> = text.lines().collect();
+            let mut damaged = String::new();
             for (n, line) in lines.iter().enumerate() {
                 match serde_json::from_str::<PairedReading>(line) {
+                    Ok(p) if pairs.contains(&p) => {}
                     Ok(p) => pairs.push(p),
                     // Only the last line may be torn.
                     Err(_) if n + 1 == lines.len() && !text.ends_with('\n') => {}
-                    Err(e) => return Err(err(format!("line {}: {e}", n + 1))),
+                    Err(_) if discard_damaged => {
+                        damaged.push_str(line);
+                        damaged.push('\n');
+                    }
+                    Err(e) => {
+                        return Err(err(format!(
+                            "line {} is damaged ({e}): --resume --discard-damaged sets it aside in {}.damaged and reads its patch again",
+                            n + 1,
+                            path.display()
+                        )));
+                    }
                 }
+            }
+            if !damaged.is_empty() {
+                let mut aside = path.as_os_str().to_owned();
+                aside.push(".damaged");
+                let aside = std::path::PathBuf::from(aside);
+                let mut kept = std::fs::read(&aside).unwrap_or_default();
+                kept.extend_from_slice(damaged.as_bytes());
+                chromacal_formats::durable::write_atomic(&aside, &kept)
+                    .map_err(|e| err(e.to_string()))?;
             }
             // Rewrite without the torn line, so that appends start on a new line.
             let mut clean = String::new();
@@ -207,6 +230,20 @@ impl PairJournal {
             .map_err(|e| err(e.to_string()))?;
         self.pairs.push(pair);
         Ok(())
+    }
+
+    /// How many patches have been read by both, in range (each once, however many
+    /// lines it has).
+    pub fn done(&self) -> usize {
+        let mut indices: Vec<usize> = self
+            .pairs
+            .iter()
+            .filter(|p| p.xyz().is_some())
+            .map(|p| p.patch.index)
+            .collect();
+        indices.sort_unstable();
+        indices.dedup();
+        indices.len()
     }
 
     /// Whether patch `index` has been read by both, in range (a patch that overloaded
@@ -302,7 +339,7 @@ pub async fn measure_pairs(
             reference: r,
             colorimeter: c,
         })?;
-        progress(journal.pairs.len(), total);
+        progress(journal.done(), total);
     }
     Ok(())
 }
@@ -454,6 +491,8 @@ pub struct MakeRequest<'a> {
     /// The `.ccmx` to write; its pairs are journalled beside it (`<output>.pairs.jsonl`).
     pub output: std::path::PathBuf,
     pub resume: bool,
+    /// At `resume`, set damaged lines of the pairs journal aside and go on.
+    pub discard_damaged: bool,
     pub aiming: Aiming<'a>,
     /// The display's name in the file [default: the display's own].
     pub display_name: Option<String>,
@@ -488,7 +527,11 @@ pub async fn make_correction(
     let mut overrides = request.overrides;
     overrides.instrument = Some(request.reference.clone());
     overrides.apply(&mut config);
-    let mut journal = PairJournal::open(&pairs_path(&request.output), request.resume)?;
+    let mut journal = PairJournal::open(
+        &pairs_path(&request.output),
+        request.resume,
+        request.discard_damaged,
+    )?;
     let mut devices = open_devices(&config, base_dir, None).await?;
     let reference_info = devices.instrument.info();
     if reference_info.capability != Capability::Spectral {
@@ -555,6 +598,17 @@ pub enum MakeError {
     Setup(String),
 }
 
+impl MakeError {
+    /// Whether running again with `--resume` goes on (not when the journal itself
+    /// is what failed, or the set-up).
+    pub fn resumable(&self) -> bool {
+        !matches!(
+            self,
+            MakeError::Correction(CorrectionError::Journal { .. }) | MakeError::Setup(_)
+        )
+    }
+}
+
 /// The correction an emulated PR-670 and an emulated `colorimeter` (reading through
 /// its filters) make on a virtual `monitor`, both in process over in-memory transports
 /// on virtual time, with noise seeded by `seed` (`chromacal bench corrections`).
@@ -613,4 +667,45 @@ pub async fn emulated_correction(
     )
     .await?;
     Ok(fit_pairs(&journal.pairs)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(index: usize) -> PairedReading {
+        let reading = |y: f64| Reading {
+            xyz: Some(Xyz::new(0.95 * y, y, 1.08 * y)),
+            ..Reading::default()
+        };
+        PairedReading {
+            patch: correction_patches()[index],
+            reference: reading(10.0 + index as f64),
+            colorimeter: reading(10.5 + index as f64),
+        }
+    }
+
+    #[test]
+    fn a_damaged_line_is_named_and_set_aside_on_request_and_a_repeated_one_counts_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.ccmx.pairs.jsonl");
+        let line = |k| serde_json::to_string(&pair(k)).unwrap() + "\n";
+        let text = line(0) + &line(1) + &line(1) + "garbage, not a pair\n" + &line(2);
+        std::fs::write(&path, &text).unwrap();
+        // Without leave, the line is named, with what to do.
+        let err = PairJournal::open(&path, true, false)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains("line 4 is damaged"), "{err}");
+        assert!(err.contains("--discard-damaged"), "{err}");
+        // With it: three patches, once each; the line kept aside; the journal clean.
+        let journal = PairJournal::open(&path, true, true).unwrap();
+        assert_eq!(journal.pairs.len(), 3);
+        assert_eq!(journal.done(), 3);
+        let aside = std::fs::read_to_string(dir.path().join("c.ccmx.pairs.jsonl.damaged")).unwrap();
+        assert_eq!(aside, "garbage, not a pair\n");
+        let again = PairJournal::open(&path, true, false).unwrap();
+        assert_eq!(again.pairs, journal.pairs);
+    }
 }

@@ -56,6 +56,10 @@ struct MakeArgs {
     /// Go on from the readings kept beside the output.
     #[arg(long)]
     resume: bool,
+    /// With --resume: set damaged lines of the readings aside (in FILE.pairs.jsonl.damaged)
+    /// and read their patches again.
+    #[arg(long, requires = "resume")]
+    discard_damaged: bool,
     /// One instrument at a time: every patch with the reference, then you swap, then
     /// every patch with the colorimeter [default: both aimed at the patch at once].
     #[arg(long)]
@@ -142,6 +146,7 @@ fn make(args: MakeArgs) -> Result<(), Failure> {
         colorimeter,
         output: args.output.clone(),
         resume: args.resume,
+        discard_damaged: args.discard_damaged,
         aiming,
         display_name: args.display_name.clone(),
         technology: args.technology.clone(),
@@ -163,12 +168,13 @@ fn make(args: MakeArgs) -> Result<(), Failure> {
     });
     let (fit, ccmx) = match made {
         Some(Ok(made)) => made,
-        Some(Err(e)) => {
+        Some(Err(e)) if e.resumable() => {
             return Err(Failure::from(format!(
                 "{e}\nthe readings taken are kept in {}: run again with --resume to go on",
                 pairs_path(&args.output).display()
             )));
         }
+        Some(Err(e)) => return Err(Failure::from(e.to_string())),
         None => {
             return Err(Failure {
                 message: format!(
