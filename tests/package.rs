@@ -65,6 +65,13 @@ fn the_package_installs_the_binary_units_user_config_manuals_and_completions() {
         .arg(format!("--root={}", root.display()))
         .args(["-s", "chromacal"]));
     assert!(status.contains("Status: install ok installed"), "{status}");
+    // USB instruments need ArgyllCMS: the package says so.
+    assert!(
+        status
+            .lines()
+            .any(|l| l.starts_with("Suggests:") && l.contains("argyll")),
+        "{status}"
+    );
 
     for file in [
         "usr/bin/chromacal",

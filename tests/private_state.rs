@@ -81,3 +81,39 @@ fn under_umask_000_the_state_tree_is_private_and_a_writable_one_is_refused() {
     );
     assert_eq!(std::fs::read_dir(&open).unwrap().count(), 0);
 }
+
+/// The current profile's id names files in the store: one written by another hand
+/// with `../` in it is refused, and nothing is written outside the store.
+#[test]
+fn a_current_profile_whose_id_leaves_the_store_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let config = dir.path().join("config.toml");
+    std::fs::write(&config, "[target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\n").unwrap();
+    let out = common::succeed(
+        common::chromacal()
+            .args(["calibrate", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state),
+    );
+    assert!(out.status.success());
+    let current = state.join("current.toml");
+    let text = std::fs::read_to_string(&current).unwrap();
+    let id_line = text.lines().find(|l| l.starts_with("id = ")).unwrap();
+    std::fs::write(&current, text.replace(id_line, "id = \"../../escaped\"")).unwrap();
+    let out = common::chromacal()
+        .args(["verify", "--config"])
+        .arg(&config)
+        .arg("--state-dir")
+        .arg(&state)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("'../../escaped' is not a profile id"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("escaped.json").exists());
+}

@@ -79,15 +79,20 @@ pub struct VerifyOutcome {
     pub saved: PathBuf,
 }
 
-/// Where the newest verification of profile `id` is kept in the store at `root`.
-pub fn saved_path(root: &Path, id: &str) -> PathBuf {
-    root.join("verifications").join(format!("{id}.json"))
+/// Where the newest verification of profile `id` is kept in the store at `root`; an
+/// id that is not one the store gives (a hand-edited `current.toml` with `../` in
+/// it) names no file.
+pub fn saved_path(root: &Path, id: &str) -> Result<PathBuf, crate::profile::store::StoreError> {
+    if !crate::profile::store::is_valid_id(id) {
+        return Err(crate::profile::store::StoreError::InvalidId(id.to_string()));
+    }
+    Ok(root.join("verifications").join(format!("{id}.json")))
 }
 
 /// The newest verification of profile `id` kept in the store at `root`, if any.
 pub fn saved_in(root: &Path, id: &str) -> Option<VerifyReport> {
     let text = chromacal_formats::durable::read_text_limited(
-        &saved_path(root, id),
+        &saved_path(root, id).ok()?,
         chromacal_formats::durable::limits::PROFILE,
     )
     .ok()?;
@@ -132,6 +137,8 @@ pub async fn verify(
             ),
         })
     })?;
+    // Checked before anything is measured: the result is kept under its id.
+    saved_path(store.root(), &profile.id)?;
     if options.metric == Metric::Itp && profile.units != Units::Absolute {
         return Err(VerifyError::Config(
             "ΔE ITP is defined on absolute light, and the profile is relative (white Y = 100)"
@@ -272,7 +279,7 @@ fn keep(
     profile: &Profile,
     report: &VerifyReport,
 ) -> Result<PathBuf, VerifyError> {
-    let saved = saved_path(store.root(), &profile.id);
+    let saved = saved_path(store.root(), &profile.id)?;
     let json =
         serde_json::to_string_pretty(report).map_err(|e| VerifyError::Judge(e.to_string()))?;
     if let Some(dir) = saved.parent() {

@@ -212,9 +212,18 @@ impl Device {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(e) => return Err(format!("{}: {e}", path.display())),
         };
-        Profile::from_toml(&text, &path.display().to_string())
-            .map(|p| Some((p, text)))
-            .map_err(|e| e.to_string())
+        let profile =
+            Profile::from_toml(&text, &path.display().to_string()).map_err(|e| e.to_string())?;
+        // Its id names files in the store (its verification, its history entry): one
+        // another hand wrote must not reach outside it.
+        if !crate::profile::store::is_valid_id(&profile.id) {
+            return Err(format!(
+                "{}: {}",
+                path.display(),
+                crate::profile::store::StoreError::InvalidId(profile.id)
+            ));
+        }
+        Ok(Some((profile, text)))
     }
 
     /// A device on `store`, holding its lock (`ProfileStore::lock`) while it lives.
