@@ -1113,3 +1113,52 @@ fn the_keeper_at_login_loads_the_curves_and_again_after_a_mode_change_or_a_new_p
     let _ = keeper.kill();
     let _ = keeper.wait();
 }
+
+/// Two stumbles of a first run: a mistyped output is named as such (it read "the
+/// display is gone"), and a plan deeper than the window paints is refused before a
+/// run exists (it left an empty run whose --resume could never work).
+#[test]
+fn a_mistyped_output_and_a_plan_too_deep_are_refused_before_any_run() {
+    let x = XServer::start();
+    let dir = tempfile::tempdir().unwrap();
+    let emulator = emulate(&[
+        "--instrument",
+        "pr670",
+        "--time-scale",
+        "0.002",
+        "--x-display",
+        &x.display,
+    ]);
+    let state = dir.path().join("state");
+    let attempt = |config_text: &str, display: &str| {
+        let config = dir.path().join("config.toml");
+        std::fs::write(&config, config_text).unwrap();
+        let out = chromacal()
+            .arg("calibrate")
+            .arg("--config")
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state)
+            .args(["--display", display, "--x-display", &x.display])
+            .args(["--instrument", &format!("pr670:{}", emulator.device)])
+            .args(["--timing-scale", "0.002"])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(1));
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = attempt("[plan]\nuniformity_grid = 0\n", "window:HDMI-9");
+    assert!(
+        err.contains("no output named 'HDMI-9'") && err.contains("DUMMY0"),
+        "{err}"
+    );
+    assert!(!err.contains("gone"), "{err}");
+    let err = attempt("[plan]\nuniformity_grid = 0\nbit_depth = 10\n", "window");
+    assert!(err.contains("set plan.bit_depth = 8"), "{err}");
+    assert!(!err.contains("--resume"), "{err}");
+    let runs = state.join("runs");
+    assert!(
+        !runs.exists() || std::fs::read_dir(&runs).unwrap().count() == 0,
+        "a run was left"
+    );
+}

@@ -761,7 +761,20 @@ pub async fn calibrate<'a>(
         options.overrides.apply(&mut config);
         check_overridden(&config)?;
         make_plan(&config.plan)?;
-        let devices = open_devices(&config, &loaded.base_dir, options.realtime_scale).await?;
+        let mut devices = open_devices(&config, &loaded.base_dir, options.realtime_scale).await?;
+        // A plan deeper than the window paints is refused before a run exists: an
+        // empty run would offer a --resume that the changed [plan] cannot take.
+        if let Some(window) = devices.display.window()
+            && config.plan.bit_depth > window.channel_bits()
+        {
+            let bits = window.channel_bits();
+            devices.instrument.close();
+            return Err(CalibrateError::Devices(DevicesError::Config(format!(
+                "the window on {} paints {bits} bits per channel, and plan.bit_depth is {}: set plan.bit_depth = {bits}",
+                window.output().name,
+                config.plan.bit_depth
+            ))));
+        }
         let run = start_run(
             &store,
             &config,

@@ -27,6 +27,10 @@ pub enum DisplayError {
     Lost(String),
     #[error("the display cannot show this patch: {0}")]
     Unsupported(String),
+    /// The display named cannot be had at all (an X display that does not answer, an
+    /// output that is not there): the name is wrong, or the screen is off.
+    #[error("{0}")]
+    Unavailable(String),
 }
 
 /// Something that puts patches on the screen being measured.

@@ -73,8 +73,18 @@ pub struct PatchWindow {
 }
 
 impl From<X11Error> for DisplayError {
+    /// An X display that cannot be reached or an output that is not there is one the
+    /// user named wrong (a mistyped output read "the display is gone"); anything else
+    /// is the display going away under a run.
     fn from(e: X11Error) -> Self {
-        DisplayError::Lost(e.to_string())
+        match e {
+            X11Error::Connect { .. }
+            | X11Error::NoRandr { .. }
+            | X11Error::NoOutput { .. }
+            | X11Error::Unlit { .. }
+            | X11Error::NoGamma { .. } => DisplayError::Unavailable(e.to_string()),
+            X11Error::Protocol { .. } => DisplayError::Lost(e.to_string()),
+        }
     }
 }
 
