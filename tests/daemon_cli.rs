@@ -223,3 +223,47 @@ fn a_daemon_configured_for_the_simulation_refuses_a_store_measured_on_a_screen()
         "{stderr}"
     );
 }
+
+/// Without a running daemon, `history` and `profile current` read the state
+/// directory on disk (saying so), and name the export for binary formats.
+#[test]
+fn history_and_the_current_profile_read_the_store_when_no_daemon_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    common::succeed(
+        common::chromacal()
+            .arg("calibrate")
+            .arg("--state-dir")
+            .arg(&state),
+    );
+    let current = chromacal::profile::Profile::read(&state.join("current.toml")).unwrap();
+    let out = common::succeed(
+        common::chromacal()
+            .args(["history", "--json", "--state-dir"])
+            .arg(&state),
+    );
+    let history: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(history["current"], current.id.as_str());
+    assert_eq!(history["profiles"][0]["id"], current.id.as_str());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no daemon answers"));
+    let out = common::succeed(
+        common::chromacal()
+            .args(["profile", "current", "--json", "--state-dir"])
+            .arg(&state),
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["id"], current.id.as_str());
+    let out = common::chromacal()
+        .args(["profile", "current", "--format", "icc4", "-o"])
+        .arg(dir.path().join("x.icc"))
+        .arg("--state-dir")
+        .arg(&state)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("chromacal export"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -30,6 +30,20 @@ pub struct ApiArgs {
 }
 
 impl ApiArgs {
+    /// The state directory to read on disk when no daemon answers on its socket:
+    /// the device's folder with `--device` where it has one. None over TCP (the
+    /// daemon is elsewhere).
+    pub fn store_on_disk(&self) -> Option<PathBuf> {
+        if self.tcp.is_some() {
+            return None;
+        }
+        let state = self.state_dir.clone().unwrap_or_else(default_state_dir);
+        Some(match &self.device {
+            Some(name) if state.join(name).is_dir() => state.join(name),
+            _ => state,
+        })
+    }
+
     /// A device's route: `/devices/NAME/…` with `--device`, else the route itself
     /// (which a daemon of one device answers).
     pub fn route(&self, path: &str) -> String {
@@ -80,6 +94,16 @@ fn expect_ok(reply: Reply) -> Result<Reply, String> {
             reply.status,
             reply.error_message()
         ))
+    }
+}
+
+/// [`get`], or `None` when no daemon answers at `endpoint` (nothing listens on its
+/// socket): a reader of the store may then read it on disk.
+pub async fn get_if_running(endpoint: &Endpoint, path: &str) -> Result<Option<Reply>, String> {
+    match request(endpoint, "GET", path, None).await {
+        Err(chromacal::daemon::client::ClientError::Connect { .. }) => Ok(None),
+        Err(e) => Err(e.to_string()),
+        Ok(reply) => expect_ok(reply).map(Some),
     }
 }
 

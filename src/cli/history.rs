@@ -1,8 +1,9 @@
 //! `chromacal history`, `chromacal rollback` and `chromacal profile current`: a
 //! running daemon's profiles.
 
-use super::api::{ApiArgs, get, post, query_value, runtime};
+use super::api::{ApiArgs, get_if_running, post, query_value, runtime};
 use super::shared::{Failure, out, outln};
+use chromacal::profile::store::ProfileStore;
 
 /// The daemon's profiles (made current, oldest first) and verifications.
 #[derive(clap::Args)]
@@ -34,12 +35,14 @@ pub fn run_rollback(args: RollbackArgs) -> Result<(), Failure> {
 pub fn history(api: &ApiArgs, json: bool) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
-        let reply = get(&endpoint, &api.route("/history")).await?;
+        let value = match get_if_running(&endpoint, &api.route("/history")).await? {
+            Some(reply) => reply.json()?,
+            None => history_on_disk(api, &endpoint)?,
+        };
         if json {
-            outln!("{}", reply.text())?;
+            outln!("{}", serde_json::to_string_pretty(&value)?)?;
             return Ok(());
         }
-        let value = reply.json()?;
         let current = value["current"].as_str().unwrap_or("");
         outln!("profiles made current, oldest first:")?;
         for p in value["profiles"].as_array().into_iter().flatten() {
@@ -82,6 +85,65 @@ pub fn history(api: &ApiArgs, json: bool) -> Result<(), Failure> {
     })
 }
 
+/// The current profile as TOML or JSON, read from the state directory when no daemon
+/// runs; other formats are `chromacal export`'s.
+fn current_on_disk(
+    api: &ApiArgs,
+    endpoint: &chromacal::daemon::client::Endpoint,
+    format: &str,
+) -> Result<chromacal::daemon::client::Reply, Failure> {
+    let no_daemon = format!("no daemon answers at {endpoint}");
+    let root = api.store_on_disk().ok_or_else(|| no_daemon.clone())?;
+    let path = ProfileStore::new(&root).current_path();
+    let profile =
+        chromacal::profile::Profile::read(&path).map_err(|e| format!("{no_daemon}, and {e}"))?;
+    let body = match format {
+        "toml" => toml::to_string(&profile).map_err(|e| e.to_string())?,
+        "json" => serde_json::to_string_pretty(&profile)?,
+        other => {
+            return Err(format!(
+                "{no_daemon}: for {other}, `chromacal export {} --format {other} -o FILE` writes it from the file",
+                path.display()
+            )
+            .into());
+        }
+    };
+    eprintln!("chromacal: {no_daemon}; read {}", path.display());
+    Ok(chromacal::daemon::client::Reply {
+        status: 200,
+        body: body.into(),
+    })
+}
+
+/// What `GET /history` answers, read from the state directory when no daemon
+/// runs (its files are there: `history.json`, `verifications.jsonl`).
+fn history_on_disk(
+    api: &ApiArgs,
+    endpoint: &chromacal::daemon::client::Endpoint,
+) -> Result<serde_json::Value, Failure> {
+    let no_daemon = || format!("no daemon answers at {endpoint}");
+    let root = api.store_on_disk().ok_or_else(no_daemon)?;
+    if !root.join("history.json").exists() {
+        return Err(format!(
+            "{}, and {} has no history.json",
+            no_daemon(),
+            root.display()
+        )
+        .into());
+    }
+    let store = ProfileStore::new(&root);
+    let (history, verifications) = (
+        store.history().map_err(|e| e.to_string())?,
+        store.verifications().map_err(|e| e.to_string())?,
+    );
+    eprintln!("chromacal: {}; read from {}", no_daemon(), root.display());
+    Ok(serde_json::json!({
+        "current": history.current,
+        "profiles": history.entries,
+        "verifications": verifications,
+    }))
+}
+
 pub fn rollback(api: &ApiArgs, to: Option<String>) -> Result<(), Failure> {
     let endpoint = api.endpoint()?;
     runtime()?.block_on(async {
@@ -115,7 +177,10 @@ pub fn current_profile(
         }
     }
     runtime()?.block_on(async {
-        let reply = get(&endpoint, &query).await?;
+        let reply = match get_if_running(&endpoint, &query).await? {
+            Some(reply) => reply,
+            None => current_on_disk(api, &endpoint, format)?,
+        };
         match output {
             Some(path) => {
                 std::fs::write(path, &reply.body)
