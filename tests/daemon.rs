@@ -468,6 +468,7 @@ async fn sigterm_finishes_the_reading_exits_zero_and_the_run_resumes() {
             .contains("resumes when the daemon starts again")
     );
     let runs = common::daemon_runs(&daemon.state);
+    let daemon_state = daemon.state.clone();
     assert_eq!(runs.len(), 1);
     let (_, before, recovery) = chromacal::journal::Journal::read(&runs[0]).unwrap();
     assert!(
@@ -476,6 +477,16 @@ async fn sigterm_finishes_the_reading_exits_zero_and_the_run_resumes() {
     );
     assert!(!before.is_empty() && before.len() < 96, "{}", before.len());
     drop(daemon);
+    // `chromacal runs` says the daemon resumes it, not `calibrate --resume`.
+    let listed = common::chromacal()
+        .arg("runs")
+        .arg("--state-dir")
+        .arg(&daemon_state)
+        .output()
+        .unwrap();
+    let listed = String::from_utf8_lossy(&listed.stdout);
+    assert!(listed.contains("a daemon's: `chromacal daemon`"), "{listed}");
+    assert!(!listed.contains("calibrate --resume"), "{listed}");
 
     let daemon = start_daemon(dir.path(), config);
     let api = daemon.endpoint();

@@ -209,6 +209,8 @@ pub struct UnfinishedRun {
     pub readings: usize,
     /// Fits of its readings that failed (not counting fits that were stopped).
     pub fit_failures: u32,
+    /// A daemon's calibration job started it: the daemon resumes it at its start.
+    pub by_daemon: bool,
 }
 
 impl UnfinishedRun {
@@ -221,6 +223,17 @@ impl UnfinishedRun {
 
 /// Failed fits after which a run is no longer resumed unless named.
 pub const MAX_FIT_FAILURES: u32 = 2;
+
+/// The file in a run's directory that says a daemon's job started it.
+pub const DAEMON_MARKER: &str = "started_by_daemon";
+
+/// Mark the run in `dir` as a daemon's (see [`UnfinishedRun::by_daemon`]).
+pub fn mark_daemon_run(dir: &Path) -> std::io::Result<()> {
+    chromacal_formats::durable::write_atomic(
+        &dir.join(DAEMON_MARKER),
+        b"a daemon's calibration job; the daemon resumes it when it starts\n",
+    )
+}
 
 /// The file in a run's directory that counts its failed fits.
 const FIT_FAILURES_FILE: &str = "fit_failures";
@@ -240,6 +253,7 @@ pub fn unfinished_runs(store: &ProfileStore) -> Vec<UnfinishedRun> {
                 .unwrap_or_default(),
             readings: count_journal_readings(&dir.join("journal.jsonl")),
             fit_failures: fit_failures(&dir),
+            by_daemon: dir.join(DAEMON_MARKER).exists(),
             dir,
         })
         .collect();

@@ -35,7 +35,10 @@ pub fn run(args: RunsArgs) -> Result<(), Failure> {
     let newest = newest_resumable(&runs).map(|r| &r.id);
     outln!("{:<30} {:>9}  state", "run", "readings")?;
     for run in &runs {
-        let state = if !run.resumable() {
+        let state = if run.by_daemon {
+            "a daemon's: `chromacal daemon` on this state directory resumes it when it starts"
+                .to_string()
+        } else if !run.resumable() {
             format!(
                 "its fit failed {} times: resumed only by name",
                 run.fit_failures

@@ -449,6 +449,11 @@ async fn calibrate(
     };
     let already = run.journal.entries().len();
     let run_dir = run.journal.path().parent().map(PathBuf::from);
+    if let Some(dir) = &run_dir
+        && let Err(e) = crate::calibrate::session::mark_daemon_run(dir)
+    {
+        tracing::warn!(error = %e, "cannot mark the run as the daemon's");
+    }
     let current = current_profile(device);
     let mut progress = progress_handler(
         device,
