@@ -485,7 +485,10 @@ async fn sigterm_finishes_the_reading_exits_zero_and_the_run_resumes() {
         .output()
         .unwrap();
     let listed = String::from_utf8_lossy(&listed.stdout);
-    assert!(listed.contains("a daemon's: `chromacal daemon`"), "{listed}");
+    assert!(
+        listed.contains("a daemon's: `chromacal daemon`"),
+        "{listed}"
+    );
     assert!(!listed.contains("calibrate --resume"), "{listed}");
 
     let daemon = start_daemon(dir.path(), config);

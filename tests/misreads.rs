@@ -4,7 +4,8 @@
 //! bytes (an emulated K-10A that now and then answers 10⁹ times the light; the
 //! spectroradiometers' drivers already refuse an XYZ their spectrum does not give) and
 //! through the ArgyllCMS bridge (a stand-in spotread that answers negative light); and
-//! a stand-in spotread whose usage text never ends is read within a bound.
+//! a stand-in spotread whose usage text never ends is read within a bound, and one
+//! whose scan hangs names the port and ArgyllCMS's way to leave it out.
 
 use std::path::Path;
 
@@ -182,5 +183,42 @@ fn a_spotread_whose_usage_never_ends_is_read_within_a_bound() {
     assert!(
         stderr.contains("printed more than 1048576 bytes"),
         "{stderr}"
+    );
+}
+
+/// A port that hangs Argyll's scan (here a FIFO, whose open waits for a writer as a
+/// tty waiting for its carrier does): after the bound, the port is named with
+/// ArgyllCMS's own way to leave it out of the scan.
+#[test]
+fn a_port_that_hangs_argylls_scan_is_named_with_the_exclusion_to_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("hanging-port");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let fake = stand_in(dir.path(), "  sleep 100", "1 1 1");
+    let out = chromacal()
+        .args(["instruments", "--json", "--port"])
+        .arg(&fifo)
+        .env("CHROMACAL_SPOTREAD", &fake)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    let rows: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let argyll = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["instrument"] == "argyll")
+        .unwrap_or_else(|| panic!("{rows}"));
+    let error = argyll["error"].as_str().unwrap();
+    let path = fifo.display().to_string();
+    assert!(
+        error.contains(&format!("it hangs on opening {path}"))
+            && error.contains(&format!("ARGYLL_EXCLUDE_SERIAL_SCAN={path}")),
+        "{error}"
     );
 }

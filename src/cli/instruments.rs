@@ -39,6 +39,7 @@ fn instruments(extra: &[String], json: bool, argyll: bool) -> Result<(), Failure
         list_ports(
             &spotread_program(),
             std::time::Duration::from_secs(ARGYLL_SCAN_S),
+            extra,
         )
         .map_err(|e| format!("{e} (--no-argyll skips it)"))
     });

@@ -52,11 +52,30 @@ pub fn spotread_args(
 /// The ports ArgyllCMS sees and the instruments it identified on them (`spotread -?`),
 /// within `timeout`: Argyll's scan reads every serial port it lists, and one that never
 /// answers holds it up.
+/// When it does not finish, the serial ports of this machine (and `extra`) that do
+/// not even open are named, with ArgyllCMS's own way to leave them out of its scan
+/// (`ARGYLL_EXCLUDE_SERIAL_SCAN`, which spotread inherits).
 pub fn list_ports(
     program: &str,
     timeout: std::time::Duration,
+    extra: &[String],
 ) -> Result<Vec<super::protocol::ArgyllPort>, String> {
-    let usage = usage_text(program, timeout)?;
+    let usage = usage_text(program, timeout).map_err(|e| {
+        if !e.contains("did not finish") {
+            return e;
+        }
+        let ports = crate::scan::candidate_ports(extra);
+        let hung = ports_that_hang(&ports, std::time::Duration::from_secs(3));
+        let (named, list) = if hung.is_empty() {
+            ("the serial ports here are", ports.join(","))
+        } else {
+            ("it hangs on opening", hung.join(","))
+        };
+        format!(
+            "{e}; {named} {}: ArgyllCMS leaves out of its scan the ports in ARGYLL_EXCLUDE_SERIAL_SCAN, e.g. `export ARGYLL_EXCLUDE_SERIAL_SCAN={list}` (those without an instrument)",
+            if list.is_empty() { "none".to_string() } else { list.replace(',', ", ") }
+        )
+    })?;
     if !usage.contains("-c listno") {
         return Err(format!(
             "{program} -? printed no port list; is it ArgyllCMS's spotread?"
@@ -65,10 +84,38 @@ pub fn list_ports(
     Ok(super::protocol::parse_port_list(&usage))
 }
 
+/// Those of `ports` whose plain (blocking) open does not return within `wait`, as a
+/// port whose driver waits for a carrier does: the one a scan hangs on. Each is tried
+/// on a thread of its own, left behind if it never returns.
+pub fn ports_that_hang(ports: &[String], wait: std::time::Duration) -> Vec<String> {
+    let (sender, receiver) = std::sync::mpsc::channel();
+    for port in ports {
+        let (sender, port) = (sender.clone(), port.clone());
+        std::thread::spawn(move || {
+            let _ = std::fs::File::open(&port);
+            let _ = sender.send(port);
+        });
+    }
+    drop(sender);
+    let deadline = std::time::Instant::now() + wait;
+    let mut answered = Vec::new();
+    while let Some(left) = deadline.checked_duration_since(std::time::Instant::now()) {
+        match receiver.recv_timeout(left) {
+            Ok(port) => answered.push(port),
+            Err(_) => break,
+        }
+    }
+    ports
+        .iter()
+        .filter(|p| !answered.contains(p))
+        .cloned()
+        .collect()
+}
+
 /// The instrument ArgyllCMS sees on port `port` (`spotread -?`), or an error naming the
 /// ports it does see.
 pub fn identify(program: &str, port: u32) -> Result<String, InstrumentError> {
-    let ports = list_ports(program, std::time::Duration::from_secs(SCAN_TIMEOUT_S))
+    let ports = list_ports(program, std::time::Duration::from_secs(SCAN_TIMEOUT_S), &[])
         .map_err(InstrumentError::Unavailable)?;
     match ports.iter().find(|p| p.number == port) {
         Some(p) => Ok(p.instrument.clone().unwrap_or_else(|| p.path.clone())),
