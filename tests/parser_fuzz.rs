@@ -283,6 +283,131 @@ fn parse_csv(text: &str) -> Result<bool, String> {
     Ok(true)
 }
 
+fn parse_ccmx(text: &str) -> Result<bool, String> {
+    let Ok(ccmx) = chromacal_formats::ccmx::parse_ccmx(text, "fuzz.ccmx") else {
+        return Ok(false);
+    };
+    // Accepted: a matrix the check itself passes (finite, invertible, light kept
+    // light).
+    if chromacal_formats::ccmx::check_matrix(&ccmx.matrix, "fuzz").is_err() {
+        return Err("accepted a matrix its own check refuses".into());
+    }
+    Ok(true)
+}
+
+fn parse_ccss(text: &str) -> Result<bool, String> {
+    let Ok(ccss) = chromacal_formats::ccss::parse_ccss(text, "fuzz.ccss") else {
+        return Ok(false);
+    };
+    for s in &ccss.samples {
+        if s.values()
+            .iter()
+            .chain(s.wavelengths_nm())
+            .any(|v| !v.is_finite())
+        {
+            return accepted_but_not_finite("a .ccss sample");
+        }
+    }
+    Ok(true)
+}
+
+/// EDID is binary: the seed is its hex, and what the mutations leave of hex digit
+/// pairs is the blob.
+fn parse_edid(text: &str) -> Result<bool, String> {
+    let digits: Vec<u8> = text.bytes().filter(u8::is_ascii_hexdigit).collect();
+    let bytes: Vec<u8> = digits
+        .chunks_exact(2)
+        .filter_map(|pair| u8::from_str_radix(std::str::from_utf8(pair).ok()?, 16).ok())
+        .collect();
+    let Ok(edid) = chromacal_formats::edid::Edid::parse(&bytes) else {
+        return Ok(false);
+    };
+    let xy = [edid.red, edid.green, edid.blue, edid.white];
+    if xy
+        .iter()
+        .flatten()
+        .chain(edid.gamma.iter())
+        .any(|v| !v.is_finite())
+    {
+        return accepted_but_not_finite("an EDID");
+    }
+    Ok(true)
+}
+
+fn parse_spectra(text: &str) -> Result<bool, String> {
+    let Ok(file) = chromacal_crf::spectral_file::SpectralFile::parse(text, Path::new("fuzz.csv"))
+    else {
+        return Ok(false);
+    };
+    // Accepted spectra integrate to finite light.
+    match file.emission_xyz() {
+        Ok(xyz) if xyz.iter().all(|v| v.iter().all(|c| c.is_finite())) => Ok(true),
+        Ok(_) => accepted_but_not_finite("a spectral file's XYZ"),
+        Err(_) => Ok(true),
+    }
+}
+
+#[test]
+fn colorimeter_corrections() {
+    let ccmx = chromacal_formats::ccmx::Ccmx {
+        matrix: nalgebra::Matrix3::new(1.02, 0.01, -0.005, 0.0, 0.99, 0.01, 0.003, -0.02, 1.05),
+        description: "fuzz seed".into(),
+        display: "LCD".into(),
+        instrument: "Klein K-10A".into(),
+        reference: "Photo Research PR-670".into(),
+        technology: "LCD White LED".into(),
+    };
+    fuzz(
+        "ccmx",
+        &[chromacal_formats::ccmx::ccmx_text(&ccmx, "now")],
+        parse_ccmx,
+    );
+    let mut ccss = String::from(
+        "CCSS\n\nDESCRIPTOR \"fuzz\"\nKEYWORD \"DISPLAY\"\nDISPLAY \"LCD\"\n\nNUMBER_OF_FIELDS 5\nBEGIN_DATA_FORMAT\nSAMPLE_ID SPEC_400 SPEC_500 SPEC_600 SPEC_700\nEND_DATA_FORMAT\n\nNUMBER_OF_SETS 4\nBEGIN_DATA\n",
+    );
+    for (i, row) in [
+        "0.1 0.2 2.0 0.3",
+        "0.1 2.0 0.4 0.1",
+        "2.0 0.3 0.1 0.05",
+        "1.0 1.1 1.2 0.9",
+    ]
+    .iter()
+    .enumerate()
+    {
+        ccss += &format!("{} {row}\n", i + 1);
+    }
+    ccss += "END_DATA\n";
+    fuzz("ccss", &[ccss], parse_ccss);
+}
+
+#[test]
+fn edids() {
+    let seeds: Vec<String> = ["srgb_office_1080p.bin", "wide_gamut_1440p.bin"]
+        .iter()
+        .map(|name| {
+            std::fs::read(fixture(&format!("edid/{name}")))
+                .unwrap()
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect()
+        })
+        .collect();
+    fuzz("edid", &seeds, parse_edid);
+}
+
+#[test]
+fn spectral_files() {
+    fuzz(
+        "spectra",
+        &[std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("crates/color/data/displays/colour_typical_crt_brainard1997_5nm.csv"),
+        )
+        .unwrap()],
+        parse_spectra,
+    );
+}
+
 fn a_profile() -> String {
     let dir = tempfile::tempdir().unwrap();
     let out = chromacal()
@@ -360,11 +485,20 @@ fn the_commands_on_mutated_files() {
     let good_profile = dir.path().join("good.toml");
     std::fs::write(&good_profile, &profile).unwrap();
     let ti3 = std::fs::read_to_string(fixture("ti3/lcd-seed12.ti3")).unwrap();
+    let spectra = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("crates/color/data/displays/colour_typical_crt_brainard1997_5nm.csv"),
+    )
+    .unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let runs = (cases() / 25).max(20);
     let mut failures_refused = 0;
     for case in 0..runs {
-        let (args, file): (Vec<String>, _) = if case % 2 == 0 {
+        let (args, file): (Vec<String>, _) = if case % 3 == 2 {
+            let path = dir.path().join(format!("s{case}.csv"));
+            std::fs::write(&path, mutate(&spectra, &mut rng)).unwrap();
+            (vec!["spectrum".into(), path.display().to_string()], path)
+        } else if case % 2 == 0 {
             let path = dir.path().join(format!("p{case}.toml"));
             std::fs::write(&path, mutate(&profile, &mut rng)).unwrap();
             (
