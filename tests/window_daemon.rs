@@ -112,6 +112,21 @@ tone = "gamma:2.2"
         Some(1.0),
         "{metrics}"
     );
+    // `lut reset` from another state directory is refused while the daemon keeps
+    // this output: it would put the curves back, and say them loaded meanwhile.
+    let other = dir.path().join("other-state");
+    let out = common::chromacal()
+        .args(["lut", "reset", "--x-display", &x.display, "--state-dir"])
+        .arg(&other)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("is kept by chromacal daemon on") && stderr.contains("stop it first"),
+        "{stderr}"
+    );
+    assert!(holds_curves(&x, &profile) <= 1.0);
 
     // A night-light tool writes its own ramp: seen within a second or two, said, and
     // replaced (keep_lut).

@@ -70,6 +70,76 @@ pub fn made_on_another_monitor(profile: &Profile, output: &OutputInfo) -> Option
     })
 }
 
+/// Where the owner of an output's video LUT is written down: one lock a user, an X
+/// display and an output (`$XDG_RUNTIME_DIR/chromacal`, else the temporary directory),
+/// whatever state directory the owner runs on. A daemon keeping an output's curves
+/// holds it; `lut load` and `lut reset` look at it first.
+pub fn output_lock_path(x_display: Option<&str>, output: &str) -> PathBuf {
+    let display = x_display
+        .map(str::to_string)
+        .or_else(|| std::env::var("DISPLAY").ok())
+        .unwrap_or_default();
+    let safe = |s: &str| -> String {
+        s.chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect()
+    };
+    let dir = std::env::var_os("XDG_RUNTIME_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| std::env::temp_dir().join(format!("chromacal-{}", user_id())))
+        .join("chromacal");
+    dir.join(format!("lut-{}-{}.lock", safe(&display), safe(output)))
+}
+
+/// This user's id, for a per-user folder in the temporary directory.
+fn user_id() -> u32 {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata("/proc/self").map_or(0, |m| m.uid())
+}
+
+/// Who owns an output's video LUT: the holder's words, when another process holds it.
+#[derive(Debug)]
+pub struct OutputOwned(pub String);
+
+/// Take the ownership of `output`'s video LUT for `holder` (held while the file
+/// lives), or say who has it.
+pub fn own_output(
+    x_display: Option<&str>,
+    output: &str,
+    holder: &str,
+) -> Result<File, OutputOwned> {
+    let path = output_lock_path(x_display, output);
+    let fail = |e: std::io::Error| OutputOwned(format!("{}: {e}", path.display()));
+    if let Some(dir) = path.parent() {
+        chromacal_formats::durable::keep_private(dir).map_err(fail)?;
+    }
+    let mut file = chromacal_formats::durable::open_options(&path)
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(fail)?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(TryLockError::WouldBlock) => {
+            let words = std::fs::read_to_string(&path).unwrap_or_default();
+            return Err(OutputOwned(words.trim().to_string()));
+        }
+        Err(TryLockError::Error(e)) => return Err(fail(e)),
+    }
+    file.set_len(0)
+        .and_then(|()| writeln!(file, "{holder} (pid {})", std::process::id()))
+        .map_err(fail)?;
+    Ok(file)
+}
+
 /// The keeper's own lock, held while it runs.
 fn keeper_lock(store: &ProfileStore) -> Result<File, KeepError> {
     let dir = store.root().to_path_buf();

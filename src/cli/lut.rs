@@ -97,6 +97,24 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
         .map(OutputSelector::parse)
         .unwrap_or_default();
     let output = x.output(&selector)?;
+    // A daemon of another state directory may keep this output's curves: it would
+    // put them back, and report them loaded meanwhile.
+    let _owned = match args.command {
+        LutCommand::Load { .. } | LutCommand::Reset => Some(
+            chromacal::calibrate::keep_lut::own_output(
+                args.x_display.as_deref(),
+                &output.name,
+                "chromacal lut",
+            )
+            .map_err(|owned| {
+                Failure::from(format!(
+                    "the video LUT of {} is kept by {}: it would set it back; stop it first",
+                    output.name, owned.0
+                ))
+            })?,
+        ),
+        _ => None,
+    };
     match args.command {
         LutCommand::Load {
             profile,

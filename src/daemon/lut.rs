@@ -56,6 +56,8 @@ struct Keeper {
     due: Option<&'static str>,
     next_check: Instant,
     warned: Option<String>,
+    /// The output's ownership (`keep_lut::own_output`), while the keeper has it.
+    owned: Option<(String, std::fs::File)>,
 }
 
 impl Keeper {
@@ -75,6 +77,7 @@ impl Keeper {
             due: Some("start"),
             next_check: Instant::now(),
             warned: None,
+            owned: None,
         }
     }
 
@@ -120,6 +123,28 @@ impl Keeper {
                         self.warn_once(format!("cannot reach the video LUT: {e}"));
                         std::thread::sleep(Duration::from_secs(1));
                         continue;
+                    }
+                }
+            }
+            if let Some(w) = &watch
+                && self
+                    .owned
+                    .as_ref()
+                    .is_none_or(|(name, _)| *name != w.output.name)
+            {
+                let holder = format!(
+                    "chromacal daemon on {} (device {})",
+                    self.device.store().root().display(),
+                    self.device.name
+                );
+                match crate::calibrate::keep_lut::own_output(
+                    x_display.as_deref(),
+                    &w.output.name,
+                    &holder,
+                ) {
+                    Ok(file) => self.owned = Some((w.output.name.clone(), file)),
+                    Err(owned) => {
+                        self.warn_once(format!("{} is also kept by {}", w.output.name, owned.0))
                     }
                 }
             }
