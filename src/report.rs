@@ -672,7 +672,7 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
     }
     if outcome.run.misreads > 0 {
         out += &format!(
-            "  misreads: {} readings no display could have given (not a number, beyond 1e5 cd/m², or negative), read again\n",
+            "  misreads: {} readings no display could have given (not a number, beyond 1e5 cd/m², or negative beyond noise), read again\n",
             outcome.run.misreads
         );
     }

@@ -468,3 +468,45 @@ fn scene_and_spectrum_values_beyond_any_light_are_refused_with_their_row() {
         "{stderr}"
     );
 }
+
+/// Under an address-space limit (`ulimit -v 4000000`, 4 GB), an image that would not
+/// render within what is left is refused from its header with a message and exit 1:
+/// it used to abort (SIGABRT) when an allocation failed.
+#[test]
+fn an_image_past_the_address_space_limit_is_refused_not_aborted() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    let (code, _, stderr) = run(
+        &["calibrate", "--state-dir", state.to_str().unwrap()],
+        Duration::from_secs(120),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    // 2976 × 2976 XYZ, 106 MB.
+    let image = dir.path().join("big.pfm");
+    let (w, h) = (2976usize, 2976usize);
+    let mut bytes = format!("PF\n{w} {h}\n-1.0\n").into_bytes();
+    let pixel: Vec<u8> = [20.0f32, 21.0, 22.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    bytes.extend(pixel.iter().cycle().take(w * h * 12));
+    std::fs::write(&image, bytes).unwrap();
+    let out = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 4000000 && exec \"{}\" render \"{}\" --image \"{}\" -o \"{}\"",
+            env!("CARGO_BIN_EXE_chromacal"),
+            state.join("current.toml").display(),
+            image.display(),
+            dir.path().join("big.png").display()
+        ))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("2976 × 2976 pixels would take about")
+            && stderr.contains("address-space limit"),
+        "{stderr}"
+    );
+}

@@ -136,12 +136,51 @@ pub const MAX_RENDER_BYTES: usize = 4 << 30;
 /// a huge image is refused at once.
 pub const MAX_PIXELS: usize = MAX_RENDER_BYTES / RENDER_BYTES_PER_PIXEL;
 
-/// The error for an image of `width` × `height` pixels past [`MAX_PIXELS`].
+/// What the process itself needs beside an image's pixels (the binary, its threads'
+/// stacks, the allocator's arenas, a decoder's buffers), kept free of the budget.
+const BESIDE_THE_IMAGE: usize = 768 << 20;
+
+/// The process's address-space limit (`ulimit -v`, RLIMIT_AS), from
+/// `/proc/self/limits`; `None` when unlimited or not known.
+fn address_space_limit() -> Option<usize> {
+    let text = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let line = text.lines().find(|l| l.starts_with("Max address space"))?;
+    line.split_whitespace()
+        .nth(3)
+        .and_then(|soft| soft.parse::<usize>().ok())
+}
+
+/// The memory an image may take to render here: [`MAX_RENDER_BYTES`], or less under
+/// an address-space limit (what is left of it beside the image). A pixel costs
+/// [`RENDER_BYTES_PER_PIXEL`]. Checked on the file's header, before any pixel is
+/// allocated: an image past it is refused with a message, never an abort when an
+/// allocation fails.
+pub fn render_budget() -> usize {
+    address_space_limit().map_or(MAX_RENDER_BYTES, |limit| {
+        MAX_RENDER_BYTES.min(limit.saturating_sub(BESIDE_THE_IMAGE))
+    })
+}
+
+/// Whether `width` × `height` pixels render within [`render_budget`] (and
+/// [`MAX_PIXELS`]).
+fn fits(width: usize, height: usize) -> bool {
+    let pixels = width.saturating_mul(height);
+    pixels <= MAX_PIXELS && pixels.saturating_mul(RENDER_BYTES_PER_PIXEL) <= render_budget()
+}
+
+/// The error for an image of `width` × `height` pixels past the budget.
 fn too_large(width: usize, height: usize) -> String {
     let gb = width.saturating_mul(height) as f64 * RENDER_BYTES_PER_PIXEL as f64 / 1e9;
+    let budget = render_budget();
+    let under_limit = if budget < MAX_RENDER_BYTES {
+        " under this process's address-space limit (ulimit -v)"
+    } else {
+        ""
+    };
     format!(
-        "{width} × {height} pixels would take about {gb:.1} GB to render: at most {MAX_PIXELS} pixels ({} GiB)",
-        MAX_RENDER_BYTES >> 30
+        "{width} × {height} pixels would take about {gb:.1} GB to render: at most {} pixels ({:.1} GB){under_limit}",
+        budget / RENDER_BYTES_PER_PIXEL,
+        budget as f64 / 1e9
     )
 }
 
@@ -281,10 +320,10 @@ pub fn read_pfm(path: &Path, grey: &Xyz) -> Result<XyzImage, SceneError> {
         .ok()
         .filter(|s: &f64| s.is_finite() && *s != 0.0)
         .ok_or_else(|| bad(format!("scale '{}' is not a non-zero number", fields[3])))?;
-    let pixels = width
-        .checked_mul(height)
-        .filter(|p| *p <= MAX_PIXELS)
-        .ok_or_else(|| bad(too_large(width, height)))?;
+    if !fits(width, height) {
+        return Err(bad(too_large(width, height)));
+    }
+    let pixels = width * height;
     let expected = pixels * channels * 4;
     let data = &bytes[at..];
     if data.len() != expected {
@@ -350,7 +389,7 @@ pub fn read_exr(path: &Path) -> Result<XyzImage, SceneError> {
         .map_err(|e| bad(format!("not an OpenEXR image: {e}")))?;
     for header in &meta.headers {
         let (w, h) = (header.layer_size.width(), header.layer_size.height());
-        if w.saturating_mul(h) > MAX_PIXELS {
+        if !fits(w, h) {
             return Err(bad(too_large(w, h)));
         }
     }
@@ -382,7 +421,7 @@ pub fn read_exr(path: &Path) -> Result<XyzImage, SceneError> {
         })?;
     let size = image.layer_data.size;
     let (width, height) = (size.width(), size.height());
-    if width == 0 || height == 0 || width.saturating_mul(height) > MAX_PIXELS {
+    if width == 0 || height == 0 || !fits(width, height) {
         return Err(bad(too_large(width, height)));
     }
     let xyz = image.layer_data.channel_data.pixels.1;

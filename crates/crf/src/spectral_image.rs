@@ -10,7 +10,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::scene::{MAX_RENDER_BYTES, SceneError, XyzImage, read_pfm};
+use super::scene::{SceneError, XyzImage, read_pfm, render_budget};
 use super::spectral::{MethodKind, SpectralError, SpectralMethod, onto_grid_holding_ends};
 use super::spectral_file::{EXTENDED_NM, covers_required, too_narrow};
 use chromacal_color::Xyz;
@@ -40,7 +40,7 @@ fn format_error(path: &Path, what: String) -> SceneError {
 impl SpectralImage {
     /// Read the `<nm>.pfm` planes of `dir`, one at a time (each turned into its 32-bit
     /// samples before the next is read). All must have one size; their samples
-    /// together may take at most half of [`MAX_RENDER_BYTES`].
+    /// together may take at most half of [`render_budget`].
     pub fn read(dir: &Path) -> Result<SpectralImage, SceneError> {
         let entries = std::fs::read_dir(dir).map_err(|source| SceneError::Io {
             path: dir.to_path_buf(),
@@ -87,7 +87,7 @@ impl SpectralImage {
                     .len()
                     .saturating_mul(plane.xyz.len())
                     .saturating_mul(4);
-                if bytes > MAX_RENDER_BYTES / 2 {
+                if bytes > render_budget() / 2 {
                     return Err(format_error(
                         dir,
                         format!(
@@ -96,7 +96,7 @@ impl SpectralImage {
                             plane.width,
                             plane.height,
                             bytes as f64 / 1e9,
-                            (MAX_RENDER_BYTES / 2) as f64 / 1e9
+                            (render_budget() / 2) as f64 / 1e9
                         ),
                     ));
                 }

