@@ -154,18 +154,7 @@ pub fn probe_port(path: &str) -> PortFinding {
     PortFinding::Silent
 }
 
-/// Ports the system lists, plus `extra` (pseudo-terminals are not listed).
-pub fn candidate_ports(extra: &[String]) -> Vec<String> {
-    let mut ports: Vec<String> = serialport::available_ports()
-        .map(|v| v.into_iter().map(|p| p.port_name).collect())
-        .unwrap_or_default();
-    for p in extra {
-        if !ports.contains(p) {
-            ports.push(p.clone());
-        }
-    }
-    ports
-}
+pub use super::serial::candidate_ports;
 
 /// Probe every port in parallel.
 pub fn scan(ports: &[String]) -> Vec<(String, PortFinding)> {

@@ -64,7 +64,7 @@ pub fn list_ports(
         if !e.contains("did not finish") {
             return e;
         }
-        let ports = crate::scan::candidate_ports(extra);
+        let ports = crate::serial::candidate_ports(extra);
         let hung = ports_that_hang(&ports, std::time::Duration::from_secs(3));
         let (named, list) = if hung.is_empty() {
             ("the serial ports here are", ports.join(","))
