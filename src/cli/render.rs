@@ -31,10 +31,10 @@ pub struct RenderArgs {
     xyz: Option<PathBuf>,
     /// XYZ image: a PFM (PF: X, Y, Z per pixel; Pf: Y alone, at the display white's
     /// chromaticity) or an OpenEXR (.exr: channels X, Y, Z, or R, G, B holding X, Y, Z).
-    /// An image may take 4 GiB to render (about 480 bytes a pixel: 8.9 megapixels, a
-    /// 3840 × 2160 frame), less under an address-space limit (ulimit -v), which keeps
-    /// 768 MiB beside the image; a larger one is refused from its header, before
-    /// anything is allocated.
+    /// An image may take 4 GiB to render (counted at 480 bytes a pixel, the most a
+    /// mapping needs: 8.9 megapixels, a 3840 × 2160 frame), less under an
+    /// address-space limit (ulimit -v), which keeps 768 MiB beside the image; a larger
+    /// one is refused from its header, before anything is allocated.
     #[arg(long, group = "scene")]
     image: Option<PathBuf>,
     /// Emission spectra: wavelength_nm, then one column of radiance

@@ -159,7 +159,9 @@ pub fn render(
     } else {
         request.method.clone()
     };
-    let mut read = read_with(&method)?;
+    // The colours read are the scene itself, not a copy of it (an image's pixels
+    // twice over).
+    let mut read = source.into_scene(&method, placement)?;
     if let Some(grid) = &request.grid {
         lay_out(&mut read, grid, placement)?;
     }
@@ -461,6 +463,18 @@ enum Source {
 }
 
 impl Source {
+    /// [`Source::scene`], taking the colours read rather than copying them.
+    fn into_scene(
+        self,
+        method: &MethodKind,
+        placement: &Placement,
+    ) -> Result<ReadScene, RenderError> {
+        match self {
+            Source::Colours(read) => Ok(read),
+            other => other.scene(method, placement),
+        }
+    }
+
     /// The scene, spectra turned into XYZ by `method`.
     fn scene(&self, method: &MethodKind, placement: &Placement) -> Result<ReadScene, RenderError> {
         let (spectra, light, scale, white) = match self {
