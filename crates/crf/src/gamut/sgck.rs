@@ -233,33 +233,24 @@ struct HuePoint {
 /// drive and one at none: the upper faces meet the lower ones there, and there the
 /// chroma at a hue is largest).
 fn cusp(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<HuePoint> {
-    // The six edges as (start corner, channel that moves, direction).
-    const LOOP: [([f64; 3], usize, f64); 6] = [
-        ([1.0, 0.0, 0.0], 1, 1.0),
-        ([1.0, 1.0, 0.0], 0, -1.0),
-        ([0.0, 1.0, 0.0], 2, 1.0),
-        ([0.0, 1.0, 1.0], 1, -1.0),
-        ([0.0, 0.0, 1.0], 0, 1.0),
-        ([1.0, 0.0, 1.0], 2, -1.0),
-    ];
-    const STEPS: usize = 32;
-    let at = |s: f64| -> Lab {
-        let edge = (s.floor() as usize).min(5);
-        let (start, channel, direction) = LOOP[edge];
-        let mut a = nalgebra::Vector3::from(start);
-        a[channel] += direction * (s - edge as f64);
-        xyz_to_lab(&gamut.from_cube(&a), white)
-    };
+    let at = |s: f64| -> Lab { edge_loop_lab(gamut, white, s) };
     // Signed hue difference in (−π, π].
     let offset = |lab: &Lab| {
         let d = lab.b.atan2(lab.a) - hue;
         (d + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
     };
+    // The loop's sample points are the same for every hue: made once for a gamut and
+    // white, and kept (the same values as made here each time: SGCK spent most of its
+    // time making them again for every colour).
+    let samples = loop_samples(gamut, white);
     let mut best: Option<HuePoint> = None;
-    let n = 6 * STEPS;
+    let n = 6 * LOOP_STEPS;
     for k in 0..n {
-        let (s0, s1) = (k as f64 / STEPS as f64, (k + 1) as f64 / STEPS as f64);
-        let (d0, d1) = (offset(&at(s0)), offset(&at(s1)));
+        let (s0, s1) = (
+            k as f64 / LOOP_STEPS as f64,
+            (k + 1) as f64 / LOOP_STEPS as f64,
+        );
+        let (d0, d1) = (offset(&samples[k]), offset(&samples[k + 1]));
         // A crossing of the hue, not of its opposite (where the offset jumps by 2π).
         if d0.signum() == d1.signum() || (d0 - d1).abs() > std::f64::consts::PI {
             continue;
@@ -283,6 +274,53 @@ fn cusp(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<HuePoint> {
         }
     }
     best
+}
+
+/// The six edges of the cube's loop as (start corner, channel that moves, direction).
+const LOOP: [([f64; 3], usize, f64); 6] = [
+    ([1.0, 0.0, 0.0], 1, 1.0),
+    ([1.0, 1.0, 0.0], 0, -1.0),
+    ([0.0, 1.0, 0.0], 2, 1.0),
+    ([0.0, 1.0, 1.0], 1, -1.0),
+    ([0.0, 0.0, 1.0], 0, 1.0),
+    ([1.0, 0.0, 1.0], 2, -1.0),
+];
+
+/// Samples an edge of the loop is cut into before the crossing is bisected.
+const LOOP_STEPS: usize = 32;
+
+/// CIELAB of the point `s` (0 … 6) along the edge loop of `gamut`.
+fn edge_loop_lab(gamut: &GamutAt, white: &Xyz, s: f64) -> Lab {
+    let edge = (s.floor() as usize).min(5);
+    let (start, channel, direction) = LOOP[edge];
+    let mut a = nalgebra::Vector3::from(start);
+    a[channel] += direction * (s - edge as f64);
+    xyz_to_lab(&gamut.from_cube(&a), white)
+}
+
+/// The loop's samples `k / LOOP_STEPS` (k = 0 … 6·LOOP_STEPS) for `gamut` and `white`,
+/// kept for the last gamut and white each thread used.
+fn loop_samples(gamut: &GamutAt, white: &Xyz) -> std::rc::Rc<Vec<Lab>> {
+    type Kept = Option<(GamutAt, Xyz, std::rc::Rc<Vec<Lab>>)>;
+    thread_local! {
+        static KEPT: std::cell::RefCell<Kept> = const { std::cell::RefCell::new(None) };
+    }
+    KEPT.with(|kept| {
+        let mut kept = kept.borrow_mut();
+        if let Some((g, w, samples)) = kept.as_ref()
+            && g == gamut
+            && w == white
+        {
+            return samples.clone();
+        }
+        let samples = std::rc::Rc::new(
+            (0..=6 * LOOP_STEPS)
+                .map(|k| edge_loop_lab(gamut, white, k as f64 / LOOP_STEPS as f64))
+                .collect::<Vec<_>>(),
+        );
+        *kept = Some((gamut.clone(), *white, samples.clone()));
+        samples
+    })
 }
 
 /// SGCK (CIE 156:2004) of `xyz` from the `source` gamut into `gamut`, in CIELAB
