@@ -315,6 +315,48 @@ impl<'a> ColourReproduction<'a> {
 
     /// Render `scene` with `settings`.
     pub fn render(&self, scene: &Scene, settings: &RenderSettings) -> Result<Rendering, CrfError> {
+        let mut pixels = Vec::with_capacity(scene.pixels.len());
+        let transform = self.render_each(scene, settings, |pixel| pixels.push(pixel))?;
+        let summary = summarise(&pixels, settings, transform);
+        Ok(Rendering { pixels, summary })
+    }
+
+    /// [`ColourReproduction::render`]'s codes and summary alone, for an image written
+    /// as codes: each pixel's codes as 16-bit values (bits ≤ 16) and its two ΔE00 kept,
+    /// 30 bytes a pixel where the whole rendered pixel is 112. The same codes and
+    /// summary.
+    pub fn render_codes(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+    ) -> Result<(Vec<[u16; 3]>, RenderSummary), CrfError> {
+        let n = scene.pixels.len();
+        let (mut codes, mut all, mut outside, mut inversion) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::new(),
+            Vec::with_capacity(n),
+        );
+        let transform = self.render_each(scene, settings, |p| {
+            codes.push(p.codes.map(|c| c as u16));
+            all.push(p.mapping_delta_e00);
+            if p.outside {
+                outside.push(p.mapping_delta_e00);
+            }
+            inversion.push(p.inversion_delta_e00);
+        })?;
+        let summary = summary_of(n, &all, &outside, &inversion, settings, transform);
+        Ok((codes, summary))
+    }
+
+    /// Render every pixel of `scene`, handing each to `each` in order; the scene-wide
+    /// transform the mapping was fitted with, if any.
+    fn render_each(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        mut each: impl FnMut(RenderedPixel),
+    ) -> Result<Option<SceneTransform>, CrfError> {
         if !(1..=16).contains(&settings.bits) {
             return Err(CrfError::BitDepth(settings.bits));
         }
@@ -388,12 +430,10 @@ impl<'a> ColourReproduction<'a> {
             _ => None,
         };
         let top = ((1u64 << settings.bits) - 1) as f64;
-        let pixels: Vec<RenderedPixel> = scene
-            .pixels
-            .iter()
-            .zip(adapted.pixels.iter())
-            .enumerate()
-            .map(|(index, (pixel, adapted_pixel))| {
+        for (index, (pixel, adapted_pixel)) in
+            scene.pixels.iter().zip(adapted.pixels.iter()).enumerate()
+        {
+            each({
                 let (target, gamut) = if whole_scene {
                     (targets[index], gamuts[index].clone())
                 } else {
@@ -406,7 +446,7 @@ impl<'a> ColourReproduction<'a> {
                 let drive = self.drive_for(&mapped, pixel.position);
                 let (codes, shown) =
                     self.codes_for(drive, &mapped, pixel.position, top, settings.codes);
-                Ok(RenderedPixel {
+                RenderedPixel {
                     codes,
                     target: (*target).into(),
                     mapped: mapped.into(),
@@ -414,11 +454,10 @@ impl<'a> ColourReproduction<'a> {
                     outside,
                     mapping_delta_e00: delta_e00_xyz(target, &mapped, &self.white),
                     inversion_delta_e00: delta_e00_xyz(&mapped, &shown, &self.white),
-                })
-            })
-            .collect::<Result<_, CrfError>>()?;
-        let summary = summarise(&pixels, settings, transform);
-        Ok(Rendering { pixels, summary })
+                }
+            });
+        }
+        Ok(transform)
     }
 
     /// The codes (0 … `top`) for `drive`, chosen as `choice` says to show `mapped` at
@@ -563,14 +602,34 @@ fn summarise(
         .map(|p| p.mapping_delta_e00)
         .collect();
     let inversion: Vec<f64> = pixels.iter().map(|p| p.inversion_delta_e00).collect();
+    summary_of(
+        pixels.len(),
+        &all,
+        &outside,
+        &inversion,
+        settings,
+        transform,
+    )
+}
+
+/// The summary of `pixels` pixels from their ΔE00: of the mapping over all and over
+/// those outside the gamut, and of the inversion.
+fn summary_of(
+    pixels: usize,
+    all: &[f64],
+    outside: &[f64],
+    inversion: &[f64],
+    settings: &RenderSettings,
+    transform: Option<SceneTransform>,
+) -> RenderSummary {
     RenderSummary {
-        pixels: pixels.len(),
+        pixels,
         outside: outside.len(),
         tone: settings.tone.name(),
         gamut: settings.gamut.name(),
-        mapping_all: ErrorStats::of(&all),
-        mapping_outside: ErrorStats::of(&outside),
-        inversion: ErrorStats::of(&inversion),
+        mapping_all: ErrorStats::of(all),
+        mapping_outside: ErrorStats::of(outside),
+        inversion: ErrorStats::of(inversion),
         stone_cowan_beatty: match transform {
             Some(SceneTransform::StoneCowanBeatty(t)) => Some(t),
             _ => None,

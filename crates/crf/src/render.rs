@@ -19,6 +19,7 @@ use chromacal_model::{MonitorModel, ScreenPosition};
 use crate::explain::{Explanation, explain};
 use crate::scene::{
     Placement, XyzImage, read_exr, read_pfm, read_xyz_csv, write_codes_csv, write_png16,
+    write_png16_codes,
 };
 use crate::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
 use crate::spectral_file::SpectralFile;
@@ -173,6 +174,31 @@ pub fn render(
     } else {
         model.clone()
     };
+    // An image written as a PNG needs the codes alone: kept as such, not as whole
+    // rendered pixels (a 2048² image in under 400 MB).
+    if let (CodesOutput::File(path), Some((width, height)), false) =
+        (&request.output, read.size, request.explain)
+        && path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        let (codes, summary) = ColourReproduction::new(&reduced)
+            .and_then(|crf| crf.render_codes(&read.scene, settings))
+            .map_err(|e| e.to_string())?;
+        drop(read.scene);
+        write_png16_codes(path, width, height, &codes, settings.bits)
+            .map_err(|e| RenderError::from(e.to_string()))?;
+        lines.push(describe(
+            &summary,
+            read.spectral.as_deref(),
+            &request.output,
+        ));
+        return Ok(RenderOutcome {
+            summary,
+            lines,
+            stdout: None,
+        });
+    }
     let mut rendering = ColourReproduction::new(&reduced)
         .and_then(|crf| crf.render(&read.scene, settings))
         .map_err(|e| e.to_string())?;

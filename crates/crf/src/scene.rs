@@ -126,7 +126,8 @@ impl XyzImage {
 /// scene (Stone–Cowan–Beatty, Smith) every pixel's target and gamut too. Measured on a
 /// 2048 × 2048 PFM: 440 bytes when every pixel's gamut, target and a copy of the scene
 /// were kept for every mapping (1.83 GB peak), 171 since only those two keep them
-/// (717 MB, byte-identical codes); kept at the worst case, with a margin.
+/// (717 MB), and to a PNG, which keeps only each pixel's codes and ΔE00, 77 (323 MB;
+/// codes byte-identical throughout); kept at the worst case, with a margin.
 pub const RENDER_BYTES_PER_PIXEL: usize = 480;
 
 /// Most memory an image scene may take to render: 4 GiB.
@@ -495,6 +496,18 @@ pub fn write_png16(
     rendered: &[RenderedPixel],
     bits: u32,
 ) -> Result<(), SceneError> {
+    let codes: Vec<[u16; 3]> = rendered.iter().map(|p| p.codes.map(|c| c as u16)).collect();
+    write_png16_codes(path, width, height, &codes, bits)
+}
+
+/// [`write_png16`] from the codes alone (each at most 16 bits).
+pub fn write_png16_codes(
+    path: &Path,
+    width: usize,
+    height: usize,
+    rendered: &[[u16; 3]],
+    bits: u32,
+) -> Result<(), SceneError> {
     let io = |source: std::io::Error| SceneError::Io {
         path: path.to_path_buf(),
         source,
@@ -514,8 +527,8 @@ pub fn write_png16(
     let mut writer = encoder.write_header().map_err(format)?;
     let top = ((1u64 << bits) - 1) as f64;
     let mut data = Vec::with_capacity(rendered.len() * 6);
-    for p in rendered {
-        for c in p.codes {
+    for codes in rendered {
+        for &c in codes {
             let v = (c as f64 * 65535.0 / top).round() as u16;
             data.extend_from_slice(&v.to_be_bytes());
         }
