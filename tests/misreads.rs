@@ -16,14 +16,9 @@ use common::{CRT_PRIMARIES, chromacal, emulate};
 
 const TIME_SCALE: &str = "0.002";
 
+/// The journal of the one run in `state`.
 fn journal_of(state: &Path) -> std::path::PathBuf {
-    std::fs::read_dir(state.join("runs"))
-        .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path()
-        .join("journal.jsonl")
+    common::daemon_runs(state).remove(0)
 }
 
 #[test]

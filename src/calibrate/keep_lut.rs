@@ -10,8 +10,9 @@
 //! sets the LUT itself meanwhile, and its end publishes a profile, which the keeper
 //! then loads.
 
-use std::fs::{File, TryLockError};
-use std::io::Write;
+use std::fs::File;
+
+use chromacal_formats::durable::Lock;
 use std::path::PathBuf;
 use std::time::{Duration, SystemTime};
 
@@ -119,25 +120,10 @@ pub fn own_output(
     if let Some(dir) = path.parent() {
         chromacal_formats::durable::keep_private(dir).map_err(fail)?;
     }
-    let mut file = chromacal_formats::durable::open_options(&path)
-        .read(true)
-        .write(true)
-        .create(true)
-        .truncate(false)
-        .open(&path)
-        .map_err(fail)?;
-    match file.try_lock() {
-        Ok(()) => {}
-        Err(TryLockError::WouldBlock) => {
-            let words = std::fs::read_to_string(&path).unwrap_or_default();
-            return Err(OutputOwned(words.trim().to_string()));
-        }
-        Err(TryLockError::Error(e)) => return Err(fail(e)),
+    match chromacal_formats::durable::lock_file(&path, holder).map_err(fail)? {
+        Lock::Taken(file) => Ok(file),
+        Lock::HeldBy(words) => Err(OutputOwned(words)),
     }
-    file.set_len(0)
-        .and_then(|()| writeln!(file, "{holder} (pid {})", std::process::id()))
-        .map_err(fail)?;
-    Ok(file)
 }
 
 /// The keeper's own lock, held while it runs.
@@ -149,33 +135,12 @@ fn keeper_lock(store: &ProfileStore) -> Result<File, KeepError> {
     };
     chromacal_formats::durable::create_dir(&dir).map_err(|e| io(&dir, e))?;
     let path = dir.join("lut-keeper.lock");
-    let mut file = chromacal_formats::durable::open_options(&path)
-        .read(true)
-        .write(true)
-        .create(true)
-        .truncate(false)
-        .open(&path)
-        .map_err(|e| io(&path, e))?;
-    match file.try_lock() {
-        Ok(()) => {}
-        Err(TryLockError::WouldBlock) => {
-            let holder = std::fs::read_to_string(&path)
-                .map(|t| t.trim().to_string())
-                .unwrap_or_default();
-            return Err(KeepError::AlreadyKept { dir, holder });
-        }
-        Err(TryLockError::Error(e)) => return Err(io(&path, e)),
+    match chromacal_formats::durable::lock_file(&path, "chromacal lut load --watch")
+        .map_err(|e| io(&path, e))?
+    {
+        Lock::Taken(file) => Ok(file),
+        Lock::HeldBy(holder) => Err(KeepError::AlreadyKept { dir, holder }),
     }
-    file.set_len(0)
-        .and_then(|()| {
-            writeln!(
-                file,
-                "chromacal lut load --watch (pid {})",
-                std::process::id()
-            )
-        })
-        .map_err(|e| io(&path, e))?;
-    Ok(file)
 }
 
 /// When the current profile file last changed (none: there is none).

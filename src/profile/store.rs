@@ -14,6 +14,8 @@
 //! profile that passed the publishing limits.
 
 use std::fs;
+
+use chromacal_formats::durable::Lock;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -178,32 +180,17 @@ impl ProfileStore {
     pub fn lock(&self, what: &str) -> Result<StoreLock, StoreError> {
         chromacal_formats::durable::keep_private(&self.root).map_err(io_error(&self.root))?;
         let path = self.lock_path();
-        let mut file = chromacal_formats::durable::open_options(&path)
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(&path)
-            .map_err(io_error(&path))?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(fs::TryLockError::WouldBlock) => {
-                let holder = fs::read_to_string(&path)
-                    .ok()
-                    .map(|t| t.trim().to_string())
-                    .filter(|t| !t.is_empty())
-                    .unwrap_or_else(|| "another process".into());
-                return Err(StoreError::Locked { path, holder });
-            }
-            Err(fs::TryLockError::Error(e)) => return Err(io_error(&path)(e)),
+        match chromacal_formats::durable::lock_file(&path, what).map_err(io_error(&path))? {
+            Lock::Taken(file) => Ok(StoreLock { file }),
+            Lock::HeldBy(words) => Err(StoreError::Locked {
+                holder: if words.is_empty() {
+                    "another process".into()
+                } else {
+                    words
+                },
+                path,
+            }),
         }
-        file.set_len(0)
-            .and_then(|()| {
-                writeln!(file, "{what} (pid {})", std::process::id())?;
-                file.sync_all()
-            })
-            .map_err(io_error(&path))?;
-        Ok(StoreLock { file })
     }
 
     /// Keep the last `n` current profiles (at least 2, so there is one to roll back to).

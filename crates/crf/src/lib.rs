@@ -434,13 +434,13 @@ impl<'a> ColourReproduction<'a> {
             scene.pixels.iter().zip(adapted.pixels.iter()).enumerate()
         {
             each({
+                let made;
                 let (target, gamut) = if whole_scene {
-                    (targets[index], gamuts[index].clone())
+                    (&targets[index], &gamuts[index])
                 } else {
-                    (target_of(adapted_pixel), gamut_of(index, pixel)?)
+                    made = (target_of(adapted_pixel), gamut_of(index, pixel)?);
+                    (&made.0, &made.1)
                 };
-                let target = &target;
-                let gamut = &gamut;
                 let outside = !gamut.contains(target);
                 let mapped = self.map(settings.gamut, transform.as_ref(), gamut, target);
                 let drive = self.drive_for(&mapped, pixel.position);

@@ -154,6 +154,38 @@ pub fn open_options(path: &Path) -> fs::OpenOptions {
     options
 }
 
+/// A lock file taken, or the words of who holds it.
+#[derive(Debug)]
+pub enum Lock {
+    Taken(File),
+    /// Another process holds it; what it wrote there (trimmed, maybe empty).
+    HeldBy(String),
+}
+
+/// Take the advisory lock (`flock`) on `path`, created as [`open_options`] creates
+/// files, and write `holder (pid N)` into it for the next comer; the lock goes with
+/// the returned file (and with the process: a kill -9 releases it).
+pub fn lock_file(path: &Path, holder: &str) -> std::io::Result<Lock> {
+    let mut file = open_options(path)
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(fs::TryLockError::WouldBlock) => {
+            let words = fs::read_to_string(path).unwrap_or_default();
+            return Ok(Lock::HeldBy(words.trim().to_string()));
+        }
+        Err(fs::TryLockError::Error(e)) => return Err(e),
+    }
+    file.set_len(0)?;
+    writeln!(file, "{holder} (pid {})", std::process::id())?;
+    file.sync_all()?;
+    Ok(Lock::Taken(file))
+}
+
 /// [`write_atomic`] to a path a user named (`-o`): its directory must exist already.
 /// A mistyped directory is an error that names it, as any other program's would be,
 /// not a tree of new directories (`report -o /nonexistent/r.html` made `/nonexistent`).
