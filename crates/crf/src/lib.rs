@@ -30,17 +30,23 @@ pub mod spectral_image;
 pub mod spectral_table;
 pub mod tone;
 
-use nalgebra::Matrix3;
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use chromacal_color::Xyz;
 use chromacal_color::adaptation::{AdaptationTransform, adaptation_matrix};
+use chromacal_color::difference::delta_e_2000;
+use chromacal_color::spaces::{Lab, xyz_to_lab};
 use chromacal_model::fit::stats::ErrorStats;
 use chromacal_model::fit::validate::delta_e00_xyz;
 use chromacal_model::{Drive, MonitorModel, ScreenPosition};
 use gamut::{GamutAt, GamutMapping, Smith, StoneCowanBeatty};
 use inverse_table::InverseTable;
 use tone::{SceneLuminance, ToneCurve, ToneOperator};
+
+/// Pixels rendered together over the cores before they are handed on.
+const BAND: usize = 1 << 16;
 
 /// Why a scene could not be rendered.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -429,61 +435,108 @@ impl<'a> ColourReproduction<'a> {
                 .map(SceneTransform::SgckSource),
             _ => None,
         };
+        // A uniform screen has one gamut everywhere: made once.
+        let everywhere = matches!(
+            self.model.spatial,
+            chromacal_model::spatial::SpatialMap::Uniform
+        )
+        .then_some(&centre);
         let top = ((1u64 << settings.bits) - 1) as f64;
-        for (index, (pixel, adapted_pixel)) in
-            scene.pixels.iter().zip(adapted.pixels.iter()).enumerate()
-        {
-            each({
-                let made;
-                let (target, gamut) = if whole_scene {
-                    (&targets[index], &gamuts[index])
-                } else {
-                    made = (target_of(adapted_pixel), gamut_of(index, pixel)?);
-                    (&made.0, &made.1)
-                };
-                let outside = !gamut.contains(target);
-                let mapped = self.map(settings.gamut, transform.as_ref(), gamut, target);
-                let drive = self.drive_for(&mapped, pixel.position);
-                let (codes, shown) =
-                    self.codes_for(drive, &mapped, pixel.position, top, settings.codes);
-                RenderedPixel {
-                    codes,
-                    target: (*target).into(),
-                    mapped: mapped.into(),
-                    shown: shown.into(),
-                    outside,
-                    mapping_delta_e00: delta_e00_xyz(target, &mapped, &self.white),
-                    inversion_delta_e00: delta_e00_xyz(&mapped, &shown, &self.white),
+        let render_pixel = |index: usize| -> Result<RenderedPixel, CrfError> {
+            let pixel = &scene.pixels[index];
+            let made;
+            let (target, gamut) = match (whole_scene, everywhere) {
+                (true, _) => (targets[index], &gamuts[index]),
+                (false, Some(gamut)) => (target_of(&adapted.pixels[index]), gamut),
+                (false, None) => {
+                    made = gamut_of(index, pixel)?;
+                    (target_of(&adapted.pixels[index]), &made)
                 }
-            });
+            };
+            let outside = !gamut.contains(&target);
+            let mapped = self.map(settings.gamut, transform.as_ref(), gamut, &target);
+            let drive = self.drive_for(&mapped, pixel.position);
+            // Each colour's L*a*b* made once for the ΔE00 it takes part in.
+            let mapped_lab = xyz_to_lab(&mapped, &self.white);
+            let (codes, shown, inversion_delta_e00) =
+                self.codes_for(drive, &mapped_lab, pixel.position, top, settings.codes);
+            Ok(RenderedPixel {
+                codes,
+                target: target.into(),
+                mapped: mapped.into(),
+                shown: shown.into(),
+                outside,
+                // A colour the mapping left as it was is 0 away from itself.
+                mapping_delta_e00: if mapped == target {
+                    0.0
+                } else {
+                    delta_e_2000(&xyz_to_lab(&target, &self.white), &mapped_lab)
+                },
+                inversion_delta_e00,
+            })
+        };
+        // Over all cores, a band of pixels at a time, handed on in the scene's order
+        // (the first bad pixel is the one reported, as one by one): the memory is one
+        // band's, whatever the scene's size.
+        let mut band = Vec::with_capacity(BAND);
+        for start in (0..scene.pixels.len()).step_by(BAND) {
+            let end = (start + BAND).min(scene.pixels.len());
+            (start..end)
+                .into_par_iter()
+                .with_min_len(1024)
+                .map(render_pixel)
+                .collect_into_vec(&mut band);
+            for pixel in band.drain(..) {
+                each(pixel?);
+            }
         }
         Ok(transform)
     }
 
-    /// The codes (0 … `top`) for `drive`, chosen as `choice` says to show `mapped` at
-    /// `position`, and what the display shows for them.
+    /// The codes (0 … `top`) for `drive`, chosen as `choice` says to show the colour
+    /// `mapped` (its L*a*b*) at `position`; what the display shows for them, and its
+    /// ΔE00 from `mapped`. Each channel's law is evaluated once for the code below and once for
+    /// the code above the drive, shared by the corners that use it.
     fn codes_for(
         &self,
         drive: Drive,
-        mapped: &Xyz,
+        mapped: &Lab,
         position: ScreenPosition,
         top: f64,
         choice: CodeChoice,
-    ) -> ([u32; 3], Xyz) {
+    ) -> ([u32; 3], Xyz, f64) {
         let scaled = drive.map(|d| d.clamp(0.0, 1.0) * top);
-        let shows = |codes: [u32; 3]| self.model.forward(codes.map(|c| c as f64 / top), position);
-        let rounded = scaled.map(|v| v.round() as u32);
-        let rounded_shows = shows(rounded);
-        if choice == CodeChoice::Rounded {
-            return (rounded, rounded_shows);
-        }
-        let mut best = (
-            rounded,
-            rounded_shows,
-            delta_e00_xyz(mapped, &rounded_shows, &self.white),
-        );
+        let gains = self.model.spatial.gains(position);
         let low = scaled.map(|v| v.floor() as u32);
         let high = scaled.map(|v| (v.ceil() as u32).min(top as u32));
+        let excitation = |c: usize, code: u32| self.model.laws[c].excitation(code as f64 / top);
+        let low_light = [0, 1, 2].map(|c| excitation(c, low[c]));
+        let high_light = [0, 1, 2].map(|c| {
+            if high[c] == low[c] {
+                low_light[c]
+            } else {
+                excitation(c, high[c])
+            }
+        });
+        // `MonitorModel::forward` of the codes, from their channels' excitations.
+        let shows = |codes: [u32; 3]| {
+            let e = [0, 1, 2].map(|c| {
+                let light = if codes[c] == low[c] {
+                    low_light[c]
+                } else {
+                    high_light[c]
+                };
+                gains[c] * light
+            });
+            let shown = self.model.light_above_black(&Vector3::from(e)) + self.model.black;
+            (shown, xyz_to_lab(&shown, &self.white))
+        };
+        let rounded = scaled.map(|v| v.round() as u32);
+        let (rounded_shows, rounded_lab) = shows(rounded);
+        let mut best = (rounded, rounded_shows, delta_e_2000(mapped, &rounded_lab));
+        if choice == CodeChoice::Rounded {
+            return best;
+        }
         for corner in 0..8 {
             let codes = [0, 1, 2].map(|c| {
                 if corner >> c & 1 == 1 {
@@ -495,13 +548,13 @@ impl<'a> ColourReproduction<'a> {
             if codes == rounded {
                 continue;
             }
-            let shown = shows(codes);
-            let error = delta_e00_xyz(mapped, &shown, &self.white);
+            let (shown, lab) = shows(codes);
+            let error = delta_e_2000(mapped, &lab);
             if error < best.2 {
                 best = (codes, shown, error);
             }
         }
-        (best.0, best.1)
+        best
     }
 
     /// The scene with its white carried to the display's chromaticity (luminance
