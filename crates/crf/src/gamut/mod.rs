@@ -189,6 +189,12 @@ const BISECTION_STEPS: usize = 40;
 /// bisected. `None` when t = 0 is outside. HPMINDE's largest chroma at a lightness
 /// and SGCK's boundaries along its lines are both this.
 fn last_inside(inside: impl Fn(f64) -> bool, start: f64) -> Option<f64> {
+    last_inside_within(inside, start, BISECTION_STEPS)
+}
+
+/// [`last_inside`] bisected `steps` times: within 2^−steps of the ray's length to the
+/// first point found outside.
+fn last_inside_within(inside: impl Fn(f64) -> bool, start: f64, steps: usize) -> Option<f64> {
     if !inside(0.0) {
         return None;
     }
@@ -200,7 +206,7 @@ fn last_inside(inside: impl Fn(f64) -> bool, start: f64) -> Option<f64> {
         }
     }
     let mut inner = 0.0;
-    for _ in 0..BISECTION_STEPS {
+    for _ in 0..steps {
         let mid = 0.5 * (inner + outside);
         if inside(mid) {
             inner = mid;
