@@ -10,6 +10,7 @@ use chromacal::calibrate::session::{CalibrateOptions, calibrate, measure_simulat
 use chromacal::config::{load_config, parse_config};
 use chromacal::journal::Journal;
 use chromacal_model::fit::fit_monitor;
+use chromacal_model::fit::validate::delta_e00_xyz;
 use chromacal_model::measurement::Role;
 
 mod common;
@@ -90,8 +91,8 @@ async fn a_resumed_sequential_run_continues_the_same_sequence() {
 
 /// On the ISETBio monitors (measured primaries and transfer tables), five seeds each:
 /// the sequential plan's 32 patches give a lower held-out error than a fixed plan's
-/// 32 on the LCD and the CRT, and at most 15 % worse on the OLED, where both sit near
-/// the instrument's repeatability (about 0.1 ΔE00) and a fixed plan's levels already
+/// 32 on the LCD and the CRT, and at most 15 % worse on the OLED, where both sit at
+/// about 0.1 ΔE00 whatever the count of patches and a fixed plan's levels already
 /// serve its smooth curve. The plan buys what is least sure per second of instrument
 /// time, not per patch: at a count of patches it gives up a little on the LCD
 /// (0.341 here, 0.236 choosing by spread alone) for 10 % less time, and over six
@@ -131,6 +132,70 @@ fn the_sequential_plan_beats_a_fixed_plan_of_the_same_size() {
             "{stem}: held-out mean {:.3} sequential, {:.3} fixed",
             sequential_sum / 5.0,
             fixed_sum / 5.0
+        );
+    }
+}
+
+/// `bench sequential`'s floor is what a perfect model scores: the profile that is the
+/// virtual monitor's own truth, judged like a fit on each run's held-out readings,
+/// lands on the floor (measured on its own, with seeds no run uses) within a fifth;
+/// a fitted profile lands above it.
+#[test]
+fn the_repeatability_floor_is_what_a_perfect_model_scores() {
+    for monitor in [
+        "[monitor]\npreset = \"lcd\"".to_string(),
+        isetbio_monitor("isetbio_crt_dell", "white_luminance = 100.0"),
+    ] {
+        let section = monitor.strip_prefix("[monitor]\n").unwrap();
+        let floor = chromacal::bench::repeatability_floor(section).unwrap();
+        let (mut perfect, mut fitted) = (Vec::new(), Vec::new());
+        for seed in 1..=6 {
+            let text = fixed(&monitor, 32, seed);
+            let (set, _) = simulate(&text, Path::new("."));
+            let config = parse_config(&text, "floor").unwrap();
+            let truth = chromacal::calibrate::session::rig_for(&config, Path::new("."), None)
+                .unwrap()
+                .monitor
+                .lock()
+                .unwrap()
+                .true_model();
+            let white = truth.white();
+            for m in set
+                .measurements
+                .iter()
+                .filter(|m| m.role == Role::Verification)
+            {
+                let xyz = m.usable_xyz().unwrap();
+                perfect.push(delta_e00_xyz(
+                    &truth.forward(m.drive, m.position),
+                    &xyz,
+                    &white,
+                ));
+            }
+            fitted.push(
+                fit_monitor(&set, &config.fit)
+                    .unwrap()
+                    .report
+                    .held_out
+                    .unwrap()
+                    .mean,
+            );
+        }
+        let perfect = perfect.iter().sum::<f64>() / perfect.len() as f64;
+        let fitted = fitted.iter().sum::<f64>() / fitted.len() as f64;
+        eprintln!(
+            "floor {:.4} ± {:.4}; the truth scores {perfect:.4}, the fit {fitted:.4}",
+            floor.mean, floor.spread
+        );
+        assert!(
+            (perfect / floor.mean - 1.0).abs() < 0.2,
+            "floor {:.4}, the truth scores {perfect:.4}",
+            floor.mean
+        );
+        assert!(
+            fitted > floor.mean,
+            "fit {fitted:.4} below the floor {:.4}",
+            floor.mean
         );
     }
 }

@@ -26,6 +26,8 @@ mod render;
 mod sequential;
 mod spectral;
 
+pub use sequential::{Floor, repeatability_floor};
+
 use std::path::{Path, PathBuf};
 
 use crate::calibrate::session::{block_on, measure_simulated};
@@ -130,7 +132,11 @@ pub fn run<E>(
         table(&|out| fit::bench(out, quick, data, wanted("fit-time"), wanted("budget")))?;
     }
     if wanted("sequential") {
-        let seeds: Vec<u64> = if quick { vec![1, 2] } else { (1..=5).collect() };
+        let seeds: Vec<u64> = if quick {
+            vec![1, 2]
+        } else {
+            (1..=10).collect()
+        };
         table(&|out| sequential::sequential_table(out, data, &seeds))?;
     }
     if wanted("argyll") {

@@ -184,7 +184,7 @@ fn halton(mut i: usize, base: usize) -> f64 {
 
 /// Held-out drives: three quarters spread through the RGB cube (a scrambled Halton
 /// sequence), one quarter near the grey axis, where errors show most.
-fn verification_drives(n: usize, seed: u64) -> Vec<Drive> {
+pub fn verification_drives(n: usize, seed: u64) -> Vec<Drive> {
     let offset = (seed % 997) as usize + 20;
     let near_grey = n / 4;
     let mut drives = Vec::with_capacity(n);
