@@ -19,7 +19,7 @@ pub enum RealSet {
     Two(MeasurementSet, MeasurementSet),
 }
 
-/// The real measurement sets in `data` that have mixtures to hold out: the three
+/// The real measurement sets in `data` that have mixtures to hold out: the five
 /// ArgyllCMS `.ti3` files, and the Psychtoolbox OLED's split (calibration, then
 /// linearity check).
 pub fn real_sets(data: &Path) -> Vec<(String, RealSet)> {
@@ -35,6 +35,14 @@ pub fn real_sets(data: &Path) -> Vec<(String, RealSet)> {
         (
             "Samsung S24A350H (TN)",
             "samsung_s24a350h_colormunki_spectral_57.ti3",
+        ),
+        (
+            "Dahua LM27-E331A (IPS, wide gamut)",
+            "dahua_lm27_e331a_spyderx_1140.ti3",
+        ),
+        (
+            "Lenovo ThinkBook 14p Gen2 (LCD)",
+            "lenovo_thinkbook14p_gen2_nv140drm_n62_i1d3_596.ti3",
         ),
     ] {
         if let Some(set) = read(file) {
