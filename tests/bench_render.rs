@@ -60,6 +60,27 @@ fn the_bench_sets_moxcms_and_little_cms_beside_chromacal() {
         let speed: f64 = cells[2].parse().unwrap();
         assert!(speed > 0.0, "{cells:?}");
     }
+    the_whole_command_is_timed(&table);
+}
+
+/// The whole `render` command has its rows beside the loop: seconds, the same less
+/// reading and writing, and that over the loop's time, each a positive number, the
+/// nearest codes costing more than the rounded ones.
+fn the_whole_command_is_timed(table: &str) {
+    assert!(table.contains("the whole `render` command"), "{table}");
+    let cells = |name: &str| -> Vec<f64> {
+        row(table, name)
+            .unwrap_or_else(|| panic!("no row {name}: {table}"))
+            .iter()
+            .skip(1)
+            .map(|c| c.parse::<f64>().unwrap())
+            .collect()
+    };
+    let nearest = cells("16 bits, nearest codes");
+    let rounded = cells("16 bits, --codes rounded");
+    assert_eq!(nearest.len(), 3, "{table}");
+    assert!(nearest.iter().chain(&rounded).all(|v| *v > 0.0), "{table}");
+    assert!(nearest[1] > rounded[1], "{table}");
 }
 
 #[cfg(not(feature = "peer-engines"))]
@@ -68,6 +89,7 @@ fn without_the_feature_the_bench_says_how_to_get_the_peers() {
     let (table, stderr) = bench_render();
     assert!(row(&table, "chromacal").is_some(), "{table}");
     assert!(row(&table, "moxcms").is_none(), "{table}");
+    the_whole_command_is_timed(&table);
     assert!(
         stderr.contains("--features peer-engines -- bench --only render"),
         "{stderr}"

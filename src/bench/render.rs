@@ -301,7 +301,127 @@ pub(super) fn render_table(out: &mut Tables, quick: bool) -> Result<(), BenchErr
             &cells
         )
     )?;
-    code_choice_table(out, &full, rounds)
+    code_choice_table(out, &full, rounds)?;
+    // The loop over the screen (the spatial map at each pixel) on one core: tool 3.
+    let loop_seconds = median(seconds.iter().map(|r| r[3]).collect());
+    // A quick look renders a 256 × 256 corner of it (the loop's time scaled to it).
+    let side = if quick { 256 } else { SIDE };
+    let scale = (side * side) as f64 / n as f64;
+    command_table(out, &profile, &asked_screen, side, loop_seconds * scale)
+}
+
+/// The whole `render` command on the same image as a `side` × `side` PFM (2048 × 2048;
+/// the top left corner of it when smaller) to a 16-bit PNG,
+/// as a user runs it (read, map over all cores, write, summary), beside what reading
+/// the file and writing the PNG take on their own and the loop above: what the user
+/// waits for, not the inner loop.
+fn command_table(
+    out: &mut Tables,
+    profile: &Profile,
+    asked: &[Xyz],
+    side: usize,
+    loop_seconds: f64,
+) -> Result<(), BenchError> {
+    use chromacal_crf::render::{CodesOutput, RenderRequest, SceneSource, SceneUnits, render};
+    use chromacal_crf::scene::{Placement, read_pfm, write_png16_codes};
+    use chromacal_crf::spectral::MethodKind;
+    let dir = std::env::temp_dir().join(format!("chromacal-bench-command-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let image = dir.join("scene.pfm");
+    let mut bytes = format!("PF\n{side} {side}\n-1.0\n").into_bytes();
+    // PFM rows run from the bottom up.
+    for row in (0..side).rev() {
+        for x in &asked[row * SIDE..row * SIDE + side] {
+            for v in [x.x, x.y, x.z] {
+                bytes.extend_from_slice(&(v as f32).to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(&image, bytes).map_err(|e| e.to_string())?;
+    let png = dir.join("codes.png");
+    let timed = |f: &mut dyn FnMut() -> Result<(), String>| -> Result<f64, String> {
+        let start = Instant::now();
+        f()?;
+        Ok(start.elapsed().as_secs_f64())
+    };
+    let white = profile.model.white();
+    let read = timed(&mut || {
+        read_pfm(&image, &white)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    })?;
+    // Codes with an image's variety (all-zero codes would compress to nothing).
+    let codes: Vec<[u16; 3]> = asked[..side * side]
+        .iter()
+        .map(|x| {
+            [x.x / white.x, x.y / white.y, x.z / white.z]
+                .map(|v| (v.clamp(0.0, 1.0) * 65535.0) as u16)
+        })
+        .collect();
+    let write =
+        timed(&mut || write_png16_codes(&png, side, side, &codes, 16).map_err(|e| e.to_string()))?;
+    let mut rows = Vec::new();
+    for (bits, choice, name) in [
+        (
+            16,
+            CodeChoice::NearestInDeltaE00,
+            "16 bits, nearest codes (the default)",
+        ),
+        (16, CodeChoice::Rounded, "16 bits, --codes rounded"),
+        (8, CodeChoice::NearestInDeltaE00, "8 bits, nearest codes"),
+    ] {
+        let request = RenderRequest {
+            source: SceneSource::Image(image.clone()),
+            units: SceneUnits::Absolute,
+            white_luminance: None,
+            scene_white: None,
+            at: Placement::FULL,
+            grid: None,
+            method: MethodKind::Direct,
+            explain: false,
+            max_de00: 0.5,
+            settings: RenderSettings {
+                adaptation: None,
+                tone: ToneOperator::Colorimetric,
+                gamut: GamutMapping::Clip,
+                bits,
+                codes: choice,
+            },
+            output: CodesOutput::File(png.clone()),
+        };
+        let whole = timed(&mut || {
+            render(&profile.model, profile.units, &request)
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        })?;
+        rows.push(vec![
+            name.to_string(),
+            format!("{whole:.2}"),
+            format!("{:.2}", whole - read - write),
+            format!("{:.0}", (whole - read - write) / loop_seconds),
+        ]);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    writeln!(
+        out.text,
+        "\nthe whole `render` command, a {side} × {side} PFM (the image above, over the screen) to a PNG, on {} cores: reading the PFM alone {read:.2} s, writing the 16-bit PNG alone {write:.2} s; the rest against the tabulated loop over the screen on one core ({:.3} s):\n",
+        rayon::current_num_threads(),
+        loop_seconds
+    )?;
+    writeln!(
+        out.text,
+        "{}",
+        table(
+            &[
+                "render",
+                "seconds",
+                "without reading and writing",
+                "÷ the loop"
+            ],
+            &rows
+        )
+    )?;
+    Ok(())
 }
 
 /// What choosing the nearest of the 8 codes around each drive costs and gains over
