@@ -37,7 +37,7 @@ pub fn real_sets(data: &Path) -> Vec<(String, RealSet)> {
             "samsung_s24a350h_colormunki_spectral_57.ti3",
         ),
         (
-            "Dahua LM27-E331A (IPS, wide gamut)",
+            "Dahua LM27-E331A (IPS, wide-gamut PFS backlight)",
             "dahua_lm27_e331a_spyderx_1140.ti3",
         ),
         (

@@ -322,11 +322,57 @@ fn command_table(
     side: usize,
     loop_seconds: f64,
 ) -> Result<(), BenchError> {
+    let dir = std::env::temp_dir().join(format!("chromacal-bench-command-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let timed = command_rows(profile, asked, side, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    let (read, write, rows) = timed?;
+    let rows: Vec<Vec<String>> = rows
+        .into_iter()
+        .map(|(name, whole)| {
+            let rest = whole - read - write;
+            vec![
+                name.to_string(),
+                format!("{whole:.3}"),
+                format!("{rest:.3}"),
+                format!("{:.0}", rest / loop_seconds),
+            ]
+        })
+        .collect();
+    writeln!(
+        out.text,
+        "\nthe whole `render` command, a {side} × {side} PFM (the image above, over the screen) to a PNG, on {} cores: reading the PFM alone {read:.3} s, writing the 16-bit PNG alone {write:.3} s; the rest against the tabulated loop over the screen on one core ({:.3} s):\n",
+        rayon::current_num_threads(),
+        loop_seconds
+    )?;
+    writeln!(
+        out.text,
+        "{}",
+        table(
+            &[
+                "render",
+                "seconds",
+                "without reading and writing",
+                "÷ the loop"
+            ],
+            &rows
+        )
+    )?;
+    Ok(())
+}
+
+/// What reading the PFM takes alone, writing the PNG alone, and the whole command
+/// for each code choice, in `dir`.
+#[allow(clippy::type_complexity)]
+fn command_rows(
+    profile: &Profile,
+    asked: &[Xyz],
+    side: usize,
+    dir: &std::path::Path,
+) -> Result<(f64, f64, Vec<(&'static str, f64)>), String> {
     use chromacal_crf::render::{CodesOutput, RenderRequest, SceneSource, SceneUnits, render};
     use chromacal_crf::scene::{Placement, read_pfm, write_png16_codes};
     use chromacal_crf::spectral::MethodKind;
-    let dir = std::env::temp_dir().join(format!("chromacal-bench-command-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let image = dir.join("scene.pfm");
     let mut bytes = format!("PF\n{side} {side}\n-1.0\n").into_bytes();
     // PFM rows run from the bottom up.
@@ -394,34 +440,9 @@ fn command_table(
                 .map(|_| ())
                 .map_err(|e| e.to_string())
         })?;
-        rows.push(vec![
-            name.to_string(),
-            format!("{whole:.2}"),
-            format!("{:.2}", whole - read - write),
-            format!("{:.0}", (whole - read - write) / loop_seconds),
-        ]);
+        rows.push((name, whole));
     }
-    let _ = std::fs::remove_dir_all(&dir);
-    writeln!(
-        out.text,
-        "\nthe whole `render` command, a {side} × {side} PFM (the image above, over the screen) to a PNG, on {} cores: reading the PFM alone {read:.2} s, writing the 16-bit PNG alone {write:.2} s; the rest against the tabulated loop over the screen on one core ({:.3} s):\n",
-        rayon::current_num_threads(),
-        loop_seconds
-    )?;
-    writeln!(
-        out.text,
-        "{}",
-        table(
-            &[
-                "render",
-                "seconds",
-                "without reading and writing",
-                "÷ the loop"
-            ],
-            &rows
-        )
-    )?;
-    Ok(())
+    Ok((read, write, rows))
 }
 
 /// What choosing the nearest of the 8 codes around each drive costs and gains over

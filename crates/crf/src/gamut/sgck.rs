@@ -228,17 +228,53 @@ struct HuePoint {
     c: f64,
 }
 
-/// The display's cusp at a hue (an angle in radians, as `atan2` gives it), read from
-/// the table of cusps made once for the gamut and white ([`CuspTable`]).
+/// The display's cusp at a hue (an angle in radians, as `atan2` gives it). A gamut
+/// asked for again (a 3D LUT's, a uniform screen's) gets its table of cusps
+/// ([`CuspTable`]) on the second call and reads it from then on; a gamut asked for
+/// once (each pixel's own, on a screen with a spatial map) gets the exact search, as
+/// building a table for one colour would cost thousands of searches.
 fn cusp(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<HuePoint> {
-    cusp_table(gamut, white).at(gamut, white, hue)
+    let table = CUSPS_KEPT.with(|kept| {
+        let mut kept = kept.borrow_mut();
+        match kept.as_mut() {
+            Some((g, w, table)) if g == gamut && w == white => Some(
+                table
+                    .get_or_insert_with(|| std::rc::Rc::new(CuspTable::new(gamut, white)))
+                    .clone(),
+            ),
+            _ => {
+                *kept = Some((gamut.clone(), *white, None));
+                None
+            }
+        }
+    });
+    match table {
+        Some(table) => table.at(gamut, white, hue),
+        None => cusp_exact(gamut, white, hue).map(|found| found.point),
+    }
+}
+
+/// The last gamut and white each thread asked `cusp` for, and its table once asked
+/// again.
+type CuspsKept = Option<(GamutAt, Xyz, Option<std::rc::Rc<CuspTable>>)>;
+
+thread_local! {
+    static CUSPS_KEPT: std::cell::RefCell<CuspsKept> = const { std::cell::RefCell::new(None) };
+}
+
+/// A cusp as found: the point, and the segment of the edge loop it lies in (0 … 6 ×
+/// `LOOP_STEPS` − 1; a segment's edge is `segment / LOOP_STEPS`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct FoundCusp {
+    point: HuePoint,
+    segment: usize,
 }
 
 /// The display's cusp at a hue: where the hue plane crosses the cube's edge loop
 /// red–yellow–green–cyan–blue–magenta (each of those edges has one channel at full
 /// drive and one at none: the upper faces meet the lower ones there, and there the
-/// chroma at a hue is largest); and the edge it lies on (0 … 5).
-fn cusp_exact(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<(HuePoint, usize)> {
+/// chroma at a hue is largest); and the loop's segment it lies in.
+fn cusp_exact(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<FoundCusp> {
     let at = |s: f64| -> Lab { edge_loop_lab(gamut, white, s) };
     // Signed hue difference in (−π, π].
     let wrap = |d: f64| {
@@ -248,7 +284,7 @@ fn cusp_exact(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<(HuePoint, usize
     // The loop's sample points and their hues are the same for every hue: made once
     // for a gamut and white.
     let samples = loop_samples(gamut, white);
-    let mut best: Option<(HuePoint, usize)> = None;
+    let mut best: Option<FoundCusp> = None;
     let n = 6 * LOOP_STEPS;
     for k in 0..n {
         let (s0, s1) = (
@@ -274,8 +310,8 @@ fn cusp_exact(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<(HuePoint, usize
             l: lab.l,
             c: lab.a.hypot(lab.b),
         };
-        if best.is_none_or(|b| point.c > b.0.c) {
-            best = Some((point, k / LOOP_STEPS));
+        if best.is_none_or(|b| point.c > b.point.c) {
+            best = Some(FoundCusp { point, segment: k });
         }
     }
     best
@@ -287,13 +323,13 @@ const CUSP_HUES: usize = 4096;
 /// The display's cusp at `CUSP_HUES` hues, made once for a gamut and white: SGCK
 /// asks for the cusp at every colour's hue, and finding it is a search along the
 /// cube's edge loop (most of SGCK's time when it was done for each colour). Between
-/// two neighbouring hues whose cusps lie on the same edge, L* and C* are interpolated
-/// linearly (on one edge they change smoothly with hue: within 3·10⁻⁴ in L* and C*
-/// at this spacing, and SGCK through the table within 3·10⁻⁴ ΔE00 of SGCK searching the
-/// cusp for each colour); where the cusp passes a corner of the cube, or jumps between two
+/// two neighbouring hues whose cusps lie on one edge, in the same or neighbouring
+/// segments of the loop, L* and C* are interpolated linearly (there they change
+/// smoothly with hue: within 3·10⁻⁴ in L* and C* at this spacing, measured; the test
+/// holds 10⁻³); where the cusp passes a corner of the cube, or jumps between two
 /// crossings of a folded loop, it is found exactly.
 struct CuspTable {
-    entries: Vec<Option<(HuePoint, usize)>>,
+    entries: Vec<Option<FoundCusp>>,
 }
 
 impl CuspTable {
@@ -318,33 +354,19 @@ impl CuspTable {
         let below = (position.floor() as usize).min(CUSP_HUES - 1);
         let t = position - below as f64;
         match (self.entries[below], self.entries[(below + 1) % CUSP_HUES]) {
-            (Some((a, edge_a)), Some((b, edge_b))) if edge_a == edge_b => Some(HuePoint {
-                l: a.l + t * (b.l - a.l),
-                c: a.c + t * (b.c - a.c),
+            (Some(a), Some(b)) if continuous(a.segment, b.segment) => Some(HuePoint {
+                l: a.point.l + t * (b.point.l - a.point.l),
+                c: a.point.c + t * (b.point.c - a.point.c),
             }),
-            _ => cusp_exact(gamut, white, hue).map(|(point, _)| point),
+            _ => cusp_exact(gamut, white, hue).map(|found| found.point),
         }
     }
 }
 
-/// The cusp table for `gamut` and `white`, kept for the last gamut and white each
-/// thread used.
-fn cusp_table(gamut: &GamutAt, white: &Xyz) -> std::rc::Rc<CuspTable> {
-    type Kept = Option<(GamutAt, Xyz, std::rc::Rc<CuspTable>)>;
-    thread_local! {
-        static KEPT: std::cell::RefCell<Kept> = const { std::cell::RefCell::new(None) };
-    }
-    if let Some(table) = KEPT.with(|kept| {
-        kept.borrow()
-            .as_ref()
-            .filter(|(g, w, _)| g == gamut && w == white)
-            .map(|(_, _, table)| table.clone())
-    }) {
-        return table;
-    }
-    let table = std::rc::Rc::new(CuspTable::new(gamut, white));
-    KEPT.with(|kept| *kept.borrow_mut() = Some((gamut.clone(), *white, table.clone())));
-    table
+/// Two cusps a linear interpolation may join: on one edge of the cube, in the same
+/// segment of the loop or in neighbouring ones.
+fn continuous(a: usize, b: usize) -> bool {
+    a / LOOP_STEPS == b / LOOP_STEPS && a.abs_diff(b) <= 1
 }
 
 /// The six edges of the cube's loop as (start corner, channel that moves, direction).
@@ -412,8 +434,8 @@ pub fn sgck(gamut: &GamutAt, source: &GamutAt, xyz: &Xyz, white: &Xyz) -> Xyz {
 }
 
 /// Bisection steps for where a line from the focal point leaves the display's and the
-/// source's gamut: 2⁻²⁴ of the line (a few 10⁻⁶ in L* and C*, far below a code step;
-/// 40 steps took a third of SGCK's time).
+/// source's gamut: 2⁻²⁴ of the line (about 10⁻⁵ in L* and C* on a line of 200, far
+/// below a code step; 40 steps took a third of SGCK's time).
 const LINE_STEPS: usize = 24;
 
 /// [`sgck`] with the display's cusp at a hue from `cusp`.
@@ -652,15 +674,17 @@ mod tests {
         let (mut exact_lookups, mut worst) = (0, 0.0f64);
         for k in 0..20_000 {
             let hue = -std::f64::consts::PI + std::f64::consts::TAU * (k as f64 + 0.37) / 20_000.0;
-            let (want, _) = cusp_exact(&display, &white, hue).unwrap();
+            let want = cusp_exact(&display, &white, hue).unwrap().point;
             let got = table.at(&display, &white, hue).unwrap();
             worst = worst
                 .max((got.l - want.l).abs())
                 .max((got.c - want.c).abs());
             let position = (hue + std::f64::consts::PI) / std::f64::consts::TAU * CUSP_HUES as f64;
             let below = position.floor() as usize % CUSP_HUES;
-            if table.entries[below].map(|e| e.1)
-                != table.entries[(below + 1) % CUSP_HUES].map(|e| e.1)
+            let (a, b) = (table.entries[below], table.entries[(below + 1) % CUSP_HUES]);
+            if !a
+                .zip(b)
+                .is_some_and(|(a, b)| continuous(a.segment, b.segment))
             {
                 exact_lookups += 1;
             }
@@ -685,7 +709,7 @@ mod tests {
                         &source,
                         &xyz,
                         &white,
-                        |hue| cusp_exact(target, &white, hue).map(|(p, _)| p),
+                        |hue| cusp_exact(target, &white, hue).map(|found| found.point),
                         BISECTION_STEPS,
                     );
                     let de = chromacal_model::fit::validate::delta_e00_xyz(&fast, &exact, &white);
@@ -695,6 +719,28 @@ mod tests {
             }
         }
         eprintln!("SGCK through the table: largest ΔE00 {largest:.2e} from SGCK as it was");
+    }
+
+    /// A gamut asked for once (each pixel's own on a screen with a spatial map) gets
+    /// the exact search and no table (a table for one colour cost thousands of
+    /// searches: a 300 × 200 SGCK render went from 7 s to over 5 min); asked again, its
+    /// table is made and read.
+    #[test]
+    fn only_a_gamut_asked_for_again_gets_a_table() {
+        let display = crate::gamut::tests::gamut();
+        let white = display.white();
+        let has_table = || CUSPS_KEPT.with(|k| k.borrow().as_ref().is_some_and(|k| k.2.is_some()));
+        for scale in [0.9, 0.8, 0.7] {
+            let gamut = GamutAt::new(display.black(), display.primaries * scale).unwrap();
+            let hue = 0.7;
+            let exact = cusp_exact(&gamut, &white, hue).map(|f| f.point);
+            assert_eq!(cusp(&gamut, &white, hue), exact);
+            assert!(!has_table(), "a table for a gamut asked for once");
+        }
+        let gamut = GamutAt::new(display.black(), display.primaries * 0.6).unwrap();
+        assert!(cusp(&gamut, &white, 0.7).is_some());
+        assert!(cusp(&gamut, &white, 0.71).is_some());
+        assert!(has_table());
     }
 
     #[test]
