@@ -719,6 +719,73 @@ fn a_calibration_in_the_window_matches_the_emulator_screen_and_verifies_through_
     drop(window);
 }
 
+/// Where the driver gives an output no EDID (XWayland, some drivers), the kernel's
+/// DRM connector of the same name has it: a directory laid out as sysfs
+/// (`class/drm/card0-NAME/edid`, chosen by `CHROMACAL_SYSFS_ROOT`) names the monitor,
+/// says where its EDID came from, and lets a device find its output by the serial.
+/// A connector with an empty file (nothing plugged in) and one of another name are
+/// passed over.
+#[test]
+fn an_output_without_an_edid_takes_its_connector_s_from_the_kernel() {
+    let x = XServer::start();
+    let xd = XDisplay::open(Some(&x.display)).unwrap();
+    let output = xd.output(&OutputSelector::Primary).unwrap();
+    assert!(output.edid.is_none() || output.edid_source.is_some());
+    let dir = tempfile::tempdir().unwrap();
+    let sysfs = dir.path().join("sys");
+    let bytes = std::fs::read(common::fixture("edid/srgb_office_1080p.bin")).unwrap();
+    for (connector, edid) in [
+        (output.name.as_str(), &bytes[..]),
+        ("HDMI-A-7", &[][..]),
+        ("DP-9", &bytes[..]),
+    ] {
+        let at = sysfs.join(format!("class/drm/card0-{connector}"));
+        std::fs::create_dir_all(&at).unwrap();
+        std::fs::write(at.join("edid"), edid).unwrap();
+    }
+    std::fs::create_dir_all(sysfs.join("class/drm/card0")).unwrap();
+    let run = |args: &[&str]| {
+        let mut c = chromacal();
+        c.env("CHROMACAL_SYSFS_ROOT", &sysfs)
+            .args(args)
+            .args(["--x-display", &x.display, "--state-dir"])
+            .arg(dir.path().join("state"));
+        String::from_utf8_lossy(&succeed(&mut c).stdout).into_owned()
+    };
+    let text = run(&["displays"]);
+    let kernel_file = sysfs.join(format!("class/drm/card0-{}/edid", output.name));
+    assert!(
+        text.contains("monitor: DEL DELL U2415 (serial 7MT0186J1T3L, week 12 of 2016)"),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!(
+            "EDID from the kernel: {} (the driver gave none)",
+            kernel_file.display()
+        )),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&run(&["displays", "--json"])).unwrap();
+    let first = &json.as_array().unwrap()[0];
+    assert_eq!(first["edid_source"], kernel_file.display().to_string());
+    assert_eq!(first["edid"]["serial_text"], "7MT0186J1T3L");
+    // Disconnected outputs take nothing, whatever the files say.
+    assert!(json.as_array().unwrap()[1]["edid"].is_null());
+    // The serial finds the output through the kernel's EDID.
+    let show = run(&["lut", "show", "--output", "edid_serial=7MT0186J1T3L"]);
+    assert!(
+        show.contains(&format!("video LUT of {}", output.name)),
+        "{show}"
+    );
+    // Without the directory, no EDID.
+    let mut bare = chromacal();
+    bare.env("CHROMACAL_SYSFS_ROOT", dir.path().join("nowhere"))
+        .args(["displays", "--x-display", &x.display, "--state-dir"])
+        .arg(dir.path().join("state"));
+    let text = String::from_utf8_lossy(&succeed(&mut bare).stdout).into_owned();
+    assert!(text.contains("EDID: none"), "{text}");
+}
+
 #[test]
 fn displays_name_the_outputs_their_monitors_and_the_device_on_each() {
     let x = XServer::start();

@@ -155,6 +155,9 @@ pub fn describe_displays(x_display: &str, entries: &[DisplayEntry]) -> String {
         match (&e.edid, &e.edid_error) {
             (Some(edid), _) => {
                 out += &format!("    monitor: {}\n", edid.describe());
+                if let Some(source) = o.edid_source.as_deref().filter(|s| *s != "RandR") {
+                    out += &format!("    EDID from the kernel: {source} (the driver gave none)\n");
+                }
                 out += &format!(
                     "    EDID primaries xy: R {:.4},{:.4}  G {:.4},{:.4}  B {:.4},{:.4}  white {:.4},{:.4}\n",
                     edid.red[0],

@@ -7,6 +7,7 @@
 //! A sink resolves `show` once the patch is on the screen and settled, so the run
 //! measures straight after it returns.
 
+pub mod drm;
 pub mod emulator_link;
 pub mod lut;
 pub mod resolve;

@@ -85,9 +85,13 @@ pub struct OutputInfo {
     pub refresh_hz: Option<f64>,
     /// Entries of the CRTC's gamma ramp (the video LUT).
     pub gamma_size: usize,
-    /// The monitor's EDID, as the driver read it.
+    /// The monitor's EDID, as the driver read it (or, where the driver gives none, as
+    /// the kernel read it: `drm`).
     #[serde(skip)]
     pub edid: Option<Vec<u8>>,
+    /// Where `edid` came from: `RandR`, or the kernel's file for the output's connector
+    /// (`/sys/class/drm/card0-DP-1/edid`).
+    pub edid_source: Option<String>,
     /// Physical size the monitor reports, mm.
     pub mm_width: u32,
     pub mm_height: u32,
@@ -107,8 +111,27 @@ impl OutputInfo {
     }
 }
 
+/// The kernel's EDID for each connected output the driver gave none (`drm`), matched
+/// by the output's name.
+pub fn with_kernel_edids(outputs: &mut [OutputInfo], sysfs_root: &std::path::Path) {
+    if outputs.iter().all(|o| o.edid.is_some() || !o.connected) {
+        return;
+    }
+    let edids = crate::drm::connector_edids(sysfs_root);
+    for output in outputs
+        .iter_mut()
+        .filter(|o| o.edid.is_none() && o.connected)
+    {
+        if let Some(found) = crate::drm::edid_for_output(&edids, &output.name) {
+            output.edid = Some(found.edid.clone());
+            output.edid_source = Some(found.path.display().to_string());
+        }
+    }
+}
+
 impl XDisplay {
-    /// Every output of the screen, lit or not.
+    /// Every output of the screen, lit or not; an output the driver gives no EDID
+    /// takes its connector's from the kernel (`with_kernel_edids`).
     pub fn outputs(&self) -> Result<Vec<OutputInfo>, X11Error> {
         let err = |e: &dyn std::fmt::Display| self.protocol(e);
         let resources = self
@@ -147,6 +170,7 @@ impl XDisplay {
                 refresh_hz: None,
                 gamma_size: 0,
                 edid: None,
+                edid_source: None,
                 mm_width: info.mm_width,
                 mm_height: info.mm_height,
             };
@@ -196,10 +220,12 @@ impl XDisplay {
                     .map_err(|e| err(&e))?;
                 if property.format == 8 && !property.data.is_empty() {
                     out.edid = Some(property.data);
+                    out.edid_source = Some("RandR".into());
                 }
             }
             outputs.push(out);
         }
+        with_kernel_edids(&mut outputs, &crate::drm::sysfs_root());
         Ok(outputs)
     }
 
