@@ -230,12 +230,7 @@ fn a_daemon_configured_for_the_simulation_refuses_a_store_measured_on_a_screen()
 fn history_and_the_current_profile_read_the_store_when_no_daemon_runs() {
     let dir = tempfile::tempdir().unwrap();
     let state = dir.path().join("state");
-    common::succeed(
-        common::chromacal()
-            .arg("calibrate")
-            .arg("--state-dir")
-            .arg(&state),
-    );
+    common::calibrate_default(&state);
     let current = chromacal::profile::Profile::read(&state.join("current.toml")).unwrap();
     let out = common::succeed(
         common::chromacal()

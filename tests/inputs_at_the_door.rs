@@ -8,6 +8,17 @@ use std::time::{Duration, Instant};
 mod common;
 use common::chromacal;
 
+/// `dir/state` with the simulated default calibrated into it (within two minutes).
+fn calibrated(dir: &std::path::Path) -> std::path::PathBuf {
+    let state = dir.join("state");
+    let (code, _, stderr) = run(
+        &["calibrate", "--state-dir", state.to_str().unwrap()],
+        Duration::from_secs(120),
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    state
+}
+
 /// Run `chromacal args…` with a time limit; (exit code, stdout, stderr).
 fn run(args: &[&str], limit: Duration) -> (Option<i32>, String, String) {
     let mut child = chromacal()
@@ -118,12 +129,7 @@ fn config_values_out_of_range_are_refused_before_anything_is_measured() {
 #[test]
 fn a_profile_with_a_runaway_degree_or_a_nan_is_refused_when_read() {
     let dir = tempfile::tempdir().unwrap();
-    let state = dir.path().join("state");
-    let (code, _, stderr) = run(
-        &["calibrate", "--state-dir", state.to_str().unwrap()],
-        Duration::from_secs(120),
-    );
-    assert_eq!(code, Some(0), "{stderr}");
+    let state = calibrated(dir.path());
     let good = std::fs::read_to_string(state.join("current.toml")).unwrap();
     assert!(
         good.contains("degree = "),
@@ -410,12 +416,7 @@ fn command_line_numbers_that_make_nan_or_infinity_are_refused_by_name() {
 #[test]
 fn scene_and_spectrum_values_beyond_any_light_are_refused_with_their_row() {
     let dir = tempfile::tempdir().unwrap();
-    let state = dir.path().join("state");
-    let (code, _, stderr) = run(
-        &["calibrate", "--state-dir", state.to_str().unwrap()],
-        Duration::from_secs(120),
-    );
-    assert_eq!(code, Some(0), "{stderr}");
+    let state = calibrated(dir.path());
     let profile = state.join("current.toml");
     let scene = write(dir.path(), "scene.csv", "X,Y,Z\n20,21,22\n1e300,1,1\n");
     let (code, stdout, stderr) = run(
@@ -475,12 +476,7 @@ fn scene_and_spectrum_values_beyond_any_light_are_refused_with_their_row() {
 #[test]
 fn an_image_past_the_address_space_limit_is_refused_not_aborted() {
     let dir = tempfile::tempdir().unwrap();
-    let state = dir.path().join("state");
-    let (code, _, stderr) = run(
-        &["calibrate", "--state-dir", state.to_str().unwrap()],
-        Duration::from_secs(120),
-    );
-    assert_eq!(code, Some(0), "{stderr}");
+    let state = calibrated(dir.path());
     // 2976 × 2976 XYZ, 106 MB.
     let image = dir.path().join("big.pfm");
     let (w, h) = (2976usize, 2976usize);

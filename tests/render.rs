@@ -1642,12 +1642,7 @@ fn a_scene_rendered_over_the_cores_keeps_its_order() {
 fn an_image_renders_to_the_same_codes_in_a_bounded_memory() {
     let dir = tempfile::tempdir().unwrap();
     let state = dir.path().join("state");
-    common::succeed(
-        common::chromacal()
-            .arg("calibrate")
-            .arg("--state-dir")
-            .arg(&state),
-    );
+    common::calibrate_default(&state);
     let profile = Profile::read(&state.join("current.toml")).unwrap();
     let crf = ColourReproduction::new(&profile.model).unwrap();
     // Colours in and out of the gamut, over the screen.

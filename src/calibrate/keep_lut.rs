@@ -11,8 +11,6 @@
 //! then loads.
 
 use std::fs::File;
-
-use chromacal_formats::durable::Lock;
 use std::path::PathBuf;
 use std::time::{Duration, SystemTime};
 
@@ -20,6 +18,7 @@ use crate::profile::Profile;
 use crate::profile::store::ProfileStore;
 use chromacal_display::x11::watch::Watch;
 use chromacal_display::x11::{GammaRamp, OutputInfo, OutputSelector, X11Error};
+use chromacal_formats::durable::Lock;
 use chromacal_formats::edid::Edid;
 
 /// How often the keeper looks for RandR events and a new current profile.

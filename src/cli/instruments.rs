@@ -4,7 +4,8 @@
 use super::shared::outln;
 use chromacal_instruments::argyll::driver::list_ports;
 use chromacal_instruments::argyll::transport::spotread_program;
-use chromacal_instruments::scan::{PortFinding, candidate_ports, scan};
+use chromacal_instruments::scan::{PortFinding, scan};
+use chromacal_instruments::serial::candidate_ports;
 
 use super::shared::Failure;
 

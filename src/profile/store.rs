@@ -14,14 +14,12 @@
 //! profile that passed the publishing limits.
 
 use std::fs;
-
-use chromacal_formats::durable::Lock;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use chromacal_formats::durable::write_atomic;
+use chromacal_formats::durable::{Lock, write_atomic};
 use chromacal_model::fit::stats::ErrorStats;
 
 /// Why the store could not do what was asked.

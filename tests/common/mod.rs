@@ -68,6 +68,12 @@ pub fn succeed(command: &mut std::process::Command) -> std::process::Output {
     out
 }
 
+/// Calibrate the simulated default into the state directory `state` (its profile is
+/// then `state/current.toml`).
+pub fn calibrate_default(state: &std::path::Path) {
+    succeed(chromacal().arg("calibrate").arg("--state-dir").arg(state));
+}
+
 /// The plan the fit's tests were written against, the default until the default
 /// became a sequential plan: fixed, 48 counted patches, 24 held out, a 5 × 5 grid.
 /// Under `[plan]`.

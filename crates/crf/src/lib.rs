@@ -495,8 +495,9 @@ impl<'a> ColourReproduction<'a> {
 
     /// The codes (0 … `top`) for `drive`, chosen as `choice` says to show the colour
     /// `mapped` (its L*a*b*) at `position`; what the display shows for them, and its
-    /// ΔE00 from `mapped`. Each channel's law is evaluated once for the code below and once for
-    /// the code above the drive, shared by the corners that use it.
+    /// ΔE00 from `mapped`. For the nearest codes each channel's law is evaluated once
+    /// for the code below and once for the code above the drive, shared by the corners
+    /// that use it.
     fn codes_for(
         &self,
         drive: Drive,
@@ -506,6 +507,14 @@ impl<'a> ColourReproduction<'a> {
         choice: CodeChoice,
     ) -> ([u32; 3], Xyz, f64) {
         let scaled = drive.map(|d| d.clamp(0.0, 1.0) * top);
+        let rounded = scaled.map(|v| v.round() as u32);
+        if choice == CodeChoice::Rounded {
+            let shown = self
+                .model
+                .forward(rounded.map(|c| c as f64 / top), position);
+            let error = delta_e_2000(mapped, &xyz_to_lab(&shown, &self.white));
+            return (rounded, shown, error);
+        }
         let gains = self.model.spatial.gains(position);
         let low = scaled.map(|v| v.floor() as u32);
         let high = scaled.map(|v| (v.ceil() as u32).min(top as u32));
@@ -531,12 +540,8 @@ impl<'a> ColourReproduction<'a> {
             let shown = self.model.light_above_black(&Vector3::from(e)) + self.model.black;
             (shown, xyz_to_lab(&shown, &self.white))
         };
-        let rounded = scaled.map(|v| v.round() as u32);
         let (rounded_shows, rounded_lab) = shows(rounded);
         let mut best = (rounded, rounded_shows, delta_e_2000(mapped, &rounded_lab));
-        if choice == CodeChoice::Rounded {
-            return best;
-        }
         for corner in 0..8 {
             let codes = [0, 1, 2].map(|c| {
                 if corner >> c & 1 == 1 {

@@ -178,9 +178,7 @@ pub fn render(
     // rendered pixels (a 2048² image in under 400 MB).
     if let (CodesOutput::File(path), Some((width, height)), false) =
         (&request.output, read.size, request.explain)
-        && path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+        && is_png(path)
     {
         let (codes, summary) = ColourReproduction::new(&reduced)
             .and_then(|crf| crf.render_codes(&read.scene, settings))
@@ -255,6 +253,12 @@ fn lay_out(read: &mut ReadScene, grid: &str, placement: &Placement) -> Result<()
     Ok(())
 }
 
+/// Codes to `path` go into a 16-bit PNG (by its extension), else a CSV.
+fn is_png(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+}
+
 /// Write the codes where they go; the CSV back when that is standard output.
 fn write_codes(
     output: &CodesOutput,
@@ -263,9 +267,7 @@ fn write_codes(
     bits: u32,
 ) -> Result<Option<Vec<u8>>, RenderError> {
     if let CodesOutput::File(path) = output
-        && path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+        && is_png(path)
     {
         let Some((width, height)) = read.size else {
             return Err(RenderError::from(

@@ -42,6 +42,7 @@ impl SpectralImage {
     /// samples before the next is read). All must have one size; their samples
     /// together may take at most half of [`render_budget`].
     pub fn read(dir: &Path) -> Result<SpectralImage, SceneError> {
+        let budget = render_budget();
         let entries = std::fs::read_dir(dir).map_err(|source| SceneError::Io {
             path: dir.to_path_buf(),
             source,
@@ -87,7 +88,7 @@ impl SpectralImage {
                     .len()
                     .saturating_mul(plane.xyz.len())
                     .saturating_mul(4);
-                if bytes > render_budget() / 2 {
+                if bytes > budget / 2 {
                     return Err(format_error(
                         dir,
                         format!(
@@ -96,7 +97,7 @@ impl SpectralImage {
                             plane.width,
                             plane.height,
                             bytes as f64 / 1e9,
-                            (render_budget() / 2) as f64 / 1e9
+                            (budget / 2) as f64 / 1e9
                         ),
                     ));
                 }

@@ -154,8 +154,6 @@ pub fn probe_port(path: &str) -> PortFinding {
     PortFinding::Silent
 }
 
-pub use super::serial::candidate_ports;
-
 /// Probe every port in parallel.
 pub fn scan(ports: &[String]) -> Vec<(String, PortFinding)> {
     let handles: Vec<_> = ports

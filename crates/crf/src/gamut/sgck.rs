@@ -32,6 +32,9 @@
 //! ranges are equal and the sigmoid has nothing to do; it acts where the display's
 //! range is the smaller (a dimmer corner, or a source whose black is deeper).
 
+use std::cell::RefCell;
+use std::rc::Rc;
+
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
@@ -234,32 +237,46 @@ struct HuePoint {
 /// once (each pixel's own, on a screen with a spatial map) gets the exact search, as
 /// building a table for one colour would cost thousands of searches.
 fn cusp(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<HuePoint> {
-    let table = CUSPS_KEPT.with(|kept| {
+    let (samples, table) = CUSPS_KEPT.with(|kept| {
         let mut kept = kept.borrow_mut();
         match kept.as_mut() {
-            Some((g, w, table)) if g == gamut && w == white => Some(
-                table
-                    .get_or_insert_with(|| std::rc::Rc::new(CuspTable::new(gamut, white)))
-                    .clone(),
-            ),
+            Some(k) if k.gamut == *gamut && k.white == *white => {
+                let samples = k.samples.clone();
+                let table = k
+                    .table
+                    .get_or_insert_with(|| Rc::new(CuspTable::new(gamut, white, &samples)))
+                    .clone();
+                (samples, Some(table))
+            }
             _ => {
-                *kept = Some((gamut.clone(), *white, None));
-                None
+                let samples = Rc::new(loop_samples(gamut, white));
+                *kept = Some(CuspsKept {
+                    gamut: gamut.clone(),
+                    white: *white,
+                    samples: samples.clone(),
+                    table: None,
+                });
+                (samples, None)
             }
         }
     });
     match table {
-        Some(table) => table.at(gamut, white, hue),
-        None => cusp_exact(gamut, white, hue).map(|found| found.point),
+        Some(table) => table.at(gamut, white, &samples, hue),
+        None => cusp_exact(gamut, white, &samples, hue).map(|found| found.point),
     }
 }
 
-/// The last gamut and white each thread asked `cusp` for, and its table once asked
-/// again.
-type CuspsKept = Option<(GamutAt, Xyz, Option<std::rc::Rc<CuspTable>>)>;
+/// What each thread keeps of the last gamut and white it asked `cusp` for: the edge
+/// loop's samples, and the table of cusps once that gamut is asked for again.
+struct CuspsKept {
+    gamut: GamutAt,
+    white: Xyz,
+    samples: Rc<Vec<(Lab, f64)>>,
+    table: Option<Rc<CuspTable>>,
+}
 
 thread_local! {
-    static CUSPS_KEPT: std::cell::RefCell<CuspsKept> = const { std::cell::RefCell::new(None) };
+    static CUSPS_KEPT: RefCell<Option<CuspsKept>> = const { RefCell::new(None) };
 }
 
 /// A cusp as found: the point, and the segment of the edge loop it lies in (0 … 6 ×
@@ -273,17 +290,15 @@ struct FoundCusp {
 /// The display's cusp at a hue: where the hue plane crosses the cube's edge loop
 /// red–yellow–green–cyan–blue–magenta (each of those edges has one channel at full
 /// drive and one at none: the upper faces meet the lower ones there, and there the
-/// chroma at a hue is largest); and the loop's segment it lies in.
-fn cusp_exact(gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<FoundCusp> {
+/// chroma at a hue is largest); and the loop's segment it lies in. `samples` are the
+/// loop's (`loop_samples`).
+fn cusp_exact(gamut: &GamutAt, white: &Xyz, samples: &[(Lab, f64)], hue: f64) -> Option<FoundCusp> {
     let at = |s: f64| -> Lab { edge_loop_lab(gamut, white, s) };
     // Signed hue difference in (−π, π].
     let wrap = |d: f64| {
         (d + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
     };
     let offset = |lab: &Lab| wrap(lab.b.atan2(lab.a) - hue);
-    // The loop's sample points and their hues are the same for every hue: made once
-    // for a gamut and white.
-    let samples = loop_samples(gamut, white);
     let mut best: Option<FoundCusp> = None;
     let n = 6 * LOOP_STEPS;
     for k in 0..n {
@@ -333,10 +348,10 @@ struct CuspTable {
 }
 
 impl CuspTable {
-    fn new(gamut: &GamutAt, white: &Xyz) -> CuspTable {
+    fn new(gamut: &GamutAt, white: &Xyz, samples: &[(Lab, f64)]) -> CuspTable {
         CuspTable {
             entries: (0..CUSP_HUES)
-                .map(|k| cusp_exact(gamut, white, Self::hue(k)))
+                .map(|k| cusp_exact(gamut, white, samples, Self::hue(k)))
                 .collect(),
         }
     }
@@ -346,7 +361,13 @@ impl CuspTable {
         -std::f64::consts::PI + std::f64::consts::TAU * k as f64 / CUSP_HUES as f64
     }
 
-    fn at(&self, gamut: &GamutAt, white: &Xyz, hue: f64) -> Option<HuePoint> {
+    fn at(
+        &self,
+        gamut: &GamutAt,
+        white: &Xyz,
+        samples: &[(Lab, f64)],
+        hue: f64,
+    ) -> Option<HuePoint> {
         let position = (hue + std::f64::consts::PI) / std::f64::consts::TAU * CUSP_HUES as f64;
         if !position.is_finite() {
             return None;
@@ -358,7 +379,7 @@ impl CuspTable {
                 l: a.point.l + t * (b.point.l - a.point.l),
                 c: a.point.c + t * (b.point.c - a.point.c),
             }),
-            _ => cusp_exact(gamut, white, hue).map(|found| found.point),
+            _ => cusp_exact(gamut, white, samples, hue).map(|found| found.point),
         }
     }
 }
@@ -392,31 +413,15 @@ fn edge_loop_lab(gamut: &GamutAt, white: &Xyz, s: f64) -> Lab {
 }
 
 /// The loop's samples `k / LOOP_STEPS` (k = 0 … 6·LOOP_STEPS) for `gamut` and `white`,
-/// each with its hue angle, kept for the last gamut and white each thread used.
-fn loop_samples(gamut: &GamutAt, white: &Xyz) -> std::rc::Rc<Vec<(Lab, f64)>> {
-    type Kept = Option<(GamutAt, Xyz, std::rc::Rc<Vec<(Lab, f64)>>)>;
-    thread_local! {
-        static KEPT: std::cell::RefCell<Kept> = const { std::cell::RefCell::new(None) };
-    }
-    KEPT.with(|kept| {
-        let mut kept = kept.borrow_mut();
-        if let Some((g, w, samples)) = kept.as_ref()
-            && g == gamut
-            && w == white
-        {
-            return samples.clone();
-        }
-        let samples = std::rc::Rc::new(
-            (0..=6 * LOOP_STEPS)
-                .map(|k| {
-                    let lab = edge_loop_lab(gamut, white, k as f64 / LOOP_STEPS as f64);
-                    (lab, lab.b.atan2(lab.a))
-                })
-                .collect::<Vec<_>>(),
-        );
-        *kept = Some((gamut.clone(), *white, samples.clone()));
-        samples
-    })
+/// each with its hue angle: the same for every hue, so made once for a gamut and white
+/// (`CUSPS_KEPT`).
+fn loop_samples(gamut: &GamutAt, white: &Xyz) -> Vec<(Lab, f64)> {
+    (0..=6 * LOOP_STEPS)
+        .map(|k| {
+            let lab = edge_loop_lab(gamut, white, k as f64 / LOOP_STEPS as f64);
+            (lab, lab.b.atan2(lab.a))
+        })
+        .collect()
 }
 
 /// SGCK (CIE 156:2004) of `xyz` from the `source` gamut into `gamut`, in CIELAB
@@ -670,12 +675,13 @@ mod tests {
     fn the_tabulated_cusp_is_the_exact_one() {
         let display = crate::gamut::tests::gamut();
         let white = display.white();
-        let table = CuspTable::new(&display, &white);
+        let samples = loop_samples(&display, &white);
+        let table = CuspTable::new(&display, &white, &samples);
         let (mut exact_lookups, mut worst) = (0, 0.0f64);
         for k in 0..20_000 {
             let hue = -std::f64::consts::PI + std::f64::consts::TAU * (k as f64 + 0.37) / 20_000.0;
-            let want = cusp_exact(&display, &white, hue).unwrap().point;
-            let got = table.at(&display, &white, hue).unwrap();
+            let want = cusp_exact(&display, &white, &samples, hue).unwrap().point;
+            let got = table.at(&display, &white, &samples, hue).unwrap();
             worst = worst
                 .max((got.l - want.l).abs())
                 .max((got.c - want.c).abs());
@@ -696,6 +702,7 @@ mod tests {
         let s = |i: usize| i as f64 / 32.0;
         let mut largest = 0.0f64;
         for target in [&display, &dimmer] {
+            let target_samples = loop_samples(target, &white);
             for source in [SgckSource::Srgb, SgckSource::Rec2020] {
                 let source = source.gamut(&white, &display.black()).unwrap();
                 for k in 0..33 * 33 * 33 {
@@ -709,7 +716,7 @@ mod tests {
                         &source,
                         &xyz,
                         &white,
-                        |hue| cusp_exact(target, &white, hue).map(|found| found.point),
+                        |hue| cusp_exact(target, &white, &target_samples, hue).map(|f| f.point),
                         BISECTION_STEPS,
                     );
                     let de = chromacal_model::fit::validate::delta_e00_xyz(&fast, &exact, &white);
@@ -729,11 +736,13 @@ mod tests {
     fn only_a_gamut_asked_for_again_gets_a_table() {
         let display = crate::gamut::tests::gamut();
         let white = display.white();
-        let has_table = || CUSPS_KEPT.with(|k| k.borrow().as_ref().is_some_and(|k| k.2.is_some()));
+        let has_table =
+            || CUSPS_KEPT.with(|k| k.borrow().as_ref().is_some_and(|k| k.table.is_some()));
         for scale in [0.9, 0.8, 0.7] {
             let gamut = GamutAt::new(display.black(), display.primaries * scale).unwrap();
             let hue = 0.7;
-            let exact = cusp_exact(&gamut, &white, hue).map(|f| f.point);
+            let exact =
+                cusp_exact(&gamut, &white, &loop_samples(&gamut, &white), hue).map(|f| f.point);
             assert_eq!(cusp(&gamut, &white, hue), exact);
             assert!(!has_table(), "a table for a gamut asked for once");
         }

@@ -113,7 +113,7 @@ impl OutputInfo {
 
 /// The kernel's EDID for each connected output the driver gave none (`drm`), matched
 /// by the output's name.
-pub fn with_kernel_edids(outputs: &mut [OutputInfo], sysfs_root: &std::path::Path) {
+fn with_kernel_edids(outputs: &mut [OutputInfo], sysfs_root: &std::path::Path) {
     if outputs.iter().all(|o| o.edid.is_some() || !o.connected) {
         return;
     }
