@@ -117,6 +117,41 @@ pub fn white_anchor_line(w: &WhiteAnchor) -> String {
     )
 }
 
+/// For a profile of an HDR signal: the held-out error in ΔE ITP (ITU-R BT.2124, on
+/// absolute light, where ΔE00's lightness relative to the white says little), and the
+/// peak and black the model gives.
+pub fn hdr_summary(profile: &Profile) -> String {
+    let Some(signal) = profile.provenance.signal.filter(|s| s.is_hdr()) else {
+        return String::new();
+    };
+    let mut out = format!(
+        "HDR signal: {}; model peak {:.1} cd/m², black {:.4} cd/m²\n",
+        signal.describe(),
+        profile.model.white().y,
+        profile.model.black.y
+    );
+    match held_out_itp(&profile.report.held_out_patches) {
+        Some(s) => {
+            let _ = writeln!(
+                out,
+                "held-out ΔE ITP (BT.2124, patches in no fit): {}",
+                stats_line(&s)
+            );
+        }
+        None => out.push_str("held-out ΔE ITP: no held-out patches\n"),
+    }
+    out
+}
+
+/// ΔE ITP (BT.2124) of each held-out patch, measured against predicted, in cd/m².
+pub fn held_out_itp(patches: &[chromacal_model::fit::validate::PatchError]) -> Option<ErrorStats> {
+    let values: Vec<f64> = patches
+        .iter()
+        .map(|p| chromacal_color::ictcp::delta_e_itp(&p.measured, &p.predicted))
+        .collect();
+    ErrorStats::of(&values)
+}
+
 pub fn fit_summary(report: &FitReport) -> String {
     let mut out = String::new();
     let rows: Vec<Vec<String>> = report
@@ -554,6 +589,7 @@ pub fn describe_profile(profile: &Profile) -> String {
     }
     let _ = writeln!(out);
     out.push_str(&fit_summary(&profile.report));
+    out.push_str(&hdr_summary(profile));
     if let Some(c) = &profile.calibration {
         out.push_str(&calibration_summary(c));
     }
@@ -699,6 +735,7 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
     out += &edid_summary(&outcome.profile);
     out += &correction_summary(&outcome.profile);
     out += &fit_summary(&outcome.fitted.report);
+    out += &hdr_summary(&outcome.profile);
     if let Some(c) = &outcome.profile.calibration {
         out += &calibration_summary(c);
     }

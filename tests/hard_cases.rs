@@ -40,6 +40,7 @@ fn profile_of(fit: &chromacal_model::fit::FittedModel) -> Profile {
             edid: None,
             correction: None,
             uncorrected: None,
+            signal: None,
         },
         report: fit.report.clone(),
         calibration: None,

@@ -460,6 +460,8 @@ mod tests {
             white: "purple".into(),
             tone: "srgb".into(),
             luminance: None,
+            peak: None,
+            mastering_peak: None,
             refine_passes: 2,
             levels: 9,
             bit_depth: None,
@@ -476,5 +478,41 @@ mod tests {
             ..config
         };
         assert!(config.check().unwrap_err().contains("target.levels"));
+        // HDR: the peak is the luminance by its other name (one of the two), and a
+        // mastering peak is for PQ only, within the PQ's range.
+        let pq = TargetConfig {
+            levels: 9,
+            tone: "pq".into(),
+            peak: Some(600.0),
+            mastering_peak: Some(4000.0),
+            ..config
+        };
+        assert!(pq.check().is_ok());
+        assert_eq!(pq.target().unwrap().luminance, Some(600.0));
+        assert_eq!(
+            pq.target().unwrap().tone,
+            chromacal_model::target::ToneCurve::Pq {
+                mastering_peak: Some(4000.0)
+            }
+        );
+        let both = TargetConfig {
+            luminance: Some(500.0),
+            ..pq.clone()
+        };
+        assert!(both.check().unwrap_err().contains("peak or luminance"));
+        let sdr = TargetConfig {
+            tone: "srgb".into(),
+            ..pq.clone()
+        };
+        assert!(
+            sdr.check()
+                .unwrap_err()
+                .contains("mastering_peak is for tone")
+        );
+        let dim = TargetConfig {
+            mastering_peak: Some(50.0),
+            ..pq
+        };
+        assert!(dim.check().unwrap_err().contains("100 to 10000"));
     }
 }

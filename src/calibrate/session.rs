@@ -675,6 +675,7 @@ pub async fn finish_run(
                 .and_then(|bytes| chromacal_formats::edid::Edid::parse(bytes).ok()),
             correction: None,
             uncorrected: None,
+            signal: config.plan.signal.filter(|s| s.is_hdr()),
         },
         report: fitted.report.clone(),
         calibration,

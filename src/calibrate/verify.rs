@@ -266,6 +266,7 @@ fn said_of_the_instrument(
         edid: None,
         correction: None,
         uncorrected: None,
+        signal: None,
     };
     provenance.set_correction(correction);
     report.instrument = Some(instrument.name);

@@ -45,7 +45,7 @@ pub struct EmulateArgs {
     /// pr650, pr655, pr670, k10a, specbos1211, ls100, ls110, cs100a, colorcal2.
     #[arg(long)]
     pub instrument: String,
-    /// Virtual monitor preset (crt, lcd) [default: the config's monitor].
+    /// Virtual monitor preset (crt, lcd, hdr-oled, hdr-lcd) [default: the config's monitor].
     #[arg(long)]
     pub monitor: Option<String>,
     /// Take [monitor] and [instrument.simulated] (noise, seed) from this config

@@ -113,6 +113,7 @@ fn fit(
             edid: None,
             correction: None,
             uncorrected: None,
+            signal: None,
         },
         report: fitted.report.clone(),
         calibration: None,

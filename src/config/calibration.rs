@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use chromacal_instruments::Reading;
-use chromacal_model::target::{Target, TargetError, parse_tone, parse_white};
+use chromacal_model::target::{Target, TargetError, ToneCurve, parse_tone, parse_white};
 
 /// `[display.stability]`: after the settle time, read again until two readings in a
 /// row agree, for displays whose settle time is not known well enough (slow LCD
@@ -100,11 +100,17 @@ pub struct TargetConfig {
     /// native, D50, D55, D65, D75, a temperature such as "6500K", or "x,y".
     #[serde(default = "native")]
     pub white: String,
-    /// "gamma:2.2", "srgb", "bt1886" or "lstar".
+    /// "gamma:2.2", "srgb", "bt1886", "lstar", or for HDR signals "pq" and "hlg".
     #[serde(default = "gamma22")]
     pub tone: String,
     /// White luminance, cd/m² (unset: the most the white point allows).
     pub luminance: Option<f64>,
+    /// For `tone = "pq"` or `"hlg"`: the display's peak, cd/m² (the same as
+    /// `luminance`, by the name HDR uses; give one of the two).
+    pub peak: Option<f64>,
+    /// For `tone = "pq"`: roll the signal off from this mastering peak (cd/m²) to
+    /// the display's peak by BT.2390's EETF instead of clipping at the peak.
+    pub mastering_peak: Option<f64>,
     /// Measured correction passes (0: the model's curves as they are).
     #[serde(default = "two")]
     pub refine_passes: usize,
@@ -141,15 +147,38 @@ fn nine() -> usize {
 
 impl TargetConfig {
     pub fn target(&self) -> Result<Target, TargetError> {
+        let mut tone = parse_tone(&self.tone)?;
+        if let (ToneCurve::Pq { mastering_peak }, Some(m)) = (&mut tone, self.mastering_peak) {
+            *mastering_peak = Some(m);
+        }
         Ok(Target {
             white: parse_white(&self.white)?,
-            tone: parse_tone(&self.tone)?,
-            luminance: self.luminance,
+            tone,
+            luminance: self.luminance.or(self.peak),
         })
     }
 
     pub fn check(&self) -> Result<(), String> {
-        self.target().map_err(|e| format!("target: {e}"))?;
+        let target = self.target().map_err(|e| format!("target: {e}"))?;
+        if self.peak.is_some() && self.luminance.is_some() {
+            return Err("target: give peak or luminance, not both (they are the same)".into());
+        }
+        if self.peak.is_some_and(|l| !(l > 0.0 && l.is_finite())) {
+            return Err("target.peak must be a positive number".into());
+        }
+        if let Some(m) = self.mastering_peak {
+            if !matches!(target.tone, ToneCurve::Pq { .. }) {
+                return Err(format!(
+                    "target.mastering_peak is for tone = \"pq\", not \"{}\"",
+                    self.tone
+                ));
+            }
+            if !(100.0..=10_000.0).contains(&m) {
+                return Err(format!(
+                    "target.mastering_peak must be 100 to 10000 cd/m², not {m}"
+                ));
+            }
+        }
         if !(3..=33).contains(&self.levels) {
             return Err("target.levels must be 3 to 33".into());
         }

@@ -28,7 +28,9 @@ use chromacal_instruments::driver::DriverOptions;
 use chromacal_instruments::simulated::SimulatedInstrumentSpec;
 use chromacal_model::fit::FitOptions;
 use chromacal_model::fit::stats::ErrorStats;
-use chromacal_model::plan::PlanConfig;
+use chromacal_model::plan::{PlanConfig, Signal};
+use chromacal_model::target::ToneCurve;
+use chromacal_model::transfer::LawKind;
 use chromacal_sim::presets::MonitorConfig;
 
 /// The default configuration, as shipped.
@@ -353,7 +355,8 @@ pub fn digest(text: &str) -> String {
 
 /// Parse configuration text; `origin` names it in errors.
 pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
-    let config = parse_config_unchecked(text, origin)?;
+    let mut config = parse_config_unchecked(text, origin)?;
+    hdr_defaults(&mut config);
     check_config(&config).map_err(|message| ConfigError::Invalid {
         path: origin.into(),
         message,
@@ -375,6 +378,35 @@ pub fn parse_config_unchecked(text: &str, origin: &str) -> Result<Config, Config
         }
     })?;
     Ok(config)
+}
+
+/// What an HDR signal asks of the rest of a run, where the config does not say: the
+/// plan's signal is the target tone's (`pq`, `hlg`); a PQ display's law is among the
+/// candidates (when the laws are the default ones); and each patch is read until two
+/// readings agree (up to 10), because a display's brightness limiter takes seconds to
+/// recover from a bright screen (the surround check's white, a uniformity patch).
+fn hdr_defaults(config: &mut Config) {
+    let tone = config
+        .target
+        .as_ref()
+        .and_then(|t| chromacal_model::target::parse_tone(&t.tone).ok());
+    if config.plan.signal.is_none() {
+        config.plan.signal = match tone {
+            Some(ToneCurve::Pq { .. }) => Some(Signal::Pq),
+            Some(ToneCurve::Hlg { .. }) => Some(Signal::Hlg),
+            _ => None,
+        };
+    }
+    let signal = config.plan.signal.unwrap_or_default();
+    if signal == Signal::Pq && config.fit.laws == LawKind::ALL {
+        config.fit.laws.push(LawKind::Pq);
+    }
+    if signal.is_hdr() && config.display.stability.is_none() {
+        config.display.stability = Some(Stability {
+            max_reads: 10,
+            ..Stability::default()
+        });
+    }
 }
 
 /// The rules that tie one key to another (the ranges of single keys are in `ranges`).

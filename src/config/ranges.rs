@@ -114,6 +114,8 @@ pub const RANGES: &[Range] = &[
     r("warmup.max_s", 0.0, 86_400.0),
     // [target]
     r("target.luminance", 0.01, 100_000.0),
+    r("target.peak", 0.01, 100_000.0),
+    r("target.mastering_peak", 100.0, 10_000.0),
     r("target.refine_passes", 0.0, 5.0),
     r("target.levels", 3.0, 33.0),
     r("target.bit_depth", 8.0, 16.0),
@@ -122,11 +124,12 @@ pub const RANGES: &[Range] = &[
 ];
 
 /// Keys whose numbers are checked by their own type, not by a range: the virtual
-/// monitor's transfer laws (each law checks its parameters: finite, monotone).
+/// monitor's transfer laws (each law checks its parameters: finite, monotone) and its
+/// HDR behaviour (`HdrBehaviour::check`, against the monitor's peak).
 ///
 /// A `[[device]]` entry and an `[instruments.NAME]` are checked as parts of each
 /// device's own config (`devices::device_configs`), where every key has its place.
-const CHECKED_ELSEWHERE: &[&str] = &["monitor.laws", "device[]", "instruments."];
+const CHECKED_ELSEWHERE: &[&str] = &["monitor.laws", "monitor.hdr", "device[]", "instruments."];
 
 /// Refuse any number of `config` outside its key's range, or whose key has none.
 pub fn check_ranges(config: &Config) -> Result<(), String> {

@@ -26,7 +26,9 @@ use chromacal_color::spaces::{Xyy, xyy_to_xyz, xyz_to_srgb8, xyz_to_uv_prime};
 use chromacal_color::spectrum::Observer;
 use chromacal_color::{UvPrime, Xyz};
 use chromacal_model::measurement::{MeasurementSet, Role};
-use chromacal_model::transfer::{Cowan, GainOffsetGamma, LawKind, Power, ThreeTerm, TransferLaw};
+use chromacal_model::transfer::{
+    Cowan, GainOffsetGamma, LawKind, Power, Pq, ThreeTerm, TransferLaw,
+};
 use chromacal_model::{MonitorModel, ScreenPosition};
 
 use figures::{Chromaticities, Curve, FigureError, GridPoint, TimeSeries};
@@ -181,6 +183,11 @@ pub fn candidate_curve(
             b: get("B")?,
             c: get("C")?,
             toe,
+        }),
+        LawKind::Pq => TransferLaw::Pq(Pq {
+            peak: get("peak")?,
+            rolloff_from: get("rolloff_from")?,
+            exponent: get("exponent")?,
         }),
         LawKind::Table => return None,
     };

@@ -84,6 +84,9 @@ pub struct Provenance {
     /// Said when a colorimeter was used without a correction: what that costs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncorrected: Option<String>,
+    /// The signal the run's codes were (PQ, HLG), for an HDR run; absent for SDR.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub signal: Option<chromacal_model::plan::Signal>,
 }
 
 impl Provenance {

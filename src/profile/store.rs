@@ -503,6 +503,7 @@ mod tests {
                 edid: None,
                 correction: None,
                 uncorrected: None,
+                signal: None,
             },
             report: fitted.report.clone(),
             calibration: None,

@@ -9,6 +9,7 @@
 pub mod adaptation;
 pub mod difference;
 pub mod gamut;
+pub mod hdr;
 pub mod ictcp;
 pub mod linalg;
 pub mod spaces;

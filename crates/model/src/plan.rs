@@ -50,6 +50,39 @@ pub struct PlanConfig {
     pub seed_budget: usize,
     /// A sequential run stops when its estimated held-out mean ΔE00 is at most this.
     pub target_de00: f64,
+    /// The signal the codes are: SDR (the display's own response), or an HDR signal
+    /// the display decodes (PQ or HLG, BT.2020 primaries). Unset: the target's tone
+    /// says (`pq` or `hlg`), else SDR. Kept in the journal and the profile.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub signal: Option<Signal>,
+}
+
+/// What the codes sent to the display mean.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Signal {
+    /// The display's own response (an SDR mode).
+    #[default]
+    Sdr,
+    /// SMPTE ST 2084 (BT.2100 PQ) with BT.2020 primaries: absolute luminance.
+    Pq,
+    /// BT.2100 Hybrid Log-Gamma with BT.2020 primaries.
+    Hlg,
+}
+
+impl Signal {
+    pub fn is_hdr(self) -> bool {
+        self != Signal::Sdr
+    }
+
+    /// How the signal is named where a run is described.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Signal::Sdr => "SDR",
+            Signal::Pq => "PQ (SMPTE ST 2084), BT.2020 primaries",
+            Signal::Hlg => "HLG (BT.2100), BT.2020 primaries",
+        }
+    }
 }
 
 /// How the patches of a run are chosen.
@@ -82,6 +115,7 @@ impl Default for PlanConfig {
             strategy: Strategy::Sequential,
             seed_budget: 20,
             target_de00: 0.2,
+            signal: None,
         }
     }
 }
@@ -146,6 +180,9 @@ pub struct Plan {
     /// patches beyond it, numbered on from its end (`calibrate::sequential`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sequential: Option<SequentialLimits>,
+    /// The HDR signal the codes are (PQ, HLG); absent for SDR.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub signal: Option<Signal>,
 }
 
 /// Drive levels for `n` ramp steps, evenly spaced in CIE L* of a nominal
@@ -286,6 +323,7 @@ pub fn make_verification_plan(config: &PlanConfig, n: usize) -> Result<Plan, Pla
     let patches = numbered(patches);
     let verification = patches.len();
     Ok(Plan {
+        signal: None,
         sequential: None,
         patches,
         budget: BudgetBreakdown {
@@ -327,6 +365,7 @@ pub fn make_uniformity_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
     }
     let references = patches.len() - uniformity;
     Ok(Plan {
+        signal: None,
         sequential: None,
         patches: numbered(patches),
         budget: BudgetBreakdown {
@@ -345,6 +384,12 @@ pub fn make_uniformity_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
 /// Build the patch sequence for `config`: all of it for a fixed plan, the seed plan
 /// for a sequential one.
 pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
+    let mut plan = make_plan_of_strategy(config)?;
+    plan.signal = config.signal.filter(|s| s.is_hdr());
+    Ok(plan)
+}
+
+fn make_plan_of_strategy(config: &PlanConfig) -> Result<Plan, PlanError> {
     match config.strategy {
         Strategy::Fixed => make_fixed_plan(config),
         Strategy::Sequential => {
@@ -502,6 +547,7 @@ fn make_fixed_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
         });
     }
     Ok(Plan {
+        signal: None,
         sequential: None,
         patches,
         budget: BudgetBreakdown {

@@ -17,6 +17,8 @@ use serde::{Deserialize, Serialize};
 
 use super::monitor::MonitorModel;
 use super::spatial::ScreenPosition;
+use chromacal_color::hdr::{bt2390_eetf, hlg_relative_luminance, hlg_system_gamma};
+use chromacal_color::ictcp::pq_eotf;
 use chromacal_color::{Xyz, delta_e_2000, xyz_to_lab};
 
 /// Rows of the curves: what `.cal` files and `vcgt` tags hold (inputs i/255).
@@ -46,6 +48,20 @@ pub enum ToneCurve {
     Bt1886,
     /// Equal steps of CIE L* from the black's L* to 100.
     LStar,
+    /// SMPTE ST 2084 (the PQ of BT.2100): input x asks for the absolute luminance
+    /// PQ(x) cd/m², so the target's white luminance is the display's peak. Above the
+    /// peak the signal is clipped, or, with a mastering peak, rolled off by BT.2390's
+    /// EETF from that peak to the display's (which also lifts the bottom to its black).
+    Pq {
+        /// cd/m² of the display the signal was mastered on (None: clip at the peak).
+        mastering_peak: Option<f64>,
+    },
+    /// BT.2100 Hybrid Log-Gamma: f(x) = OETF⁻¹(x)^γ with the system gamma γ of the
+    /// display's white luminance and the room's (BT.2100 Table 5 note 5f, BT.2390 §6.2).
+    Hlg {
+        /// Luminance of the room's surround, cd/m² (BT.2100's reference is 5).
+        ambient: f64,
+    },
 }
 
 /// What the curves should make of the display.
@@ -143,19 +159,45 @@ pub fn parse_white(text: &str) -> Result<WhiteTarget, TargetError> {
     Err(bad())
 }
 
-/// Parse a tone curve: `gamma:2.2` (or just `2.2`), `srgb`, `bt1886`, `lstar`.
+/// Parse a tone curve: `gamma:2.2` (or just `2.2`), `srgb`, `bt1886`, `lstar`, `pq`
+/// (clipped at the peak), `pq:bt2390:4000` (rolled off from a 4,000 cd/m² master),
+/// `hlg` (a 5 cd/m² room) or `hlg:AMBIENT`.
 pub fn parse_tone(text: &str) -> Result<ToneCurve, TargetError> {
     let bad = || TargetError::Parse {
         what: "tone curve",
         text: text.into(),
-        expected: "gamma:G (G from 1 to 4), srgb, bt1886 or lstar",
+        expected: "gamma:G (G from 1 to 4), srgb, bt1886, lstar, pq, pq:bt2390:MASTERING_PEAK (cd/m², 100 to 10000), hlg or hlg:AMBIENT (cd/m², 0.01 to 1000)",
     };
     let t = text.trim().to_ascii_lowercase();
     match t.as_str() {
         "srgb" => return Ok(ToneCurve::Srgb),
         "bt1886" | "bt.1886" => return Ok(ToneCurve::Bt1886),
         "lstar" | "l*" => return Ok(ToneCurve::LStar),
+        "pq" | "st2084" | "pq:clip" => {
+            return Ok(ToneCurve::Pq {
+                mastering_peak: None,
+            });
+        }
+        "hlg" => return Ok(ToneCurve::Hlg { ambient: 5.0 }),
         _ => {}
+    }
+    if let Some(peak) = t.strip_prefix("pq:bt2390:") {
+        let peak: f64 = peak.trim().parse().map_err(|_| bad())?;
+        return if (100.0..=10_000.0).contains(&peak) {
+            Ok(ToneCurve::Pq {
+                mastering_peak: Some(peak),
+            })
+        } else {
+            Err(bad())
+        };
+    }
+    if let Some(ambient) = t.strip_prefix("hlg:") {
+        let ambient: f64 = ambient.trim().parse().map_err(|_| bad())?;
+        return if (0.01..=1000.0).contains(&ambient) {
+            Ok(ToneCurve::Hlg { ambient })
+        } else {
+            Err(bad())
+        };
     }
     let g: f64 = t
         .strip_prefix("gamma:")
@@ -228,7 +270,23 @@ impl ToneCurve {
                 let y = white * lstar_inverse(lb + x * (100.0 - lb));
                 (y - black) / (white - black)
             }
+            ToneCurve::Pq { mastering_peak } => {
+                let y = match mastering_peak {
+                    None => pq_eotf(x).min(white),
+                    Some(m) => bt2390_eetf(x, m, white, black.max(0.0)),
+                };
+                ((y - black) / (white - black)).clamp(0.0, 1.0)
+            }
+            ToneCurve::Hlg { ambient } => {
+                hlg_relative_luminance(x, hlg_system_gamma(white, ambient))
+            }
         }
+    }
+
+    /// Whether the curve asks for absolute luminance (a PQ signal) or is relative to
+    /// the white (every other): what a report plots on a log scale in cd/m².
+    pub fn is_hdr(&self) -> bool {
+        matches!(self, ToneCurve::Pq { .. } | ToneCurve::Hlg { .. })
     }
 
     pub fn describe(&self) -> String {
@@ -237,6 +295,13 @@ impl ToneCurve {
             ToneCurve::Srgb => "sRGB".into(),
             ToneCurve::Bt1886 => "BT.1886".into(),
             ToneCurve::LStar => "L*".into(),
+            ToneCurve::Pq {
+                mastering_peak: None,
+            } => "PQ (ST 2084, clipped at the peak)".into(),
+            ToneCurve::Pq {
+                mastering_peak: Some(m),
+            } => format!("PQ (ST 2084, BT.2390 roll-off from {m} cd/m²)"),
+            ToneCurve::Hlg { ambient } => format!("HLG (BT.2100, {ambient} cd/m² room)"),
         }
     }
 }
@@ -682,6 +747,24 @@ mod tests {
         assert_eq!(parse_tone("gamma:2.4").unwrap(), ToneCurve::Power(2.4));
         assert_eq!(parse_tone("bt1886").unwrap(), ToneCurve::Bt1886);
         assert!(parse_tone("gamma:9").is_err());
+        assert_eq!(
+            parse_tone("PQ").unwrap(),
+            ToneCurve::Pq {
+                mastering_peak: None
+            }
+        );
+        assert_eq!(
+            parse_tone("pq:bt2390:4000").unwrap(),
+            ToneCurve::Pq {
+                mastering_peak: Some(4000.0)
+            }
+        );
+        assert_eq!(
+            parse_tone("hlg:10").unwrap(),
+            ToneCurve::Hlg { ambient: 10.0 }
+        );
+        assert!(parse_tone("pq:bt2390:50").is_err());
+        assert!(parse_tone("hlg:-1").is_err());
         // D50 on the daylight locus is within 0.0005 of its tabulated x, y.
         let WhiteTarget::Daylight(k) = parse_white("D50").unwrap() else {
             unreachable!()
@@ -693,6 +776,35 @@ mod tests {
         );
     }
 
+    /// PQ asks for absolute light: 100 cd/m² at code 0.5081 whatever the peak, the
+    /// peak from there up when clipping, and BT.2390's roll-off below the peak when
+    /// mastered brighter. HLG is relative, with the system gamma of the peak.
+    #[test]
+    fn hdr_tones_ask_for_the_bt2100_light() {
+        let pq = ToneCurve::Pq {
+            mastering_peak: None,
+        };
+        let (black, peak) = (0.01, 600.0);
+        let at = |tone: ToneCurve, x: f64| target_luminance(tone, x, black, peak);
+        assert!((at(pq, 0.5081) / 100.0 - 1.0).abs() < 1e-3);
+        assert!((at(pq, 0.9) - peak).abs() < 1e-9);
+        // Below the black the target is the black.
+        assert!((at(pq, 0.01) - black).abs() < 1e-12);
+        let rolled = ToneCurve::Pq {
+            mastering_peak: Some(4000.0),
+        };
+        let knee = chromacal_color::ictcp::pq_inverse_eotf(550.0);
+        assert!(at(rolled, knee) < 550.0 && at(rolled, knee) > 400.0);
+        assert!((at(rolled, 0.5081) / 100.0 - 1.0).abs() < 0.01);
+        let hlg = ToneCurve::Hlg { ambient: 5.0 };
+        let y = hlg.relative(0.5, 0.0, 1000.0);
+        assert!((y - (1.0f64 / 12.0).powf(1.2)).abs() < 1e-7, "{y}");
+        assert!(
+            hlg.relative(0.5, 0.0, 2000.0) < y,
+            "a brighter peak, a higher gamma"
+        );
+    }
+
     #[test]
     fn tone_curves_start_at_black_and_end_at_white() {
         for tone in [
@@ -700,6 +812,13 @@ mod tests {
             ToneCurve::Srgb,
             ToneCurve::Bt1886,
             ToneCurve::LStar,
+            ToneCurve::Pq {
+                mastering_peak: None,
+            },
+            ToneCurve::Pq {
+                mastering_peak: Some(1000.0),
+            },
+            ToneCurve::Hlg { ambient: 5.0 },
         ] {
             assert!(tone.relative(0.0, 0.1, 100.0).abs() < 1e-12, "{tone:?}");
             assert!(

@@ -16,6 +16,8 @@
 //! whose turning point lies between the toe and full drive is not monotone where it is
 //! used; [`TransferLaw::monotonicity`] finds it and the fitting refuses to publish it.
 
+use chromacal_color::hdr::bt2390_eetf;
+use chromacal_color::ictcp::{PQ_PEAK, pq_eotf, pq_inverse_eotf};
 use serde::{Deserialize, Serialize};
 
 /// Why a law cannot be used as a monotone map from drive to excitation.
@@ -209,6 +211,65 @@ impl GainOffsetGamma {
     }
 }
 
+/// A display in its HDR mode decoding a PQ signal (SMPTE ST 2084): the channel's
+/// light is the PQ's absolute luminance L(v), clipped at the display's `peak` or
+/// rolled off to it from `rolloff_from` by BT.2390's EETF, and E = (L(v) / peak)^a,
+/// a = 1 when the display tracks the PQ exactly (the panel's departure from the gamma
+/// its processing assumes shows as a ≠ 1). Light is absolute here: E reaches 1 at
+/// the signal of `rolloff_from` (or of `peak`, clipping) and stays there.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Pq {
+    /// cd/m² at full excitation.
+    pub peak: f64,
+    /// cd/m² of the master the roll-off starts from (equal to `peak`: a clip).
+    pub rolloff_from: f64,
+    /// a: the tracking exponent.
+    pub exponent: f64,
+}
+
+impl Pq {
+    /// L(v) / peak in [0, 1].
+    fn relative_light(&self, v: f64) -> f64 {
+        let light = if self.rolloff_from > self.peak {
+            bt2390_eetf(v.clamp(0.0, 1.0), self.rolloff_from, self.peak, 0.0)
+        } else {
+            pq_eotf(v).min(self.peak)
+        };
+        (light / self.peak).clamp(0.0, 1.0)
+    }
+
+    pub fn excitation(&self, v: f64) -> f64 {
+        self.relative_light(v).powf(self.exponent)
+    }
+
+    /// The smallest drive of excitation `e`: the PQ's inverse below the roll-off's knee,
+    /// bisection on the EETF above it.
+    pub fn drive(&self, e: f64) -> f64 {
+        if e <= 0.0 {
+            return 0.0;
+        }
+        let top = pq_inverse_eotf(self.rolloff_from.max(self.peak));
+        if e >= 1.0 {
+            return top;
+        }
+        let want = e.powf(1.0 / self.exponent);
+        let exact = pq_inverse_eotf(want * self.peak);
+        if self.rolloff_from <= self.peak || (self.relative_light(exact) - want).abs() < 1e-12 {
+            return exact;
+        }
+        let (mut lo, mut hi) = (0.0, top);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if self.relative_light(mid) < want {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi
+    }
+}
+
 /// Monotone piecewise-cubic interpolation of a measured ramp (Fritsch & Carlson 1980,
 /// with the end conditions of Fritsch & Butland 1984 as in SciPy's PCHIP). The knots
 /// start at (0, 0) and their excitations never decrease, so the curve never does.
@@ -374,6 +435,8 @@ pub enum LawKind {
     Cowan,
     ThreeTerm,
     Table,
+    /// Tried only for a display sent PQ signals (not in `ALL`).
+    Pq,
 }
 
 impl LawKind {
@@ -392,6 +455,7 @@ impl LawKind {
             LawKind::Cowan => "cowan",
             LawKind::ThreeTerm => "three-term",
             LawKind::Table => "table",
+            LawKind::Pq => "pq",
         }
     }
 
@@ -400,7 +464,7 @@ impl LawKind {
     pub fn parameter_count(self, levels: usize) -> usize {
         match self {
             LawKind::Power => 1,
-            LawKind::GainOffsetGamma | LawKind::Cowan => 2,
+            LawKind::GainOffsetGamma | LawKind::Cowan | LawKind::Pq => 2,
             LawKind::ThreeTerm => 3,
             LawKind::Table => levels,
         }
@@ -422,6 +486,7 @@ pub enum TransferLaw {
     ThreeTerm(ThreeTerm),
     GainOffsetGamma(GainOffsetGamma),
     Table(Table),
+    Pq(Pq),
 }
 
 impl TransferLaw {
@@ -432,6 +497,7 @@ impl TransferLaw {
             TransferLaw::ThreeTerm(_) => LawKind::ThreeTerm,
             TransferLaw::GainOffsetGamma(_) => LawKind::GainOffsetGamma,
             TransferLaw::Table(_) => LawKind::Table,
+            TransferLaw::Pq(_) => LawKind::Pq,
         }
     }
 
@@ -443,6 +509,7 @@ impl TransferLaw {
             TransferLaw::ThreeTerm(l) => l.excitation(v),
             TransferLaw::GainOffsetGamma(l) => l.excitation(v),
             TransferLaw::Table(l) => l.excitation(v),
+            TransferLaw::Pq(l) => l.excitation(v),
         }
     }
 
@@ -455,6 +522,7 @@ impl TransferLaw {
             TransferLaw::ThreeTerm(l) => l.drive(e),
             TransferLaw::GainOffsetGamma(l) => l.drive(e),
             TransferLaw::Table(l) => l.drive(e),
+            TransferLaw::Pq(l) => l.drive(e),
         }
     }
 
@@ -473,6 +541,11 @@ impl TransferLaw {
                 vec![("gain", l.gain), ("gamma", l.gamma), ("cutoff", l.cutoff())]
             }
             TransferLaw::Table(l) => vec![("knots", l.drive.len() as f64)],
+            TransferLaw::Pq(l) => vec![
+                ("peak", l.peak),
+                ("rolloff_from", l.rolloff_from),
+                ("exponent", l.exponent),
+            ],
         }
     }
 
@@ -498,6 +571,19 @@ impl TransferLaw {
             TransferLaw::Cowan(l) => log_law_monotonicity("cowan", l.core()),
             TransferLaw::ThreeTerm(l) => log_law_monotonicity("three-term", l.core()),
             TransferLaw::Table(l) => Table::new(l.drive.clone(), l.excitation.clone()).map(|_| ()),
+            TransferLaw::Pq(l)
+                if !(l.peak > 0.0
+                    && l.peak <= PQ_PEAK
+                    && l.rolloff_from >= l.peak
+                    && l.rolloff_from <= PQ_PEAK
+                    && l.exponent > 0.0
+                    && l.exponent.is_finite()) =>
+            {
+                invalid(
+                    "pq",
+                    "peak must be in (0, 10000], rolloff_from from the peak to 10000, exponent positive",
+                )
+            }
             _ => Ok(()),
         }
     }
@@ -548,7 +634,48 @@ mod tests {
                 )
                 .unwrap(),
             ),
+            TransferLaw::Pq(Pq {
+                peak: 700.0,
+                rolloff_from: 700.0,
+                exponent: 1.03,
+            }),
+            TransferLaw::Pq(Pq {
+                peak: 700.0,
+                rolloff_from: 4000.0,
+                exponent: 0.97,
+            }),
         ]
+    }
+
+    #[test]
+    fn the_pq_law_is_the_pq_below_its_peak_and_flat_above_it() {
+        let clip = Pq {
+            peak: 600.0,
+            rolloff_from: 600.0,
+            exponent: 1.0,
+        };
+        // ST 2084: code 0.5081 is 100 cd/m², a sixth of this display's peak.
+        assert!((clip.excitation(0.5081) - 100.0 / 600.0).abs() < 2e-4);
+        let top = pq_inverse_eotf(600.0);
+        assert!((clip.excitation(top) - 1.0).abs() < 1e-12);
+        assert_eq!(clip.excitation(0.9), 1.0);
+        assert!(
+            (clip.drive(1.0) - top).abs() < 1e-12,
+            "the smallest drive of full light"
+        );
+        let rolled = Pq {
+            rolloff_from: 4000.0,
+            ..clip
+        };
+        // The roll-off reaches the peak only at the master's peak, and bends the top
+        // below the clip's.
+        assert!(rolled.excitation(top) < 0.95);
+        assert!((rolled.drive(1.0) - pq_inverse_eotf(4000.0)).abs() < 1e-12);
+        let bad = TransferLaw::Pq(Pq {
+            rolloff_from: 500.0,
+            ..clip
+        });
+        assert!(bad.monotonicity().is_err());
     }
 
     #[test]

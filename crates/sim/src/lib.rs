@@ -8,5 +8,6 @@
 //! real time when a person watches.
 
 pub mod clock;
+pub mod hdr;
 pub mod monitor;
 pub mod presets;

@@ -24,6 +24,7 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use super::clock::VirtualClock;
+use super::hdr::HdrBehaviour;
 use chromacal_color::Xyz;
 use chromacal_color::spectrum::{Illuminant, Observer, Spectrum, SpectrumError, emission_to_xyz};
 use chromacal_color::tables;
@@ -224,6 +225,9 @@ pub struct MonitorSpec {
     /// Fraction of light lost at the corners, per channel (cos⁴-law shape).
     pub falloff: [f64; 3],
     pub failures: Failures,
+    /// An HDR display's signal processing and power limits (`hdr`); `None` for an
+    /// SDR display, whose drive goes to the panel as it is.
+    pub hdr: Option<HdrBehaviour>,
 }
 
 /// The cos⁴ falloff shape h(r) = 1 − cos⁴θ with tan θ = r / 2 (the eye or instrument
@@ -279,6 +283,14 @@ impl VirtualMonitor {
         }
         if !(spec.black_luminance >= 0.0 && spec.flare_luminance >= 0.0) {
             return Err(bad("black and flare luminances must not be negative"));
+        }
+        if let Some(hdr) = &spec.hdr {
+            let Some(peak) = spec.white_luminance else {
+                return Err(bad(
+                    "an HDR display needs white_luminance (its peak, cd/m²)",
+                ));
+            };
+            hdr.check(peak).map_err(|e| bad(&e))?;
         }
         let grid = &spec.primaries;
         let white: Vec<f64> = (0..grid.wavelengths_nm.len())
@@ -378,7 +390,10 @@ impl VirtualMonitor {
     /// Output of each channel for a drive (quantised), crosstalk included (after the
     /// codes: it is analogue).
     fn outputs(&self, drive: Drive) -> [f64; 3] {
-        let q = drive.map(|v| self.quantise(v));
+        let mut q = drive.map(|v| self.quantise(v));
+        if let (Some(hdr), Some(peak)) = (&self.spec.hdr, self.spec.white_luminance) {
+            q = q.map(|v| hdr.panel_drive(v, peak));
+        }
         let chi = self.spec.failures.channel_crosstalk;
         [0, 1, 2].map(|c| {
             let others = (q.iter().sum::<f64>() - q[c]) / 2.0;
@@ -433,13 +448,15 @@ impl VirtualMonitor {
             let screen_mean = area * mean(screen.patch) + (1.0 - area) * mean(screen.background);
             gain *= 1.0 - f.surround_dependence * screen_mean;
         }
+        let (limiter, backlight) = self.hdr_gains(screen, t);
+        gain *= limiter;
         let output = self.outputs(drive);
         let shape = falloff_shape(position.radius());
         let mut values: Vec<f64> = self
             .black
             .iter()
             .zip(&self.flare)
-            .map(|(b, f)| b + f)
+            .map(|(b, f)| b * backlight + f)
             .collect();
         for c in 0..3 {
             let k = 1.0 - self.spec.falloff[c] * shape;
@@ -451,6 +468,43 @@ impl VirtualMonitor {
             }
         }
         values
+    }
+
+    /// An HDR display's limiter gain on all light at time `t` and its backlight level
+    /// (the factor on its black) while `screen` is shown: (1, 1) for an SDR display.
+    /// The limiter is one supply for the whole screen: it follows the screen's mean
+    /// light from before the last change to now with its time constant.
+    fn hdr_gains(&self, screen: &ScreenContent, t: f64) -> (f64, f64) {
+        let (Some(hdr), Some(peak)) = (&self.spec.hdr, self.spec.white_luminance) else {
+            return (1.0, 1.0);
+        };
+        let light = |d: Drive| self.outputs_above_black(d);
+        let mean_light = |s: &ScreenContent| {
+            let area = s.geometry.area();
+            let mean = |d: Drive| light(d).iter().sum::<f64>() / 3.0;
+            peak * (area * mean(s.patch) + (1.0 - area) * mean(s.background))
+        };
+        let mut p = mean_light(&self.screen);
+        if let Some(abl) = &hdr.abl
+            && abl.time_constant_s > 0.0
+        {
+            let old = (-(t - self.changed_at).max(0.0) / abl.time_constant_s).exp();
+            if old > 1e-12 {
+                p += (mean_light(&self.previous) - p) * old;
+            }
+        }
+        let backlight = match hdr.global_dimming_floor {
+            Some(floor) => {
+                let brightest = |d: Drive| light(d).into_iter().fold(0.0, f64::max);
+                let mut b = brightest(screen.patch);
+                if screen.geometry.area() < 1.0 {
+                    b = b.max(brightest(screen.background));
+                }
+                b.max(floor)
+            }
+            None => 1.0,
+        };
+        (hdr.abl_gain(p), backlight)
     }
 
     /// Noise-free XYZ (CIE 1931 2°) at `position` now.
@@ -482,13 +536,29 @@ impl VirtualMonitor {
             matrix.set_column(c, &(primary * (1.0 - offset)));
             black += primary * offset;
         }
-        let laws = match &self.spec.transfer {
-            SimTransfer::Laws(laws) => laws.clone(),
-            SimTransfer::Measured(t) => [0, 1, 2].map(|c| {
-                let drive: Vec<f64> = t.input.clone();
+        let laws = match (&self.spec.transfer, &self.spec.hdr) {
+            (SimTransfer::Laws(laws), None) => laws.clone(),
+            (transfer, hdr) => [0, 1, 2].map(|c| {
+                // An HDR display's processing comes before the panel's transfer: its
+                // law is tabulated at every code the display takes.
+                let drive: Vec<f64> = match (transfer, hdr) {
+                    (SimTransfer::Measured(t), None) => t.input.clone(),
+                    _ => {
+                        let levels = ((1u32 << self.spec.bit_depth) - 1) as f64;
+                        (0..=levels as u32).map(|k| k as f64 / levels).collect()
+                    }
+                };
+                let output = |v: f64| match hdr {
+                    None => transfer.output(c, v),
+                    Some(_) => {
+                        let mut d = [0.0; 3];
+                        d[c] = v;
+                        self.outputs(d)[c]
+                    }
+                };
                 let excitation: Vec<f64> = drive
                     .iter()
-                    .map(|v| ((t.output(c, *v) - zero[c]) / (1.0 - zero[c])).max(0.0))
+                    .map(|v| ((output(*v) - zero[c]) / (1.0 - zero[c])).max(0.0))
                     .collect();
                 let mut running = 0.0f64;
                 let monotone: Vec<f64> = excitation
@@ -547,6 +617,7 @@ mod tests {
             bit_depth: 8,
             falloff: [0.0; 3],
             failures: Failures::default(),
+            hdr: None,
         }
     }
 
@@ -651,5 +722,57 @@ mod tests {
         m.show(content);
         let on_white = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
         assert!(on_white < 0.95 * on_black);
+    }
+
+    /// The `hdr-oled` preset: 800 cd/m² on a small window, its full-field white held
+    /// to 180 by the limiter, which recovers with its time constant after the screen
+    /// goes dark again; PQ code 0.5081 shows 100 cd/m².
+    #[test]
+    fn an_hdr_oled_limits_a_full_field_and_decodes_the_pq() {
+        let spec = crate::presets::preset("hdr-oled").unwrap();
+        let mut m = monitor(spec);
+        let window = centre_patch([1.0; 3]);
+        m.show(window);
+        m.clock().advance(100.0);
+        let peak = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
+        assert!((peak / 800.0 - 1.0).abs() < 0.01, "{peak}");
+        let full = ScreenContent {
+            background: [1.0; 3],
+            ..window
+        };
+        m.show(full);
+        m.clock().advance(100.0);
+        let full_field = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
+        assert!((full_field / 180.0 - 1.0).abs() < 0.02, "{full_field}");
+        // Back to the window: dimmed still after one time constant, recovered later.
+        m.show(window);
+        m.clock().advance(2.0);
+        let recovering = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
+        assert!(recovering < 0.9 * peak, "{recovering}");
+        m.clock().advance(60.0);
+        assert!((m.xyz_at(ScreenPosition::CENTRE).unwrap().y / peak - 1.0).abs() < 1e-3);
+        // The PQ: 100 cd/m² asked, 100 shown within the panel's tracking (its laws
+        // are 2.14 to 2.26 where the processing assumes 2.2) and the flare.
+        m.show(centre_patch([0.5081; 3]));
+        m.clock().advance(100.0);
+        let grey = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
+        assert!((grey / 100.0 - 1.0).abs() < 0.05, "{grey}");
+    }
+
+    /// `hdr-lcd`: a black patch on a black screen is darker than the same black beside
+    /// a bright window (the backlight follows the brightest content).
+    #[test]
+    fn a_global_dimming_backlight_lifts_the_black_beside_bright_content() {
+        let spec = crate::presets::preset("hdr-lcd").unwrap();
+        let mut m = monitor(spec);
+        m.show(centre_patch([0.0; 3]));
+        let alone = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
+        m.show(ScreenContent {
+            background: [0.8; 3],
+            ..centre_patch([0.0; 3])
+        });
+        m.clock().advance(100.0);
+        let beside = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
+        assert!(beside > 3.0 * alone, "{alone} {beside}");
     }
 }

@@ -16,13 +16,14 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::hdr::{Abl, HdrBehaviour};
 use super::monitor::{
     Failures, MeasuredTransfer, MonitorSpec, PrimarySpectra, SimError, SimTransfer,
 };
-use chromacal_model::transfer::{Cowan, GainOffsetGamma, TransferLaw};
+use chromacal_model::transfer::{Cowan, GainOffsetGamma, Power, TransferLaw};
 
 /// Names of the built-in virtual monitors.
-pub const PRESET_NAMES: [&str; 2] = ["crt", "lcd"];
+pub const PRESET_NAMES: [&str; 4] = ["crt", "lcd", "hdr-oled", "hdr-lcd"];
 
 /// A built-in virtual monitor.
 ///
@@ -32,6 +33,13 @@ pub const PRESET_NAMES: [&str; 2] = ["crt", "lcd"];
 /// * `lcd`: the Apple Studio Display primaries (Fairchild & Wyble 1998), a Cowan law
 ///   whose toe is lifted as LCD curves are, 160 cd/m² white, 1000:1 contrast, 5 %
 ///   falloff.
+/// * `hdr-oled`: an OLED TV in its PQ mode (`hdr`): 800 cd/m² on a small window,
+///   180 on a full field (the limiter, time constant 2 s), BT.2390 roll-off from a
+///   4,000 cd/m² master, black clipped below 0.02 cd/m², 10 bits; panel laws off the
+///   nominal 2.2 by ±0.06. Its emitters are the CRT's phosphors (the only other
+///   spectra the program may ship); `primaries_csv` puts real ones in.
+/// * `hdr-lcd`: a 1,000 cd/m² LCD with a global-dimming backlight (floor 10 %) and
+///   600 cd/m² full-field white, 4,000:1 native contrast, 10 bits.
 pub fn preset(name: &str) -> Result<MonitorSpec, SimError> {
     match name.to_ascii_lowercase().as_str() {
         "crt" => Ok(MonitorSpec {
@@ -48,6 +56,7 @@ pub fn preset(name: &str) -> Result<MonitorSpec, SimError> {
             bit_depth: 8,
             falloff: [0.15; 3],
             failures: Failures::default(),
+            hdr: None,
         }),
         "lcd" => {
             let toe = 1.0 / 255.0;
@@ -77,6 +86,67 @@ pub fn preset(name: &str) -> Result<MonitorSpec, SimError> {
                 bit_depth: 8,
                 falloff: [0.05; 3],
                 failures: Failures::default(),
+                hdr: None,
+            })
+        }
+        "hdr-oled" => Ok(MonitorSpec {
+            name: "hdr-oled".into(),
+            // The program ships no OLED spectra: give primaries_csv for real ones
+            // (ISETBio's Sony OLED, say).
+            primaries: PrimarySpectra::typical_crt(),
+            // The panel's own transfer: near the nominal 2.2 the processing inverts,
+            // not on it, and not the same in each channel (the tracking error).
+            transfer: SimTransfer::Laws([
+                TransferLaw::Power(Power { gamma: 2.26 }),
+                TransferLaw::Power(Power { gamma: 2.20 }),
+                TransferLaw::Power(Power { gamma: 2.14 }),
+            ]),
+            white_luminance: Some(800.0),
+            black_luminance: 0.0005,
+            flare_luminance: 0.01,
+            bit_depth: 10,
+            falloff: [0.03; 3],
+            failures: Failures::default(),
+            hdr: Some(HdrBehaviour {
+                rolloff_from: 4000.0,
+                panel_gamma: 2.2,
+                black_clip: 0.02,
+                abl: Some(Abl {
+                    full_field: 180.0,
+                    sharpness: 6.0,
+                    time_constant_s: 2.0,
+                }),
+                global_dimming_floor: None,
+            }),
+        }),
+        "hdr-lcd" => {
+            let toe = 1.0 / 1023.0;
+            let cowan = |a: f64, b: f64| TransferLaw::Cowan(Cowan { a, b, toe });
+            Ok(MonitorSpec {
+                name: "hdr-lcd".into(),
+                primaries: PrimarySpectra::apple_studio_display(),
+                transfer: SimTransfer::Laws([
+                    cowan(2.25, 0.030),
+                    cowan(2.20, 0.025),
+                    cowan(2.15, 0.020),
+                ]),
+                white_luminance: Some(1000.0),
+                black_luminance: 0.25,
+                flare_luminance: 0.01,
+                bit_depth: 10,
+                falloff: [0.06; 3],
+                failures: Failures::default(),
+                hdr: Some(HdrBehaviour {
+                    rolloff_from: 4000.0,
+                    panel_gamma: 2.2,
+                    black_clip: 0.0,
+                    abl: Some(Abl {
+                        full_field: 600.0,
+                        sharpness: 4.0,
+                        time_constant_s: 1.0,
+                    }),
+                    global_dimming_floor: Some(0.1),
+                }),
             })
         }
         other => Err(SimError::BadSpec {
@@ -113,6 +183,8 @@ pub struct MonitorConfig {
     pub bit_depth: Option<u32>,
     pub falloff: Option<FalloffConfig>,
     pub failures: Option<Failures>,
+    /// An HDR display's processing and limits (replacing the preset's).
+    pub hdr: Option<HdrBehaviour>,
 }
 
 impl MonitorConfig {
@@ -169,6 +241,7 @@ impl MonitorConfig {
                 bit_depth: 8,
                 falloff: [0.0; 3],
                 failures: Failures::default(),
+                hdr: None,
             },
             (None, Some(_), None) => {
                 return Err(SimError::BadSpec {
@@ -205,6 +278,9 @@ impl MonitorConfig {
         }
         if let Some(f) = &self.failures {
             spec.failures = f.clone();
+        }
+        if let Some(h) = &self.hdr {
+            spec.hdr = Some(h.clone());
         }
         Ok(spec)
     }

@@ -17,8 +17,9 @@ use serde::{Deserialize, Serialize};
 use super::least_squares::{Curve, LeastSquares, LeastSquaresError, fit_curve, fit_linear};
 use super::primaries::ChannelRamp;
 use crate::transfer::{
-    Cowan, GainOffsetGamma, LawKind, Power, Table, ThreeTerm, TransferError, TransferLaw,
+    Cowan, GainOffsetGamma, LawKind, Power, Pq, Table, ThreeTerm, TransferError, TransferLaw,
 };
+use chromacal_color::ictcp::{PQ_PEAK, pq_eotf};
 use nalgebra::DMatrix;
 
 /// Slope d ln E / d ln v held at the toe when a log law has to be constrained.
@@ -154,6 +155,8 @@ pub fn fit_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
         LawKind::Cowan => fit_log_law(kind, ramp, toe),
         LawKind::Power => fit_power(ramp),
         LawKind::GainOffsetGamma => fit_gog(ramp),
+        LawKind::Pq if !pinned => Err(LawFitError::NeedsFullDrive { law: kind }),
+        LawKind::Pq => fit_pq(ramp),
     }
 }
 
@@ -310,6 +313,101 @@ fn gog_curve(pinned: bool, t: &[f64], v: f64, g: &mut [f64]) -> f64 {
         g[2] = p;
     }
     amplitude * p
+}
+
+/// Masters a PQ display's roll-off may start from, cd/m² (`None`: it clips at its
+/// peak); the one of least χ² is kept.
+const PQ_ROLLOFFS: [Option<f64>; 5] = [
+    None,
+    Some(1000.0),
+    Some(2000.0),
+    Some(4000.0),
+    Some(10_000.0),
+];
+
+/// The PQ law (`transfer::Pq`), θ = [ln peak, exponent], fitted for each roll-off in
+/// `PQ_ROLLOFFS` (those above the peak), the least χ² kept. The gradient is by
+/// central differences: the EETF's spline has no tidy derivative in θ.
+fn fit_pq(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
+    let kind = LawKind::Pq;
+    let points = Points::from_ramp(ramp, false);
+    need_levels(kind, &points, 2)?;
+    // Start: the peak each mid-range reading implies with exact tracking, L(v) / E.
+    let mut implied: Vec<f64> = (0..points.drive.len())
+        .filter(|&i| points.excitation[i] > 0.01 && points.excitation[i] < 0.6)
+        .map(|i| pq_eotf(points.drive[i]) / points.excitation[i])
+        .filter(|p| p.is_finite() && *p > 0.0)
+        .collect();
+    implied.sort_by(|a, b| a.total_cmp(b));
+    let peak0 = implied
+        .get(implied.len() / 2)
+        .copied()
+        .unwrap_or(1000.0)
+        .clamp(1.0, PQ_PEAK);
+    let mut best: Option<(LeastSquares, Option<f64>)> = None;
+    let mut failure = None;
+    for rolloff in PQ_ROLLOFFS {
+        let law = move |t: &[f64]| {
+            let peak = t[0].clamp(0.0, PQ_PEAK.ln()).exp();
+            Pq {
+                peak,
+                rolloff_from: rolloff.map_or(peak, |m| m.max(peak)),
+                exponent: t[1].clamp(0.05, 20.0),
+            }
+        };
+        let curve = move |t: &[f64], v: f64, g: &mut [f64]| {
+            for k in 0..2 {
+                let h = 1e-6 * (1.0 + t[k].abs());
+                let (mut up, mut down) = ([t[0], t[1]], [t[0], t[1]]);
+                up[k] += h;
+                down[k] -= h;
+                g[k] = (law(&up).excitation(v) - law(&down).excitation(v)) / (2.0 * h);
+            }
+            law(t).excitation(v)
+        };
+        let fit = match points.fit(kind, &curve, &[peak0.ln(), 1.0]) {
+            Ok(fit) => fit,
+            Err(e) => {
+                failure = Some(e);
+                continue;
+            }
+        };
+        if best.as_ref().is_none_or(|(b, _)| fit.chi2 < b.chi2) {
+            best = Some((fit, rolloff));
+        }
+    }
+    let (fit, rolloff) = match (best, failure) {
+        (Some(best), _) => best,
+        (None, Some(e)) => return Err(e),
+        (None, None) => unreachable!("PQ_ROLLOFFS is not empty"),
+    };
+    let peak = fit.params[0].clamp(0.0, PQ_PEAK.ln()).exp();
+    let rolloff_from = rolloff.map_or(peak, |m| m.max(peak));
+    let law = TransferLaw::Pq(Pq {
+        peak,
+        rolloff_from,
+        exponent: fit.params[1].clamp(0.05, 20.0),
+    });
+    law.monotonicity()
+        .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
+    let ses = standard_errors_with_pin(&fit, &points, ramp);
+    Ok(LawFit {
+        law,
+        amplitude: 1.0,
+        parameters: vec![
+            parameter("peak", peak, ses[0].map(|s| s * peak)),
+            parameter("exponent", fit.params[1], ses[1]),
+            parameter("rolloff_from", rolloff_from, None),
+        ],
+        chi2: fit.chi2,
+        dof: fit.dof,
+        free_parameters: 2,
+        notes: vec![if rolloff_from > peak {
+            format!("rolled off from {rolloff_from} cd/m² (BT.2390)")
+        } else {
+            "clipped at the peak".into()
+        }],
+    })
 }
 
 /// A start for the gain-offset-gamma fit: the best (least χ²) of a few cut-offs, each
@@ -700,6 +798,47 @@ mod tests {
     }
 
     const WIGGLE: [f64; 7] = [0.4, -1.1, 0.7, 0.2, -0.5, 1.3, -0.8];
+
+    /// A display in PQ mode whose panel is not the law's: the processing inverts a
+    /// 2.2 gamma, the panel follows a gain-offset-gamma of 2.3 with a small cut-off,
+    /// and the roll-off starts from a 4,000 cd/m² master onto a 750 cd/m² peak. The PQ
+    /// law finds the peak and the roll-off and is far closer than any SDR law.
+    #[test]
+    fn the_pq_law_finds_a_pq_display_s_peak_and_roll_off() {
+        use chromacal_color::hdr::bt2390_eetf;
+        let panel = GainOffsetGamma::from_cutoff(0.01, 2.3);
+        let display = |v: f64| {
+            let relative = bt2390_eetf(v, 4000.0, 750.0, 0.0) / 750.0;
+            panel.excitation(relative.powf(1.0 / 2.2))
+        };
+        let levels: Vec<f64> = (1..=16).map(|k| k as f64 / 16.0).collect();
+        let r = ramp(&levels, display, &WIGGLE, true);
+        let fit = fit_law(LawKind::Pq, &r, 1.0 / 1023.0).unwrap();
+        let TransferLaw::Pq(law) = &fit.law else {
+            panic!("{:?}", fit.law)
+        };
+        // The panel's own departure trades against the peak: within a tenth.
+        assert!((law.peak / 750.0 - 1.0).abs() < 0.1, "{law:?}");
+        assert!(
+            law.rolloff_from > law.peak,
+            "{law:?}: the roll-off was found"
+        );
+        let worst = |f: &LawFit| {
+            (1..200)
+                .map(|k| k as f64 / 200.0)
+                .map(|v| (f.law.excitation(v) - display(v)).abs())
+                .fold(0.0, f64::max)
+        };
+        let power = fit_law(LawKind::Power, &r, 1.0 / 1023.0).unwrap();
+        assert!(worst(&fit) < 0.02, "pq {}", worst(&fit));
+        assert!(worst(&power) > 5.0 * worst(&fit), "power {}", worst(&power));
+        // Without a full-drive reading there is nothing to pin the peak to.
+        let unpinned = ramp(&levels, display, &WIGGLE, false);
+        assert!(matches!(
+            fit_law(LawKind::Pq, &unpinned, 1.0 / 1023.0),
+            Err(LawFitError::NeedsFullDrive { .. })
+        ));
+    }
 
     fn levels() -> Vec<f64> {
         (1..=12).map(|k| k as f64 / 12.0).collect()
