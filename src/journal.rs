@@ -417,6 +417,7 @@ mod tests {
             codes: None,
             position: Default::default(),
             background: [0.0; 3],
+            window: None,
             time_s: Some(index as f64),
             reading: Reading {
                 xyz: Some(Xyz::new(y, y, y)),

@@ -81,8 +81,13 @@ pub fn duration(seconds: f64) -> String {
 
 /// The budget line: what counts as measured.
 pub fn budget_line(b: &BudgetBreakdown) -> String {
+    let windows = if b.window > 0 {
+        format!(" + {} windows", b.window)
+    } else {
+        String::new()
+    };
     format!(
-        "{} counted ({} black, {} levels × 3 ramps, {} grey, {} surround, {} reference) + {} held out + {} uniformity = {} patches",
+        "{} counted ({} black, {} levels × 3 ramps, {} grey, {} surround, {} reference) + {} held out + {} uniformity{windows} = {} patches",
         b.counted,
         b.black,
         b.ramp_levels_per_channel,
@@ -91,7 +96,7 @@ pub fn budget_line(b: &BudgetBreakdown) -> String {
         b.reference,
         b.verification,
         b.uniformity,
-        b.counted + b.verification + b.uniformity
+        b.counted + b.verification + b.uniformity + b.window
     )
 }
 
@@ -150,6 +155,41 @@ pub fn held_out_itp(patches: &[chromacal_model::fit::validate::PatchError]) -> O
         .map(|p| chromacal_color::ictcp::delta_e_itp(&p.measured, &p.predicted))
         .collect();
     ErrorStats::of(&values)
+}
+
+/// The brightness limiter: each window measured, as the additive model and as the
+/// limiter fitted without it predict it, and whether the term was kept.
+pub fn limiter_summary(l: &chromacal_model::fit::limiter::LimiterReport) -> String {
+    let mut out = format!(
+        "brightness limiter (windows of the screen on black; predicted with the limiter fitted without each): {}\n",
+        match (&l.limiter, l.kept) {
+            (Some(limiter), true) => format!(
+                "kept: the screen's light is held to {:.1} cd/m² (knee {:.1})",
+                limiter.full_field, limiter.sharpness
+            ),
+            (Some(_), false) => "not kept (the additive model)".into(),
+            (None, _) => "none fits (the additive model)".into(),
+        }
+    );
+    let rows: Vec<Vec<String>> = l
+        .windows
+        .iter()
+        .map(|w| {
+            vec![
+                format!("{:.0} %", 100.0 * w.area),
+                format!("{:.3}", w.level),
+                format!("{:.2}", w.measured_y),
+                format!("{:+.1} %", 100.0 * (w.additive_y / w.measured_y - 1.0)),
+                format!("{:+.1} %", 100.0 * (w.left_out_y / w.measured_y - 1.0)),
+            ]
+        })
+        .collect();
+    out += &table(
+        &["window", "level", "measured Y", "additive", "limiter"],
+        &rows,
+    );
+    let _ = writeln!(out, "  rule: {}", l.rule);
+    out
 }
 
 pub fn fit_summary(report: &FitReport) -> String {
@@ -266,6 +306,9 @@ pub fn fit_summary(report: &FitReport) -> String {
     let _ = writeln!(out);
     if let Some(note) = &report.luminance_only {
         let _ = writeln!(out, "NOTE: {note}\n");
+    }
+    if let Some(l) = &report.limiter {
+        out.push_str(&limiter_summary(l));
     }
     match &report.held_out {
         Some(s) => {

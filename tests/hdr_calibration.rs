@@ -157,3 +157,78 @@ fn an_hdr_calibration_over_resolve_in_10_bits_matches_the_in_process_one() {
             .all(|m| m.codes.is_some_and(|c| c.bit_depth == 10))
     );
 }
+
+/// Calibrate `config_text` in process and return the profile (published or not).
+fn calibrate_profile(dir: &std::path::Path, name: &str, config_text: &str) -> Profile {
+    let config = dir.join(format!("{name}.toml"));
+    std::fs::write(&config, config_text).unwrap();
+    let state = dir.join(name);
+    let out = chromacal()
+        .args(["calibrate", "--config"])
+        .arg(&config)
+        .arg("--state-dir")
+        .arg(&state)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{name}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Profile::read(&state.join("current.toml")).unwrap()
+}
+
+/// The limiter term on the HDR displays that have one (the OLED's supply, the LCD's
+/// backlight budget): kept, and the full-field white predicted by the term fitted
+/// without it within 2 %, where the additive model is over 30 % too bright; on the SDR
+/// presets, which have none, the term is not kept, whatever the seed.
+#[test]
+fn the_brightness_limiter_is_kept_where_a_display_has_one_and_only_there() {
+    let dir = tempfile::tempdir().unwrap();
+    let sony = format!(
+        "primaries_csv = \"{}\"\ntransfer_csv = \"{}\"\n",
+        shared_path("displays/spd/isetbio_oled_sony_spd.csv").display(),
+        shared_path("displays/gamma/isetbio_oled_sony_gamma.csv").display(),
+    );
+    for (name, monitor, seed) in [
+        ("oled-1", format!("preset = \"hdr-oled\"\n{sony}"), 1),
+        ("oled-2", format!("preset = \"hdr-oled\"\n{sony}"), 2),
+        ("lcd-1", "preset = \"hdr-lcd\"\n".to_string(), 1),
+    ] {
+        let profile = calibrate_profile(
+            dir.path(),
+            name,
+            &format!(
+                "[monitor]\n{monitor}[plan]\nbit_depth = 10\nseed = {seed}\n\
+                 [instrument.simulated]\nseed = {seed}\n[target]\ntone = \"pq\"\nwhite = \"D65\"\n"
+            ),
+        );
+        let limiter = profile.report.limiter.as_ref().unwrap();
+        assert!(limiter.kept, "{name}: {}", limiter.rule);
+        let full = limiter.full_field_white().unwrap();
+        assert!(
+            full.additive_y / full.measured_y > 1.3,
+            "{name}: the additive model is not far off: {full:?}"
+        );
+        assert!(
+            (full.left_out_y / full.measured_y - 1.0).abs() < 0.02,
+            "{name}: {full:?}"
+        );
+    }
+    for preset in ["crt", "lcd"] {
+        for seed in 1..=3 {
+            let name = format!("{preset}-{seed}");
+            let profile = calibrate_profile(
+                dir.path(),
+                &name,
+                &format!(
+                    "[monitor]\npreset = \"{preset}\"\n[plan]\nbrightness_limiter = true\nseed = {seed}\n\
+                     [instrument.simulated]\nseed = {seed}\n"
+                ),
+            );
+            let limiter = profile.report.limiter.as_ref().unwrap();
+            assert_eq!(limiter.windows.len(), 18, "{name}");
+            assert!(!limiter.kept, "{name}: {}", limiter.rule);
+        }
+    }
+}

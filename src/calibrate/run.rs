@@ -368,6 +368,7 @@ pub async fn measure_patch<D: PatchDisplay, I: Instrument>(
         codes: Some(planned.patch.codes),
         position: planned.position(),
         background: planned.patch.background.drive(),
+        window: (planned.role == Role::Window).then(|| planned.patch.geometry.area()),
         time_s: Some(time_s),
         reading,
     })?;

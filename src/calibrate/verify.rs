@@ -484,6 +484,7 @@ fn measurement_set(
                     codes: Some(p.codes),
                     position: ScreenPosition::CENTRE,
                     background: [0.0; 3],
+                    window: None,
                     time_s: None,
                     reading: Reading {
                         xyz: Some(xyz),

@@ -392,6 +392,7 @@ fn checked_levels(
             codes: None,
             position: chromacal_model::ScreenPosition::CENTRE,
             background: [0.0; 3],
+            window: None,
             time_s: None,
             reading: chromacal_instruments::Reading {
                 xyz: Some(chromacal_color::Xyz::from(level.measured_xyz)),

@@ -373,6 +373,7 @@ pub fn xyz_measurement(index: usize, drive: [f64; 3], xyz: Xyz) -> Measurement {
         codes: None,
         position: Default::default(),
         background: [0.0; 3],
+        window: None,
         time_s: None,
         reading: Reading {
             xyz: Some(xyz),

@@ -390,6 +390,7 @@ pub fn ti3_from_text(text: &str, name: &str) -> Result<MeasurementSet, CgatsErro
             codes: None,
             position: ScreenPosition::CENTRE,
             background: [0.0; 3],
+            window: None,
             time_s: None,
             reading: Reading {
                 xyz: Some(value),

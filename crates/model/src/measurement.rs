@@ -24,6 +24,8 @@ pub enum Role {
     Uniformity,
     /// The same patch on different backgrounds: spatial independence.
     Surround,
+    /// White or a grey as a window of a stated size on black: the brightness limiter.
+    Window,
     /// Held out of every fit: the honest error.
     Verification,
     /// Anything else (from files that do not say what a patch is for).
@@ -89,6 +91,10 @@ pub struct Measurement {
     /// Drive of the surround.
     #[serde(default)]
     pub background: Drive,
+    /// The patch's share of the screen's area, where it was measured for the
+    /// brightness limiter (`Role::Window`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window: Option<f64>,
     /// Seconds on the run's clock at the middle of the reading, where known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_s: Option<f64>,

@@ -55,7 +55,22 @@ pub struct PlanConfig {
     /// says (`pq` or `hlg`), else SDR. Kept in the journal and the profile.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub signal: Option<Signal>,
+    /// Measure white and a grey as windows of 1 to 100 % of the screen at the end of
+    /// the plan (`WINDOW_AREAS`), for the brightness limiter. Unset: on for HDR
+    /// signals, off for SDR.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub brightness_limiter: Option<bool>,
 }
+
+/// The windows' shares of the screen's area the brightness-limiter patches are
+/// shown at: the sizes HDR reviews and calibration tools measure peak brightness at,
+/// and 75 %, so that a limiter which binds only near a full field (an LCD's) is seen
+/// at two sizes and can be cross-validated.
+pub const WINDOW_AREAS: [f64; 9] = [0.01, 0.02, 0.05, 0.10, 0.18, 0.25, 0.50, 0.75, 1.0];
+
+/// The grey the brightness-limiter patches measure beside white: on a PQ signal
+/// about 200 cd/m² (BT.2408's reference white, 203), on SDR above mid-grey.
+pub const WINDOW_GREY: f64 = 0.58;
 
 /// What the codes sent to the display mean.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -116,6 +131,7 @@ impl Default for PlanConfig {
             seed_budget: 20,
             target_de00: 0.2,
             signal: None,
+            brightness_limiter: None,
         }
     }
 }
@@ -169,6 +185,10 @@ pub struct BudgetBreakdown {
     pub counted: usize,
     pub verification: usize,
     pub uniformity: usize,
+    /// White and a grey at each of `WINDOW_AREAS`, for the brightness limiter (0 in
+    /// plans made before there were any).
+    #[serde(default)]
+    pub window: usize,
 }
 
 /// The patch sequence.
@@ -335,6 +355,7 @@ pub fn make_verification_plan(config: &PlanConfig, n: usize) -> Result<Plan, Pla
             counted: 0,
             verification,
             uniformity: 0,
+            window: 0,
         },
     })
 }
@@ -377,6 +398,7 @@ pub fn make_uniformity_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
             counted: references,
             verification: 0,
             uniformity,
+            window: 0,
         },
     })
 }
@@ -385,8 +407,47 @@ pub fn make_uniformity_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
 /// for a sequential one.
 pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
     let mut plan = make_plan_of_strategy(config)?;
-    plan.signal = config.signal.filter(|s| s.is_hdr());
+    let signal = config.signal.filter(|s| s.is_hdr());
+    plan.signal = signal;
+    if config.brightness_limiter.unwrap_or(signal.is_some()) {
+        let windows = window_patches(config.bit_depth);
+        plan.budget.window = windows.len();
+        let start = plan.patches.len();
+        plan.patches
+            .extend(
+                windows
+                    .into_iter()
+                    .enumerate()
+                    .map(|(k, (role, patch))| PlannedPatch {
+                        index: start + k,
+                        role,
+                        patch,
+                    }),
+            );
+    }
     Ok(plan)
+}
+
+/// White and `WINDOW_GREY` at each of `WINDOW_AREAS`, centred on black, largest
+/// first: the run ends on the smallest window, so that what is measured next does
+/// not wait for a limiter held down by a full field.
+fn window_patches(depth: u32) -> Vec<(Role, Patch)> {
+    WINDOW_AREAS
+        .iter()
+        .rev()
+        .flat_map(|area| {
+            [[1.0; 3], [WINDOW_GREY; 3]].map(|drive| {
+                (
+                    Role::Window,
+                    Patch {
+                        codes: Codes::from_drive(drive, depth),
+                        background: Codes::from_drive([0.0; 3], depth),
+                        geometry: Geometry::centred(area.sqrt()),
+                    },
+                )
+            })
+        })
+        .collect()
 }
 
 fn make_plan_of_strategy(config: &PlanConfig) -> Result<Plan, PlanError> {
@@ -559,6 +620,7 @@ fn make_fixed_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
             counted: b,
             verification: verification.len(),
             uniformity,
+            window: 0,
         },
     })
 }

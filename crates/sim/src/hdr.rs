@@ -12,9 +12,12 @@
 //! * **Automatic brightness limiting (ABL).** An OLED's supply (and an LCD's backlight
 //!   budget) limits the light the whole screen may emit: with the screen's average
 //!   light p (cd/m², the average picture level times the peak) every emitter's light
-//!   is scaled by g(p) = (1 + (p / F)^k)^(−1/k), 1 for small windows and F / p for a
-//!   full field, F being the full-field white. The limiter follows a change of the
-//!   picture with a time constant, as the supply's control loop does.
+//!   is scaled by g(p) = (F / p) · tanh((p / F)^k)^(1/k), 1 for small windows and
+//!   F / p for a full field, F being the full-field white: the screen's light is
+//!   held below F with a knee of sharpness k. (The model's limiter term,
+//!   `fit::limiter`, is another family with the same limits, so that fitting it
+//!   here tests more than the optimiser.) The limiter follows a change of the picture
+//!   with a time constant, as the supply's control loop does.
 //! * **Global dimming (LCD).** The backlight follows the brightest content on the
 //!   screen, down to a floor; the panel's leakage (its black) scales with it, so a
 //!   black patch on a black screen is darker than the black beside a bright window.
@@ -42,8 +45,8 @@ pub struct HdrBehaviour {
     pub global_dimming_floor: Option<f64>,
 }
 
-/// Automatic brightness limiting: g(p) = (1 + (p / F)^k)^(−1/k) of the screen's mean
-/// light p.
+/// Automatic brightness limiting: g(p) = (F / p) · tanh((p / F)^k)^(1/k) of the
+/// screen's mean light p.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Abl {
@@ -120,8 +123,12 @@ impl HdrBehaviour {
     pub fn abl_gain(&self, mean_light: f64) -> f64 {
         match &self.abl {
             Some(abl) => {
-                let ratio = (mean_light.max(0.0) / abl.full_field).powf(abl.sharpness);
-                (1.0 + ratio).powf(-1.0 / abl.sharpness)
+                let x = mean_light.max(0.0) / abl.full_field;
+                if x < 1e-9 {
+                    return 1.0;
+                }
+                let k = abl.sharpness;
+                x.powf(k).tanh().powf(1.0 / k) / x
             }
             None => 1.0,
         }

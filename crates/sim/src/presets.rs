@@ -113,7 +113,7 @@ pub fn preset(name: &str) -> Result<MonitorSpec, SimError> {
                 black_clip: 0.02,
                 abl: Some(Abl {
                     full_field: 180.0,
-                    sharpness: 6.0,
+                    sharpness: 4.0,
                     time_constant_s: 2.0,
                 }),
                 global_dimming_floor: None,

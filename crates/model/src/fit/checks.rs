@@ -504,6 +504,7 @@ mod tests {
             codes: None,
             position: Default::default(),
             background: [0.0; 3],
+            window: None,
             time_s: None,
             reading: Reading {
                 xyz: Some(xyz),

@@ -332,48 +332,16 @@ fn fit_pq(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     let kind = LawKind::Pq;
     let points = Points::from_ramp(ramp, false);
     need_levels(kind, &points, 2)?;
-    // Start: the peak each mid-range reading implies with exact tracking, L(v) / E.
-    let mut implied: Vec<f64> = (0..points.drive.len())
-        .filter(|&i| points.excitation[i] > 0.01 && points.excitation[i] < 0.6)
-        .map(|i| pq_eotf(points.drive[i]) / points.excitation[i])
-        .filter(|p| p.is_finite() && *p > 0.0)
-        .collect();
-    implied.sort_by(|a, b| a.total_cmp(b));
-    let peak0 = implied
-        .get(implied.len() / 2)
-        .copied()
-        .unwrap_or(1000.0)
-        .clamp(1.0, PQ_PEAK);
+    let peak0 = pq_start_peak(&points);
     let mut best: Option<(LeastSquares, Option<f64>)> = None;
     let mut failure = None;
     for rolloff in PQ_ROLLOFFS {
-        let law = move |t: &[f64]| {
-            let peak = t[0].clamp(0.0, PQ_PEAK.ln()).exp();
-            Pq {
-                peak,
-                rolloff_from: rolloff.map_or(peak, |m| m.max(peak)),
-                exponent: t[1].clamp(0.05, 20.0),
+        match fit_pq_with_rolloff(&points, rolloff, peak0) {
+            Ok(fit) if best.as_ref().is_none_or(|(b, _)| fit.chi2 < b.chi2) => {
+                best = Some((fit, rolloff))
             }
-        };
-        let curve = move |t: &[f64], v: f64, g: &mut [f64]| {
-            for k in 0..2 {
-                let h = 1e-6 * (1.0 + t[k].abs());
-                let (mut up, mut down) = ([t[0], t[1]], [t[0], t[1]]);
-                up[k] += h;
-                down[k] -= h;
-                g[k] = (law(&up).excitation(v) - law(&down).excitation(v)) / (2.0 * h);
-            }
-            law(t).excitation(v)
-        };
-        let fit = match points.fit(kind, &curve, &[peak0.ln(), 1.0]) {
-            Ok(fit) => fit,
-            Err(e) => {
-                failure = Some(e);
-                continue;
-            }
-        };
-        if best.as_ref().is_none_or(|(b, _)| fit.chi2 < b.chi2) {
-            best = Some((fit, rolloff));
+            Ok(_) => {}
+            Err(e) => failure = Some(e),
         }
     }
     let (fit, rolloff) = match (best, failure) {
@@ -381,13 +349,9 @@ fn fit_pq(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         (None, Some(e)) => return Err(e),
         (None, None) => unreachable!("PQ_ROLLOFFS is not empty"),
     };
-    let peak = fit.params[0].clamp(0.0, PQ_PEAK.ln()).exp();
-    let rolloff_from = rolloff.map_or(peak, |m| m.max(peak));
-    let law = TransferLaw::Pq(Pq {
-        peak,
-        rolloff_from,
-        exponent: fit.params[1].clamp(0.05, 20.0),
-    });
+    let pq = pq_law(&fit.params, rolloff);
+    let (peak, rolloff_from) = (pq.peak, pq.rolloff_from);
+    let law = TransferLaw::Pq(pq);
     law.monotonicity()
         .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
     let ses = standard_errors_with_pin(&fit, &points, ramp);
@@ -408,6 +372,53 @@ fn fit_pq(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
             "clipped at the peak".into()
         }],
     })
+}
+
+/// The start of the PQ law's peak: the median of the peaks each mid-range reading
+/// implies with exact tracking, L(v) / E.
+fn pq_start_peak(points: &Points) -> f64 {
+    let mut implied: Vec<f64> = (0..points.drive.len())
+        .filter(|&i| points.excitation[i] > 0.01 && points.excitation[i] < 0.6)
+        .map(|i| pq_eotf(points.drive[i]) / points.excitation[i])
+        .filter(|p| p.is_finite() && *p > 0.0)
+        .collect();
+    implied.sort_by(|a, b| a.total_cmp(b));
+    implied
+        .get(implied.len() / 2)
+        .copied()
+        .unwrap_or(1000.0)
+        .clamp(1.0, PQ_PEAK)
+}
+
+/// The PQ law of θ = [ln peak, exponent] with its roll-off from `rolloff` (`None`:
+/// clipped), bounded to what the law allows.
+fn pq_law(t: &[f64], rolloff: Option<f64>) -> Pq {
+    let peak = t[0].clamp(0.0, PQ_PEAK.ln()).exp();
+    Pq {
+        peak,
+        rolloff_from: rolloff.map_or(peak, |m| m.max(peak)),
+        exponent: t[1].clamp(0.05, 20.0),
+    }
+}
+
+/// The PQ law fitted with one roll-off, from a peak of `peak0`.
+fn fit_pq_with_rolloff(
+    points: &Points,
+    rolloff: Option<f64>,
+    peak0: f64,
+) -> Result<LeastSquares, LawFitError> {
+    let curve = move |t: &[f64], v: f64, g: &mut [f64]| {
+        for k in 0..2 {
+            let h = 1e-6 * (1.0 + t[k].abs());
+            let (mut up, mut down) = ([t[0], t[1]], [t[0], t[1]]);
+            up[k] += h;
+            down[k] -= h;
+            g[k] = (pq_law(&up, rolloff).excitation(v) - pq_law(&down, rolloff).excitation(v))
+                / (2.0 * h);
+        }
+        pq_law(t, rolloff).excitation(v)
+    };
+    points.fit(LawKind::Pq, &curve, &[peak0.ln(), 1.0])
 }
 
 /// A start for the gain-offset-gamma fit: the best (least χ²) of a few cut-offs, each

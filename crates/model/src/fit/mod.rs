@@ -33,6 +33,7 @@ pub mod law_selection;
 pub mod laws;
 pub mod least_squares;
 pub mod light_meter;
+pub mod limiter;
 pub mod noise;
 pub mod primaries;
 pub mod refit;
@@ -286,6 +287,9 @@ pub struct FitReport {
     /// Set when the instrument measured luminance only: what that means for the figures.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub luminance_only: Option<String>,
+    /// The brightness limiter, where windows of several sizes were measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limiter: Option<limiter::LimiterReport>,
 }
 
 impl FitReport {
@@ -408,6 +412,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let (evaluation, held_out) = validate_on_held_out(&model, &corrected);
     Ok(FittedModel {
         report: FitReport {
+            limiter: limiter::fit_limiter(&model, &corrected, &noise), // before `noise,`
             units: set.units,
             noise,
             black,

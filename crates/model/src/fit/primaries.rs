@@ -383,6 +383,7 @@ mod tests {
             codes: None,
             position: Default::default(),
             background: [0.0; 3],
+            window: None,
             time_s: None,
             reading: Reading {
                 xyz: Some(Xyz::new(y, y, y)),
