@@ -68,6 +68,13 @@ fn assert_calibrated_to_pq(label: &str, profile: &Profile) {
     );
     let white = calibration.levels.last().unwrap().measured_luminance;
     assert!((white / 600.0 - 1.0).abs() < 0.03, "{label}: white {white}");
+    // The white the model is anchored to is the patch's, not the limited windows'
+    // (a full-field white is a quarter of it).
+    let anchor = profile.report.white_anchor.as_ref().unwrap();
+    assert!(
+        (anchor.measured.y / anchor.predicted.y - 1.0).abs() < 0.02,
+        "{label}: {anchor:?}"
+    );
 }
 
 #[test]

@@ -549,6 +549,7 @@ pub fn reopen_run(dir: &Path) -> Result<PreparedRun, CalibrateError> {
         })?;
         let given = parse_config_unchecked(&text, &saved.display().to_string())?;
         take_settings(&mut config, &given);
+        crate::config::hdr_defaults(&mut config);
         settings_at_resume = text
             .lines()
             .next()

@@ -355,8 +355,7 @@ pub fn digest(text: &str) -> String {
 
 /// Parse configuration text; `origin` names it in errors.
 pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
-    let mut config = parse_config_unchecked(text, origin)?;
-    hdr_defaults(&mut config);
+    let config = parse_config_unchecked(text, origin)?;
     check_config(&config).map_err(|message| ConfigError::Invalid {
         path: origin.into(),
         message,
@@ -366,9 +365,10 @@ pub fn parse_config(text: &str, origin: &str) -> Result<Config, ConfigError> {
 
 /// Parse without `check_config`: for a run's own config read back from its journal,
 /// which was checked when the run started (perhaps by an older version with other
-/// ranges), and is checked again once `--resume` has put new settings in.
+/// ranges), and is checked again once `--resume` has put new settings in. What an HDR
+/// signal implies is filled in here, so that a resumed run plans what it began with.
 pub fn parse_config_unchecked(text: &str, origin: &str) -> Result<Config, ConfigError> {
-    let config: Config = toml::from_str(text).map_err(|e| {
+    let mut config: Config = toml::from_str(text).map_err(|e| {
         let (line, column, message) = toml_error_position(text, &e);
         ConfigError::Parse {
             path: origin.into(),
@@ -377,6 +377,7 @@ pub fn parse_config_unchecked(text: &str, origin: &str) -> Result<Config, Config
             message,
         }
     })?;
+    hdr_defaults(&mut config);
     Ok(config)
 }
 
@@ -385,7 +386,8 @@ pub fn parse_config_unchecked(text: &str, origin: &str) -> Result<Config, Config
 /// candidates (when the laws are the default ones); and each patch is read until two
 /// readings agree (up to 10), because a display's brightness limiter takes seconds to
 /// recover from a bright screen (the surround check's white, a uniformity patch).
-fn hdr_defaults(config: &mut Config) {
+/// Applying it twice changes nothing.
+pub(crate) fn hdr_defaults(config: &mut Config) {
     let tone = config
         .target
         .as_ref()
@@ -418,6 +420,35 @@ fn check_between_keys(config: &Config) -> Result<(), String> {
         return Err(format!(
             "monitor.black_luminance = {black} is not below monitor.white_luminance = {white}"
         ));
+    }
+    // A PQ target on an HLG signal (or the other way) would aim each code at light
+    // the display was never sent.
+    if let (Some(signal), Some(target)) = (config.plan.signal, &config.target)
+        && let Ok(tone) = chromacal_model::target::parse_tone(&target.tone)
+    {
+        let wants = match tone {
+            ToneCurve::Pq { .. } => Some(Signal::Pq),
+            ToneCurve::Hlg { .. } => Some(Signal::Hlg),
+            _ => None,
+        };
+        if let Some(wants) = wants
+            && wants != signal
+        {
+            return Err(format!(
+                "plan.signal = \"{}\" does not carry target.tone = \"{}\" (it needs plan.signal = \"{}\")",
+                signal.name(),
+                target.tone,
+                wants.name()
+            ));
+        }
+        if wants.is_none() && signal.is_hdr() {
+            return Err(format!(
+                "plan.signal = \"{}\" is an HDR signal, but target.tone = \"{}\" is an SDR curve (use tone = \"{}\")",
+                signal.name(),
+                target.tone,
+                if signal == Signal::Pq { "pq" } else { "hlg" }
+            ));
+        }
     }
     if let Some(sim) = &config.instrument.simulated {
         if !(sim.max_integration_s >= sim.integration_s) {
@@ -621,6 +652,30 @@ mod tests {
         let fixed =
             format!("{text}[fit]\nprimaries_xy = [[0.64, 0.33], [0.30, 0.60], [0.15, 0.06]]\n");
         parse_config(&fixed, "c.toml").unwrap();
+    }
+
+    #[test]
+    fn an_hdr_tone_sets_the_signal_and_a_contradicting_signal_is_refused() {
+        let pq = "[target]\ntone = \"pq\"\npeak = 600\n";
+        for parse in [parse_config, parse_config_unchecked] {
+            let config = parse(pq, "c.toml").unwrap();
+            assert_eq!(config.plan.signal, Some(Signal::Pq));
+            assert!(config.fit.laws.contains(&LawKind::Pq));
+            assert!(config.display.stability.is_some());
+            // Filled in twice is filled in once.
+            let mut again = config.clone();
+            hdr_defaults(&mut again);
+            assert_eq!(again.fit.laws, config.fit.laws);
+        }
+        let hlg_on_pq = format!("{pq}[plan]\nsignal = \"hlg\"\n");
+        let error = parse_config(&hlg_on_pq, "c.toml").unwrap_err().to_string();
+        assert!(error.contains("needs plan.signal = \"pq\""), "{error}");
+        let sdr_tone = "[target]\ntone = \"srgb\"\n[plan]\nsignal = \"pq\"\n";
+        let error = parse_config(sdr_tone, "c.toml").unwrap_err().to_string();
+        assert!(error.contains("is an SDR curve"), "{error}");
+        let sdr = parse_config("[target]\ntone = \"srgb\"\n", "c.toml").unwrap();
+        assert_eq!(sdr.plan.signal, None);
+        assert!(!sdr.fit.laws.contains(&LawKind::Pq));
     }
 
     #[test]

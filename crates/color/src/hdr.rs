@@ -44,12 +44,15 @@ pub fn hlg_system_gamma(peak: f64, ambient: f64) -> f64 {
 }
 
 /// BT.2100 Table 5 HLG EOTF on the grey axis (R = G = B, so the OOTF's luminance is the
-/// channel's): the displayed luminance of signal `signal`, as a fraction of the
-/// display's peak, for system gamma `gamma`. (The black lift β of the EOTF is the
-/// target's black, which chromacal adds as it does for every tone curve.) Divided by
-/// its value at signal 1, which the published constants miss by a few 10⁻⁸.
-pub fn hlg_relative_luminance(signal: f64, gamma: f64) -> f64 {
-    (hlg_inverse_oetf(signal) / hlg_inverse_oetf(1.0)).powf(gamma)
+/// channel's): the displayed luminance of signal `signal`, cd/m², on a display of
+/// nominal peak `white` and black `black`, for system gamma `gamma`. The black enters
+/// as BT.2100 has it, in the signal: E = OETF⁻¹(max(0, (1 − β) E′ + β)) with
+/// β = √(3 (L_B / L_W)^(1/γ)), and F_D = L_W · E^γ, so signal 0 shows L_B and 1 shows
+/// L_W (to the constants' digits: E is divided by its value at 1).
+pub fn hlg_eotf_grey(signal: f64, white: f64, black: f64, gamma: f64) -> f64 {
+    let beta = (3.0 * (black.max(0.0) / white).powf(1.0 / gamma)).sqrt();
+    let lifted = ((1.0 - beta) * signal.clamp(0.0, 1.0) + beta).max(0.0);
+    white * (hlg_inverse_oetf(lifted) / hlg_inverse_oetf(1.0)).powf(gamma)
 }
 
 /// The mapping of ITU-R BT.2390-10 §5.4.1 (the EETF) from a PQ signal mastered on a
@@ -59,14 +62,14 @@ pub fn hlg_relative_luminance(signal: f64, gamma: f64) -> f64 {
 /// meets the display's peak with slope 0 at the mastering peak. A display at least as
 /// bright as the mastering peak shows the PQ as it is, up to the mastering peak.
 pub fn bt2390_eetf(signal: f64, mastering_peak: f64, display_peak: f64, display_black: f64) -> f64 {
-    let source_top = pq_inverse_eotf(mastering_peak);
-    if !(source_top > 0.0) {
-        return display_black;
-    }
     // §5.4.1 eq. (5): the source's range normalised (source black 0, so PQ(0) is the
     // bottom only through its own value).
+    let source_top = pq_inverse_eotf(mastering_peak);
     let source_bottom = pq_inverse_eotf(0.0);
     let span = source_top - source_bottom;
+    if !(span > 0.0) {
+        return display_black;
+    }
     let e1 = ((signal - source_bottom) / span).clamp(0.0, 1.0);
     let min_lum = (pq_inverse_eotf(display_black) - source_bottom) / span;
     let max_lum = ((pq_inverse_eotf(display_peak) - source_bottom) / span).min(1.0);
@@ -102,6 +105,20 @@ mod tests {
         let below = hlg_inverse_oetf(0.5 - 1e-9);
         let above = hlg_inverse_oetf(0.5 + 1e-9);
         assert!((below - above).abs() < 1e-8);
+    }
+
+    #[test]
+    fn the_hlg_eotf_shows_the_display_s_black_at_0_and_its_peak_at_1() {
+        let (white, black, gamma) = (1000.0, 0.25, 1.2);
+        assert!((hlg_eotf_grey(0.0, white, black, gamma) / black - 1.0).abs() < 1e-6);
+        assert!((hlg_eotf_grey(1.0, white, black, gamma) / white - 1.0).abs() < 1e-6);
+        // With no black, signal 0.5 is scene light 1/12 through the system gamma.
+        let mid = hlg_eotf_grey(0.5, white, 0.0, gamma);
+        assert!((mid / (white * (1.0f64 / 12.0).powf(gamma)) - 1.0).abs() < 1e-7);
+        // The black lifts the low signals more than linear light would (BT.2100's β).
+        let low = hlg_eotf_grey(0.1, white, black, gamma);
+        let linear = black + (white - black) * (hlg_eotf_grey(0.1, white, 0.0, gamma) / white);
+        assert!(low > 1.5 * linear, "{low} {linear}");
     }
 
     #[test]

@@ -110,10 +110,11 @@ impl Measurement {
         }
     }
 
-    /// A reading of the centre of the screen on a black background: the condition
-    /// under which the model's matrix and laws are defined.
+    /// A reading of the centre of the screen on a black background, at the plan's
+    /// patch size: the condition under which the model's matrix and laws are defined.
+    /// (A window of another size is not: a brightness limiter dims a large one.)
     pub fn is_standard_condition(&self) -> bool {
-        self.position.is_centre() && self.background == [0.0; 3]
+        self.position.is_centre() && self.background == [0.0; 3] && self.window.is_none()
     }
 }
 

@@ -90,6 +90,15 @@ impl Signal {
         self != Signal::Sdr
     }
 
+    /// The signal's name in a config (`plan.signal`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Signal::Sdr => "sdr",
+            Signal::Pq => "pq",
+            Signal::Hlg => "hlg",
+        }
+    }
+
     /// How the signal is named where a run is described.
     pub fn describe(self) -> &'static str {
         match self {

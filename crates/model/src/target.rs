@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use super::monitor::MonitorModel;
 use super::spatial::ScreenPosition;
-use chromacal_color::hdr::{bt2390_eetf, hlg_relative_luminance, hlg_system_gamma};
+use chromacal_color::hdr::{bt2390_eetf, hlg_eotf_grey, hlg_system_gamma};
 use chromacal_color::ictcp::pq_eotf;
 use chromacal_color::{Xyz, delta_e_2000, xyz_to_lab};
 
@@ -56,8 +56,9 @@ pub enum ToneCurve {
         /// cd/m² of the display the signal was mastered on (None: clip at the peak).
         mastering_peak: Option<f64>,
     },
-    /// BT.2100 Hybrid Log-Gamma: f(x) = OETF⁻¹(x)^γ with the system gamma γ of the
-    /// display's white luminance and the room's (BT.2100 Table 5 note 5f, BT.2390 §6.2).
+    /// BT.2100 Hybrid Log-Gamma: the HLG EOTF's grey with the display's black lifted in
+    /// the signal (β) and the system gamma γ of the display's white luminance and the
+    /// room's (BT.2100 Table 5 and note 5f, BT.2390 §6.2).
     Hlg {
         /// Luminance of the room's surround, cd/m² (BT.2100's reference is 5).
         ambient: f64,
@@ -278,7 +279,8 @@ impl ToneCurve {
                 ((y - black) / (white - black)).clamp(0.0, 1.0)
             }
             ToneCurve::Hlg { ambient } => {
-                hlg_relative_luminance(x, hlg_system_gamma(white, ambient))
+                let y = hlg_eotf_grey(x, white, black, hlg_system_gamma(white, ambient));
+                ((y - black) / (white - black)).clamp(0.0, 1.0)
             }
         }
     }

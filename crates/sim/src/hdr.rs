@@ -123,12 +123,14 @@ impl HdrBehaviour {
     pub fn abl_gain(&self, mean_light: f64) -> f64 {
         match &self.abl {
             Some(abl) => {
-                let x = mean_light.max(0.0) / abl.full_field;
-                if x < 1e-9 {
+                // (F/p) tanh(y)^(1/k) = (tanh(y) / y)^(1/k) with y = (p/F)^k, which
+                // stays 1 where y underflows.
+                let k = abl.sharpness;
+                let y = (mean_light.max(0.0) / abl.full_field).powf(k);
+                if y < 1e-12 {
                     return 1.0;
                 }
-                let k = abl.sharpness;
-                x.powf(k).tanh().powf(1.0 / k) / x
+                (y.tanh() / y).powf(1.0 / k)
             }
             None => 1.0,
         }
@@ -147,7 +149,7 @@ mod tests {
             black_clip: 0.0,
             abl: Some(Abl {
                 full_field: 180.0,
-                sharpness: 6.0,
+                sharpness: 4.0,
                 time_constant_s: 2.0,
             }),
             global_dimming_floor: None,
@@ -191,6 +193,15 @@ mod tests {
             .abl_gain(peak),
             1.0
         );
+        // A dim screen is not limited, however sharp the knee (no underflow to 0).
+        let sharp = HdrBehaviour {
+            abl: Some(Abl {
+                sharpness: 50.0,
+                ..oled().abl.unwrap()
+            }),
+            ..oled()
+        };
+        assert_eq!(sharp.abl_gain(1e-6), 1.0);
         assert!(oled().check(peak).is_ok());
         assert!(oled().check(5000.0).is_err(), "a roll-off below the peak");
     }

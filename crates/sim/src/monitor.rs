@@ -265,6 +265,9 @@ pub struct VirtualMonitor {
     /// What the screen showed before the last change, and when the change came.
     previous: ScreenContent,
     changed_at: f64,
+    /// The mean light an HDR display's limiter was following at the last change
+    /// (cd/m²): where it decays from towards the new screen's.
+    limiter_from: f64,
     clock: Arc<VirtualClock>,
     osd: Osd,
 }
@@ -332,6 +335,7 @@ impl VirtualMonitor {
             screen: ScreenContent::default(),
             previous: ScreenContent::default(),
             changed_at: f64::NEG_INFINITY,
+            limiter_from: 0.0,
             clock,
             osd: Osd::default(),
         })
@@ -350,8 +354,10 @@ impl VirtualMonitor {
     /// that only matters when patches change faster than the response time.)
     pub fn show(&mut self, content: ScreenContent) {
         if content != self.screen {
+            let now = self.clock.now();
+            self.limiter_from = self.limiter_light(now);
             self.previous = self.screen;
-            self.changed_at = self.clock.now();
+            self.changed_at = now;
             self.screen = content;
         }
     }
@@ -470,32 +476,40 @@ impl VirtualMonitor {
         values
     }
 
+    /// The screen's mean light (cd/m², without the limiter) while `screen` is shown.
+    fn mean_light(&self, screen: &ScreenContent) -> f64 {
+        let Some(peak) = self.spec.white_luminance else {
+            return 0.0;
+        };
+        let mean = |d: Drive| self.outputs_above_black(d).iter().sum::<f64>() / 3.0;
+        let area = screen.geometry.area();
+        peak * (area * mean(screen.patch) + (1.0 - area) * mean(screen.background))
+    }
+
+    /// The mean light an HDR display's limiter follows at time `t`: the screen's,
+    /// reached with the limiter's time constant from what it followed at the last
+    /// change (so a full field two patches ago still holds it down).
+    fn limiter_light(&self, t: f64) -> f64 {
+        let now = self.mean_light(&self.screen);
+        let tau = match self.spec.hdr.as_ref().and_then(|h| h.abl.as_ref()) {
+            Some(abl) if abl.time_constant_s > 0.0 => abl.time_constant_s,
+            _ => return now,
+        };
+        let old = (-(t - self.changed_at).max(0.0) / tau).exp();
+        now + (self.limiter_from - now) * old
+    }
+
     /// An HDR display's limiter gain on all light at time `t` and its backlight level
     /// (the factor on its black) while `screen` is shown: (1, 1) for an SDR display.
-    /// The limiter is one supply for the whole screen: it follows the screen's mean
-    /// light from before the last change to now with its time constant.
+    /// The limiter is one supply for the whole screen (`limiter_light`).
     fn hdr_gains(&self, screen: &ScreenContent, t: f64) -> (f64, f64) {
-        let (Some(hdr), Some(peak)) = (&self.spec.hdr, self.spec.white_luminance) else {
+        let Some(hdr) = &self.spec.hdr else {
             return (1.0, 1.0);
         };
-        let light = |d: Drive| self.outputs_above_black(d);
-        let mean_light = |s: &ScreenContent| {
-            let area = s.geometry.area();
-            let mean = |d: Drive| light(d).iter().sum::<f64>() / 3.0;
-            peak * (area * mean(s.patch) + (1.0 - area) * mean(s.background))
-        };
-        let mut p = mean_light(&self.screen);
-        if let Some(abl) = &hdr.abl
-            && abl.time_constant_s > 0.0
-        {
-            let old = (-(t - self.changed_at).max(0.0) / abl.time_constant_s).exp();
-            if old > 1e-12 {
-                p += (mean_light(&self.previous) - p) * old;
-            }
-        }
         let backlight = match hdr.global_dimming_floor {
             Some(floor) => {
-                let brightest = |d: Drive| light(d).into_iter().fold(0.0, f64::max);
+                let brightest =
+                    |d: Drive| self.outputs_above_black(d).into_iter().fold(0.0, f64::max);
                 let mut b = brightest(screen.patch);
                 if screen.geometry.area() < 1.0 {
                     b = b.max(brightest(screen.background));
@@ -504,7 +518,7 @@ impl VirtualMonitor {
             }
             None => 1.0,
         };
-        (hdr.abl_gain(p), backlight)
+        (hdr.abl_gain(self.limiter_light(t)), backlight)
     }
 
     /// Noise-free XYZ (CIE 1931 2°) at `position` now.

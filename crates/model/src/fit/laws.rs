@@ -350,7 +350,7 @@ fn fit_pq(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         (None, None) => unreachable!("PQ_ROLLOFFS is not empty"),
     };
     let pq = pq_law(&fit.params, rolloff);
-    let (peak, rolloff_from) = (pq.peak, pq.rolloff_from);
+    let (peak, rolloff_from, exponent) = (pq.peak, pq.rolloff_from, pq.exponent);
     let law = TransferLaw::Pq(pq);
     law.monotonicity()
         .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
@@ -360,7 +360,7 @@ fn fit_pq(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         amplitude: 1.0,
         parameters: vec![
             parameter("peak", peak, ses[0].map(|s| s * peak)),
-            parameter("exponent", fit.params[1], ses[1]),
+            parameter("exponent", exponent, ses[1]),
             parameter("rolloff_from", rolloff_from, None),
         ],
         chi2: fit.chi2,
