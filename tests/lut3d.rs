@@ -14,6 +14,7 @@ use chromacal_color::adaptation::{AdaptationTransform, adapt};
 use chromacal_crf::ColourReproduction;
 use chromacal_model::fit::validate::delta_e00_xyz;
 use chromacal_model::{MonitorModel, ScreenPosition};
+use common::images::{ffmpeg_lut3d, write_png16};
 use common::{chromacal, succeed};
 
 /// The simulated LCD, calibrated with the fixed plan: its profile.
@@ -51,49 +52,6 @@ fn source_codes() -> Vec<[u16; 3]> {
         codes.push([next(), next(), next()]);
     }
     codes
-}
-
-fn write_png16(path: &Path, width: u32, pixels: &[[u16; 3]]) {
-    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
-    let mut encoder = png::Encoder::new(file, width, pixels.len() as u32 / width);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Sixteen);
-    let mut writer = encoder.write_header().unwrap();
-    let bytes: Vec<u8> = pixels
-        .iter()
-        .flat_map(|p| p.iter().flat_map(|v| v.to_be_bytes()))
-        .collect();
-    writer.write_image_data(&bytes).unwrap();
-}
-
-fn read_png16(path: &Path) -> Vec<[u16; 3]> {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buffer = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buffer).unwrap();
-    assert_eq!(
-        (info.color_type, info.bit_depth),
-        (png::ColorType::Rgb, png::BitDepth::Sixteen)
-    );
-    buffer[..info.buffer_size()]
-        .chunks(6)
-        .map(|p| [0, 1, 2].map(|c| u16::from_be_bytes([p[2 * c], p[2 * c + 1]])))
-        .collect()
-}
-
-/// ffmpeg's lut3d filter (tetrahedral) applied to `input`, 16 bits in and out.
-fn ffmpeg_lut3d(input: &Path, lut: &Path, output: &Path) -> Vec<[u16; 3]> {
-    common::need_tool("ffmpeg", "ffmpeg");
-    succeed(
-        std::process::Command::new("ffmpeg")
-            .args(["-y", "-loglevel", "error", "-i"])
-            .arg(input)
-            .arg("-vf")
-            .arg(format!("lut3d=file={}:interp=tetrahedral", lut.display()))
-            .args(["-pix_fmt", "rgb48be"])
-            .arg(output),
-    );
-    read_png16(output)
 }
 
 /// What BT.709 code `rgb` stands for on this display (ITU-R BT.1886 Annex 1 with the

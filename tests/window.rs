@@ -1223,6 +1223,11 @@ fn a_mistyped_output_and_a_plan_too_deep_are_refused_before_any_run() {
     let err = attempt("[plan]\nuniformity_grid = 0\nbit_depth = 10\n", "window");
     assert!(err.contains("set plan.bit_depth = 8"), "{err}");
     assert!(!err.contains("--resume"), "{err}");
+    // An HDR plan on the 24-bit visual: refused for what it is, not told to drop bits.
+    let hdr =
+        "[plan]\nuniformity_grid = 0\nbit_depth = 10\n[target]\ntone = \"pq\"\nwhite = \"D65\"\n";
+    let err = attempt(hdr, "window");
+    assert!(err.contains("PQ") && err.contains("depth 30"), "{err}");
     let runs = state.join("runs");
     assert!(
         !runs.exists() || std::fs::read_dir(&runs).unwrap().count() == 0,

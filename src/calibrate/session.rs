@@ -785,8 +785,15 @@ pub async fn calibrate<'a>(
         {
             let bits = window.channel_bits();
             devices.instrument.close();
+            let fix = match config.plan.signal.filter(|s| s.is_hdr()) {
+                Some(signal) => format!(
+                    "a {} signal needs 10: run the X server at depth 30 (a 30-bit visual) or use the Resolve sink",
+                    signal.describe()
+                ),
+                None => format!("set plan.bit_depth = {bits}"),
+            };
             return Err(CalibrateError::Devices(DevicesError::Config(format!(
-                "the window on {} paints {bits} bits per channel, and plan.bit_depth is {}: set plan.bit_depth = {bits}",
+                "the window on {} paints {bits} bits per channel, and plan.bit_depth is {}: {fix}",
                 window.output().name,
                 config.plan.bit_depth
             ))));

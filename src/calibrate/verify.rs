@@ -207,8 +207,9 @@ pub async fn verify(
 }
 
 /// The verification a calibration with a target ends with: the default chart through
-/// the new curves, on the run's own devices, against sRGB, judged by `[verify]`'s
-/// criteria (DisplayCAL's defaults when it names none), and kept in `store`.
+/// the new curves, on the run's own devices, against sRGB (for a PQ signal the
+/// bt2100 chart against BT.2100 PQ in ΔE ITP), judged by `[verify]`'s criteria
+/// (DisplayCAL's defaults when it names none), and kept in `store`.
 pub async fn after_calibration(
     store: &ProfileStore,
     profile: &Profile,
@@ -217,22 +218,35 @@ pub async fn after_calibration(
     devices: &mut Devices,
     progress: &mut (dyn FnMut(usize, usize) + Send),
 ) -> Result<VerifyReport, VerifyError> {
+    use chromacal_crf::lut3d::SourceSpace;
+    let (chart, against, metric) = match profile.provenance.signal {
+        Some(chromacal_model::plan::Signal::Pq) => (
+            crate::verify::chart::bt2100_chart(),
+            Against::Encoding(SourceSpace::Rec2100Pq),
+            Metric::Itp,
+        ),
+        _ => (
+            crate::verify::chart::default_chart(),
+            Against::Encoding(SourceSpace::Srgb),
+            Metric::De00,
+        ),
+    };
     let criteria = match (&config.criteria, config.criterion.is_empty()) {
         (None, false) => CriteriaSet {
             name: "the config's [[verify.criterion]]".into(),
             criteria: config.criterion.clone(),
         },
         (name, _) => {
-            crate::verify::criteria::preset(name.as_deref().unwrap_or("displaycal"), Metric::De00)
+            crate::verify::criteria::preset(name.as_deref().unwrap_or("displaycal"), metric)
                 .ok_or_else(|| VerifyError::Config(format!("no criteria {name:?}")))?
         }
     };
     let options = VerifyOptions {
         state_dir: store.root().to_path_buf(),
         profile: None,
-        chart: crate::verify::chart::default_chart(),
-        against: Against::Encoding(chromacal_crf::lut3d::SourceSpace::Srgb),
-        metric: Metric::De00,
+        chart,
+        against,
+        metric,
         criteria,
         until_decided: None,
         overrides: Overrides::default(),

@@ -11,7 +11,8 @@ use chromacal::calibrate::run::Progress;
 use chromacal::calibrate::session::{CalibrateOptions, Resume, calibrate as calibrate_session};
 use chromacal::config::devices::find_device;
 use chromacal::config::{
-    LoadedConfig, Sink, check_config, config_search_paths, device_configs, load_config_searching,
+    LoadedConfig, Sink, check_config, config_search_paths, device_configs, hdr_mode_advice,
+    load_config_searching,
 };
 use chromacal::profile::store::default_state_dir;
 use chromacal::report;
@@ -241,6 +242,9 @@ fn announce_display(loaded: &LoadedConfig, options: &CalibrateOptions) {
                 .unwrap_or_default()
         ),
         Sink::Simulated | Sink::Emulator => {}
+    }
+    if let Some(advice) = hdr_mode_advice(&config) {
+        eprintln!("chromacal: {advice}");
     }
 }
 

@@ -11,16 +11,23 @@ use super::shared::{Failure, is_stdout, write_stdout};
 use chromacal_crf::gamut::{ScbOptions, SgckSource};
 
 /// Write a 3D LUT that shows a source encoding (sRGB, BT.709/BT.1886, Display P3,
-/// Rec. 2020) on this display, for mpv, madVR, Resolve or ffmpeg's lut3d filter.
+/// Rec. 2020, BT.2100 PQ or HLG) on this display, for mpv, madVR, Resolve or
+/// ffmpeg's lut3d filter.
 #[derive(clap::Args)]
 pub struct Lut3dArgs {
     /// The display's profile (TOML).
     profile: PathBuf,
     /// The encoding of the LUT's input: srgb, bt709 (gamma 2.4), bt1886 (BT.709
     /// through BT.1886 with this display's black), p3 (Display P3), rec2020 (through
-    /// BT.1886).
+    /// BT.1886), rec2100-pq or rec2100-hlg (HDR: BT.2020 primaries, full-range codes,
+    /// the display in its PQ or HLG mode).
     #[arg(long)]
     source: SourceSpace,
+    /// With --source rec2100-pq: the peak of the display the video was mastered on
+    /// (cd/m², e.g. 1000 or 4000 from its HDR10 metadata); BT.2390's EETF rolls it off
+    /// to this display's peak. Without it the PQ is clipped at the peak.
+    #[arg(long, value_name = "CD_M2", value_parser = super::shared::positive_number)]
+    mastering_peak: Option<f64>,
     /// Points along each axis (2 to 129) [default: 33 for a .cube, 17 for a .3dl, the
     /// only size ffmpeg reads in that format].
     #[arg(long)]
@@ -44,6 +51,11 @@ pub struct Lut3dArgs {
 }
 
 pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
+    if args.mastering_peak.is_some() && args.source != SourceSpace::Rec2100Pq {
+        return Err(Failure::from(
+            "--mastering-peak is for --source rec2100-pq (a PQ master's peak)".to_string(),
+        ));
+    }
     let profile = Profile::read(&args.profile)?;
     let three_dl = args
         .output
@@ -77,9 +89,24 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
             gamut: args.gamut.mapping(ScbOptions::default(), SgckSource::Srgb),
             absolute: args.absolute,
             through_calibration: args.through_calibration,
+            mastering_peak: args.mastering_peak,
         },
     )
     .map_err(|e| Failure::from(format!("{}: {e}", args.profile.display())))?;
+    let mut lut = lut;
+    if args.source.is_hdr()
+        && let Some(full) = profile
+            .report
+            .limiter
+            .as_ref()
+            .and_then(|l| l.full_field_white())
+    {
+        // The peak is a small window's; a bright scene gets less (the limiter).
+        lut.notes.push(format!(
+            "The display's full-field white is {:.1} cd/m2 (its brightness limiter): bright scenes show less than this LUT asks",
+            full.measured_y
+        ));
+    }
     let text = if three_dl {
         lut.to_3dl()
     } else {
@@ -108,5 +135,8 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
         profile.id,
         args.output.display()
     );
+    for note in &lut.notes {
+        eprintln!("chromacal: {note}");
+    }
     Ok(())
 }

@@ -9,6 +9,7 @@ use chromacal::config::{config_search_paths, load_config_searching};
 use chromacal::profile::store::default_state_dir;
 use chromacal::verify::criteria::{CriteriaSet, PRESETS, preset};
 use chromacal::verify::{Against, Metric, Verdict, chart};
+use chromacal_crf::lut3d::SourceSpace;
 
 use super::args::DeviceArgs;
 use super::shared::{Failure, VERIFICATION_FAILED, VERIFICATION_UNDECIDED, outln};
@@ -26,14 +27,16 @@ pub struct VerifyArgs {
     /// Verify the store's current profile (the default when no profile is named).
     #[arg(long, conflicts_with = "profile")]
     current: bool,
-    /// What each patch is set against: srgb, bt709, bt1886, p3, rec2020 (what an
-    /// application asks for in that encoding) or profile (the profile's prediction).
-    #[arg(long, default_value = "srgb")]
-    against: Against,
+    /// What each patch is set against: srgb, bt709, bt1886, p3, rec2020, rec2100-pq,
+    /// rec2100-hlg (what an application asks for in that encoding) or profile (the
+    /// profile's prediction) [default: srgb; rec2100-pq for the bt2100 chart].
+    #[arg(long)]
+    against: Option<Against>,
     /// default (≥ 17 greys, primaries and secondaries at four levels, the
     /// ColorChecker, white and black read three times), short (26 patches), long
-    /// (≥ 100), or a file: a .ti1/.ti3 (RGB_R RGB_G RGB_B, 0–100) or a CSV (R, G, B,
-    /// 0–1), in the --against encoding.
+    /// (≥ 100), bt2100 (for a display in PQ mode: PQ greys from 0.1 to 1,000 cd/m²
+    /// and the ColorChecker at 203 cd/m², as BT.2100 PQ codes), or a file: a .ti1/.ti3
+    /// (RGB_R RGB_G RGB_B, 0–100) or a CSV (R, G, B, 0–1), in the --against encoding.
     #[arg(long, default_value = "default")]
     chart: String,
     /// de00 (CIEDE2000) or itp (ITU-R BT.2124 ΔE ITP).
@@ -79,11 +82,23 @@ pub fn run(args: VerifyArgs) -> Result<(), Failure> {
     if let Some(path) = &args.report {
         super::report::check_output_dir(path)?;
     }
+    let chart = chart::chart(&args.chart)?;
+    let pq = Against::Encoding(SourceSpace::Rec2100Pq);
+    let against = match (chart.name == "bt2100", args.against) {
+        (true, None) => pq,
+        (true, Some(a)) if a != pq => {
+            return Err(Failure::from(format!(
+                "the bt2100 chart is BT.2100 PQ codes: verify it --against rec2100-pq, not {}",
+                a.name()
+            )));
+        }
+        (_, a) => a.unwrap_or(Against::Encoding(SourceSpace::Srgb)),
+    };
     let options = VerifyOptions {
         state_dir: args.state_dir.unwrap_or_else(default_state_dir),
         profile: args.profile,
-        chart: chart::chart(&args.chart)?,
-        against: args.against,
+        chart,
+        against,
         metric: args.metric,
         criteria,
         until_decided: args.until_decided,

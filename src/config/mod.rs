@@ -411,6 +411,30 @@ pub(crate) fn hdr_defaults(config: &mut Config) {
     }
 }
 
+/// What the user must set on the display before an HDR run, for the sinks that send
+/// no HDR metadata themselves (all of them: chromacal sends codes, not InfoFrames).
+pub fn hdr_mode_advice(config: &Config) -> Option<String> {
+    let signal = config.plan.signal.filter(|s| s.is_hdr())?;
+    let mode = match signal {
+        Signal::Hlg => "HLG",
+        _ => "HDR10 (PQ)",
+    };
+    let how = match config.display.sink() {
+        Sink::Resolve => format!(
+            "set the pattern generator to send {mode} metadata with BT.2020 primaries, so that the display switches to that mode"
+        ),
+        Sink::Window => format!(
+            "X11 sends no HDR metadata: put the display in its {mode} mode from its own menu"
+        ),
+        Sink::Simulated | Sink::Emulator | Sink::Web => return None,
+    };
+    Some(format!(
+        "the patches are a {} signal in {} bits; chromacal sends no HDR metadata: {how}, and leave its picture settings as they will be used",
+        signal.describe(),
+        config.plan.bit_depth
+    ))
+}
+
 /// The rules that tie one key to another (the ranges of single keys are in `ranges`).
 fn check_between_keys(config: &Config) -> Result<(), String> {
     let monitor = &config.monitor;
@@ -522,6 +546,19 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     }
     if sink == Sink::Emulator && config.display.screen.is_none() {
         return Err("display.sink = \"emulator\" needs display.screen".into());
+    }
+    let signal = config.plan.signal.unwrap_or_default();
+    if signal.is_hdr() && sink == Sink::Web {
+        return Err(format!(
+            "plan.signal = \"{}\" is an HDR signal, and the web patch page paints 8-bit sRGB through the browser's colour management: use display.sink = \"resolve\" (10 bits, the pattern generator in HDR10 or HLG mode) or a 30-bit window",
+            signal.name()
+        ));
+    }
+    if signal.is_hdr() && config.plan.bit_depth < 10 {
+        return Err(format!(
+            "plan.signal = \"{}\" is carried in 10 or 12 bits (BT.2100; in 8, PQ's steps show as bands): set plan.bit_depth = 10",
+            signal.name()
+        ));
     }
     if sink == Sink::Web && config.plan.bit_depth != 8 {
         return Err(format!(
@@ -752,6 +789,19 @@ mod tests {
             ))
             .contains("max_reads")
         );
+        // An HDR plan: never on the web page, never in 8 bits; said before measuring.
+        let pq = "[target]\ntone = \"pq\"\n";
+        let web = error(&format!("{serial}{pq}[display]\nsink = \"web\"\n"));
+        assert!(web.contains("HDR signal") && web.contains("8-bit"), "{web}");
+        let eight = error(&format!("{serial}{pq}[display]\nsink = \"resolve\"\n"));
+        assert!(eight.contains("set plan.bit_depth = 10"), "{eight}");
+        let resolve = parse_config(
+            &format!("{serial}{pq}[display]\nsink = \"resolve\"\n[plan]\nbit_depth = 10\n"),
+            "c.toml",
+        )
+        .unwrap();
+        let advice = hdr_mode_advice(&resolve).unwrap();
+        assert!(advice.contains("HDR10 (PQ)"), "{advice}");
         let ok = parse_config(
             &format!("{serial}[display]\nsink = \"resolve\"\n[display.resolve]\naddress = \"127.0.0.1:0\"\n[plan]\nbit_depth = 10\n"),
             "c.toml",

@@ -246,7 +246,45 @@ pub fn long_chart() -> Chart {
     }
 }
 
-/// A chart by name (`default`, `short`, `long`) or from a file: an ArgyllCMS `.ti1` or
+/// BT.2408's HDR reference white, cd/m²: where a PQ chart puts the ColorChecker's.
+pub const HDR_REFERENCE_WHITE: f64 = 203.0;
+
+/// The chart for an HDR display in its PQ mode (`--chart bt2100`, read with
+/// `--against rec2100-pq`): the white and the black three times each, 15 calibration
+/// greys, PQ greys from 0.1 to 1,000 cd/m² (those above the display's peak are
+/// judged against the peak), and the ColorChecker under D65 with its perfect white at
+/// BT.2408's 203 cd/m², all as BT.2100 PQ codes on BT.2020 primaries.
+pub fn bt2100_chart() -> Chart {
+    use chromacal_color::gamut::{AdditiveGamut, REC_2020};
+    use chromacal_color::ictcp::pq_inverse_eotf;
+    let mut patches = repeats(3);
+    patches.extend(display_greys(15));
+    for nits in [0.1, 0.5, 1.0, 5.0, 10.0, 50.0, 100.0, 203.0, 400.0, 1000.0] {
+        patches.push(patch(
+            format!("PQ grey {nits} cd/m²"),
+            Kind::EncodedGrey,
+            Input::Encoded([pq_inverse_eotf(nits); 3]),
+        ));
+    }
+    let to_rgb = AdditiveGamut::of_space(&REC_2020).and_then(|g| g.primaries.try_inverse());
+    if let (Some(to_rgb), Some(colours)) = (to_rgb, colorchecker_xyz(Illuminant::D65, 1.0)) {
+        for (name, xyz) in COLORCHECKER.iter().zip(colours) {
+            // Every ColorChecker colour is inside BT.2020 (a rounding's negative is 0).
+            let rgb = to_rgb * (xyz * HDR_REFERENCE_WHITE);
+            patches.push(patch(
+                format!("ColorChecker {name}"),
+                Kind::ColorChecker,
+                Input::Encoded([rgb.x, rgb.y, rgb.z].map(|v| pq_inverse_eotf(v.max(0.0)))),
+            ));
+        }
+    }
+    Chart {
+        name: "bt2100".into(),
+        patches,
+    }
+}
+
+/// A chart by name (`default`, `short`, `long`, `bt2100`) or from a file: an ArgyllCMS `.ti1` or
 /// `.ti3` (its `RGB_R RGB_G RGB_B` columns, 0–100), or a CSV with a header naming `R`,
 /// `G` and `B` columns (0–1). Its patches are codes of the reference encoding.
 pub fn chart(name: &str) -> Result<Chart, ChartError> {
@@ -254,6 +292,7 @@ pub fn chart(name: &str) -> Result<Chart, ChartError> {
         "default" => Ok(default_chart()),
         "short" => Ok(short_chart()),
         "long" => Ok(long_chart()),
+        "bt2100" => Ok(bt2100_chart()),
         path => read_chart(Path::new(path)),
     }
 }

@@ -70,7 +70,8 @@ impl std::str::FromStr for Against {
         match s.to_ascii_lowercase().as_str() {
             "profile" => Ok(Against::Profile),
             other => other.parse().map(Against::Encoding).map_err(|_| {
-                format!("no reference '{s}' (srgb, bt709, bt1886, p3, rec2020, profile)")
+                let keys: Vec<&str> = SourceSpace::ALL.iter().map(|s| s.key()).collect();
+                format!("no reference '{s}' ({}, profile)", keys.join(", "))
             }),
         }
     }
@@ -89,7 +90,7 @@ impl Serialize for Against {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         s.serialize_str(&match self {
             Against::Profile => "profile".to_string(),
-            Against::Encoding(space) => format!("{space:?}").to_ascii_lowercase(),
+            Against::Encoding(space) => space.key().to_string(),
         })
     }
 }
@@ -231,6 +232,7 @@ pub fn plan(
                     gamut: GamutMapping::Clip,
                     absolute: false,
                     through_calibration: setting.curves.is_some(),
+                    mastering_peak: None,
                 },
             )),
             (Input::Colour(c), _) => Some(relative_colour(chart::colour_xyz(c), &white, &black)),

@@ -5,6 +5,7 @@
 pub mod argyll;
 pub mod bus;
 pub mod daemon;
+pub mod images;
 pub mod xserver;
 
 use std::path::PathBuf;

@@ -50,9 +50,31 @@ pub fn hlg_system_gamma(peak: f64, ambient: f64) -> f64 {
 /// β = √(3 (L_B / L_W)^(1/γ)), and F_D = L_W · E^γ, so signal 0 shows L_B and 1 shows
 /// L_W (to the constants' digits: E is divided by its value at 1).
 pub fn hlg_eotf_grey(signal: f64, white: f64, black: f64, gamma: f64) -> f64 {
+    hlg_eotf([signal; 3], white, black, gamma)[1]
+}
+
+/// BT.2020's luminance weights of linear R, G, B (BT.2100 Table 5's Y_S).
+const BT2020_LUMINANCE: [f64; 3] = [0.2627, 0.6780, 0.0593];
+
+/// BT.2100 Table 5 HLG EOTF of a BT.2020 R′G′B′ signal: each channel's scene light
+/// E = OETF⁻¹(max(0, (1 − β) E′ + β)) (β lifting the display's black `black`), then
+/// the OOTF F_D = L_W · Y_S^(γ−1) · E, the system gamma acting on the scene's
+/// luminance Y_S so that hues keep their ratios. Linear R, G, B in cd/m² of a display
+/// of nominal peak `white`.
+pub fn hlg_eotf(signal: [f64; 3], white: f64, black: f64, gamma: f64) -> [f64; 3] {
     let beta = (3.0 * (black.max(0.0) / white).powf(1.0 / gamma)).sqrt();
-    let lifted = ((1.0 - beta) * signal.clamp(0.0, 1.0) + beta).max(0.0);
-    white * (hlg_inverse_oetf(lifted) / hlg_inverse_oetf(1.0)).powf(gamma)
+    // Normalised to the signal's top, which the published constants miss by 10⁻⁸.
+    let top = hlg_inverse_oetf(1.0);
+    let scene = signal.map(|e| {
+        let lifted = ((1.0 - beta) * e.clamp(0.0, 1.0) + beta).max(0.0);
+        hlg_inverse_oetf(lifted) / top
+    });
+    let luminance: f64 = (0..3).map(|c| BT2020_LUMINANCE[c] * scene[c]).sum();
+    if !(luminance > 0.0) {
+        return [0.0; 3];
+    }
+    let ootf = white * luminance.powf(gamma - 1.0);
+    scene.map(|e| ootf * e)
 }
 
 /// The mapping of ITU-R BT.2390-10 §5.4.1 (the EETF) from a PQ signal mastered on a
@@ -119,6 +141,17 @@ mod tests {
         let low = hlg_eotf_grey(0.1, white, black, gamma);
         let linear = black + (white - black) * (hlg_eotf_grey(0.1, white, 0.0, gamma) / white);
         assert!(low > 1.5 * linear, "{low} {linear}");
+    }
+
+    #[test]
+    fn the_hlg_ootf_keeps_a_colour_s_channel_ratios() {
+        let (white, gamma) = (1000.0, 1.2);
+        let rgb = hlg_eotf([0.7, 0.4, 0.2], white, 0.0, gamma);
+        let scene = [0.7, 0.4, 0.2].map(hlg_inverse_oetf);
+        assert!((rgb[0] / rgb[2] - scene[0] / scene[2]).abs() < 1e-9);
+        // The luminance goes through the system gamma, not each channel.
+        let y = |v: [f64; 3]| (0..3).map(|c| BT2020_LUMINANCE[c] * v[c]).sum::<f64>();
+        assert!((y(rgb) / (white * y(scene).powf(gamma)) - 1.0).abs() < 1e-6);
     }
 
     #[test]

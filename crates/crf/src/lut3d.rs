@@ -19,6 +19,8 @@ use super::{CodeChoice, ColourReproduction, CrfError, RenderSettings, Scene, Sce
 use chromacal_color::Xyz;
 use chromacal_color::adaptation::{AdaptationTransform, adapt};
 use chromacal_color::gamut::{AdditiveGamut, DISPLAY_P3, REC_2020, RgbSpace, SRGB};
+use chromacal_color::hdr::{bt2390_eetf, hlg_eotf, hlg_system_gamma};
+use chromacal_color::ictcp::{pq_eotf, pq_inverse_eotf};
 use chromacal_color::spaces::{Xyy, xyy_to_xyz};
 use chromacal_model::fit::stats::ErrorStats;
 use chromacal_model::target::CalibrationCurves;
@@ -39,28 +41,53 @@ pub enum SourceSpace {
     P3,
     /// ITU-R BT.2020 primaries through BT.1886 with the display's white and black.
     Rec2020,
+    /// ITU-R BT.2100 PQ (SMPTE ST 2084) on BT.2020 primaries: absolute light, brought
+    /// onto the display's peak and black by BT.2390's EETF from the mastering peak.
+    Rec2100Pq,
+    /// ITU-R BT.2100 HLG on BT.2020 primaries: scene light, shown through the HLG
+    /// EOTF of the display's peak and black (system gamma for BT.2100's 5 cd/m² room).
+    Rec2100Hlg,
 }
 
 impl std::str::FromStr for SourceSpace {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        Ok(match s.to_ascii_lowercase().as_str() {
-            "srgb" => SourceSpace::Srgb,
-            "bt709" => SourceSpace::Bt709,
-            "bt1886" => SourceSpace::Bt1886,
-            "p3" => SourceSpace::P3,
-            "rec2020" => SourceSpace::Rec2020,
-            _ => {
-                return Err(format!(
-                    "no source space '{s}' (srgb, bt709, bt1886, p3, rec2020)"
-                ));
-            }
-        })
+        let wanted = s.to_ascii_lowercase();
+        SourceSpace::ALL
+            .into_iter()
+            .find(|space| space.key() == wanted)
+            .ok_or_else(|| {
+                let keys: Vec<&str> = SourceSpace::ALL.iter().map(|s| s.key()).collect();
+                format!("no source space '{s}' ({})", keys.join(", "))
+            })
     }
 }
 
 impl SourceSpace {
+    pub const ALL: [SourceSpace; 7] = [
+        SourceSpace::Srgb,
+        SourceSpace::Bt709,
+        SourceSpace::Bt1886,
+        SourceSpace::P3,
+        SourceSpace::Rec2020,
+        SourceSpace::Rec2100Pq,
+        SourceSpace::Rec2100Hlg,
+    ];
+
+    /// The name on the command line (`--source`, `verify --against`).
+    pub fn key(self) -> &'static str {
+        match self {
+            SourceSpace::Srgb => "srgb",
+            SourceSpace::Bt709 => "bt709",
+            SourceSpace::Bt1886 => "bt1886",
+            SourceSpace::P3 => "p3",
+            SourceSpace::Rec2020 => "rec2020",
+            SourceSpace::Rec2100Pq => "rec2100-pq",
+            SourceSpace::Rec2100Hlg => "rec2100-hlg",
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             SourceSpace::Srgb => "sRGB",
@@ -68,6 +95,8 @@ impl SourceSpace {
             SourceSpace::Bt1886 => "BT.709 through BT.1886",
             SourceSpace::P3 => "Display P3",
             SourceSpace::Rec2020 => "Rec. 2020 through BT.1886",
+            SourceSpace::Rec2100Pq => "BT.2100 PQ",
+            SourceSpace::Rec2100Hlg => "BT.2100 HLG",
         }
     }
 
@@ -75,7 +104,7 @@ impl SourceSpace {
         match self {
             SourceSpace::Srgb | SourceSpace::Bt709 | SourceSpace::Bt1886 => SRGB,
             SourceSpace::P3 => DISPLAY_P3,
-            SourceSpace::Rec2020 => REC_2020,
+            SourceSpace::Rec2020 | SourceSpace::Rec2100Pq | SourceSpace::Rec2100Hlg => REC_2020,
         }
     }
 
@@ -84,27 +113,57 @@ impl SourceSpace {
         match self {
             SourceSpace::Srgb | SourceSpace::Bt709 | SourceSpace::Bt1886 => SgckSource::Srgb,
             SourceSpace::P3 => SgckSource::P3,
-            SourceSpace::Rec2020 => SgckSource::Rec2020,
+            SourceSpace::Rec2020 | SourceSpace::Rec2100Pq | SourceSpace::Rec2100Hlg => {
+                SgckSource::Rec2020
+            }
         }
     }
 
     /// Whether the EOTF itself lifts code 0 to the display's black (BT.1886); the
     /// others are given black point compensation.
     fn places_black(self) -> bool {
-        matches!(self, SourceSpace::Bt1886 | SourceSpace::Rec2020)
+        !matches!(
+            self,
+            SourceSpace::Srgb | SourceSpace::Bt709 | SourceSpace::P3
+        )
     }
 
-    /// Linear light of code `v` relative to white, with the display's black at
-    /// `black` (its luminance over the white's).
-    pub fn decode(self, v: f64, black: f64) -> f64 {
-        let v = v.clamp(0.0, 1.0);
+    /// An HDR signal: its light is set in cd/m² by the signal and the display's peak,
+    /// not relative to the display's white.
+    pub fn is_hdr(self) -> bool {
+        matches!(self, SourceSpace::Rec2100Pq | SourceSpace::Rec2100Hlg)
+    }
+
+    /// Linear light of codes `rgb` in cd/m² on a display of white luminance `white`
+    /// and black `black` (the HDR encodings' light is their own, brought onto that
+    /// range: PQ by BT.2390's EETF from `mastering_peak`, or clipped at the white
+    /// where it is None; HLG by its EOTF for that peak).
+    pub fn decode(
+        self,
+        rgb: [f64; 3],
+        white: f64,
+        black: f64,
+        mastering_peak: Option<f64>,
+    ) -> [f64; 3] {
+        let share = (black / white).clamp(0.0, 1.0);
+        let relative = |f: &dyn Fn(f64) -> f64| rgb.map(|v| white * f(v.clamp(0.0, 1.0)));
         match self {
-            SourceSpace::Srgb | SourceSpace::P3 => srgb_eotf(v),
-            SourceSpace::Bt709 => v.powf(BT1886_GAMMA),
-            SourceSpace::Bt1886 | SourceSpace::Rec2020 => bt1886_eotf(v, 1.0, black),
+            SourceSpace::Srgb | SourceSpace::P3 => relative(&srgb_eotf),
+            SourceSpace::Bt709 => relative(&|v| v.powf(BT1886_GAMMA)),
+            SourceSpace::Bt1886 | SourceSpace::Rec2020 => relative(&|v| bt1886_eotf(v, 1.0, share)),
+            // A mastering peak at or below the display's leaves the knee at the top:
+            // the PQ as it is, clipped at the peak, with the black lifted.
+            SourceSpace::Rec2100Pq => rgb
+                .map(|v| bt2390_eetf(v, mastering_peak.unwrap_or(white).max(white), white, black)),
+            SourceSpace::Rec2100Hlg => {
+                hlg_eotf(rgb, white, black, hlg_system_gamma(white, HLG_ROOM))
+            }
         }
     }
 }
+
+/// BT.2100's reference surround for HLG, cd/m².
+const HLG_ROOM: f64 = 5.0;
 
 /// BT.1886's exponent.
 const BT1886_GAMMA: f64 = 2.4;
@@ -143,6 +202,9 @@ pub struct LutOptions {
     /// The LUT is applied while the profile's calibration curves are in the video
     /// LUT: its output is the curves' input that gives each drive.
     pub through_calibration: bool,
+    /// For a PQ source: the peak of the display it was mastered on, cd/m², from
+    /// which BT.2390's EETF rolls it off to this display's (None: clipped).
+    pub mastering_peak: Option<f64>,
 }
 
 /// A 3D LUT: `size`³ output triples in [0, 1], red varying fastest.
@@ -154,6 +216,9 @@ pub struct Lut3d {
     pub outside: usize,
     pub mapping: Option<ErrorStats>,
     pub source: SourceSpace,
+    /// What the file says about its input beyond the source's name (an HDR source's
+    /// range and the peak it is brought to), one comment line each.
+    pub notes: Vec<String>,
 }
 
 /// Why a LUT could not be made.
@@ -184,7 +249,10 @@ pub fn source_target(rgb: [f64; 3], white: &Xyz, black: &Xyz, options: &LutOptio
     let black_share = (black.y / white.y).clamp(0.0, 1.0);
     let space = options.source.primaries();
     let to_xyz = space_matrix(&space);
-    let linear = rgb.map(|v| options.source.decode(v, black_share));
+    let linear = options
+        .source
+        .decode(rgb, white.y, black.y, options.mastering_peak)
+        .map(|v| v / white.y);
     let xyz = to_xyz * Xyz::new(linear[0], linear[1], linear[2]);
     let source_white = to_xyz * Xyz::new(1.0, 1.0, 1.0);
     let relative = if options.absolute {
@@ -330,7 +398,49 @@ pub fn build_lut(
         outside: rendering.summary.outside,
         mapping: rendering.summary.mapping_outside,
         source: options.source,
+        notes: hdr_notes(options, &white, &black),
     })
+}
+
+/// What an HDR LUT's file says of its input and of the light it is brought to.
+fn hdr_notes(options: &LutOptions, white: &Xyz, black: &Xyz) -> Vec<String> {
+    let input = "Input: full-range R'G'B' codes over 0-1 (10-bit 0-1023); narrow-range video (64-940) must be expanded first";
+    match options.source {
+        SourceSpace::Rec2100Pq => vec![
+            format!("{input}; SMPTE ST 2084 PQ, 1.0 = 10000 cd/m2, BT.2020 primaries, D65"),
+            match options.mastering_peak {
+                Some(m) if m > white.y => format!(
+                    "BT.2390 EETF from a {m} cd/m2 mastering peak to the display's {:.1} cd/m2 (black {:.4}); exact below the knee at {:.1} cd/m2",
+                    white.y,
+                    black.y,
+                    eetf_knee(m, white.y)
+                ),
+                _ => format!(
+                    "PQ as it is up to the display's {:.1} cd/m2, clipped above (black {:.4} lifted by BT.2390)",
+                    white.y, black.y
+                ),
+            },
+        ],
+        SourceSpace::Rec2100Hlg => vec![
+            format!("{input}; BT.2100 HLG, BT.2020 primaries, D65"),
+            format!(
+                "HLG EOTF for a {:.1} cd/m2 peak, black {:.4}, system gamma {:.3} (5 cd/m2 surround)",
+                white.y,
+                black.y,
+                hlg_system_gamma(white.y, HLG_ROOM)
+            ),
+        ],
+        _ => Vec::new(),
+    }
+}
+
+/// Luminance of BT.2390's knee (KS = 1.5 · maxLum − 0.5 in the mastering range's PQ,
+/// §5.4.1 eq. 6) for a PQ mastered at `mastering_peak` shown on a `display_peak`
+/// display: below it the EETF is the PQ itself.
+pub fn eetf_knee(mastering_peak: f64, display_peak: f64) -> f64 {
+    let (bottom, top) = (pq_inverse_eotf(0.0), pq_inverse_eotf(mastering_peak));
+    let max_lum = ((pq_inverse_eotf(display_peak) - bottom) / (top - bottom)).min(1.0);
+    pq_eotf((1.5 * max_lum - 0.5) * (top - bottom) + bottom)
 }
 
 impl Lut3d {
@@ -338,9 +448,15 @@ impl Lut3d {
     /// triples with red varying fastest.
     pub fn to_cube(&self, title: &str) -> String {
         let mut out = format!(
-            "# Made by chromacal {}: {} to this display\nTITLE \"{}\"\nLUT_3D_SIZE {}\nDOMAIN_MIN 0.0 0.0 0.0\nDOMAIN_MAX 1.0 1.0 1.0\n",
+            "# Made by chromacal {}: {} to this display\n",
             env!("CARGO_PKG_VERSION"),
             self.source.name(),
+        );
+        for note in &self.notes {
+            out += &format!("# {}\n", note.replace('\n', " "));
+        }
+        out += &format!(
+            "TITLE \"{}\"\nLUT_3D_SIZE {}\nDOMAIN_MIN 0.0 0.0 0.0\nDOMAIN_MAX 1.0 1.0 1.0\n",
             title.replace('"', "'"),
             self.size
         );
@@ -376,6 +492,25 @@ impl Lut3d {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hdr_sources_decode_to_the_display_s_light_and_every_key_parses_back() {
+        for space in SourceSpace::ALL {
+            assert_eq!(space.key().parse::<SourceSpace>(), Ok(space));
+        }
+        let pq = SourceSpace::Rec2100Pq;
+        // Below the knee the PQ's own light; the master's peak lands on the display's.
+        let hundred = pq.decode([pq_inverse_eotf(100.0); 3], 600.0, 0.0, Some(1000.0));
+        assert!((hundred[0] / 100.0 - 1.0).abs() < 1e-6, "{hundred:?}");
+        let top = pq.decode([pq_inverse_eotf(1000.0); 3], 600.0, 0.0, Some(1000.0));
+        assert!((top[0] / 600.0 - 1.0).abs() < 1e-6, "{top:?}");
+        // Unmastered: clipped at the peak.
+        let clipped = pq.decode([pq_inverse_eotf(4000.0); 3], 600.0, 0.0, None);
+        assert!((clipped[0] / 600.0 - 1.0).abs() < 1e-9, "{clipped:?}");
+        assert!(eetf_knee(1000.0, 600.0) < 600.0 && eetf_knee(1000.0, 600.0) > 300.0);
+        let hlg = SourceSpace::Rec2100Hlg.decode([1.0; 3], 1000.0, 0.0, None);
+        assert!((hlg[1] / 1000.0 - 1.0).abs() < 1e-6, "{hlg:?}");
+    }
 
     #[test]
     fn bt1886_runs_from_the_black_to_the_white() {
@@ -420,6 +555,7 @@ mod tests {
             outside: 0,
             mapping: None,
             source: SourceSpace::Srgb,
+            notes: Vec::new(),
         };
         let text = lut.to_3dl();
         let lines: Vec<&str> = text.lines().collect();
