@@ -459,4 +459,11 @@ fn a_pq_lut_through_ffmpeg_shows_a_1000_nit_master_on_the_oled_by_bt2390() {
         above.len() >= 5 && above.windows(2).all(|w| w[1] >= w[0] * (1.0 - 1e-6)),
         "{above:?}"
     );
+    // Rolled off, not clipped at the knee: from below the peak up to it.
+    let (first, last) = (above[0], above[above.len() - 1]);
+    assert!(
+        first < 0.97 * white.y && (last / white.y - 1.0).abs() < 0.01,
+        "{first} to {last}, peak {}",
+        white.y
+    );
 }

@@ -51,6 +51,11 @@ pub struct Lut3dArgs {
 }
 
 pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
+    if args.mastering_peak.is_some_and(|m| m > 10000.0) {
+        return Err(Failure::from(
+            "--mastering-peak is at most 10000 cd/m² (the top of the PQ)".to_string(),
+        ));
+    }
     if args.mastering_peak.is_some() && args.source != SourceSpace::Rec2100Pq {
         return Err(Failure::from(
             "--mastering-peak is for --source rec2100-pq (a PQ master's peak)".to_string(),

@@ -39,9 +39,10 @@ pub struct VerifyArgs {
     /// (RGB_R RGB_G RGB_B, 0–100) or a CSV (R, G, B, 0–1), in the --against encoding.
     #[arg(long, default_value = "default")]
     chart: String,
-    /// de00 (CIEDE2000) or itp (ITU-R BT.2124 ΔE ITP).
-    #[arg(long, default_value = "de00")]
-    metric: Metric,
+    /// de00 (CIEDE2000) or itp (ITU-R BT.2124 ΔE ITP) [default: de00; itp for the
+    /// bt2100 chart].
+    #[arg(long)]
+    metric: Option<Metric>,
     /// displaycal (DisplayCAL's default tolerances), displaycal-recommended, iso14861
     /// [default: the config's [verify] criteria, else displaycal].
     #[arg(long)]
@@ -78,15 +79,19 @@ pub struct VerifyArgs {
 
 pub fn run(args: VerifyArgs) -> Result<(), Failure> {
     let loaded = load_config_searching(args.config.as_deref(), &config_search_paths())?;
-    let criteria = criteria(args.criteria.as_deref(), &loaded.config.verify, args.metric)?;
+    let chart = chart::chart(&args.chart)?;
+    let hdr_chart = chart.name == "bt2100";
+    let metric = args
+        .metric
+        .unwrap_or(if hdr_chart { Metric::Itp } else { Metric::De00 });
+    let criteria = criteria(args.criteria.as_deref(), &loaded.config.verify, metric)?;
     if let Some(path) = &args.report {
         super::report::check_output_dir(path)?;
     }
-    let chart = chart::chart(&args.chart)?;
     let pq = Against::Encoding(SourceSpace::Rec2100Pq);
-    let against = match (chart.name == "bt2100", args.against) {
+    let against = match (hdr_chart, args.against) {
         (true, None) => pq,
-        (true, Some(a)) if a != pq => {
+        (true, Some(a @ Against::Encoding(_))) if a != pq => {
             return Err(Failure::from(format!(
                 "the bt2100 chart is BT.2100 PQ codes: verify it --against rec2100-pq, not {}",
                 a.name()
@@ -99,7 +104,7 @@ pub fn run(args: VerifyArgs) -> Result<(), Failure> {
         profile: args.profile,
         chart,
         against,
-        metric: args.metric,
+        metric,
         criteria,
         until_decided: args.until_decided,
         overrides: args.devices.overrides()?,

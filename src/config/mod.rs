@@ -693,7 +693,7 @@ mod tests {
 
     #[test]
     fn an_hdr_tone_sets_the_signal_and_a_contradicting_signal_is_refused() {
-        let pq = "[target]\ntone = \"pq\"\npeak = 600\n";
+        let pq = "[target]\ntone = \"pq\"\npeak = 600\n[plan]\nbit_depth = 10\n";
         for parse in [parse_config, parse_config_unchecked] {
             let config = parse(pq, "c.toml").unwrap();
             assert_eq!(config.plan.signal, Some(Signal::Pq));
@@ -704,10 +704,10 @@ mod tests {
             hdr_defaults(&mut again);
             assert_eq!(again.fit.laws, config.fit.laws);
         }
-        let hlg_on_pq = format!("{pq}[plan]\nsignal = \"hlg\"\n");
+        let hlg_on_pq = format!("{pq}signal = \"hlg\"\n");
         let error = parse_config(&hlg_on_pq, "c.toml").unwrap_err().to_string();
         assert!(error.contains("needs plan.signal = \"pq\""), "{error}");
-        let sdr_tone = "[target]\ntone = \"srgb\"\n[plan]\nsignal = \"pq\"\n";
+        let sdr_tone = "[target]\ntone = \"srgb\"\n[plan]\nsignal = \"pq\"\nbit_depth = 10\n";
         let error = parse_config(sdr_tone, "c.toml").unwrap_err().to_string();
         assert!(error.contains("is an SDR curve"), "{error}");
         let sdr = parse_config("[target]\ntone = \"srgb\"\n", "c.toml").unwrap();

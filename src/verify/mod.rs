@@ -41,7 +41,7 @@ use chromacal_crf::tone::ToneOperator;
 use chromacal_crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
 use chromacal_display::x11::GammaRamp;
 use chromacal_model::screen::Codes;
-use chromacal_model::target::{CalibrationCurves, target_luminance};
+use chromacal_model::target::{CalibrationCurves, ToneCurve, target_luminance};
 use chromacal_model::{MonitorModel, ScreenPosition};
 
 pub use chart::{Chart, ChartPatch, Input, Kind};
@@ -232,7 +232,11 @@ pub fn plan(
                     gamut: GamutMapping::Clip,
                     absolute: false,
                     through_calibration: setting.curves.is_some(),
-                    mastering_peak: None,
+                    // A PQ reference as the calibration's target rolls it off.
+                    mastering_peak: setting.curves.and_then(|k| match k.target.tone {
+                        ToneCurve::Pq { mastering_peak } => mastering_peak,
+                        _ => None,
+                    }),
                 },
             )),
             (Input::Colour(c), _) => Some(relative_colour(chart::colour_xyz(c), &white, &black)),

@@ -134,10 +134,26 @@ impl SourceSpace {
         matches!(self, SourceSpace::Rec2100Pq | SourceSpace::Rec2100Hlg)
     }
 
+    /// Linear light of code `v` of an SDR encoding relative to white, with the
+    /// display's black at `black` (its luminance over the white's).
+    pub fn decode_relative(self, v: f64, black: f64) -> f64 {
+        let v = v.clamp(0.0, 1.0);
+        match self {
+            SourceSpace::Srgb | SourceSpace::P3 => srgb_eotf(v),
+            SourceSpace::Bt709 => v.powf(BT1886_GAMMA),
+            SourceSpace::Bt1886 | SourceSpace::Rec2020 => bt1886_eotf(v, 1.0, black),
+            // Absolute light, relative only to a peak: see `decode`.
+            SourceSpace::Rec2100Pq | SourceSpace::Rec2100Hlg => {
+                self.decode([v; 3], 1.0, black, None)[0]
+            }
+        }
+    }
+
     /// Linear light of codes `rgb` in cd/m² on a display of white luminance `white`
-    /// and black `black` (the HDR encodings' light is their own, brought onto that
-    /// range: PQ by BT.2390's EETF from `mastering_peak`, or clipped at the white
-    /// where it is None; HLG by its EOTF for that peak).
+    /// and black `black`. The HDR encodings' light is their own, brought onto that
+    /// range: PQ by BT.2390's EETF from `mastering_peak` (which also lifts the
+    /// black), or without one clipped at the black and the white as the calibration's
+    /// `tone = "pq"` is; HLG by its EOTF for that peak.
     pub fn decode(
         self,
         rgb: [f64; 3],
@@ -146,18 +162,15 @@ impl SourceSpace {
         mastering_peak: Option<f64>,
     ) -> [f64; 3] {
         let share = (black / white).clamp(0.0, 1.0);
-        let relative = |f: &dyn Fn(f64) -> f64| rgb.map(|v| white * f(v.clamp(0.0, 1.0)));
         match self {
-            SourceSpace::Srgb | SourceSpace::P3 => relative(&srgb_eotf),
-            SourceSpace::Bt709 => relative(&|v| v.powf(BT1886_GAMMA)),
-            SourceSpace::Bt1886 | SourceSpace::Rec2020 => relative(&|v| bt1886_eotf(v, 1.0, share)),
-            // A mastering peak at or below the display's leaves the knee at the top:
-            // the PQ as it is, clipped at the peak, with the black lifted.
-            SourceSpace::Rec2100Pq => rgb
-                .map(|v| bt2390_eetf(v, mastering_peak.unwrap_or(white).max(white), white, black)),
+            SourceSpace::Rec2100Pq => rgb.map(|v| match mastering_peak {
+                Some(m) if m > white => bt2390_eetf(v, m, white, black),
+                _ => pq_eotf(v).clamp(black.max(0.0), white),
+            }),
             SourceSpace::Rec2100Hlg => {
                 hlg_eotf(rgb, white, black, hlg_system_gamma(white, HLG_ROOM))
             }
+            sdr => rgb.map(|v| white * sdr.decode_relative(v, share)),
         }
     }
 }
@@ -249,10 +262,14 @@ pub fn source_target(rgb: [f64; 3], white: &Xyz, black: &Xyz, options: &LutOptio
     let black_share = (black.y / white.y).clamp(0.0, 1.0);
     let space = options.source.primaries();
     let to_xyz = space_matrix(&space);
-    let linear = options
-        .source
-        .decode(rgb, white.y, black.y, options.mastering_peak)
-        .map(|v| v / white.y);
+    let linear = if options.source.is_hdr() {
+        let light = options
+            .source
+            .decode(rgb, white.y, black.y, options.mastering_peak);
+        light.map(|v| v / white.y)
+    } else {
+        rgb.map(|v| options.source.decode_relative(v, black_share))
+    };
     let xyz = to_xyz * Xyz::new(linear[0], linear[1], linear[2]);
     let source_white = to_xyz * Xyz::new(1.0, 1.0, 1.0);
     let relative = if options.absolute {
@@ -410,13 +427,13 @@ fn hdr_notes(options: &LutOptions, white: &Xyz, black: &Xyz) -> Vec<String> {
             format!("{input}; SMPTE ST 2084 PQ, 1.0 = 10000 cd/m2, BT.2020 primaries, D65"),
             match options.mastering_peak {
                 Some(m) if m > white.y => format!(
-                    "BT.2390 EETF from a {m} cd/m2 mastering peak to the display's {:.1} cd/m2 (black {:.4}); exact below the knee at {:.1} cd/m2",
+                    "BT.2390 EETF from a {m} cd/m2 mastering peak to the display's {:.1} cd/m2 (black {:.4}); the PQ itself from the lifted black to the knee at {:.1} cd/m2",
                     white.y,
                     black.y,
                     eetf_knee(m, white.y)
                 ),
                 _ => format!(
-                    "PQ as it is up to the display's {:.1} cd/m2, clipped above (black {:.4} lifted by BT.2390)",
+                    "PQ as it is from the display's black {1:.4} to its {0:.1} cd/m2, clipped outside",
                     white.y, black.y
                 ),
             },
