@@ -375,3 +375,48 @@ fn the_browser_check_sees_a_broken_page() {
         "{errors:#?}"
     );
 }
+
+/// An HDR calibration's report draws the PQ tracking (each grey measured through the
+/// curves) and the brightness limiter (each window), and states the full-field white.
+#[test]
+fn an_hdr_calibration_s_report_draws_its_pq_tracking_and_its_limiter() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[monitor]\npreset = \"hdr-oled\"\nprimaries_csv = \"{}\"\ntransfer_csv = \"{}\"\n\
+             [plan]\nbit_depth = 10\n[target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\n",
+            shared_path("displays/spd/isetbio_oled_sony_spd.csv").display(),
+            shared_path("displays/gamma/isetbio_oled_sony_gamma.csv").display(),
+        ),
+    )
+    .unwrap();
+    let page = dir.path().join("report.html");
+    let state = dir.path().join("state");
+    succeed(
+        chromacal()
+            .arg("calibrate")
+            .arg("--config")
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state)
+            .arg("--report")
+            .arg(&page),
+    );
+    let profile = chromacal::profile::Profile::read(&state.join("current.toml")).unwrap();
+    let levels = profile.calibration.as_ref().unwrap().levels.len() as u64;
+    let limiter = profile.report.limiter.as_ref().unwrap();
+    let mut browser = open_report(&page, &["fig-pq-tracking", "fig-brightness-limiter"]);
+    // Each level measured through the curves, each window, and one legend circle per
+    // series of points.
+    let (_, _, circles) = figure_shape(&mut browser, "fig-pq-tracking").unwrap();
+    assert_eq!(circles, levels + 1);
+    let (_, _, circles) = figure_shape(&mut browser, "fig-brightness-limiter").unwrap();
+    assert_eq!(circles, limiter.windows.len() as u64 + 2);
+    let said = browser.evaluate("document.querySelector('#full-field-white').innerText");
+    let full = limiter.full_field_white().unwrap().measured_y;
+    assert_eq!(said.as_str(), Some(format!("{full:.1} cd/m²").as_str()));
+    let verdict = browser.evaluate("document.querySelector('#limiter-verdict').innerText");
+    assert!(verdict.as_str().unwrap().starts_with("Kept"), "{verdict}");
+}

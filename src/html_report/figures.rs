@@ -701,6 +701,137 @@ pub fn over_time(title: &str, y_label: &str, series: &[TimeSeries]) -> Result<St
     })
 }
 
+/// An HDR display's PQ tracking: the target's luminance against the signal, and the
+/// greys measured through the calibration, in cd/m² on a log scale from `floor` (the
+/// darkest that matters, 0.005 cd/m²) to above the peak.
+pub fn pq_tracking(target: &Curve, measured: &Curve, floor: f64) -> Result<String, FigureError> {
+    svg("pq tracking", (460, 360), |root| {
+        let top = target
+            .iter()
+            .chain(measured)
+            .map(|p| p.1)
+            .fold(floor * 10.0, f64::max)
+            * 1.5;
+        let visible = |c: &Curve| -> Curve { c.iter().copied().filter(|p| p.1 >= floor).collect() };
+        let mut chart = ChartBuilder::on(root)
+            .caption("PQ tracking", (FONT, 16))
+            .margin(8)
+            .x_label_area_size(34)
+            .y_label_area_size(54)
+            .build_cartesian_2d(0.0..1.0, (floor..top).log_scale())
+            .map_err(text)?;
+        chart
+            .configure_mesh()
+            .x_desc("signal")
+            .y_desc("luminance, cd/m² (log)")
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .light_line_style(RGBColor(238, 238, 238))
+            .draw()
+            .map_err(text)?;
+        let colour = CANDIDATE_COLOURS[0];
+        chart
+            .draw_series(LineSeries::new(visible(target), colour.stroke_width(2)))
+            .map_err(text)?
+            .label("target")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+        chart
+            .draw_series(
+                visible(measured)
+                    .into_iter()
+                    .map(|p| Circle::new(p, 3, RGBColor(90, 90, 90).filled())),
+            )
+            .map_err(text)?
+            .label("measured through the curves")
+            .legend(|(x, y)| Circle::new((x + 8, y), 3, RGBColor(90, 90, 90).filled()));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(200, 200, 200))
+            .label_font((FONT, 11))
+            .draw()
+            .map_err(text)
+    })
+}
+
+/// The brightness limiter: each window's luminance against its share of the screen
+/// (log), measured (points), as the additive model predicts it (dashed) and as the
+/// limiter term does (lines, where one was fitted); one series per grey level.
+pub fn brightness_limiter(series: &[LimiterSeries]) -> Result<String, FigureError> {
+    svg("brightness limiter", (460, 360), |root| {
+        let top = series
+            .iter()
+            .flat_map(|s| s.measured.iter().chain(&s.additive))
+            .map(|p| p.1)
+            .fold(1.0_f64, f64::max)
+            // Room above the points for the legend.
+            * 1.5;
+        let mut chart = ChartBuilder::on(root)
+            .caption("Brightness limiter", (FONT, 16))
+            .margin(8)
+            .x_label_area_size(34)
+            .y_label_area_size(54)
+            .build_cartesian_2d((0.8..120.0).log_scale(), 0.0..top)
+            .map_err(text)?;
+        chart
+            .configure_mesh()
+            .x_desc("window, % of the screen (log)")
+            .y_desc("luminance, cd/m²")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .light_line_style(RGBColor(238, 238, 238))
+            .draw()
+            .map_err(text)?;
+        for (i, s) in series.iter().enumerate() {
+            let colour = CANDIDATE_COLOURS[i % CANDIDATE_COLOURS.len()];
+            chart
+                .draw_series(DashedLineSeries::new(
+                    s.additive.iter().copied(),
+                    5,
+                    3,
+                    colour.mix(0.6).stroke_width(1),
+                ))
+                .map_err(text)?
+                .label(format!("{}: additive model", s.name))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour.mix(0.6)));
+            if let Some(limited) = &s.limited {
+                chart
+                    .draw_series(LineSeries::new(
+                        limited.iter().copied(),
+                        colour.stroke_width(2),
+                    ))
+                    .map_err(text)?
+                    .label(format!("{}: limiter", s.name))
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+            }
+            chart
+                .draw_series(
+                    s.measured
+                        .iter()
+                        .map(|&p| Circle::new(p, 3, colour.filled())),
+                )
+                .map_err(text)?
+                .label(format!("{}: measured", s.name))
+                .legend(move |(x, y)| Circle::new((x + 8, y), 3, colour.filled()));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(200, 200, 200))
+            .label_font((FONT, 11))
+            .draw()
+            .map_err(text)
+    })
+}
+
+/// One grey level's windows for [`brightness_limiter`]: (area %, cd/m²) points.
+pub struct LimiterSeries {
+    pub name: String,
+    pub measured: Curve,
+    pub additive: Curve,
+    pub limited: Option<Curve>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -12,6 +12,7 @@
 mod calibrated;
 pub mod figures;
 pub mod fleet;
+mod hdr;
 mod markup;
 mod page;
 

@@ -117,6 +117,7 @@ pub fn report_html(input: &ReportInput) -> Result<String, ReportError> {
         calibrated,
         identity(profile),
         summary(profile, verified),
+        super::hdr::hdr(profile)?,
         patches(verified.map(|v| v.0)),
         greys(profile, verified.map(|v| v.0))?,
         transfer(input)?,
