@@ -467,3 +467,109 @@ fn a_pq_lut_through_ffmpeg_shows_a_1000_nit_master_on_the_oled_by_bt2390() {
         white.y
     );
 }
+
+/// The limiter kept goes into the profile's model, and from there predicts what the
+/// display shows: `check` predicts every window the run measured (the additive model
+/// alone misses the full field by a factor of four), and `render` says how much a
+/// whole image is dimmed, which the simulated display, shown that image, confirms.
+#[test]
+fn the_profile_s_limiter_predicts_the_windows_and_a_whole_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = hdr_oled_config(dir.path());
+    let state = dir.path().join("state");
+    common::succeed(
+        chromacal()
+            .args(["calibrate", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state),
+    );
+    let profile_path = state.join("current.toml");
+    let profile = Profile::read(&profile_path).unwrap();
+    let limiter = profile
+        .model
+        .terms
+        .limiter
+        .expect("the limiter in the model");
+    let journal = common::newest_run(&state);
+    let out = common::succeed(
+        chromacal()
+            .arg("check")
+            .arg(&profile_path)
+            .arg(&journal)
+            .arg("--json"),
+    );
+    let checked: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let windows: Vec<f64> = checked["patches"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["role"] == "window")
+        .map(|p| p["delta_e00"].as_f64().unwrap())
+        .collect();
+    assert_eq!(windows.len(), 18);
+    assert!(windows.iter().all(|&e| e < 2.0), "{windows:?}");
+
+    // A full-field white and a 10 % window of it, as XYZ images at the display's white.
+    let white = profile.model.white();
+    let pfm = |name: &str, lit: &dyn Fn(usize, usize) -> bool| {
+        let path = dir.path().join(name);
+        let mut bytes = b"PF\n40 20\n-1.0\n".to_vec();
+        for y in 0..20 {
+            for x in 0..40 {
+                let v = if lit(x, y) { white } else { white * 0.0 };
+                for c in [v.x, v.y, v.z] {
+                    bytes.extend((c as f32).to_le_bytes());
+                }
+            }
+        }
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let render = |image: &std::path::Path| -> serde_json::Value {
+        let out = common::succeed(
+            chromacal()
+                .arg("render")
+                .arg(&profile_path)
+                .arg("--image")
+                .arg(image)
+                .arg("--json")
+                .arg("-o")
+                .arg(dir.path().join("codes.png")),
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let full = render(&pfm("full.pfm", &|_, _| true));
+    let codes = common::images::read_png16(&dir.path().join("codes.png"))[0];
+    let window = render(&pfm("window.pfm", &|x, y| {
+        (14..26).contains(&x) && (7..13).contains(&y)
+    }));
+    let gain = |v: &serde_json::Value| v["image_light"]["gain"].as_f64().unwrap();
+    assert!(gain(&window) > 0.99, "{window:#}");
+    // What the simulated display shows for that image (a full field of its codes):
+    // the image's light by the profile, dimmed by its gain, within 2 % of it.
+    let parsed =
+        chromacal::config::parse_config(&std::fs::read_to_string(&config).unwrap(), "t").unwrap();
+    let rig = chromacal::calibrate::session::rig_for(&parsed, dir.path(), None).unwrap();
+    let shown = {
+        let mut m = rig.monitor.lock().unwrap();
+        let drive = codes.map(|v| f64::from(v) / 65535.0);
+        m.show(chromacal_model::screen::ScreenContent {
+            patch: drive,
+            background: drive,
+            geometry: chromacal_model::screen::Geometry::centred(1.0),
+        });
+        rig.clock.advance(30.0);
+        m.xyz_at(m.patch_centre()).unwrap().y
+    };
+    let predicted = full["image_light"]["mean_light"].as_f64().unwrap() * gain(&full);
+    eprintln!(
+        "full-field image: predicted {predicted:.1} cd/m², shown {shown:.1}; windows' ΔE00 {windows:.2?}"
+    );
+    assert!(
+        (predicted / shown - 1.0).abs() < 0.02,
+        "predicted {predicted:.1} cd/m² (gain {:.3}, F {:.1}), shown {shown:.1}",
+        gain(&full),
+        limiter.full_field
+    );
+}

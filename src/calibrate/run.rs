@@ -314,8 +314,7 @@ pub async fn measure_patch<D: PatchDisplay, I: Instrument>(
         }
     };
     if let Some(stability) = options.stability {
-        let mut reads = 1;
-        let mut agreed = false;
+        let (mut reads, mut agreed, mut earlier) = (1, false, None);
         while reads < stability.max_reads.max(2) {
             let next = match read(
                 instrument,
@@ -333,8 +332,8 @@ pub async fn measure_patch<D: PatchDisplay, I: Instrument>(
             };
             reads += 1;
             tally.extra_read_s += reading.integration_s;
-            agreed = stability.agree(&reading, &next);
-            reading = next;
+            agreed = stability.settled(earlier.as_ref(), &reading, &next);
+            earlier = Some(std::mem::replace(&mut reading, next));
             if agreed {
                 break;
             }

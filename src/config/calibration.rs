@@ -48,6 +48,35 @@ impl Stability {
             },
         }
     }
+
+    /// Has the patch settled at `next`? The last two readings agree, and where three
+    /// show a clear trend (the first step beyond the tolerance), what is left of it is
+    /// within half the tolerance: a display that decays towards its light (a
+    /// brightness limiter after a bright screen, τ of seconds) moves by a factor r a
+    /// reading, and after a step d has d · r / (1 − r) still to go, which two readings
+    /// that agree do not see.
+    pub fn settled(&self, earlier: Option<&Reading>, last: &Reading, next: &Reading) -> bool {
+        if !self.agree(last, next) {
+            return false;
+        }
+        let (Some(a), Some(b), Some(c)) = (
+            earlier.and_then(Reading::luminance),
+            last.luminance(),
+            next.luminance(),
+        ) else {
+            return true;
+        };
+        let (first, second) = (b - a, c - b);
+        let step = self.tolerance * c.abs() + self.floor;
+        if first.abs() <= step {
+            return true; // no trend beyond the noise
+        }
+        let r = second / first;
+        if !(r > 0.0 && r < 1.0) {
+            return r <= 0.0; // a reversal is noise; r ≥ 1 is not settling
+        }
+        (second * r / (1.0 - r)).abs() <= step / 2.0
+    }
 }
 
 /// `[warmup]`.

@@ -716,6 +716,32 @@ mod tests {
     }
 
     #[test]
+    fn a_patch_decaying_towards_its_light_is_not_settled_until_little_is_left() {
+        use chromacal_instruments::{Reading, ReadingStatus};
+        let reading = |y: f64| Reading {
+            xyz: Some(chromacal_color::Xyz::new(0.95 * y, y, 1.09 * y)),
+            luminance: None,
+            spectrum: None,
+            status: ReadingStatus::Ok,
+            integration_s: 1.0,
+            device_code: None,
+            raw: None,
+        };
+        let s = Stability::default(); // 1 %
+        // A limiter settling on 180 cd/m² from above, by 0.6 a reading: the last two
+        // agree within 1 % (0.8 % apart) while 1.3 % is still to go.
+        let decay = |n: i32| 180.0 * (1.0 + 0.25 * 0.6f64.powi(n));
+        let (a, b, c) = (reading(decay(4)), reading(decay(5)), reading(decay(6)));
+        assert!(s.agree(&b, &c));
+        assert!(!s.settled(Some(&a), &b, &c));
+        // Later, little is left; and readings that only scatter are settled at once.
+        let (a, b, c) = (reading(decay(9)), reading(decay(10)), reading(decay(11)));
+        assert!(s.settled(Some(&a), &b, &c));
+        let (a, b, c) = (reading(180.3), reading(179.8), reading(180.1));
+        assert!(s.settled(Some(&a), &b, &c) && s.settled(None, &b, &c));
+    }
+
+    #[test]
     fn publishing_limits_must_be_numbers_and_the_gate_refuses_figures_that_are_not() {
         for text in [
             "[publish]\nmax_mean_de00 = nan\n",

@@ -150,6 +150,10 @@ pub struct RenderSummary {
     pub stone_cowan_beatty: Option<StoneCowanBeatty>,
     /// Smith's transform, when that mapping was used.
     pub smith: Option<Smith>,
+    /// For an image on a display with a brightness limiter: its mean light and the
+    /// gain the limiter puts on all of it (`MonitorModel::image_light`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub image_light: Option<chromacal_model::monitor::ImageLight>,
 }
 
 /// The scene-wide transform a mapping chose, if it is one.
@@ -696,5 +700,6 @@ fn summary_of(
             Some(SceneTransform::Smith(t)) => Some(t),
             _ => None,
         },
+        image_light: None,
     }
 }

@@ -13,6 +13,7 @@ use chromacal_color::spaces::{Xyy, xyy_to_xyz};
 use chromacal_color::spectrum::{Illuminant, KM_PHOTOPIC, Observer};
 use chromacal_model::fit::validate::delta_e00_xyz;
 use chromacal_model::measurement::Units;
+use chromacal_model::monitor::ImageLight;
 use chromacal_model::target::{WhiteTarget, daylight_xy, parse_white};
 use chromacal_model::{MonitorModel, ScreenPosition};
 
@@ -180,9 +181,12 @@ pub fn render(
         (&request.output, read.size, request.explain)
         && is_png(path)
     {
-        let (codes, summary) = ColourReproduction::new(&reduced)
+        let (codes, mut summary) = ColourReproduction::new(&reduced)
             .and_then(|crf| crf.render_codes(&read.scene, settings))
             .map_err(|e| e.to_string())?;
+        let top = f64::from((1u32 << settings.bits) - 1);
+        summary.image_light =
+            image_light(model, &read.scene, |i| codes[i].map(|v| f64::from(v) / top));
         drop(read.scene);
         write_png16_codes(path, width, height, &codes, settings.bits)
             .map_err(|e| RenderError::from(e.to_string()))?;
@@ -205,6 +209,13 @@ pub fn render(
         // profile's prediction.
         rendering.shown_by(model, &read.scene, settings.bits);
     }
+    if read.size.is_some() {
+        let top = f64::from((1u32 << settings.bits) - 1);
+        let pixels = &rendering.pixels;
+        rendering.summary.image_light = image_light(model, &read.scene, |i| {
+            pixels[i].codes.map(|v| f64::from(v) / top)
+        });
+    }
     let stdout = write_codes(&request.output, &read, &rendering, settings.bits)?;
     lines.push(describe(
         &rendering.summary,
@@ -216,6 +227,29 @@ pub fn render(
         lines,
         stdout,
     })
+}
+
+/// Pixels a limiter's estimate of an image's mean light reads at most: evenly spread,
+/// they give the mean to well under a percent, at a fixed cost for any image size.
+const IMAGE_LIGHT_SAMPLES: usize = 1 << 16;
+
+/// What the display's brightness limiter makes of the rendered image (None without
+/// one): its mean light over (a spread of) its pixels, pixel i shown at `drive(i)`.
+fn image_light(
+    model: &MonitorModel,
+    scene: &Scene,
+    drive: impl Fn(usize) -> [f64; 3],
+) -> Option<ImageLight> {
+    model.terms.limiter?;
+    let step = scene.pixels.len().div_ceil(IMAGE_LIGHT_SAMPLES).max(1);
+    model.image_light(
+        scene
+            .pixels
+            .iter()
+            .enumerate()
+            .step_by(step)
+            .map(|(i, p)| (drive(i), p.position)),
+    )
 }
 
 /// Place a list's colours as a COLUMNSxROWS image.
@@ -673,6 +707,14 @@ fn describe(summary: &RenderSummary, spectral: Option<&str>, output: &CodesOutpu
         lines.push(format!(
             "ΔE00 of the codes against the mapped colour (quantisation, inversion): mean {:.3}, max {:.3}",
             s.mean, s.max
+        ));
+    }
+    if let Some(light) = &summary.image_light {
+        lines.push(format!(
+            "brightness limiter: the image's mean light {:.1} (full-field white {:.1}) dims all of it to {:.1} % of what the codes show on a small patch",
+            light.mean_light,
+            light.full_field,
+            100.0 * light.gain
         ));
     }
     lines.join("\n")

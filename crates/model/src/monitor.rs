@@ -90,11 +90,23 @@ pub struct AdditivityTerms {
     /// u of red, green and blue, XYZ each.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chromaticity_shift: Option<[[f64; 3]; 3]>,
+    /// The brightness limiter (`fit::limiter`): not a term of a patch's colour (the
+    /// model is defined for the plan's patch on black, which it does not dim) but of a
+    /// whole screen's, its light scaled by g(p) of the screen's mean light p
+    /// (`MonitorModel::image_light`). Not counted by `is_empty`: the colour of a
+    /// patch, and so every export of the model, is the same with or without it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub limiter: Option<Limiter>,
 }
 
 impl AdditivityTerms {
     pub fn is_empty(&self) -> bool {
         self.interaction.is_none() && self.crosstalk.is_none() && self.chromaticity_shift.is_none()
+    }
+
+    /// No term at all, the limiter included: nothing to write in a model file.
+    pub fn is_absent(&self) -> bool {
+        self.is_empty() && self.limiter.is_none()
     }
 
     /// Each channel's gain at drive shares `shares`: 1 + γ_c s_c + κ_c (1 − ê_c) s_c.
@@ -132,7 +144,42 @@ impl AdditivityTerms {
                 .flatten()
                 .flatten()
                 .all(|v| v.is_finite())
+            && self.limiter.is_none_or(|l| {
+                l.full_field > 0.0
+                    && l.full_field.is_finite()
+                    && l.sharpness > 0.0
+                    && l.sharpness.is_finite()
+            })
     }
+}
+
+/// The brightness limiter g(p) = (1 + (p / F)^k)^(−1/k) of a screen's mean light p
+/// (fitted by `fit::limiter`, whose documentation says why this family).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Limiter {
+    /// F: the screen's mean light the cap holds to (the full-field white), cd/m².
+    pub full_field: f64,
+    /// k: the knee's sharpness.
+    pub sharpness: f64,
+}
+
+impl Limiter {
+    /// The gain on every emitter for a screen of mean light `mean_light` cd/m².
+    pub fn gain(&self, mean_light: f64) -> f64 {
+        let ratio = (mean_light.max(0.0) / self.full_field).powf(self.sharpness);
+        (1.0 + ratio).powf(-1.0 / self.sharpness)
+    }
+}
+
+/// A whole image's light as a brightness limiter sees it (`MonitorModel::image_light`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ImageLight {
+    /// The screen's mean light, in the model's units (cd/m² for absolute readings).
+    pub mean_light: f64,
+    /// The limiter's gain on all the screen's light.
+    pub gain: f64,
+    /// The limiter's full-field white.
+    pub full_field: f64,
 }
 
 /// ê_c: each channel's light as a share of its full drive, clamped to [0, 1].
@@ -318,6 +365,45 @@ impl MonitorModel {
         self.forward(drive, ScreenPosition::CENTRE)
     }
 
+    /// What a brightness limiter makes of a whole screen whose pixels, equal shares of
+    /// it, are `pixels` (drive and position): the screen's mean light p (the mean of
+    /// the model's Y, in its units) and the gain g(p) on all of its light. None
+    /// without a limiter (or without pixels).
+    pub fn image_light(
+        &self,
+        pixels: impl Iterator<Item = (Drive, ScreenPosition)>,
+    ) -> Option<ImageLight> {
+        let limiter = self.terms.limiter?;
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (drive, position) in pixels {
+            sum += self.forward(drive, position).y;
+            n += 1;
+        }
+        (n > 0).then(|| {
+            let mean_light = sum / n as f64;
+            ImageLight {
+                mean_light,
+                gain: limiter.gain(mean_light),
+                full_field: limiter.full_field,
+            }
+        })
+    }
+
+    /// XYZ of a patch of drive `drive` at `position`, shown as a window of `area` of
+    /// the screen on black: as `forward`, dimmed by the limiter for the screen's mean
+    /// light where the model has one (a window of the plan's own size is hardly dimmed:
+    /// the model's readings were taken on it).
+    pub fn forward_in_window(&self, drive: Drive, position: ScreenPosition, area: f64) -> Xyz {
+        let xyz = self.forward(drive, position);
+        match self.terms.limiter {
+            Some(l) => {
+                let area = area.clamp(0.0, 1.0);
+                xyz * l.gain(area * xyz.y + (1.0 - area) * self.black.y)
+            }
+            None => xyz,
+        }
+    }
+
     /// XYZ of full white at the centre: the reference white for L*a*b*.
     pub fn white(&self) -> Xyz {
         self.forward_centre([1.0; 3])
@@ -462,7 +548,7 @@ pub struct ModelFile {
     laws: PerChannel<TransferLaw>,
     #[serde(default)]
     spatial: SpatialMap,
-    #[serde(default, skip_serializing_if = "AdditivityTerms::is_empty")]
+    #[serde(default, skip_serializing_if = "AdditivityTerms::is_absent")]
     terms: AdditivityTerms,
 }
 
@@ -580,6 +666,45 @@ mod tests {
         }
     }
 
+    #[test]
+    fn the_limiter_dims_a_whole_image_and_large_windows_and_survives_the_file() {
+        let mut m = srgb_like();
+        let white = m.white().y;
+        assert_eq!(
+            m.image_light([([1.0; 3], ScreenPosition::CENTRE)].into_iter()),
+            None
+        );
+        let limiter = Limiter {
+            full_field: 30.0,
+            sharpness: 4.0,
+        };
+        m.terms.limiter = Some(limiter);
+        // A full field of white: its mean light is white's, dimmed to about F.
+        let full = m
+            .image_light(std::iter::repeat_n(([1.0; 3], ScreenPosition::CENTRE), 10))
+            .unwrap();
+        assert!((full.mean_light / white - 1.0).abs() < 1e-9);
+        assert!((full.gain - limiter.gain(white)).abs() < 1e-12 && full.gain < 0.35);
+        // Mostly black: hardly dimmed; a window's patch likewise by its area.
+        let pixels = (0..100).map(|i| {
+            (
+                if i == 0 { [1.0; 3] } else { [0.0; 3] },
+                ScreenPosition::CENTRE,
+            )
+        });
+        assert!(m.image_light(pixels).unwrap().gain > 0.999);
+        let small = m
+            .forward_in_window([1.0; 3], ScreenPosition::CENTRE, 0.01)
+            .y;
+        let whole = m.forward_in_window([1.0; 3], ScreenPosition::CENTRE, 1.0).y;
+        assert!((small / white - 1.0).abs() < 1e-3 && whole < 0.35 * white);
+        // A patch's colour, and so every export, is the limiter's alone to leave.
+        assert!(m.terms.is_empty() && !m.terms.is_absent());
+        let text = toml::to_string(&m).unwrap();
+        let back: MonitorModel = toml::from_str(&text).unwrap();
+        assert_eq!(back.terms.limiter, Some(limiter));
+    }
+
     /// Beyond the gamut the extended inverse solves the terms' equations carried on
     /// (shares outside [0, 1]); a limiter near the fit's bound needs Newton there, and
     /// its answer is judged by those equations, not by the clamped forward (a review
@@ -639,6 +764,7 @@ mod tests {
                 interaction: Some([-0.03, -0.02, -0.05]),
                 crosstalk: Some([0.04, 0.03, 0.05]),
                 chromaticity_shift: Some([[0.0, 0.5, 1.5], [0.8, 0.0, -0.4], [-1.0, 1.2, 0.0]]),
+                limiter: None,
             },
             ..srgb_like()
         }

@@ -27,6 +27,7 @@ use super::primaries::Corrected;
 use super::stats::mean;
 use crate::MonitorModel;
 use crate::measurement::Role;
+use crate::monitor::Limiter;
 
 /// Fewest window readings the term is fitted on (two parameters, and one left out).
 const MIN_WINDOWS: usize = 4;
@@ -34,29 +35,12 @@ const MIN_WINDOWS: usize = 4;
 /// The term's parameters, F and k.
 const PARAMETERS: f64 = 2.0;
 
-/// The limiter g(p) = (1 + (p / F)^k)^(−1/k).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Limiter {
-    /// F: the screen's mean light the cap holds to (the full-field white), cd/m².
-    pub full_field: f64,
-    /// k: the knee's sharpness.
-    pub sharpness: f64,
-}
-
-impl Limiter {
-    /// The gain on every emitter for a screen of mean light `mean_light` cd/m².
-    pub fn gain(&self, mean_light: f64) -> f64 {
-        let ratio = (mean_light.max(0.0) / self.full_field).powf(self.sharpness);
-        (1.0 + ratio).powf(-1.0 / self.sharpness)
-    }
-
-    /// Parameters θ = [ln F, ln k], bounded so that a display without a limiter
-    /// (F → ∞) stays finite.
-    fn of(t: &[f64]) -> Limiter {
-        Limiter {
-            full_field: t[0].clamp(-5.0, 14.0).exp(),
-            sharpness: t[1].clamp(0.0, 30f64.ln()).exp(),
-        }
+/// The limiter of parameters θ = [ln F, ln k], bounded so that a display without a
+/// limiter (F → ∞) stays finite.
+fn limiter_of(t: &[f64]) -> Limiter {
+    Limiter {
+        full_field: t[0].clamp(-5.0, 14.0).exp(),
+        sharpness: t[1].clamp(0.0, 30f64.ln()).exp(),
     }
 }
 
@@ -98,6 +82,19 @@ impl LimiterReport {
             .iter()
             .find(|w| w.area >= 0.999 && w.level >= 1.0)
     }
+}
+
+/// The limiter fitted to the window readings among `corrected`, and `model` with it
+/// among its terms where it was kept (it then predicts whole images: `MonitorModel::
+/// image_gain`).
+pub fn keep_limiter(
+    mut model: MonitorModel,
+    corrected: &[Corrected<'_>],
+    noise: &NoiseModel,
+) -> (MonitorModel, Option<LimiterReport>) {
+    let report = fit_limiter(&model, corrected, noise);
+    model.terms.limiter = report.as_ref().filter(|r| r.kept).and_then(|r| r.limiter);
+    (model, report)
 }
 
 /// Fit the limiter to the window readings among `corrected` with `model` (the
@@ -202,10 +199,10 @@ fn fit_to(set: &[&WindowPoint], noise: &NoiseModel) -> Option<Limiter> {
             let (mut up, mut down) = ([t[0], t[1]], [t[0], t[1]]);
             up[k] += h;
             down[k] -= h;
-            g[k] = (Limiter::of(&up).gain(p) - Limiter::of(&down).gain(p)) / (2.0 * h);
+            g[k] = (limiter_of(&up).gain(p) - limiter_of(&down).gain(p)) / (2.0 * h);
         }
-        Limiter::of(t).gain(p)
+        limiter_of(t).gain(p)
     };
     let result = fit_curve(&curve, &x, &y, &s, &[start.ln(), 4f64.ln()]).ok()?;
-    Some(Limiter::of(&result.params))
+    Some(limiter_of(&result.params))
 }

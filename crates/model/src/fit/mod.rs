@@ -389,11 +389,10 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
         &drift,
         &white_reference,
     );
-    let readings = term_readings(&corrected);
     let evidence = CurveEvidence {
         ramps: &ramps,
         greys: &greys,
-        readings: &readings,
+        readings: &term_readings(&corrected),
         noise: &noise,
     };
     let refit = CurveRefit::as_chosen(&selection, options, code_step(set));
@@ -410,9 +409,10 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let (model, white_anchor) =
         anchor_at_measured_white(base.with_spatial(spatial_map), &corrected, options);
     let (evaluation, held_out) = validate_on_held_out(&model, &corrected);
+    let (model, limiter) = limiter::keep_limiter(model, &corrected, &noise);
     Ok(FittedModel {
         report: FitReport {
-            limiter: limiter::fit_limiter(&model, &corrected, &noise), // before `noise,`
+            limiter,
             units: set.units,
             noise,
             black,

@@ -70,7 +70,12 @@ pub fn evaluate<'a>(
     let patches: Vec<PatchError> = readings
         .into_iter()
         .map(|(m, measured)| {
-            let predicted = model.forward(m.drive, m.position);
+            // A window of another size than the plan's patch is dimmed by the
+            // display's brightness limiter, where the model has one.
+            let predicted = match m.window {
+                Some(area) => model.forward_in_window(m.drive, m.position, area),
+                None => model.forward(m.drive, m.position),
+            };
             PatchError {
                 index: m.index,
                 role: m.role,
