@@ -360,6 +360,20 @@ fn eetf_target(code: [f64; 3], white: &chromacal_color::Xyz, black: f64) -> chro
     )
 }
 
+/// The OLED of `hdr_oled_config` calibrated in `dir`: its config and state directory.
+fn calibrated_oled(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let config = hdr_oled_config(dir);
+    let state = dir.join("state");
+    common::succeed(
+        chromacal()
+            .args(["calibrate", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(&state),
+    );
+    (config, state)
+}
+
 /// A PQ LUT for a 1,000 cd/m² master, applied by ffmpeg to a grey ramp and colour bars
 /// and shown on the simulated display itself (its 10-bit input, its spectra, not the
 /// profile): within 1 ΔE ITP of BT.2390's EETF below the knee, monotone above it.
@@ -370,15 +384,7 @@ fn a_pq_lut_through_ffmpeg_shows_a_1000_nit_master_on_the_oled_by_bt2390() {
     use chromacal_model::ScreenPosition;
     use common::images::{ffmpeg_lut3d, write_png16};
     let dir = tempfile::tempdir().unwrap();
-    let config = hdr_oled_config(dir.path());
-    let state = dir.path().join("state");
-    common::succeed(
-        chromacal()
-            .args(["calibrate", "--config"])
-            .arg(&config)
-            .arg("--state-dir")
-            .arg(&state),
-    );
+    let (config, state) = calibrated_oled(dir.path());
     let profile_path = state.join("current.toml");
     let profile = Profile::read(&profile_path).unwrap();
     let cube = dir.path().join("pq.cube");
@@ -475,15 +481,7 @@ fn a_pq_lut_through_ffmpeg_shows_a_1000_nit_master_on_the_oled_by_bt2390() {
 #[test]
 fn the_profile_s_limiter_predicts_the_windows_and_a_whole_image() {
     let dir = tempfile::tempdir().unwrap();
-    let config = hdr_oled_config(dir.path());
-    let state = dir.path().join("state");
-    common::succeed(
-        chromacal()
-            .args(["calibrate", "--config"])
-            .arg(&config)
-            .arg("--state-dir")
-            .arg(&state),
-    );
+    let (config, state) = calibrated_oled(dir.path());
     let profile_path = state.join("current.toml");
     let profile = Profile::read(&profile_path).unwrap();
     let limiter = profile
