@@ -745,7 +745,7 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
     }
     if outcome.run.extra_reads > 0 || outcome.run.unsettled > 0 {
         out += &format!(
-            "  stability check: {} extra readings; {} patches never agreed (last reading kept)\n",
+            "  stability check: {} extra readings; {} patches never settled (last reading kept)\n",
             outcome.run.extra_reads, outcome.run.unsettled
         );
     }

@@ -506,7 +506,7 @@ fn the_profile_s_limiter_predicts_the_windows_and_a_whole_image() {
         .map(|p| p["delta_e00"].as_f64().unwrap())
         .collect();
     assert_eq!(windows.len(), 18);
-    assert!(windows.iter().all(|&e| e < 2.0), "{windows:?}");
+    assert!(windows.iter().all(|&e| e < 1.0), "{windows:?}");
 
     // A full-field white and a 10 % window of it, as XYZ images at the display's white.
     let white = profile.model.white();

@@ -119,7 +119,7 @@ pub struct RunSummary {
     pub already_measured: usize,
     /// Readings taken beyond one per patch by the stability check.
     pub extra_reads: usize,
-    /// Patches whose readings never agreed within `max_reads`.
+    /// Patches whose readings never settled within `max_reads`.
     pub unsettled: usize,
     /// Integration seconds those extra readings took.
     pub extra_read_s: f64,
@@ -344,7 +344,7 @@ pub async fn measure_patch<D: PatchDisplay, I: Instrument>(
             tracing::warn!(
                 index = planned.index,
                 reads,
-                "readings never agreed; kept the last"
+                "readings never settled; kept the last"
             );
         }
     }

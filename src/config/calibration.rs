@@ -49,8 +49,8 @@ impl Stability {
         }
     }
 
-    /// Has the patch settled at `next`? The last two readings agree, and where three
-    /// show a clear trend (the first step beyond the tolerance), what is left of it is
+    /// Has the patch settled at `next`? The last two readings agree (the first two to
+    /// within half the tolerance), and where three show a clear trend (the first step beyond the tolerance), what is left of it is
     /// within half the tolerance: a display that decays towards its light (a
     /// brightness limiter after a bright screen, τ of seconds) moves by a factor r a
     /// reading, and after a step d has d · r / (1 − r) still to go, which two readings
@@ -59,15 +59,16 @@ impl Stability {
         if !self.agree(last, next) {
             return false;
         }
-        let (Some(a), Some(b), Some(c)) = (
-            earlier.and_then(Reading::luminance),
-            last.luminance(),
-            next.luminance(),
-        ) else {
+        let (Some(b), Some(c)) = (last.luminance(), next.luminance()) else {
             return true;
         };
-        let (first, second) = (b - a, c - b);
         let step = self.tolerance * c.abs() + self.floor;
+        // Two readings alone cannot tell a slow decay from noise: where they are
+        // more than half the tolerance apart, a third reading decides.
+        let Some(a) = earlier.and_then(Reading::luminance) else {
+            return (c - b).abs() <= step / 2.0;
+        };
+        let (first, second) = (b - a, c - b);
         if first.abs() <= step {
             return true; // no trend beyond the noise
         }

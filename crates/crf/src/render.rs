@@ -185,8 +185,9 @@ pub fn render(
             .and_then(|crf| crf.render_codes(&read.scene, settings))
             .map_err(|e| e.to_string())?;
         let top = f64::from((1u32 << settings.bits) - 1);
-        summary.image_light =
-            image_light(model, &read.scene, |i| codes[i].map(|v| f64::from(v) / top));
+        summary.image_light = image_light(model, codes.len(), placement, |i| {
+            codes[i].map(|v| f64::from(v) / top)
+        });
         drop(read.scene);
         write_png16_codes(path, width, height, &codes, settings.bits)
             .map_err(|e| RenderError::from(e.to_string()))?;
@@ -212,7 +213,7 @@ pub fn render(
     if read.size.is_some() {
         let top = f64::from((1u32 << settings.bits) - 1);
         let pixels = &rendering.pixels;
-        rendering.summary.image_light = image_light(model, &read.scene, |i| {
+        rendering.summary.image_light = image_light(model, pixels.len(), placement, |i| {
             pixels[i].codes.map(|v| f64::from(v) / top)
         });
     }
@@ -229,27 +230,18 @@ pub fn render(
     })
 }
 
-/// Pixels a limiter's estimate of an image's mean light reads at most: evenly spread,
-/// they give the mean to well under a percent, at a fixed cost for any image size.
-const IMAGE_LIGHT_SAMPLES: usize = 1 << 16;
-
 /// What the display's brightness limiter makes of the rendered image (None without
-/// one): its mean light over (a spread of) its pixels, pixel i shown at `drive(i)`.
+/// one): the screen's mean light over every pixel, pixel i shown at `drive(i)`, the
+/// image on the share of the screen `placement` gives it and black around it.
 fn image_light(
     model: &MonitorModel,
-    scene: &Scene,
+    pixels: usize,
+    placement: &Placement,
     drive: impl Fn(usize) -> [f64; 3],
 ) -> Option<ImageLight> {
     model.terms.limiter?;
-    let step = scene.pixels.len().div_ceil(IMAGE_LIGHT_SAMPLES).max(1);
-    model.image_light(
-        scene
-            .pixels
-            .iter()
-            .enumerate()
-            .step_by(step)
-            .map(|(i, p)| (drive(i), p.position)),
-    )
+    let area = placement.width * placement.height;
+    model.image_light((0..pixels).map(drive), area)
 }
 
 /// Place a list's colours as a COLUMNSxROWS image.

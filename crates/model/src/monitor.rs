@@ -156,6 +156,7 @@ impl AdditivityTerms {
 /// The brightness limiter g(p) = (1 + (p / F)^k)^(−1/k) of a screen's mean light p
 /// (fitted by `fit::limiter`, whose documentation says why this family).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Limiter {
     /// F: the screen's mean light the cap holds to (the full-field white), cd/m².
     pub full_field: f64,
@@ -365,22 +366,25 @@ impl MonitorModel {
         self.forward(drive, ScreenPosition::CENTRE)
     }
 
-    /// What a brightness limiter makes of a whole screen whose pixels, equal shares of
-    /// it, are `pixels` (drive and position): the screen's mean light p (the mean of
-    /// the model's Y, in its units) and the gain g(p) on all of its light. None
-    /// without a limiter (or without pixels).
+    /// What a brightness limiter makes of a screen whose share `area` shows an image
+    /// of pixels driven at `drives` (equal shares of it) on black: the screen's mean
+    /// light p and the gain g(p) on all of its light. None without a limiter (or
+    /// without pixels). p is reckoned as the limiter was fitted (`fit::limiter`): each
+    /// pixel's Y at the centre of the screen, the spatial map left out.
     pub fn image_light(
         &self,
-        pixels: impl Iterator<Item = (Drive, ScreenPosition)>,
+        drives: impl Iterator<Item = Drive>,
+        area: f64,
     ) -> Option<ImageLight> {
         let limiter = self.terms.limiter?;
         let (mut sum, mut n) = (0.0, 0usize);
-        for (drive, position) in pixels {
-            sum += self.forward(drive, position).y;
+        for drive in drives {
+            sum += self.forward_centre(drive).y;
             n += 1;
         }
         (n > 0).then(|| {
-            let mean_light = sum / n as f64;
+            let area = area.clamp(0.0, 1.0);
+            let mean_light = area * sum / n as f64 + (1.0 - area) * self.black.y;
             ImageLight {
                 mean_light,
                 gain: limiter.gain(mean_light),
@@ -457,6 +461,10 @@ impl MonitorModel {
             for v in u.iter_mut().flatten() {
                 *v *= factor;
             }
+        }
+        // The limiter's F is a light, in the same units.
+        if let Some(l) = terms.limiter.as_mut() {
+            l.full_field *= factor;
         }
         MonitorModel {
             matrix: self.matrix * factor,
@@ -670,10 +678,7 @@ mod tests {
     fn the_limiter_dims_a_whole_image_and_large_windows_and_survives_the_file() {
         let mut m = srgb_like();
         let white = m.white().y;
-        assert_eq!(
-            m.image_light([([1.0; 3], ScreenPosition::CENTRE)].into_iter()),
-            None
-        );
+        assert_eq!(m.image_light([[1.0; 3]].into_iter(), 1.0), None);
         let limiter = Limiter {
             full_field: 30.0,
             sharpness: 4.0,
@@ -681,18 +686,21 @@ mod tests {
         m.terms.limiter = Some(limiter);
         // A full field of white: its mean light is white's, dimmed to about F.
         let full = m
-            .image_light(std::iter::repeat_n(([1.0; 3], ScreenPosition::CENTRE), 10))
+            .image_light(std::iter::repeat_n([1.0; 3], 10), 1.0)
             .unwrap();
         assert!((full.mean_light / white - 1.0).abs() < 1e-9);
         assert!((full.gain - limiter.gain(white)).abs() < 1e-12 && full.gain < 0.35);
         // Mostly black: hardly dimmed; a window's patch likewise by its area.
-        let pixels = (0..100).map(|i| {
-            (
-                if i == 0 { [1.0; 3] } else { [0.0; 3] },
-                ScreenPosition::CENTRE,
-            )
-        });
-        assert!(m.image_light(pixels).unwrap().gain > 0.999);
+        let pixels = (0..100).map(|i| if i == 0 { [1.0; 3] } else { [0.0; 3] });
+        assert!(m.image_light(pixels, 1.0).unwrap().gain > 0.999);
+        // The same white image on a quarter of the screen: a quarter of the light.
+        let quarter = m
+            .image_light(std::iter::repeat_n([1.0; 3], 10), 0.25)
+            .unwrap();
+        assert!((quarter.mean_light - (0.25 * white + 0.75 * m.black.y)).abs() < 1e-9);
+        // check of relative readings scales the model, and F with it.
+        let scaled = m.scaled(0.5);
+        assert_eq!(scaled.terms.limiter.unwrap().full_field, 15.0);
         let small = m
             .forward_in_window([1.0; 3], ScreenPosition::CENTRE, 0.01)
             .y;

@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::measurement::Role;
 use crate::screen::{Codes, Geometry, Patch};
 use crate::{Drive, ScreenPosition};
+use chromacal_color::ictcp::pq_inverse_eotf;
 use chromacal_color::spaces::lightness_to_luminance;
 
 /// Nominal gamma used only to space the ramp levels before anything is measured.
@@ -418,6 +419,9 @@ pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
     let mut plan = make_plan_of_strategy(config)?;
     let signal = config.signal.filter(|s| s.is_hdr());
     plan.signal = signal;
+    if signal == Some(Signal::Pq) {
+        add_knee_ramps(&mut plan, config.bit_depth);
+    }
     if config.brightness_limiter.unwrap_or(signal.is_some()) {
         let windows = window_patches(config.bit_depth);
         plan.budget.window = windows.len();
@@ -435,6 +439,54 @@ pub fn make_plan(config: &PlanConfig) -> Result<Plan, PlanError> {
             );
     }
     Ok(plan)
+}
+
+/// Luminances (cd/m²) about which HDR displays reach their peak (most between 400 and
+/// 2,000). A display decoding PQ clips or rolls off there, and the PQ law's choice
+/// between the two needs each channel read on both sides of its knee, which ramp
+/// levels spread over the whole code range leave out (four levels put none between
+/// 0.67 and full drive: a run then took a clip at 835 cd/m² for a roll-off to 800,
+/// 6 % too bright at drive 0.72).
+pub const PQ_KNEE_LUMINANCES: [f64; 3] = [600.0, 1000.0, 2000.0];
+
+/// Each channel's ramp read at the PQ codes of `PQ_KNEE_LUMINANCES` (those the plan
+/// does not read already), as counted ramp patches of the plan's own geometry.
+fn add_knee_ramps(plan: &mut Plan, depth: u32) {
+    let Some(template) = plan
+        .patches
+        .iter()
+        .find(|p| p.role == Role::Ramp)
+        .map(|p| p.patch)
+    else {
+        return;
+    };
+    let top = f64::from((1u32 << depth) - 1);
+    let mut added: Vec<Patch> = Vec::new();
+    for c in 0..3 {
+        for nits in PQ_KNEE_LUMINANCES {
+            let mut rgb = [0; 3];
+            rgb[c] = (pq_inverse_eotf(nits) * top).round() as u32;
+            let codes = Codes {
+                rgb,
+                bit_depth: depth,
+            };
+            if !plan.patches.iter().any(|p| p.patch.codes == codes) {
+                added.push(Patch { codes, ..template });
+            }
+        }
+    }
+    plan.budget.counted += added.len();
+    let start = plan.patches.len();
+    plan.patches.extend(
+        added
+            .into_iter()
+            .enumerate()
+            .map(|(k, patch)| PlannedPatch {
+                index: start + k,
+                role: Role::Ramp,
+                patch,
+            }),
+    );
 }
 
 /// White and `WINDOW_GREY` at each of `WINDOW_AREAS`, centred on black, largest

@@ -21,6 +21,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::FitOptions;
 use super::least_squares::fit_curve;
 use super::noise::NoiseModel;
 use super::primaries::Corrected;
@@ -85,15 +86,18 @@ impl LimiterReport {
 }
 
 /// The limiter fitted to the window readings among `corrected`, and `model` with it
-/// among its terms where it was kept (it then predicts whole images: `MonitorModel::
-/// image_gain`).
+/// among its terms where it was kept and `options` allow terms (it then predicts
+/// whole images: `MonitorModel::image_light`).
 pub fn keep_limiter(
     mut model: MonitorModel,
     corrected: &[Corrected<'_>],
     noise: &NoiseModel,
+    options: &FitOptions,
 ) -> (MonitorModel, Option<LimiterReport>) {
     let report = fit_limiter(&model, corrected, noise);
-    model.terms.limiter = report.as_ref().filter(|r| r.kept).and_then(|r| r.limiter);
+    if options.additivity_terms {
+        model.terms.limiter = report.as_ref().filter(|r| r.kept).and_then(|r| r.limiter);
+    }
     (model, report)
 }
 
@@ -157,10 +161,14 @@ pub fn fit_limiter(
 }
 
 /// The window readings with the additive model's prediction and the screen's mean
-/// light it implies.
+/// light it implies. The prediction is anchored at each grey level's three smallest
+/// windows, which no limiter dims (their median measured / additive ratio): what the
+/// model gets wrong at that drive, by a percent at mid-grey, is not the limiter's, and
+/// left in it would be fitted as one where a display has none (or pull F away where it
+/// has).
 fn window_points(model: &MonitorModel, corrected: &[Corrected<'_>]) -> Vec<WindowPoint> {
     let black = model.black.y;
-    corrected
+    let mut points: Vec<WindowPoint> = corrected
         .iter()
         .filter(|r| r.measurement.role == Role::Window && r.xyz.y > 0.0)
         .filter_map(|r| {
@@ -169,14 +177,49 @@ fn window_points(model: &MonitorModel, corrected: &[Corrected<'_>]) -> Vec<Windo
             Some(WindowPoint {
                 area,
                 level: r.measurement.drive.iter().sum::<f64>() / 3.0,
-                mean_light: area * additive_y + (1.0 - area) * black,
+                mean_light: 0.0,
                 measured_y: r.xyz.y,
                 additive_y,
-                left_out_y: additive_y,
+                left_out_y: 0.0,
             })
         })
         .filter(|w| w.additive_y > 0.0)
-        .collect()
+        .collect();
+    let anchors: Vec<(f64, f64)> = points
+        .iter()
+        .map(|w| w.level)
+        .fold(Vec::new(), |mut levels: Vec<f64>, l| {
+            if !levels.iter().any(|&k| (k - l).abs() < 1e-9) {
+                levels.push(l);
+            }
+            levels
+        })
+        .into_iter()
+        .map(|level| {
+            let mut small: Vec<&WindowPoint> = points
+                .iter()
+                .filter(|w| (w.level - level).abs() < 1e-9)
+                .collect();
+            small.sort_by(|a, b| a.area.total_cmp(&b.area));
+            let mut ratios: Vec<f64> = small
+                .iter()
+                .take(3)
+                .map(|w| w.measured_y / w.additive_y)
+                .collect();
+            ratios.sort_by(f64::total_cmp);
+            (level, ratios[ratios.len() / 2])
+        })
+        .collect();
+    for w in &mut points {
+        let anchor = anchors
+            .iter()
+            .find(|(l, _)| (l - w.level).abs() < 1e-9)
+            .map_or(1.0, |a| a.1);
+        w.additive_y *= anchor;
+        w.mean_light = w.area * w.additive_y + (1.0 - w.area) * black;
+        w.left_out_y = w.additive_y;
+    }
+    points
 }
 
 /// The limiter fitted to the ratio measured / additive of `set`, each weighted by its

@@ -409,7 +409,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let (model, white_anchor) =
         anchor_at_measured_white(base.with_spatial(spatial_map), &corrected, options);
     let (evaluation, held_out) = validate_on_held_out(&model, &corrected);
-    let (model, limiter) = limiter::keep_limiter(model, &corrected, &noise);
+    let (model, limiter) = limiter::keep_limiter(model, &corrected, &noise, options);
     Ok(FittedModel {
         report: FitReport {
             limiter,
