@@ -571,3 +571,31 @@ fn the_profile_s_limiter_predicts_the_windows_and_a_whole_image() {
         limiter.full_field
     );
 }
+
+/// Limits of the config's own criteria are read in the run's metric: on a PQ run that
+/// is ΔE ITP, and the run says so rather than judge ΔE00 limits silently in it.
+#[test]
+fn a_pq_run_says_its_own_criteria_are_read_as_itp() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = hdr_oled_config(dir.path());
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(
+        &config,
+        format!("{text}[[verify.criterion]]\nstatistic = \"mean\"\nlimit = 1.5\n"),
+    )
+    .unwrap();
+    let out = common::succeed(
+        chromacal()
+            .args(["calibrate", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(dir.path().join("state")),
+    );
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("read as ΔE ITP"), "{said}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("criteria: the config's [[verify.criterion]] (ΔE ITP)"),
+        "{stdout}"
+    );
+}

@@ -232,10 +232,17 @@ pub async fn after_calibration(
         ),
     };
     let criteria = match (&config.criteria, config.criterion.is_empty()) {
-        (None, false) => CriteriaSet {
-            name: "the config's [[verify.criterion]]".into(),
-            criteria: config.criterion.clone(),
-        },
+        (None, false) => {
+            if metric == Metric::Itp {
+                tracing::warn!(
+                    "the config's [[verify.criterion]] limits are read as ΔE ITP on this PQ run: a limit written for ΔE00 does not mean the same there"
+                );
+            }
+            CriteriaSet {
+                name: format!("the config's [[verify.criterion]] ({})", metric.name()),
+                criteria: config.criterion.clone(),
+            }
+        }
         (name, _) => {
             crate::verify::criteria::preset(name.as_deref().unwrap_or("displaycal"), metric)
                 .ok_or_else(|| VerifyError::Config(format!("no criteria {name:?}")))?
