@@ -12,19 +12,17 @@ use chromacal_model::plan::Signal;
 use chromacal_model::transfer::LawKind;
 
 mod common;
-use common::{assert_same_model, chromacal, emulate, in_process_profile, shared_path};
+use common::{assert_same_model, chromacal, emulate, in_process_profile, isetbio_monitor};
 
 fn hdr_oled_config(dir: &std::path::Path) -> std::path::PathBuf {
     let config = dir.join("config.toml");
     std::fs::write(
         &config,
         format!(
-            "[monitor]\npreset = \"hdr-oled\"\nprimaries_csv = \"{}\"\ntransfer_csv = \"{}\"\n\
-             [plan]\nbit_depth = 10\n\
+            "{}[plan]\nbit_depth = 10\n\
              [target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\nlevels = 17\n\
              [display.resolve]\nconnect_timeout_s = 60.0\n",
-            shared_path("displays/spd/isetbio_oled_sony_spd.csv").display(),
-            shared_path("displays/gamma/isetbio_oled_sony_gamma.csv").display(),
+            isetbio_monitor("isetbio_oled_sony", "preset = \"hdr-oled\""),
         ),
     )
     .unwrap();
@@ -243,21 +241,17 @@ fn calibrate_profile(dir: &std::path::Path, name: &str, config_text: &str) -> Pr
 #[test]
 fn the_brightness_limiter_is_kept_where_a_display_has_one_and_only_there() {
     let dir = tempfile::tempdir().unwrap();
-    let sony = format!(
-        "primaries_csv = \"{}\"\ntransfer_csv = \"{}\"\n",
-        shared_path("displays/spd/isetbio_oled_sony_spd.csv").display(),
-        shared_path("displays/gamma/isetbio_oled_sony_gamma.csv").display(),
-    );
+    let sony = isetbio_monitor("isetbio_oled_sony", "preset = \"hdr-oled\"");
     for (name, monitor, seed) in [
-        ("oled-1", format!("preset = \"hdr-oled\"\n{sony}"), 1),
-        ("oled-2", format!("preset = \"hdr-oled\"\n{sony}"), 2),
-        ("lcd-1", "preset = \"hdr-lcd\"\n".to_string(), 1),
+        ("oled-1", sony.clone(), 1),
+        ("oled-2", sony.clone(), 2),
+        ("lcd-1", "[monitor]\npreset = \"hdr-lcd\"\n".to_string(), 1),
     ] {
         let profile = calibrate_profile(
             dir.path(),
             name,
             &format!(
-                "[monitor]\n{monitor}[plan]\nbit_depth = 10\nseed = {seed}\n\
+                "{monitor}[plan]\nbit_depth = 10\nseed = {seed}\n\
                  [instrument.simulated]\nseed = {seed}\n[target]\ntone = \"pq\"\nwhite = \"D65\"\n"
             ),
         );
@@ -374,6 +368,13 @@ fn calibrated_oled(dir: &std::path::Path) -> (std::path::PathBuf, std::path::Pat
     (config, state)
 }
 
+/// The simulated display and instrument of `config`, to show patches on directly.
+fn simulated_rig(config: &std::path::Path) -> chromacal::calibrate::rig::SimulatedRig {
+    let text = std::fs::read_to_string(config).unwrap();
+    let parsed = chromacal::config::parse_config(&text, "test").unwrap();
+    chromacal::calibrate::session::rig_for(&parsed, config.parent().unwrap(), None).unwrap()
+}
+
 /// A PQ LUT for a 1,000 cd/m² master, applied by ffmpeg to a grey ramp and colour bars
 /// and shown on the simulated display itself (its 10-bit input, its spectra, not the
 /// profile): within 1 ΔE ITP of BT.2390's EETF below the knee, monotone above it.
@@ -411,9 +412,7 @@ fn a_pq_lut_through_ffmpeg_shows_a_1000_nit_master_on_the_oled_by_bt2390() {
     write_png16(&image, sixteen.len() as u32, &sixteen);
     let shown_codes = ffmpeg_lut3d(&image, &cube, &dir.path().join("shown.png"));
     // The simulated display, shown each output at its 10-bit input.
-    let parsed =
-        chromacal::config::parse_config(&std::fs::read_to_string(&config).unwrap(), "t").unwrap();
-    let rig = chromacal::calibrate::session::rig_for(&parsed, dir.path(), None).unwrap();
+    let rig = simulated_rig(&config);
     let show = |c: [u16; 3]| {
         let drive = c.map(|v| (f64::from(v) / 65535.0 * 1023.0).round() / 1023.0);
         let mut m = rig.monitor.lock().unwrap();
@@ -546,9 +545,7 @@ fn the_profile_s_limiter_predicts_the_windows_and_a_whole_image() {
     assert!(gain(&window) > 0.99, "{window:#}");
     // What the simulated display shows for that image (a full field of its codes):
     // the image's light by the profile, dimmed by its gain, within 2 % of it.
-    let parsed =
-        chromacal::config::parse_config(&std::fs::read_to_string(&config).unwrap(), "t").unwrap();
-    let rig = chromacal::calibrate::session::rig_for(&parsed, dir.path(), None).unwrap();
+    let rig = simulated_rig(&config);
     let shown = {
         let mut m = rig.monitor.lock().unwrap();
         let drive = codes.map(|v| f64::from(v) / 65535.0);

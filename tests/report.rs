@@ -385,10 +385,8 @@ fn an_hdr_calibration_s_report_draws_its_pq_tracking_and_its_limiter() {
     std::fs::write(
         &config,
         format!(
-            "[monitor]\npreset = \"hdr-oled\"\nprimaries_csv = \"{}\"\ntransfer_csv = \"{}\"\n\
-             [plan]\nbit_depth = 10\n[target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\n",
-            shared_path("displays/spd/isetbio_oled_sony_spd.csv").display(),
-            shared_path("displays/gamma/isetbio_oled_sony_gamma.csv").display(),
+            "{}[plan]\nbit_depth = 10\n[target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\n",
+            common::isetbio_monitor("isetbio_oled_sony", "preset = \"hdr-oled\""),
         ),
     )
     .unwrap();

@@ -2,8 +2,8 @@
 //! the page. Each function takes plain data (points, curves, chromaticities) that
 //! `super` computes from a profile, so what is drawn and how it is computed read apart.
 
-use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
+use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
 use plotters::style::colors::colormaps::ViridisRGB;
 
@@ -90,8 +90,8 @@ fn axes(chart: &mut Chart, x: &str, y: &str) -> Result<(), String> {
 }
 
 /// The legend of the series that have a label, at `position`.
-fn legend<'a, 'b: 'a>(
-    chart: &mut Chart<'a, 'b>,
+fn legend<'a, 'b: 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, SVGBackend<'b>, CT>,
     position: SeriesLabelPosition,
 ) -> Result<(), String> {
     chart
@@ -317,14 +317,7 @@ pub fn tone_log(
             .map_err(text)?
             .label("measured greys")
             .legend(|(x, y)| Circle::new((x + 8, y), 3, RGBColor(90, 90, 90).filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::LowerRight)
     })
 }
 
@@ -743,14 +736,7 @@ pub fn pq_tracking(target: &Curve, measured: &Curve, floor: f64) -> Result<Strin
             .map_err(text)?
             .label("measured through the curves")
             .legend(|(x, y)| Circle::new((x + 8, y), 3, RGBColor(90, 90, 90).filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::LowerRight)
     })
 }
 
@@ -813,14 +799,7 @@ pub fn brightness_limiter(series: &[LimiterSeries]) -> Result<String, FigureErro
                 .label(format!("{}: measured", s.name))
                 .legend(move |(x, y)| Circle::new((x + 8, y), 3, colour.filled()));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(200, 200, 200))
-            .label_font((FONT, 11))
-            .draw()
-            .map_err(text)
+        legend(&mut chart, SeriesLabelPosition::UpperRight)
     })
 }
 

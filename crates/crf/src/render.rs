@@ -184,9 +184,8 @@ pub fn render(
         let (codes, mut summary) = ColourReproduction::new(&reduced)
             .and_then(|crf| crf.render_codes(&read.scene, settings))
             .map_err(|e| e.to_string())?;
-        let top = f64::from((1u32 << settings.bits) - 1);
-        summary.image_light = image_light(model, codes.len(), placement, |i| {
-            codes[i].map(|v| f64::from(v) / top)
+        summary.image_light = image_light(model, codes.len(), placement, settings.bits, |i| {
+            codes[i].map(u32::from)
         });
         drop(read.scene);
         write_png16_codes(path, width, height, &codes, settings.bits)
@@ -211,11 +210,11 @@ pub fn render(
         rendering.shown_by(model, &read.scene, settings.bits);
     }
     if read.size.is_some() {
-        let top = f64::from((1u32 << settings.bits) - 1);
         let pixels = &rendering.pixels;
-        rendering.summary.image_light = image_light(model, pixels.len(), placement, |i| {
-            pixels[i].codes.map(|v| f64::from(v) / top)
-        });
+        rendering.summary.image_light =
+            image_light(model, pixels.len(), placement, settings.bits, |i| {
+                pixels[i].codes
+            });
     }
     let stdout = write_codes(&request.output, &read, &rendering, settings.bits)?;
     lines.push(describe(
@@ -231,17 +230,19 @@ pub fn render(
 }
 
 /// What the display's brightness limiter makes of the rendered image (None without
-/// one): the screen's mean light over every pixel, pixel i shown at `drive(i)`, the
-/// image on the share of the screen `placement` gives it and black around it.
+/// one): the screen's mean light over every pixel, pixel i shown at `bits`-bit codes
+/// `codes(i)`, the image on the share of the screen `placement` gives it and black
+/// around it.
 fn image_light(
     model: &MonitorModel,
     pixels: usize,
     placement: &Placement,
-    drive: impl Fn(usize) -> [f64; 3],
+    bits: u32,
+    codes: impl Fn(usize) -> [u32; 3],
 ) -> Option<ImageLight> {
-    model.terms.limiter?;
-    let area = placement.width * placement.height;
-    model.image_light((0..pixels).map(drive), area)
+    let top = f64::from((1u32 << bits) - 1);
+    let drives = (0..pixels).map(|i| codes(i).map(|v| f64::from(v) / top));
+    model.image_light(drives, placement.width * placement.height)
 }
 
 /// Place a list's colours as a COLUMNSxROWS image.

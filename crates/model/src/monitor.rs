@@ -164,6 +164,13 @@ pub struct Limiter {
     pub sharpness: f64,
 }
 
+/// The mean light of a screen whose share `area` shows `light` on a black of `black`:
+/// what a brightness limiter follows (the fit's p, `fit::limiter`).
+pub fn screen_mean_light(area: f64, light: f64, black: f64) -> f64 {
+    let area = area.clamp(0.0, 1.0);
+    area * light + (1.0 - area) * black
+}
+
 impl Limiter {
     /// The gain on every emitter for a screen of mean light `mean_light` cd/m².
     pub fn gain(&self, mean_light: f64) -> f64 {
@@ -383,8 +390,7 @@ impl MonitorModel {
             n += 1;
         }
         (n > 0).then(|| {
-            let area = area.clamp(0.0, 1.0);
-            let mean_light = area * sum / n as f64 + (1.0 - area) * self.black.y;
+            let mean_light = screen_mean_light(area, sum / n as f64, self.black.y);
             ImageLight {
                 mean_light,
                 gain: limiter.gain(mean_light),
@@ -400,10 +406,7 @@ impl MonitorModel {
     pub fn forward_in_window(&self, drive: Drive, position: ScreenPosition, area: f64) -> Xyz {
         let xyz = self.forward(drive, position);
         match self.terms.limiter {
-            Some(l) => {
-                let area = area.clamp(0.0, 1.0);
-                xyz * l.gain(area * xyz.y + (1.0 - area) * self.black.y)
-            }
+            Some(l) => xyz * l.gain(screen_mean_light(area, xyz.y, self.black.y)),
             None => xyz,
         }
     }

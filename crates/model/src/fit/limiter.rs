@@ -28,7 +28,7 @@ use super::primaries::Corrected;
 use super::stats::mean;
 use crate::MonitorModel;
 use crate::measurement::Role;
-use crate::monitor::Limiter;
+use crate::monitor::{Limiter, screen_mean_light};
 
 /// Fewest window readings the term is fitted on (two parameters, and one left out).
 const MIN_WINDOWS: usize = 4;
@@ -185,39 +185,30 @@ fn window_points(model: &MonitorModel, corrected: &[Corrected<'_>]) -> Vec<Windo
         })
         .filter(|w| w.additive_y > 0.0)
         .collect();
-    let anchors: Vec<(f64, f64)> = points
-        .iter()
-        .map(|w| w.level)
-        .fold(Vec::new(), |mut levels: Vec<f64>, l| {
-            if !levels.iter().any(|&k| (k - l).abs() < 1e-9) {
-                levels.push(l);
-            }
-            levels
-        })
-        .into_iter()
-        .map(|level| {
-            let mut small: Vec<&WindowPoint> = points
-                .iter()
-                .filter(|w| (w.level - level).abs() < 1e-9)
-                .collect();
-            small.sort_by(|a, b| a.area.total_cmp(&b.area));
-            let mut ratios: Vec<f64> = small
-                .iter()
-                .take(3)
-                .map(|w| w.measured_y / w.additive_y)
-                .collect();
-            ratios.sort_by(f64::total_cmp);
-            (level, ratios[ratios.len() / 2])
-        })
+    // Each level's windows, smallest first (the points stay in the run's order).
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by(|&i, &j| {
+        let (a, b) = (&points[i], &points[j]);
+        a.level.total_cmp(&b.level).then(a.area.total_cmp(&b.area))
+    });
+    let levels: Vec<Vec<usize>> = order
+        .chunk_by(|&i, &j| (points[i].level - points[j].level).abs() < 1e-9)
+        .map(<[usize]>::to_vec)
         .collect();
-    for w in &mut points {
-        let anchor = anchors
+    for level in levels {
+        let mut ratios: Vec<f64> = level
             .iter()
-            .find(|(l, _)| (l - w.level).abs() < 1e-9)
-            .map_or(1.0, |a| a.1);
-        w.additive_y *= anchor;
-        w.mean_light = w.area * w.additive_y + (1.0 - w.area) * black;
-        w.left_out_y = w.additive_y;
+            .take(3)
+            .map(|&i| points[i].measured_y / points[i].additive_y)
+            .collect();
+        ratios.sort_by(f64::total_cmp);
+        let anchor = ratios[ratios.len() / 2];
+        for i in level {
+            let w = &mut points[i];
+            w.additive_y *= anchor;
+            w.mean_light = screen_mean_light(w.area, w.additive_y, black);
+            w.left_out_y = w.additive_y;
+        }
     }
     points
 }
