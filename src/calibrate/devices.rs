@@ -12,6 +12,7 @@ use crate::config::{Config, Correction, Sink};
 use chromacal_display::emulator_link::EmulatorScreen;
 use chromacal_display::resolve::ResolveDisplay;
 use chromacal_display::simulated::SimulatedDisplay;
+use chromacal_display::wayland::surface::{PatchSurface, SurfaceTarget};
 use chromacal_display::web::WebDisplay;
 use chromacal_display::window::{PatchWindow, WindowTarget};
 use chromacal_display::{DisplayError, PatchDisplay};
@@ -52,6 +53,8 @@ pub struct Overrides {
     pub output: Option<chromacal_display::x11::OutputSelector>,
     /// The window sink's X display (`--x-display`).
     pub x_display: Option<String>,
+    /// The wayland sink's Wayland display (`--wayland-display`).
+    pub wayland_display: Option<String>,
 }
 
 impl Overrides {
@@ -82,6 +85,9 @@ impl Overrides {
         if let Some(output) = &self.output {
             config.display.output = Some(output.clone());
         }
+        if let Some(wayland_display) = &self.wayland_display {
+            config.display.wayland_display = Some(wayland_display.clone());
+        }
         if let Some(x_display) = &self.x_display {
             config.display.x_display = Some(x_display.clone());
         }
@@ -95,6 +101,7 @@ pub enum RunDisplay {
     Resolve(ResolveDisplay),
     Web(WebDisplay),
     Window(PatchWindow),
+    Wayland(Box<PatchSurface>),
 }
 
 impl RunDisplay {
@@ -102,6 +109,22 @@ impl RunDisplay {
     pub fn window(&mut self) -> Option<&mut PatchWindow> {
         match self {
             RunDisplay::Window(w) => Some(w),
+            _ => None,
+        }
+    }
+
+    /// For chromacal's own window or surface: the bits per channel it paints, and
+    /// what it is on (for messages).
+    pub fn painted_bits(&self) -> Option<(u32, String)> {
+        match self {
+            RunDisplay::Window(w) => Some((
+                w.channel_bits(),
+                format!("the window on {}", w.output().name),
+            )),
+            RunDisplay::Wayland(s) => Some((
+                s.channel_bits(),
+                format!("the Wayland surface on {}", s.output().name),
+            )),
             _ => None,
         }
     }
@@ -115,6 +138,7 @@ impl PatchDisplay for RunDisplay {
             RunDisplay::Resolve(d) => d.name(),
             RunDisplay::Web(d) => d.name(),
             RunDisplay::Window(d) => d.name(),
+            RunDisplay::Wayland(d) => d.name(),
         }
     }
 
@@ -125,6 +149,7 @@ impl PatchDisplay for RunDisplay {
             RunDisplay::Resolve(d) => d.show(patch).await,
             RunDisplay::Web(d) => d.show(patch).await,
             RunDisplay::Window(d) => d.show(patch).await,
+            RunDisplay::Wayland(d) => d.show(patch).await,
         }
     }
 
@@ -135,6 +160,7 @@ impl PatchDisplay for RunDisplay {
             RunDisplay::Resolve(d) => d.blank().await,
             RunDisplay::Web(d) => d.blank().await,
             RunDisplay::Window(d) => d.blank().await,
+            RunDisplay::Wayland(d) => d.blank().await,
         }
     }
 
@@ -276,6 +302,13 @@ pub async fn open_devices(
             },
             settle_s,
         )?),
+        (Sink::Wayland, _) => RunDisplay::Wayland(Box::new(PatchSurface::open(
+            &SurfaceTarget {
+                wayland_display: config.display.wayland_display.clone(),
+                output: config.display.output.clone().unwrap_or_default(),
+            },
+            settle_s,
+        )?)),
         (Sink::Emulator, Some(screen)) => RunDisplay::Emulator(EmulatorScreen::connect(
             &if screen.is_absolute() {
                 screen.clone()
@@ -286,7 +319,7 @@ pub async fn open_devices(
         )?),
         (sink, _) => {
             return Err(DevicesError::Config(format!(
-                "the {address} needs a display it can measure, not '{}': set display.sink (--display) to window, resolve or web, or give an emulator's --screen",
+                "the {address} needs a display it can measure, not '{}': set display.sink (--display) to window, wayland, resolve or web, or give an emulator's --screen",
                 sink.name()
             )));
         }

@@ -1,6 +1,6 @@
-//! The screens of an X display as a user picks one: each RandR output with its
-//! monitor's EDID identity, its mode, its video LUT, and the configured device whose
-//! window goes there (with that device's current profile).
+//! The screens of an X or Wayland display as a user picks one: each RandR output or
+//! wl_output with its monitor's EDID identity, its mode, its video LUT, and the
+//! configured device whose window goes there (with that device's current profile).
 
 use std::path::Path;
 
@@ -9,6 +9,8 @@ use serde::Serialize;
 use crate::config::devices::device_configs;
 use crate::config::{LoadedConfig, Sink};
 use crate::profile::store::ProfileStore;
+use chromacal_display::wayland::gamma::GammaOffer;
+use chromacal_display::wayland::{self, WaylandError, WaylandOutput};
 use chromacal_display::x11::{OutputInfo, X11Error, XDisplay};
 use chromacal_formats::edid::{Edid, colord_device_id};
 
@@ -193,6 +195,164 @@ pub fn describe_displays(x_display: &str, entries: &[DisplayEntry]) -> String {
         .collect();
     if !disconnected.is_empty() {
         out += &format!("  disconnected: {}\n", disconnected.join(", "));
+    }
+    out
+}
+
+/// One Wayland output, as `chromacal displays` shows it.
+#[derive(Debug, Clone, Serialize)]
+pub struct WaylandEntry {
+    #[serde(flatten)]
+    pub output: WaylandOutput,
+    pub edid: Option<Edid>,
+    pub edid_error: Option<String>,
+    /// What the output's gamma control says (wlroots compositors).
+    pub gamma: GammaOffer,
+    /// The id colord knows the output's monitor by (GNOME applies its profile).
+    pub colord_device_id: String,
+    /// Configured devices whose surface is on this output.
+    pub devices: Vec<DeviceOnOutput>,
+}
+
+/// A Wayland display's outputs, and what its compositor offers a calibration.
+#[derive(Debug, Clone, Serialize)]
+pub struct WaylandListing {
+    pub display: String,
+    /// The protocols chromacal uses or minds, and whether the compositor has each.
+    pub protocols: Vec<(&'static str, bool)>,
+    pub outputs: Vec<WaylandEntry>,
+}
+
+/// What chromacal uses on Wayland, or minds: each protocol and what it is for.
+pub const WAYLAND_PROTOCOLS: [(&str, &str); 6] = [
+    ("xdg_wm_base", "the full-screen patch surface"),
+    ("wp_presentation", "a patch counts as shown once presented"),
+    ("zwp_idle_inhibit_manager_v1", "no blanking during a run"),
+    (
+        "zwlr_gamma_control_manager_v1",
+        "the video LUT (lut load --hold)",
+    ),
+    (
+        "zwlr_screencopy_manager_v1",
+        "emulate --wayland-display reads the screen",
+    ),
+    (
+        "wp_color_manager_v1",
+        "the compositor may convert the patches' codes",
+    ),
+];
+
+/// Every output of Wayland display `name`, with the devices of `loaded` whose surface
+/// goes there.
+pub fn list_wayland_displays(
+    name: Option<&str>,
+    loaded: Option<&LoadedConfig>,
+    state_dir: &Path,
+) -> Result<WaylandListing, WaylandError> {
+    let outputs = wayland::list_outputs(name, &chromacal_display::drm::sysfs_root())?;
+    let offers = wayland::gamma::gamma_offers(name)?;
+    let interfaces = wayland::offered_interfaces(name)?;
+    let protocols = WAYLAND_PROTOCOLS
+        .iter()
+        .map(|(p, _)| (*p, interfaces.iter().any(|(i, _)| i == p)))
+        .collect();
+    let devices = loaded
+        .and_then(|l| device_configs(l).ok())
+        .unwrap_or_default();
+    let entries = outputs
+        .iter()
+        .map(|output| {
+            let (edid, edid_error) = match output.edid.as_deref().map(Edid::parse) {
+                Some(Ok(e)) => (Some(e), None),
+                Some(Err(e)) => (None, Some(e.to_string())),
+                None => (None, None),
+            };
+            let devices = devices
+                .iter()
+                .filter(|d| {
+                    let display = &d.loaded.config.display;
+                    display.sink() == Sink::Wayland
+                        && wayland::pick(&display.output.clone().unwrap_or_default(), &outputs)
+                            .is_some_and(|o| o.global == output.global)
+                })
+                .map(|d| DeviceOnOutput {
+                    name: d.name.clone(),
+                    profile: ProfileStore::new(&d.store_dir(state_dir))
+                        .history()
+                        .ok()
+                        .and_then(|h| h.current),
+                })
+                .collect();
+            WaylandEntry {
+                colord_device_id: colord_device_id(edid.as_ref(), &output.name, pnp_vendor_name),
+                gamma: offers
+                    .iter()
+                    .find(|(n, _)| *n == output.name)
+                    .map_or(GammaOffer::Failed, |(_, g)| *g),
+                output: output.clone(),
+                edid,
+                edid_error,
+                devices,
+            }
+        })
+        .collect();
+    Ok(WaylandListing {
+        display: wayland::socket_path(name)?.display().to_string(),
+        protocols,
+        outputs: entries,
+    })
+}
+
+/// The lines `chromacal displays` prints for a Wayland listing.
+pub fn describe_wayland_displays(listing: &WaylandListing) -> String {
+    let mut out = format!("Wayland display {}:\n", listing.display);
+    for e in &listing.outputs {
+        let o = &e.output;
+        out += &format!(
+            "  {}  {}×{} at {:.2} Hz, scale {}  ({})\n",
+            o.name,
+            o.width,
+            o.height,
+            f64::from(o.refresh_mhz) / 1000.0,
+            o.scale,
+            o.description
+        );
+        out += &format!("    video LUT: {}\n", e.gamma.describe());
+        match (&e.edid, &e.edid_error, &o.edid_source) {
+            (Some(edid), _, source) => {
+                out += &format!("    monitor: {}\n", edid.describe());
+                if let Some(source) = source {
+                    out += &format!("    EDID from the kernel: {source}\n");
+                }
+            }
+            (None, Some(err), _) => out += &format!("    EDID: unreadable ({err})\n"),
+            (None, None, _) => {
+                out += &format!(
+                    "    EDID: none (no kernel connector {} with one under {}/class/drm)\n",
+                    o.name,
+                    chromacal_display::drm::sysfs_root().display()
+                )
+            }
+        }
+        out += &format!("    colord device: {}\n", e.colord_device_id);
+        for d in &e.devices {
+            out += &format!(
+                "    device {}: {}\n",
+                d.name,
+                d.profile
+                    .as_deref()
+                    .map_or("no profile yet".to_string(), |p| format!(
+                        "current profile {p}"
+                    ))
+            );
+        }
+    }
+    out += "  the compositor offers:\n";
+    for ((protocol, offered), (_, what)) in listing.protocols.iter().zip(WAYLAND_PROTOCOLS) {
+        out += &format!(
+            "    {protocol}: {}  ({what})\n",
+            if *offered { "yes" } else { "no" }
+        );
     }
     out
 }

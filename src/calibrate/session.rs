@@ -512,7 +512,7 @@ pub fn start_run(
 /// compared as it would run, so a resume agrees.
 fn grid_the_instrument_can_see(config: &Config) -> Config {
     let mut config = config.clone();
-    if config.display.sink() == Sink::Window
+    if matches!(config.display.sink(), Sink::Window | Sink::Wayland)
         && !config.display.prompt_positions
         && config.plan.uniformity_grid >= 2
     {
@@ -777,24 +777,22 @@ pub async fn calibrate<'a>(
         options.overrides.apply(&mut config);
         check_overridden(&config)?;
         make_plan(&config.plan)?;
-        let mut devices = open_devices(&config, &loaded.base_dir, options.realtime_scale).await?;
+        let devices = open_devices(&config, &loaded.base_dir, options.realtime_scale).await?;
         // A plan deeper than the window paints is refused before a run exists: an
         // empty run would offer a --resume that the changed [plan] cannot take.
-        if let Some(window) = devices.display.window()
-            && config.plan.bit_depth > window.channel_bits()
+        if let Some((bits, what)) = devices.display.painted_bits()
+            && config.plan.bit_depth > bits
         {
-            let bits = window.channel_bits();
             devices.instrument.close();
             let fix = match config.plan.signal.filter(|s| s.is_hdr()) {
                 Some(signal) => format!(
-                    "a {} signal needs 10: run the X server at depth 30 (a 30-bit visual) or use the Resolve sink",
+                    "a {} signal needs 10: run the X server at depth 30 (a 30-bit visual), a Wayland compositor that offers XRGB2101010 buffers, or the Resolve sink",
                     signal.describe()
                 ),
                 None => format!("set plan.bit_depth = {bits}"),
             };
             return Err(CalibrateError::Devices(DevicesError::Config(format!(
-                "the window on {} paints {bits} bits per channel, and plan.bit_depth is {}: {fix}",
-                window.output().name,
+                "{what} paints {bits} bits per channel, and plan.bit_depth is {}: {fix}",
                 config.plan.bit_depth
             ))));
         }

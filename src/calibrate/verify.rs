@@ -160,7 +160,7 @@ pub async fn verify(
         && aim.is_none()
         && matches!(
             config.display.sink(),
-            Sink::Window | Sink::Resolve | Sink::Web
+            Sink::Window | Sink::Wayland | Sink::Resolve | Sink::Web
         )
     {
         return Err(VerifyError::UniformityUnseen);

@@ -24,14 +24,19 @@ pub struct DeviceArgs {
     #[arg(long, value_parser = positive_number)]
     timing_scale: Option<f64>,
     /// Where patches go: window[:OUTPUT] (chromacal's full-screen window on an X11
-    /// output, the primary by default; see `chromacal displays`), resolve (a pattern
-    /// generator connects to chromacal), web (a browser opens chromacal's patch page),
-    /// emulator or simulated.
+    /// output, the primary by default; see `chromacal displays`), wayland[:OUTPUT]
+    /// (a full-screen surface on a Wayland output, the first by default), resolve (a
+    /// pattern generator connects to chromacal), web (a browser opens chromacal's
+    /// patch page), emulator or simulated.
     #[arg(long, value_name = "SINK")]
     display: Option<String>,
     /// The X display of the window sink, e.g. :0 [default: $DISPLAY].
     #[arg(long, value_name = "DISPLAY")]
     x_display: Option<String>,
+    /// The Wayland display of the wayland sink, e.g. wayland-0 or a socket path
+    /// [default: $WAYLAND_DISPLAY].
+    #[arg(long, value_name = "NAME")]
+    wayland_display: Option<String>,
     /// Address the Resolve server or the web page listens on, e.g. 127.0.0.1:20002.
     #[arg(long, value_name = "ADDR")]
     listen: Option<String>,
@@ -54,6 +59,7 @@ impl DeviceArgs {
             prompt_positions: self.prompt_positions,
             output: parse_sink_output(self.display.as_deref()),
             x_display: self.x_display.clone(),
+            wayland_display: self.wayland_display.clone(),
         })
     }
 }
@@ -66,7 +72,7 @@ pub fn parse_sink(display: Option<&str>) -> Result<Option<Sink>, Failure> {
         .map_err(Failure::from)
 }
 
-/// `--display window:OUTPUT`: the output, when one is named.
+/// `--display window:OUTPUT` or `wayland:OUTPUT`: the output, when one is named.
 pub fn parse_sink_output(display: Option<&str>) -> Option<chromacal_display::x11::OutputSelector> {
     display
         .and_then(|t| t.split_once(':'))

@@ -241,6 +241,16 @@ fn announce_display(loaded: &LoadedConfig, options: &CalibrateOptions) {
                 .or_else(|| std::env::var("DISPLAY").ok())
                 .unwrap_or_default()
         ),
+        Sink::Wayland => eprintln!(
+            "chromacal: patches full-screen on {} of Wayland display {}; aim the instrument at the screen's centre",
+            config.display.output.clone().unwrap_or_default().describe(),
+            config
+                .display
+                .wayland_display
+                .clone()
+                .or_else(|| std::env::var("WAYLAND_DISPLAY").ok())
+                .unwrap_or_default()
+        ),
         Sink::Simulated | Sink::Emulator => {}
     }
     if let Some(advice) = hdr_mode_advice(&config) {

@@ -283,11 +283,25 @@ fn split_devices(loaded: &LoadedConfig) -> Result<Vec<DeviceConfig>, String> {
             ));
         }
         // A window's output has one video LUT: two devices would fight over it.
-        if device.display.sink() == super::Sink::Window {
-            let output = format!(
-                "{} of X display {}",
-                device.display.output.clone().unwrap_or_default().describe(),
+        let screen = match device.display.sink() {
+            super::Sink::Window => Some(format!(
+                "X display {}",
                 device.display.x_display.as_deref().unwrap_or("$DISPLAY")
+            )),
+            super::Sink::Wayland => Some(format!(
+                "Wayland display {}",
+                device
+                    .display
+                    .wayland_display
+                    .as_deref()
+                    .unwrap_or("$WAYLAND_DISPLAY")
+            )),
+            _ => None,
+        };
+        if let Some(screen) = screen {
+            let output = format!(
+                "{} of {screen}",
+                device.display.output.clone().unwrap_or_default().describe(),
             );
             if let Some(other) = listeners.insert(output.clone(), name.clone()) {
                 return Err(format!(

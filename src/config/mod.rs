@@ -133,6 +133,9 @@ pub enum Sink {
     /// chromacal's own full-screen window on an X11 output (`x_display`, `output`),
     /// whose video LUT the run holds.
     Window,
+    /// chromacal's own full-screen surface on a Wayland output (`wayland_display`,
+    /// `output`).
+    Wayland,
 }
 
 impl Sink {
@@ -143,6 +146,7 @@ impl Sink {
             Sink::Resolve => "resolve",
             Sink::Web => "web",
             Sink::Window => "window",
+            Sink::Wayland => "wayland",
         }
     }
 
@@ -153,8 +157,9 @@ impl Sink {
             "resolve" => Ok(Sink::Resolve),
             "web" => Ok(Sink::Web),
             "window" => Ok(Sink::Window),
+            "wayland" => Ok(Sink::Wayland),
             _ => Err(format!(
-                "unknown display '{text}': window[:OUTPUT], resolve, web, emulator or simulated"
+                "unknown display '{text}': window[:OUTPUT], wayland[:OUTPUT], resolve, web, emulator or simulated"
             )),
         }
     }
@@ -182,8 +187,13 @@ pub struct DisplayConfig {
     pub web: WebConfig,
     /// The X display of the window sink (`:0`); unset: `$DISPLAY`.
     pub x_display: Option<String>,
-    /// The window's output: a RandR name (`output = "DP-1"`) or the monitor's EDID
-    /// serial (`output = { edid_serial = "…" }`); unset: the primary output.
+    /// The Wayland display of the wayland sink (`wayland-0`, or a socket path); unset:
+    /// `$WAYLAND_DISPLAY`.
+    pub wayland_display: Option<String>,
+    /// The window's output: a RandR or wl_output name (`output = "DP-1"`; on Wayland
+    /// also the output's description or "make model") or the monitor's EDID serial
+    /// (`output = { edid_serial = "…" }`); unset: the primary (X11) or first (Wayland)
+    /// output.
     pub output: Option<chromacal_display::x11::OutputSelector>,
     /// Put the current profile's curves back into the video LUT whenever something else
     /// overwrote them (the daemon checks every `lut_check_s`).
@@ -203,6 +213,7 @@ impl Default for DisplayConfig {
             resolve: ResolveConfig::default(),
             web: WebConfig::default(),
             x_display: None,
+            wayland_display: None,
             output: None,
             keep_lut: false,
             lut_check_s: 30.0,
@@ -426,6 +437,9 @@ pub fn hdr_mode_advice(config: &Config) -> Option<String> {
         Sink::Window => format!(
             "X11 sends no HDR metadata: put the display in its {mode} mode from its own menu"
         ),
+        Sink::Wayland => format!(
+            "the surface is not described as HDR to the compositor: put the display in its {mode} mode from its own menu, with the compositor's HDR off"
+        ),
         Sink::Simulated | Sink::Emulator | Sink::Web => return None,
     };
     Some(format!(
@@ -534,9 +548,9 @@ pub fn check_config(config: &Config) -> Result<(), String> {
     match (sink, serial.is_some()) {
         (Sink::Simulated, true) => {
             return Err(
-                "a serial instrument needs a display it can measure: set display.sink to window, resolve or web (or give an emulator's screen)".into());
+                "a serial instrument needs a display it can measure: set display.sink to window, wayland, resolve or web (or give an emulator's screen)".into());
         }
-        (Sink::Resolve | Sink::Web | Sink::Emulator | Sink::Window, false) => {
+        (Sink::Resolve | Sink::Web | Sink::Emulator | Sink::Window | Sink::Wayland, false) => {
             return Err(format!(
                 "display.sink = \"{}\" needs a serial instrument (instrument.driver and port): the simulated instrument can only measure the in-process virtual monitor",
                 sink.name()

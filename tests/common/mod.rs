@@ -6,6 +6,7 @@ pub mod argyll;
 pub mod bus;
 pub mod daemon;
 pub mod images;
+pub mod sway;
 pub mod xserver;
 
 use std::path::PathBuf;

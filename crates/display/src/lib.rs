@@ -1,8 +1,9 @@
 //! Showing patches: the patch-display trait and its sinks (the simulated display, a
 //! Resolve pattern generator over TCP, a browser page, chromacal's own full-screen
-//! X11 window, an emulator's screen socket), and the screen in front of the user
-//! through X11 (`x11`: outputs, EDID, the CRTC gamma ramp, pixels), with the video
-//! LUT the calibration curves go into (`lut`).
+//! X11 window or Wayland surface, an emulator's screen socket), and the screen in front
+//! of the user through X11 (`x11`: outputs, EDID, the CRTC gamma ramp, pixels) and
+//! Wayland (`wayland`: outputs, the patch surface), with the video LUT the calibration
+//! curves go into (`lut`).
 //!
 //! A sink resolves `show` once the patch is on the screen and settled, so the run
 //! measures straight after it returns.
@@ -12,6 +13,7 @@ pub mod emulator_link;
 pub mod lut;
 pub mod resolve;
 pub mod simulated;
+pub mod wayland;
 pub mod web;
 pub mod window;
 pub mod x11;

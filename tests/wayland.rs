@@ -1,0 +1,166 @@
+//! chromacal on a real Wayland compositor: sway, headless (wlroots' headless backend,
+//! pixman renderer), started as an unprivileged user. The patch surface's pixels are
+//! read back by `grim` (an independent reader, through wlr-screencopy), a patch counts
+//! as shown only once the compositor has presented it, and `displays` names sway's
+//! outputs.
+
+use chromacal_display::PatchDisplay;
+use chromacal_display::wayland::surface::{PatchSurface, SurfaceTarget};
+use chromacal_display::x11::OutputSelector;
+use chromacal_model::screen::{Codes, Geometry, Patch};
+
+mod common;
+use common::sway::Sway;
+
+fn target(sway: &Sway) -> SurfaceTarget {
+    SurfaceTarget {
+        wayland_display: Some(sway.socket().display().to_string()),
+        output: OutputSelector::Name("HEADLESS-1".into()),
+    }
+}
+
+fn patch(rgb: [u32; 3], background: [u32; 3]) -> Patch {
+    Patch {
+        codes: Codes { rgb, bit_depth: 8 },
+        background: Codes {
+            rgb: background,
+            bit_depth: 8,
+        },
+        geometry: Geometry::centred(0.3),
+    }
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .build()
+        .unwrap()
+}
+
+/// 50 random codes, each a patch on a background of other random codes: what grim
+/// reads of the output is exactly the codes asked, at the patch and around it.
+#[test]
+fn the_patch_surface_shows_the_exact_codes_grim_reads_back() {
+    let sway = Sway::start();
+    let dir = tempfile::tempdir().unwrap();
+    let mut surface = PatchSurface::open(&target(&sway), 0.0).unwrap();
+    assert_eq!(surface.output().name, "HEADLESS-1");
+    let rt = runtime();
+    // A small linear congruential generator: the codes differ each test, reproducibly.
+    let mut state: u64 = 0x2545_f491_4f6c_dd1d;
+    let mut random = move || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 33) % 256) as u32
+    };
+    for i in 0..50 {
+        let codes = [random(), random(), random()];
+        let background = [random(), random(), random()];
+        rt.block_on(surface.show(&patch(codes, background)))
+            .unwrap();
+        let (w, h, pixels) = sway.grim("HEADLESS-1", dir.path());
+        let at = |x: usize, y: usize| pixels[y * w + x].map(u32::from);
+        eprintln!(
+            "{i}: asked {codes:?} on {background:?}; {w}x{h} centre {:?} corner {:?}",
+            at(w / 2, h / 2),
+            at(2, 2)
+        );
+        assert_eq!(at(w / 2, h / 2), codes, "patch {i}: the centre");
+        assert_eq!(at(2, 2), background, "patch {i}: a corner");
+        assert_eq!(at(w - 3, h - 3), background, "patch {i}: the other corner");
+    }
+    surface.close();
+}
+
+/// With sway stopped (it presents nothing), `show` does not return: no reading could
+/// start on the previous patch. Once sway goes on, it returns, and the screen shows
+/// the patch.
+#[test]
+fn no_patch_counts_as_shown_before_the_compositor_presents_it() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{Arc, Mutex};
+    let sway = Sway::start();
+    let dir = tempfile::tempdir().unwrap();
+    let mut surface = PatchSurface::open(&target(&sway), 0.0).unwrap();
+    let rt = runtime();
+    rt.block_on(surface.show(&patch([10, 20, 30], [0; 3])))
+        .unwrap();
+    sway.pause(true);
+    let shown = Arc::new(AtomicBool::new(false));
+    let resumed_at = Arc::new(Mutex::new(None::<std::time::Instant>));
+    let handle = {
+        let shown = shown.clone();
+        std::thread::spawn(move || {
+            let rt = runtime();
+            rt.block_on(surface.show(&patch([200, 100, 50], [0; 3])))
+                .unwrap();
+            let at = std::time::Instant::now();
+            shown.store(true, Ordering::SeqCst);
+            (surface, at)
+        })
+    };
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let early = shown.load(Ordering::SeqCst);
+    *resumed_at.lock().unwrap() = Some(std::time::Instant::now());
+    sway.pause(false);
+    let (mut surface, at) = handle.join().unwrap();
+    assert!(!early, "show returned while the compositor was stopped");
+    assert!(at >= resumed_at.lock().unwrap().unwrap());
+    let (w, h, pixels) = sway.grim("HEADLESS-1", dir.path());
+    assert_eq!(pixels[(h / 2) * w + w / 2], [200, 100, 50]);
+    surface.close();
+}
+
+/// `displays` on sway: the headless output by name with its mode, the EDID of the
+/// kernel connector of the same name from a sysfs-shaped directory, what the
+/// compositor offers, and a gamma ramp of size 0 said as none.
+#[test]
+fn displays_names_sway_s_output_with_its_edid_from_the_kernel() {
+    let sway = Sway::start();
+    let dir = tempfile::tempdir().unwrap();
+    let sysfs = dir.path().join("sys");
+    let connector = sysfs.join("class/drm/card0-HEADLESS-1");
+    std::fs::create_dir_all(&connector).unwrap();
+    std::fs::write(
+        connector.join("edid"),
+        std::fs::read(common::fixture("edid/srgb_office_1080p.bin")).unwrap(),
+    )
+    .unwrap();
+    // Another card's connector that no output has.
+    std::fs::create_dir_all(sysfs.join("class/drm/card1-DP-3")).unwrap();
+    std::fs::write(sysfs.join("class/drm/card1-DP-3/edid"), b"").unwrap();
+    let run = |args: &[&str]| {
+        let mut c = sway.client(env!("CARGO_BIN_EXE_chromacal"));
+        c.env("CHROMACAL_SYSFS_ROOT", &sysfs)
+            .env("XDG_CONFIG_HOME", dir.path())
+            .arg("displays")
+            .args(args);
+        common::succeed(&mut c)
+    };
+    let text = String::from_utf8_lossy(&run(&[]).stdout).into_owned();
+    assert!(text.contains("Wayland display"), "{text}");
+    assert!(text.contains("HEADLESS-1  1280×720 at 60.00 Hz"), "{text}");
+    assert!(text.contains("video LUT: no gamma ramp"), "{text}");
+    assert!(text.contains("7MT0186J1T3L"), "{text}");
+    assert!(text.contains("zwlr_screencopy_manager_v1: yes"), "{text}");
+    let json: serde_json::Value = serde_json::from_slice(
+        &run(&[
+            "--wayland-display",
+            &sway.socket().display().to_string(),
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    let output = &json["outputs"][0];
+    assert_eq!(output["name"], "HEADLESS-1");
+    assert_eq!(output["width"], 1280);
+    assert_eq!(output["edid"]["serial_text"], "7MT0186J1T3L");
+    assert_eq!(
+        output["edid_source"],
+        connector.join("edid").display().to_string()
+    );
+    assert_eq!(output["gamma"]["gamma"], "failed");
+    assert_eq!(json["outputs"].as_array().unwrap().len(), 1);
+}
