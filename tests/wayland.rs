@@ -164,3 +164,103 @@ fn displays_names_sway_s_output_with_its_edid_from_the_kernel() {
     assert_eq!(output["gamma"]["gamma"], "failed");
     assert_eq!(json["outputs"].as_array().unwrap().len(), 1);
 }
+
+/// A whole calibration on Wayland with real bytes at every step: the patches on the
+/// surface on sway's output, an emulated PR-670 on a pseudo-terminal whose virtual
+/// monitor is shown what `wlr-screencopy` reads under its aim point, the curves put
+/// into the codes (the headless output has no gamma ramp). Its profile matches the
+/// same monitor's over the emulator's screen socket, within the instrument's noise.
+#[test]
+fn a_calibration_on_sway_matches_the_same_monitor_over_the_emulator_socket() {
+    use chromacal::profile::Profile;
+    let sway = Sway::start();
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("config.toml");
+    std::fs::write(
+        &config,
+        "[monitor]\npreset = \"crt\"\n[plan]\nuniformity_grid = 0\n[display]\nsettle_s = 0.0\n\
+         [target]\nwhite = \"D65\"\ntone = \"gamma:2.2\"\nlevels = 10\n",
+    )
+    .unwrap();
+    let config_arg = config.to_str().unwrap();
+    let calibrate = |state: &std::path::Path, args: &[&str]| {
+        let out = common::succeed(
+            common::chromacal()
+                .arg("calibrate")
+                .arg("--config")
+                .arg(&config)
+                .arg("--state-dir")
+                .arg(state)
+                .args(args),
+        );
+        (
+            Profile::read(&state.join("current.toml")).unwrap(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+        )
+    };
+    let socket_emulator = common::emulate(&[
+        "--instrument",
+        "pr670",
+        "--time-scale",
+        "0.002",
+        "--config",
+        config_arg,
+    ]);
+    let (reference, _) = calibrate(
+        &dir.path().join("socket"),
+        &[
+            "--instrument",
+            &format!("pr670:{}", socket_emulator.device),
+            "--screen",
+            &socket_emulator.screen,
+            "--timing-scale",
+            "0.002",
+        ],
+    );
+    let wayland = sway.socket().display().to_string();
+    let emulator = common::emulate(&[
+        "--instrument",
+        "pr670",
+        "--time-scale",
+        "0.002",
+        "--config",
+        config_arg,
+        "--wayland-display",
+        &wayland,
+        "--output",
+        "HEADLESS-1",
+    ]);
+    let (profile, summary) = calibrate(
+        &dir.path().join("wayland"),
+        &[
+            "--display",
+            "wayland:HEADLESS-1",
+            "--wayland-display",
+            &wayland,
+            "--instrument",
+            &format!("pr670:{}", emulator.device),
+            "--timing-scale",
+            "0.002",
+        ],
+    );
+    eprintln!("{summary}");
+    let shown_on = profile.provenance.display.clone().unwrap_or_default();
+    assert!(
+        shown_on.contains("Wayland surface on HEADLESS-1"),
+        "{shown_on}"
+    );
+    common::assert_same_model("wayland", &profile, &reference);
+    let (held, reference_held) = (
+        profile.report.held_out.unwrap(),
+        reference.report.held_out.unwrap(),
+    );
+    eprintln!("held-out on Wayland {held:?}, through the socket {reference_held:?}");
+    assert!(
+        (held.mean - reference_held.mean).abs() < 0.1 && held.mean < 0.3,
+        "{held:?} vs {reference_held:?}"
+    );
+    // The curves went into the codes, and were measured into place through them.
+    let calibration = profile.calibration.as_ref().unwrap();
+    assert!(!calibration.through_lut);
+    assert!(calibration.measured_white_de00 < 1.0, "{calibration:?}");
+}

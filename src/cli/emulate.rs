@@ -18,6 +18,7 @@ use chromacal_instruments::simulated::SimulatedInstrumentSpec;
 use chromacal_sim::clock::VirtualClock;
 use chromacal_sim::monitor::VirtualMonitor;
 
+use chromacal_display::wayland::capture::watch_wayland_output;
 use chromacal_display::x11::OutputSelector;
 use chromacal_display::x11::capture::watch_output;
 
@@ -87,8 +88,13 @@ pub struct EmulateArgs {
     /// shows the pixels under the aim point, through the output's CRTC gamma ramp as a
     /// video card sends them (e.g. :1, an X server showing `--display window`: Xorg with
     /// the dummy driver keeps the ramp; Xvfb's reads back straight whatever is set).
-    #[arg(long, value_name = "DISPLAY")]
+    #[arg(long, value_name = "DISPLAY", conflicts_with = "wayland_display")]
     pub x_display: Option<String>,
+    /// Look at this Wayland display's screen instead (wayland-1 or a socket path): the
+    /// pixels under the aim point, copied through wlr-screencopy (wlroots compositors),
+    /// sent to the virtual monitor as they are (no gamma ramp can be read back there).
+    #[arg(long, value_name = "NAME")]
+    pub wayland_display: Option<String>,
     /// An emulated colorimeter (k10a, cs100a, colorcal2) reads exact CIE XYZ instead of
     /// reading through its filters (for tests; hidden from --help).
     #[arg(long, hide = true)]
@@ -102,16 +108,12 @@ pub struct EmulateArgs {
     /// `correction make`); printed as `also KIND /dev/pts/N`.
     #[arg(long, value_name = "KIND")]
     pub also: Vec<String>,
-    /// The output looked at, by RandR name [default: the primary].
-    #[arg(long, requires = "x_display")]
+    /// The output looked at, by RandR or wl_output name [default: the primary, or
+    /// the first Wayland output].
+    #[arg(long)]
     pub output: Option<String>,
     /// Where the instrument is aimed, as fractions of the output's width and height.
-    #[arg(
-        long,
-        value_name = "X,Y",
-        default_value = "0.5,0.5",
-        requires = "x_display"
-    )]
+    #[arg(long, value_name = "X,Y", default_value = "0.5,0.5")]
     pub aim: String,
 }
 
@@ -181,6 +183,18 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
             .unwrap_or_default();
         let mut watch = watch_output(Some(display), &selector, aim).map_err(|e| e.to_string())?;
         meter = meter.with_screen_source(Box::new(move || watch().map_err(|e| e.to_string())));
+    } else if let Some(display) = &args.wayland_display {
+        let aim = parse_aim(&args.aim)?;
+        let selector = args
+            .output
+            .as_deref()
+            .map(OutputSelector::parse)
+            .unwrap_or_default();
+        let mut watch =
+            watch_wayland_output(Some(display), &selector, aim).map_err(|e| e.to_string())?;
+        meter = meter.with_screen_source(Box::new(move || watch().map_err(|e| e.to_string())));
+    } else if args.output.is_some() {
+        return Err("--output names an output of --x-display or --wayland-display".into());
     }
     let quirks = EmulatorQuirks {
         not_remote: args.not_remote,

@@ -8,6 +8,7 @@
 //! implementation of the wire protocol: no libwayland is needed at build or run time),
 //! with the protocol extensions of `wayland-protocols` and `wayland-protocols-wlr`.
 
+pub mod capture;
 pub mod gamma;
 pub mod surface;
 

@@ -146,6 +146,29 @@ impl XDisplay {
             1,
             to_u16(h)?,
         )?;
+        Ok(Sample::of_lines(
+            &row,
+            &column,
+            (ax, ay),
+            |p| format.codes(p),
+            format.channel_bits(),
+        ))
+    }
+}
+
+impl Sample {
+    /// The sample of the pixels of one `row` and one `column` of an output crossing at
+    /// `at` (x, y): the code there, the run of equal pixels through it along each (the
+    /// patch), and the first other pixel found on them (the surround). `codes` decodes
+    /// a pixel at `channel_bits`.
+    pub fn of_lines(
+        row: &[u32],
+        column: &[u32],
+        at: (u32, u32),
+        codes: impl Fn(u32) -> [u32; 3],
+        channel_bits: u32,
+    ) -> Sample {
+        let (ax, ay) = at;
         let here = row[ax as usize];
         let run = |line: &[u32], at: usize| {
             let start = line[..at]
@@ -158,34 +181,34 @@ impl XDisplay {
                 .map_or(line.len(), |i| at + i);
             (start as u32, end as u32)
         };
-        let (x0, x1) = run(&row, ax as usize);
-        let (y0, y1) = run(&column, ay as usize);
+        let (x0, x1) = run(row, ax as usize);
+        let (y0, y1) = run(column, ay as usize);
         let surround = row
             .iter()
-            .chain(&column)
+            .chain(column)
             .find(|&&p| p != here)
             .copied()
             .unwrap_or(here);
-        Ok(Sample {
-            patch: format.codes(here),
-            background: format.codes(surround),
+        Sample {
+            patch: codes(here),
+            background: codes(surround),
             rect: [x0, y0, x1 - x0, y1 - y0],
-            channel_bits: format.channel_bits(),
-        })
+            channel_bits,
+        }
     }
-}
 
-impl Sample {
     /// What the monitor is sent: the codes through `ramp` (the CRTC's gamma), as drives
     /// in [0, 1], with the patch's place as a fraction of the output.
     pub fn content(&self, ramp: &GammaRamp, output: &OutputInfo) -> ScreenContent {
+        self.content_on(ramp, output.width, output.height)
+    }
+
+    /// [`Self::content`] on an output of `width` × `height` pixels.
+    pub fn content_on(&self, ramp: &GammaRamp, width: u32, height: u32) -> ScreenContent {
         let max = f64::from((1u32 << self.channel_bits) - 1);
         let through =
             |codes: [u32; 3]| [0, 1, 2].map(|c| ramp.output(c, f64::from(codes[c]) / max));
-        let (w, h) = (
-            f64::from(output.width.max(1)),
-            f64::from(output.height.max(1)),
-        );
+        let (w, h) = (f64::from(width.max(1)), f64::from(height.max(1)));
         ScreenContent {
             patch: through(self.patch),
             background: through(self.background),
