@@ -264,3 +264,125 @@ fn a_calibration_on_sway_matches_the_same_monitor_over_the_emulator_socket() {
     assert!(!calibration.through_lut);
     assert!(calibration.measured_white_de00 < 1.0, "{calibration:?}");
 }
+
+/// `lut` on sway's headless output: without --hold it says the compositor would drop
+/// the ramp; with it, that the output has no gamma ramp and what to do instead;
+/// `show` says so and that no chromacal process holds it. The KDE path runs a
+/// stand-in `kscreen-doctor` that records its arguments (the real one needs Plasma 6):
+/// the profile is set with its curves in an ICC `vcgt` that ArgyllCMS's `iccdump`
+/// reads, and `reset` puts the output back on sRGB.
+#[test]
+fn lut_on_wayland_says_where_the_curves_go_and_drives_kscreen_doctor() {
+    let sway = Sway::start();
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state");
+    common::calibrate_default(&state);
+    let lut = |args: &[&str]| {
+        let mut c = sway.client(env!("CARGO_BIN_EXE_chromacal"));
+        c.arg("lut").args(args).arg("--state-dir").arg(&state);
+        c
+    };
+    let failed = |mut c: std::process::Command| {
+        let out = c.output().unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    // The default calibration has no [target]: curves from its model for D65, 2.2.
+    let err = failed(lut(&[
+        "load",
+        "--current",
+        "--white",
+        "D65",
+        "--tone",
+        "gamma:2.2",
+    ]));
+    assert!(err.contains("give --hold"), "{err}");
+    let err = failed(lut(&[
+        "load",
+        "--current",
+        "--hold",
+        "--white",
+        "D65",
+        "--tone",
+        "gamma:2.2",
+    ]));
+    assert!(
+        err.contains("offers no gamma ramp on HEADLESS-1")
+            && err.contains("headless or nested output")
+            && err.contains("kscreen-doctor"),
+        "{err}"
+    );
+    let shown = common::succeed(&mut lut(&["show"]));
+    let shown = String::from_utf8_lossy(&shown.stdout);
+    assert!(
+        shown.contains("HEADLESS-1 on Wayland: curves go into its gamma ramp")
+            && shown.contains("no gamma ramp to load")
+            && shown.contains("held by no chromacal process"),
+        "{shown}"
+    );
+
+    // KDE, through a stand-in kscreen-doctor on the PATH.
+    let bin = dir.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let record = dir.path().join("kscreen-doctor.args");
+    let script = bin.join("kscreen-doctor");
+    std::fs::write(
+        &script,
+        format!(
+            "#!/bin/sh\nfor a in \"$@\"; do echo \"$a\" >> {}; done\n",
+            record.display()
+        ),
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt as _;
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let path = format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let out = common::succeed(
+        lut(&[
+            "load",
+            "--current",
+            "--via",
+            "kde",
+            "--white",
+            "D65",
+            "--tone",
+            "gamma:2.2",
+        ])
+        .env("PATH", &path),
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    let icc = state.join("wayland/HEADLESS-1.icc").canonicalize().unwrap();
+    let args = std::fs::read_to_string(&record).unwrap();
+    assert_eq!(
+        args.lines().collect::<Vec<_>>(),
+        [
+            format!("output.HEADLESS-1.iccprofile.{}", icc.display()),
+            "output.HEADLESS-1.colorProfileSource.ICC".to_string()
+        ],
+        "{said}"
+    );
+    common::need_tool("iccdump", "argyll");
+    let dump = common::succeed(
+        std::process::Command::new("iccdump")
+            .args(["-v", "1"])
+            .arg(&icc),
+    );
+    let dump = String::from_utf8_lossy(&dump.stdout);
+    assert!(dump.contains("vcgt"), "{dump}");
+    std::fs::remove_file(&record).unwrap();
+    common::succeed(lut(&["reset", "--via", "kde"]).env("PATH", &path));
+    assert_eq!(
+        std::fs::read_to_string(&record)
+            .unwrap()
+            .lines()
+            .collect::<Vec<_>>(),
+        [
+            "output.HEADLESS-1.colorProfileSource.sRGB",
+            "output.HEADLESS-1.iccprofile."
+        ]
+    );
+}

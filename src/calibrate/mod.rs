@@ -14,3 +14,4 @@ pub mod session;
 pub mod verify;
 pub mod video_lut;
 pub mod warmup;
+pub mod wayland_lut;

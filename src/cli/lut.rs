@@ -1,5 +1,6 @@
 //! `chromacal lut`: the video LUT of an X11 output (its CRTC gamma ramp): load a
-//! profile's calibration curves into it, show it, reset it, save it as a `.cal`.
+//! profile's calibration curves into it, show it, reset it, save it as a `.cal`. On
+//! Wayland, where the compositor applies them (`lut_wayland`).
 
 use super::shared::{out, outln};
 use std::path::PathBuf;
@@ -22,21 +23,31 @@ use super::shared::Failure;
 #[derive(clap::Args)]
 pub struct LutArgs {
     #[command(subcommand)]
-    command: LutCommand,
-    /// The X display [default: $DISPLAY].
+    pub(super) command: LutCommand,
+    /// The X display [default: $DISPLAY, when no Wayland display is named or set].
     #[arg(long, global = true, value_name = "DISPLAY")]
-    x_display: Option<String>,
-    /// The output, by RandR name (see `chromacal displays`) [default: the primary].
+    pub(super) x_display: Option<String>,
+    /// The Wayland display, e.g. wayland-0 or a socket path [default:
+    /// $WAYLAND_DISPLAY, when set and --x-display is not given].
+    #[arg(long, global = true, value_name = "NAME", conflicts_with = "x_display")]
+    pub(super) wayland_display: Option<String>,
+    /// On Wayland, where the curves go: wlroots (gamma control, held), kde
+    /// (kscreen-doctor sets the profile with its vcgt), colord (GNOME) or auto (from
+    /// what the compositor offers).
+    #[arg(long, global = true, value_name = "PATH", default_value = "auto")]
+    pub(super) via: String,
+    /// The output, by RandR or wl_output name (see `chromacal displays`) [default: the
+    /// primary, or the first Wayland output].
     #[arg(long, global = true)]
-    output: Option<String>,
+    pub(super) output: Option<String>,
     /// State directory (for --current, and to put back a ramp an interrupted
     /// calibration saved).
     #[arg(long, global = true)]
-    state_dir: Option<PathBuf>,
+    pub(super) state_dir: Option<PathBuf>,
 }
 
 #[derive(Subcommand)]
-enum LutCommand {
+pub(super) enum LutCommand {
     /// Load a profile's calibration curves (interpolated to the ramp's size).
     Load {
         /// A chromacal profile (TOML) with calibration curves.
@@ -51,6 +62,10 @@ enum LutCommand {
         /// autostart entry run at login. One keeper a state directory.
         #[arg(long, requires = "current")]
         watch: bool,
+        /// On a wlroots compositor, stay and hold the output's gamma ramp until
+        /// stopped (the compositor drops a client's ramp when it disconnects).
+        #[arg(long, conflicts_with = "watch")]
+        hold: bool,
         /// Curves computed now from the profile's model for a target, instead of
         /// the curves it carries.
         #[command(flatten)]
@@ -74,6 +89,14 @@ enum LutCommand {
 
 pub fn run(args: LutArgs) -> Result<(), Failure> {
     let state_dir = args.state_dir.clone().unwrap_or_else(default_state_dir);
+    let wayland = args.wayland_display.clone().or_else(|| {
+        std::env::var("WAYLAND_DISPLAY")
+            .ok()
+            .filter(|v| !v.is_empty() && args.x_display.is_none())
+    });
+    if let Some(name) = wayland {
+        return super::lut_wayland::run(args, &name, &state_dir);
+    }
     if let LutCommand::Load { watch: true, .. } = args.command {
         return watch(&args, &state_dir);
     }

@@ -21,6 +21,7 @@ pub mod instruments;
 pub mod job;
 pub mod lut;
 pub mod lut3d;
+mod lut_wayland;
 pub mod measure;
 pub mod profile;
 pub mod render;

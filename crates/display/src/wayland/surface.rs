@@ -9,7 +9,9 @@
 //! elsewhere, or a powered-down output, holds the reading back rather than letting it
 //! read the previous patch. Then the display's settle time (the panel's response).
 //! Idle is inhibited while the surface is up (`zwp_idle_inhibit_manager_v1`), so no
-//! screen blanker or DPMS starts in a run.
+//! screen blanker or DPMS starts in a run, and on wlroots the output's gamma ramp is
+//! held straight (`gamma`): the compositor puts its own back when the process lets
+//! go, however the run ends.
 //!
 //! Colour management: where the compositor offers `wp_color_manager_v1` a surface
 //! without an image description is, by that protocol, sRGB-encoded content that the
@@ -33,8 +35,9 @@ use wayland_protocols::wp::idle_inhibit::zv1::client::{
 use wayland_protocols::wp::presentation_time::client::{wp_presentation, wp_presentation_feedback};
 use wayland_protocols::xdg::shell::client::{xdg_surface, xdg_toplevel, xdg_wm_base};
 
+use super::gamma::{GammaError, GammaOffer, HeldGamma, hold_gamma};
 use super::{REPLY_TIMEOUT, WaylandDisplay, WaylandError, WaylandOutput, apply_output_event};
-use crate::x11::OutputSelector;
+use crate::x11::{GammaRamp, OutputSelector};
 use crate::{DisplayError, PatchDisplay};
 use chromacal_model::screen::{Codes, Patch};
 use chromacal_model::target::CalibrationCurves;
@@ -104,6 +107,9 @@ pub struct PatchSurface {
     shm: wl_shm::WlShm,
     presentation: Option<wp_presentation::WpPresentation>,
     inhibitor: Option<zwp_idle_inhibitor_v1::ZwpIdleInhibitorV1>,
+    /// The output's gamma ramp held straight for the run (wlroots): the compositor
+    /// puts its own back when the surface's process lets go, however it ends.
+    _straight: Option<HeldGamma>,
     buffers: Vec<Buffer>,
     /// Buffer size, pixels, and its format.
     pixels: (i32, i32),
@@ -194,6 +200,7 @@ impl PatchSurface {
                 "the compositor manages colour (wp_color_manager_v1): it may convert the patches' codes through the output's profile; turn the output's colour management (ICC profile, HDR, night light) off for the run"
             );
         }
+        let straight = straight_ramp(target, &output);
         let surface = compositor.create_surface(&qh, ());
         let xdg_surface = wm_base.get_xdg_surface(&surface, &qh, ());
         let toplevel = xdg_surface.get_toplevel(&qh, ());
@@ -214,6 +221,7 @@ impl PatchSurface {
             shm,
             presentation,
             inhibitor,
+            _straight: straight,
             buffers: Vec::new(),
             pixels: (0, 0),
             format: wl_shm::Format::Xrgb8888,
@@ -564,6 +572,33 @@ impl PatchSurface {
 impl Drop for PatchSurface {
     fn drop(&mut self) {
         self.close();
+    }
+}
+
+/// Characterisation measures the panel with nothing between the codes and it: on a
+/// wlroots compositor the output's gamma ramp is taken and held straight for the run
+/// (the compositor restores its own when the process lets go, on every exit path).
+/// Where it cannot be taken, or the compositor applies a profile itself, the run is
+/// told what to turn off.
+fn straight_ramp(target: &SurfaceTarget, output: &WaylandOutput) -> Option<HeldGamma> {
+    let selector = OutputSelector::Name(output.name.clone());
+    match hold_gamma(
+        target.wayland_display.as_deref(),
+        &selector,
+        GammaRamp::identity,
+    ) {
+        Ok(held) => Some(held),
+        Err(GammaError::NoRamp {
+            offer: GammaOffer::NotOffered,
+            ..
+        }) => {
+            tracing::warn!(output = %output.name, "the compositor applies the output's colour profile itself (KDE, GNOME): set the output's profile to none (sRGB) for the characterisation (chromacal lut reset), or the patches are measured through its curves");
+            None
+        }
+        Err(e) => {
+            tracing::info!(output = %output.name, "the gamma ramp is not held straight: {e} (a night-light tool holding it would bend the patches)");
+            None
+        }
     }
 }
 

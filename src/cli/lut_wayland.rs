@@ -1,0 +1,175 @@
+//! `chromacal lut` on Wayland: the curves where the compositor applies them
+//! (`calibrate::wayland_lut`): held through wlroots' gamma control, set as the
+//! output's profile through KDE's kscreen-doctor, or registered with colord for GNOME.
+
+use std::path::Path;
+
+use super::lut::{LutArgs, LutCommand};
+use super::shared::{Failure, outln};
+use chromacal::calibrate::wayland_lut::{
+    CurvesPath, find_output, hold_curves, holder, load_kde, release_held, reset_kde, write_icc,
+};
+use chromacal::export::calibration_for;
+use chromacal::profile::Profile;
+use chromacal::profile::store::ProfileStore;
+use chromacal_display::wayland::gamma::gamma_offers;
+use chromacal_display::wayland::offered_interfaces;
+use chromacal_display::x11::OutputSelector;
+
+pub fn run(args: LutArgs, name: &str, state_dir: &Path) -> Result<(), Failure> {
+    let name = Some(name);
+    let selector = args
+        .output
+        .as_deref()
+        .map(OutputSelector::parse)
+        .unwrap_or_default();
+    let output = find_output(name, &selector)?;
+    let via = match CurvesPath::parse(&args.via)? {
+        Some(via) => via,
+        None => CurvesPath::of_interfaces(&offered_interfaces(name)?),
+    };
+    let store = ProfileStore::new(state_dir);
+    match args.command {
+        LutCommand::Load {
+            profile,
+            hold,
+            target,
+            ..
+        } => {
+            let path = profile.unwrap_or_else(|| store.current_path());
+            let profile = Profile::read(&path)?;
+            let target = target.target()?;
+            match via {
+                CurvesPath::Wlroots => {
+                    let curves = calibration_for(&profile, target.as_ref())?.ok_or_else(|| {
+                        format!(
+                            "{} carries no calibration curves: calibrate with a [target], or give --white/--tone",
+                            path.display()
+                        )
+                    })?;
+                    if !hold {
+                        return Err(Failure::from(
+                            chromacal::calibrate::wayland_lut::WaylandLutError::NotHeld.to_string(),
+                        ));
+                    }
+                    let mut held = hold_curves(name, &selector, &curves, &profile.id, state_dir)?;
+                    outln!(
+                        "holding the curves of {} ({}) in the gamma ramp of {} ({} entries) until stopped",
+                        path.display(),
+                        curves.describe(),
+                        held.output.name,
+                        held.size
+                    )?;
+                    held.wait()?;
+                }
+                CurvesPath::Kde => {
+                    let icc = write_icc(&profile, target.as_ref(), &output.name, state_dir)?;
+                    load_kde(&output.name, &icc)?;
+                    outln!(
+                        "set {} (the profile {} with its curves in vcgt) as the colour profile of {} through kscreen-doctor; KWin applies it",
+                        icc.display(),
+                        profile.id,
+                        output.name
+                    )?;
+                }
+                CurvesPath::Colord => {
+                    let icc = write_icc(&profile, target.as_ref(), &output.name, state_dir)?;
+                    let edid = output
+                        .edid
+                        .as_deref()
+                        .and_then(|b| chromacal_formats::edid::Edid::parse(b).ok());
+                    let device = chromacal_formats::edid::colord_device_id(
+                        edid.as_ref(),
+                        &output.name,
+                        |_| None,
+                    );
+                    let registered = tokio::runtime::Builder::new_current_thread()
+                        .enable_all()
+                        .build()?
+                        .block_on(chromacal::export::colord::register(&icc, &device))
+                        .map_err(|e| format!("colord: {e}"))?;
+                    outln!(
+                        "colord: {} ({}) is the default profile of {device}; GNOME applies it, vcgt included",
+                        registered.profile_id,
+                        icc.display()
+                    )?;
+                }
+            }
+        }
+        LutCommand::Show { json } => {
+            let offer = gamma_offers(name)?
+                .into_iter()
+                .find(|(n, _)| *n == output.name)
+                .map(|(_, g)| g);
+            let held = holder(state_dir, &output.name);
+            if json {
+                outln!(
+                    "{}",
+                    serde_json::to_string_pretty(&serde_json::json!({
+                        "output": output.name,
+                        "via": via,
+                        "gamma": offer,
+                        "held_by": held,
+                    }))?
+                )?;
+            } else {
+                outln!(
+                    "{} on Wayland: curves go {}",
+                    output.name,
+                    match via {
+                        CurvesPath::Wlroots =>
+                            "into its gamma ramp (wlr-gamma-control), held by a client",
+                        CurvesPath::Kde => "into its colour profile's vcgt (KWin, kscreen-doctor)",
+                        CurvesPath::Colord =>
+                            "into its colour profile's vcgt (colord; GNOME applies it)",
+                    }
+                )?;
+                if let Some(offer) = offer.filter(|_| held.is_none()) {
+                    outln!("  {}", offer.describe())?;
+                }
+                match held {
+                    Some(h) => outln!(
+                        "  held by chromacal lut load --hold (pid {}), profile {}",
+                        h.pid,
+                        h.profile
+                    )?,
+                    None if via == CurvesPath::Wlroots => {
+                        outln!("  held by no chromacal process: the compositor's own ramp")?
+                    }
+                    None => {}
+                }
+            }
+        }
+        LutCommand::Reset => match via {
+            CurvesPath::Wlroots => match release_held(state_dir, &output.name) {
+                Some(h) => outln!(
+                    "stopped chromacal's holder of the gamma ramp of {} (pid {}): the compositor's own ramp is back",
+                    output.name,
+                    h.pid
+                )?,
+                None => outln!(
+                    "no chromacal process holds the gamma ramp of {}: it is the compositor's own",
+                    output.name
+                )?,
+            },
+            CurvesPath::Kde => {
+                reset_kde(&output.name)?;
+                outln!(
+                    "{} is back on sRGB, without a profile (kscreen-doctor)",
+                    output.name
+                )?;
+            }
+            CurvesPath::Colord => {
+                return Err(Failure::from(
+                    "on GNOME the output's profile is colord's: choose another in Settings → Colour (chromacal does not remove profiles from colord)",
+                ));
+            }
+        },
+        LutCommand::Save { .. } => {
+            return Err(Failure::from(
+                "no Wayland protocol reads a gamma ramp back: lut save works on X11 only (the curves are the profile's: export --format cal)",
+            ));
+        }
+    }
+    Ok(())
+}
