@@ -148,6 +148,52 @@ pub fn hold_curves(
     Ok(held)
 }
 
+/// How long `lut load --hold` waits before taking an output's gamma control again
+/// after losing it (the output was unplugged, or its mode set anew).
+const RETAKE_S: f64 = 2.0;
+
+/// wlroots: hold `curves` on the output `selector` names until the compositor goes
+/// away, taking the control again (and loading the curves again) whenever it is lost:
+/// the output was unplugged and plugged back, or its mode was set anew. `said` hears
+/// each load and each loss.
+pub fn hold_until_gone(
+    name: Option<&str>,
+    selector: &OutputSelector,
+    curves: &CalibrationCurves,
+    profile: &str,
+    state_dir: &Path,
+    said: &mut dyn FnMut(&str),
+) -> Result<(), WaylandLutError> {
+    let mut first = true;
+    loop {
+        match hold_curves(name, selector, curves, profile, state_dir) {
+            Ok(mut held) => {
+                said(&format!(
+                    "holding the curves ({}) in the gamma ramp of {} ({} entries){}",
+                    curves.describe(),
+                    held.output.name,
+                    held.size,
+                    if first { "" } else { " again" }
+                ));
+                first = false;
+                if let Err(e) = held.wait() {
+                    said(&format!("{e}; taking it again"));
+                }
+            }
+            // The first attempt's refusal is the user's to hear at once.
+            Err(e) if first => return Err(e),
+            Err(WaylandLutError::Wayland(WaylandError::Connect { .. })) => return Ok(()),
+            Err(_) => {}
+        }
+        // The compositor gone: nothing to hold any more.
+        if wayland::offered_interfaces(name).is_err() {
+            said("the compositor is gone: stopping");
+            return Ok(());
+        }
+        std::thread::sleep(std::time::Duration::from_secs_f64(RETAKE_S));
+    }
+}
+
 /// The profile as ICC v2 (what every compositor and colord read, ArgyllCMS too) with
 /// its curves in `vcgt`, written where the compositor will read it:
 /// `<state_dir>/wayland/<output>.icc`.

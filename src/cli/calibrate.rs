@@ -11,8 +11,8 @@ use chromacal::calibrate::run::Progress;
 use chromacal::calibrate::session::{CalibrateOptions, Resume, calibrate as calibrate_session};
 use chromacal::config::devices::find_device;
 use chromacal::config::{
-    LoadedConfig, Sink, check_config, config_search_paths, device_configs, hdr_mode_advice,
-    load_config_searching,
+    LoadedConfig, check_config, config_search_paths, device_configs, hdr_mode_advice,
+    load_config_searching, where_patches_go,
 };
 use chromacal::profile::store::default_state_dir;
 use chromacal::report;
@@ -222,36 +222,8 @@ fn announce_display(loaded: &LoadedConfig, options: &CalibrateOptions) {
     if options.resume.is_some() || check_config(&config).is_err() {
         return; // the session reports the error, or resumes with the journal's config
     }
-    match config.display.sink() {
-        Sink::Web => eprintln!(
-            "chromacal: open http://{}/ full-screen on the display to measure (e.g. chromium --kiosk)",
-            config.display.web.address
-        ),
-        Sink::Resolve => eprintln!(
-            "chromacal: waiting for a Resolve pattern generator to connect to {}",
-            config.display.resolve.address
-        ),
-        Sink::Window => eprintln!(
-            "chromacal: patches full-screen on {} of X display {}; aim the instrument at the screen's centre",
-            config.display.output.clone().unwrap_or_default().describe(),
-            config
-                .display
-                .x_display
-                .clone()
-                .or_else(|| std::env::var("DISPLAY").ok())
-                .unwrap_or_default()
-        ),
-        Sink::Wayland => eprintln!(
-            "chromacal: patches full-screen on {} of Wayland display {}; aim the instrument at the screen's centre",
-            config.display.output.clone().unwrap_or_default().describe(),
-            config
-                .display
-                .wayland_display
-                .clone()
-                .or_else(|| std::env::var("WAYLAND_DISPLAY").ok())
-                .unwrap_or_default()
-        ),
-        Sink::Simulated | Sink::Emulator => {}
+    if let Some(place) = where_patches_go(&config) {
+        eprintln!("chromacal: {place}");
     }
     if let Some(advice) = hdr_mode_advice(&config) {
         eprintln!("chromacal: {advice}");

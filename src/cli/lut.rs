@@ -23,31 +23,31 @@ use super::shared::Failure;
 #[derive(clap::Args)]
 pub struct LutArgs {
     #[command(subcommand)]
-    pub(super) command: LutCommand,
+    command: LutCommand,
     /// The X display [default: $DISPLAY, when no Wayland display is named or set].
     #[arg(long, global = true, value_name = "DISPLAY")]
-    pub(super) x_display: Option<String>,
+    x_display: Option<String>,
     /// The Wayland display, e.g. wayland-0 or a socket path [default:
     /// $WAYLAND_DISPLAY, when set and --x-display is not given].
     #[arg(long, global = true, value_name = "NAME", conflicts_with = "x_display")]
-    pub(super) wayland_display: Option<String>,
+    wayland_display: Option<String>,
     /// On Wayland, where the curves go: wlroots (gamma control, held), kde
     /// (kscreen-doctor sets the profile with its vcgt), colord (GNOME) or auto (from
     /// what the compositor offers).
     #[arg(long, global = true, value_name = "PATH", default_value = "auto")]
-    pub(super) via: String,
+    via: String,
     /// The output, by RandR or wl_output name (see `chromacal displays`) [default: the
     /// primary, or the first Wayland output].
     #[arg(long, global = true)]
-    pub(super) output: Option<String>,
+    output: Option<String>,
     /// State directory (for --current, and to put back a ramp an interrupted
     /// calibration saved).
     #[arg(long, global = true)]
-    pub(super) state_dir: Option<PathBuf>,
+    state_dir: Option<PathBuf>,
 }
 
 #[derive(Subcommand)]
-pub(super) enum LutCommand {
+enum LutCommand {
     /// Load a profile's calibration curves (interpolated to the ramp's size).
     Load {
         /// A chromacal profile (TOML) with calibration curves.
@@ -95,7 +95,24 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
             .filter(|v| !v.is_empty() && args.x_display.is_none())
     });
     if let Some(name) = wayland {
-        return super::lut_wayland::run(args, &name, &state_dir);
+        use super::lut_wayland::Action;
+        let action = match args.command {
+            LutCommand::Load {
+                profile,
+                hold,
+                target,
+                ..
+            } => Action::Load {
+                profile,
+                hold,
+                target: target.target()?,
+            },
+            LutCommand::Show { json } => Action::Show { json },
+            LutCommand::Reset => Action::Reset,
+            LutCommand::Save { .. } => Action::Save,
+        };
+        let via = chromacal::calibrate::wayland_lut::CurvesPath::parse(&args.via)?;
+        return super::lut_wayland::run(action, &name, args.output.as_deref(), via, &state_dir);
     }
     if let LutCommand::Load { watch: true, .. } = args.command {
         return watch(&args, &state_dir);

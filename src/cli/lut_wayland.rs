@@ -4,10 +4,9 @@
 
 use std::path::Path;
 
-use super::lut::{LutArgs, LutCommand};
 use super::shared::{Failure, outln};
 use chromacal::calibrate::wayland_lut::{
-    CurvesPath, find_output, hold_curves, holder, load_kde, release_held, reset_kde, write_icc,
+    CurvesPath, find_output, hold_until_gone, holder, load_kde, release_held, reset_kde, write_icc,
 };
 use chromacal::export::calibration_for;
 use chromacal::profile::Profile;
@@ -15,30 +14,47 @@ use chromacal::profile::store::ProfileStore;
 use chromacal_display::wayland::gamma::gamma_offers;
 use chromacal_display::wayland::offered_interfaces;
 use chromacal_display::x11::OutputSelector;
+use chromacal_model::target::Target;
 
-pub fn run(args: LutArgs, name: &str, state_dir: &Path) -> Result<(), Failure> {
+/// What `lut` is asked to do, on a Wayland output.
+pub enum Action {
+    /// Load the profile at this path (its curves, or curves for `target`).
+    Load {
+        profile: Option<std::path::PathBuf>,
+        hold: bool,
+        target: Option<Target>,
+    },
+    Show {
+        json: bool,
+    },
+    Reset,
+    Save,
+}
+
+/// `lut` on Wayland display `name`, output `output`, curves `via` (auto when `None`).
+pub fn run(
+    action: Action,
+    name: &str,
+    output: Option<&str>,
+    via: Option<CurvesPath>,
+    state_dir: &Path,
+) -> Result<(), Failure> {
     let name = Some(name);
-    let selector = args
-        .output
-        .as_deref()
-        .map(OutputSelector::parse)
-        .unwrap_or_default();
+    let selector = output.map(OutputSelector::parse).unwrap_or_default();
     let output = find_output(name, &selector)?;
-    let via = match CurvesPath::parse(&args.via)? {
+    let via = match via {
         Some(via) => via,
         None => CurvesPath::of_interfaces(&offered_interfaces(name)?),
     };
     let store = ProfileStore::new(state_dir);
-    match args.command {
-        LutCommand::Load {
+    match action {
+        Action::Load {
             profile,
             hold,
             target,
-            ..
         } => {
             let path = profile.unwrap_or_else(|| store.current_path());
             let profile = Profile::read(&path)?;
-            let target = target.target()?;
             match via {
                 CurvesPath::Wlroots => {
                     let curves = calibration_for(&profile, target.as_ref())?.ok_or_else(|| {
@@ -52,15 +68,14 @@ pub fn run(args: LutArgs, name: &str, state_dir: &Path) -> Result<(), Failure> {
                             chromacal::calibrate::wayland_lut::WaylandLutError::NotHeld.to_string(),
                         ));
                     }
-                    let mut held = hold_curves(name, &selector, &curves, &profile.id, state_dir)?;
-                    outln!(
-                        "holding the curves of {} ({}) in the gamma ramp of {} ({} entries) until stopped",
-                        path.display(),
-                        curves.describe(),
-                        held.output.name,
-                        held.size
-                    )?;
-                    held.wait()?;
+                    let mut said = Ok(());
+                    let mut say = |line: &str| {
+                        if said.is_ok() {
+                            said = outln!("{line} (from {})", path.display());
+                        }
+                    };
+                    hold_until_gone(name, &selector, &curves, &profile.id, state_dir, &mut say)?;
+                    said?;
                 }
                 CurvesPath::Kde => {
                     let icc = write_icc(&profile, target.as_ref(), &output.name, state_dir)?;
@@ -96,7 +111,7 @@ pub fn run(args: LutArgs, name: &str, state_dir: &Path) -> Result<(), Failure> {
                 }
             }
         }
-        LutCommand::Show { json } => {
+        Action::Show { json } => {
             let offer = gamma_offers(name)?
                 .into_iter()
                 .find(|(n, _)| *n == output.name)
@@ -140,7 +155,7 @@ pub fn run(args: LutArgs, name: &str, state_dir: &Path) -> Result<(), Failure> {
                 }
             }
         }
-        LutCommand::Reset => match via {
+        Action::Reset => match via {
             CurvesPath::Wlroots => match release_held(state_dir, &output.name) {
                 Some(h) => outln!(
                     "stopped chromacal's holder of the gamma ramp of {} (pid {}): the compositor's own ramp is back",
@@ -165,7 +180,7 @@ pub fn run(args: LutArgs, name: &str, state_dir: &Path) -> Result<(), Failure> {
                 ));
             }
         },
-        LutCommand::Save { .. } => {
+        Action::Save => {
             return Err(Failure::from(
                 "no Wayland protocol reads a gamma ramp back: lut save works on X11 only (the curves are the profile's: export --format cal)",
             ));

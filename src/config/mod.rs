@@ -422,6 +422,39 @@ pub(crate) fn hdr_defaults(config: &mut Config) {
     }
 }
 
+/// Where the patches of a run with `config` will be, for the sinks a user has to
+/// attend to (a browser to open, a generator to connect, a screen to aim at).
+pub fn where_patches_go(config: &Config) -> Option<String> {
+    let output = || config.display.output.clone().unwrap_or_default().describe();
+    let named = |given: &Option<String>, variable: &str| {
+        given
+            .clone()
+            .or_else(|| std::env::var(variable).ok())
+            .unwrap_or_default()
+    };
+    Some(match config.display.sink() {
+        Sink::Web => format!(
+            "open http://{}/ full-screen on the display to measure (e.g. chromium --kiosk)",
+            config.display.web.address
+        ),
+        Sink::Resolve => format!(
+            "waiting for a Resolve pattern generator to connect to {}",
+            config.display.resolve.address
+        ),
+        Sink::Window => format!(
+            "patches full-screen on {} of X display {}; aim the instrument at the screen's centre",
+            output(),
+            named(&config.display.x_display, "DISPLAY")
+        ),
+        Sink::Wayland => format!(
+            "patches full-screen on {} of Wayland display {}; aim the instrument at the screen's centre",
+            output(),
+            named(&config.display.wayland_display, "WAYLAND_DISPLAY")
+        ),
+        Sink::Simulated | Sink::Emulator => return None,
+    })
+}
+
 /// What the user must set on the display before an HDR run, for the sinks that send
 /// no HDR metadata themselves (all of them: chromacal sends codes, not InfoFrames).
 pub fn hdr_mode_advice(config: &Config) -> Option<String> {
