@@ -64,6 +64,12 @@ command -v ffmpeg >/dev/null || need_package ffmpeg
 [ -e /usr/lib/xorg/modules/drivers/dummy_drv.so ] || need_package xserver-xorg-video-dummy
 command -v xrandr >/dev/null || need_package x11-xserver-utils
 command -v edid-decode >/dev/null || need_package edid-decode
+# The Wayland patch surface, outputs, gamma control and screencopy are tested against
+# a real compositor: sway on its headless backend (run as an unprivileged user), with
+# grim reading the screen back; setpriv (util-linux) drops to that user.
+command -v sway >/dev/null || need_package sway
+command -v grim >/dev/null || need_package grim
+command -v setpriv >/dev/null || need_package util-linux
 # Registration with colord is tested against a real colord on a private system bus.
 [ -x /usr/libexec/colord ] || need_package colord
 command -v dbus-daemon >/dev/null || need_package dbus-daemon
