@@ -44,7 +44,6 @@ fn the_patch_surface_shows_the_exact_codes_grim_reads_back() {
     let sway = Sway::start();
     let dir = tempfile::tempdir().unwrap();
     let mut surface = PatchSurface::open(&target(&sway), 0.0).unwrap();
-    assert_eq!(surface.output().name, "HEADLESS-1");
     let rt = runtime();
     // A small linear congruential generator: the codes differ each test, reproducibly.
     let mut state: u64 = 0x2545_f491_4f6c_dd1d;
@@ -73,13 +72,16 @@ fn the_patch_surface_shows_the_exact_codes_grim_reads_back() {
     surface.close();
 }
 
-/// With sway stopped (it presents nothing), `show` does not return: no reading could
-/// start on the previous patch. Once sway goes on, it returns, and the screen shows
-/// the patch.
+/// With sway's process stopped (SIGSTOP), it draws and presents nothing: `show` does
+/// not return, so no reading could start on the previous patch. Once sway goes on, it
+/// returns, and the screen shows the patch. (On this sway, 1.7 on the headless
+/// backend, neither `output dpms off`, which the headless output ignores, nor
+/// `output disable` withholds frame callbacks, and it sends no presentation feedback:
+/// holding back the whole compositor is what holds its frames back here.)
 #[test]
 fn no_patch_counts_as_shown_before_the_compositor_presents_it() {
+    use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
-    use std::sync::{Arc, Mutex};
     let sway = Sway::start();
     let dir = tempfile::tempdir().unwrap();
     let mut surface = PatchSurface::open(&target(&sway), 0.0).unwrap();
@@ -88,25 +90,21 @@ fn no_patch_counts_as_shown_before_the_compositor_presents_it() {
         .unwrap();
     sway.pause(true);
     let shown = Arc::new(AtomicBool::new(false));
-    let resumed_at = Arc::new(Mutex::new(None::<std::time::Instant>));
     let handle = {
         let shown = shown.clone();
         std::thread::spawn(move || {
-            let rt = runtime();
-            rt.block_on(surface.show(&patch([200, 100, 50], [0; 3])))
+            runtime()
+                .block_on(surface.show(&patch([200, 100, 50], [0; 3])))
                 .unwrap();
-            let at = std::time::Instant::now();
             shown.store(true, Ordering::SeqCst);
-            (surface, at)
+            surface
         })
     };
     std::thread::sleep(std::time::Duration::from_millis(1500));
     let early = shown.load(Ordering::SeqCst);
-    *resumed_at.lock().unwrap() = Some(std::time::Instant::now());
     sway.pause(false);
-    let (mut surface, at) = handle.join().unwrap();
+    let mut surface = handle.join().unwrap();
     assert!(!early, "show returned while the compositor was stopped");
-    assert!(at >= resumed_at.lock().unwrap().unwrap());
     let (w, h, pixels) = sway.grim("HEADLESS-1", dir.path());
     assert_eq!(pixels[(h / 2) * w + w / 2], [200, 100, 50]);
     surface.close();
@@ -163,6 +161,36 @@ fn displays_names_sway_s_output_with_its_edid_from_the_kernel() {
     );
     assert_eq!(output["gamma"]["gamma"], "failed");
     assert_eq!(json["outputs"].as_array().unwrap().len(), 1);
+    // The monitor's serial picks the output, by the kernel's EDID.
+    let mut lut = sway.client(env!("CARGO_BIN_EXE_chromacal"));
+    lut.env("CHROMACAL_SYSFS_ROOT", &sysfs)
+        .args([
+            "lut",
+            "show",
+            "--output",
+            "edid_serial=7MT0186J1T3L",
+            "--state-dir",
+        ])
+        .arg(dir.path().join("state"));
+    let shown = common::succeed(&mut lut);
+    assert!(
+        String::from_utf8_lossy(&shown.stdout).starts_with("HEADLESS-1 on Wayland"),
+        "{}",
+        String::from_utf8_lossy(&shown.stdout)
+    );
+    let mut wrong = sway.client(env!("CARGO_BIN_EXE_chromacal"));
+    wrong
+        .env("CHROMACAL_SYSFS_ROOT", &sysfs)
+        .args(["lut", "show", "--output", "edid_serial=NOPE", "--state-dir"])
+        .arg(dir.path().join("state"));
+    let refused = wrong.output().unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success()
+            && err.contains("whose monitor's EDID serial is 'NOPE'")
+            && err.contains("HEADLESS-1"),
+        "{err}"
+    );
 }
 
 /// A whole calibration on Wayland with real bytes at every step: the patches on the
@@ -261,7 +289,6 @@ fn a_calibration_on_sway_matches_the_same_monitor_over_the_emulator_socket() {
     );
     // The curves went into the codes, and were measured into place through them.
     let calibration = profile.calibration.as_ref().unwrap();
-    assert!(!calibration.through_lut);
     assert!(calibration.measured_white_de00 < 1.0, "{calibration:?}");
 }
 
@@ -309,7 +336,7 @@ fn lut_on_wayland_says_where_the_curves_go_and_drives_kscreen_doctor() {
     assert!(
         err.contains("offers no gamma ramp on HEADLESS-1")
             && err.contains("headless or nested output")
-            && err.contains("kscreen-doctor"),
+            && err.contains("exported ICC profile"),
         "{err}"
     );
     let shown = common::succeed(&mut lut(&["show"]));

@@ -20,7 +20,7 @@ const PNP_IDS: [&str; 2] = ["/usr/share/hwdata/pnp.ids", "/usr/share/misc/pnp.id
 
 /// The maker's name for a three-letter PNP id, from the first `pnp.ids` there is
 /// (lines `ABC<tab>Name`); none where there is none or it does not list the id.
-fn pnp_vendor_name(code: &str) -> Option<String> {
+pub fn pnp_vendor_name(code: &str) -> Option<String> {
     let text = PNP_IDS
         .iter()
         .find_map(|p| std::fs::read_to_string(p).ok())?;

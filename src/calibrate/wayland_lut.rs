@@ -68,7 +68,7 @@ pub enum WaylandLutError {
     #[error(transparent)]
     Gamma(#[from] GammaError),
     #[error(
-        "the compositor drops a client's gamma ramp when it disconnects: give --hold (lut load stays and holds it until stopped), or let the daemon hold it"
+        "the compositor drops a client's gamma ramp when it disconnects: give --hold (lut load stays and holds it until stopped)"
     )]
     NotHeld,
     #[error("{0}")]
@@ -97,13 +97,33 @@ pub fn holder_path(state_dir: &Path, output: &str) -> PathBuf {
     state_dir.join(format!("wayland-gamma-{output}.json"))
 }
 
-/// The holder noted for `output`, if its process still runs.
+/// The holder noted for `output`, if its process still runs and is a chromacal that
+/// holds a ramp (a process id can be reused after a crash or a reboot).
 pub fn holder(state_dir: &Path, output: &str) -> Option<GammaHolder> {
     let text = std::fs::read_to_string(holder_path(state_dir, output)).ok()?;
     let holder: GammaHolder = serde_json::from_str(&text).ok()?;
-    Path::new(&format!("/proc/{}", holder.pid))
-        .exists()
-        .then_some(holder)
+    let cmdline = std::fs::read(format!("/proc/{}/cmdline", holder.pid)).ok()?;
+    let args: Vec<String> = cmdline
+        .split(|b| *b == 0)
+        .map(|a| String::from_utf8_lossy(a).into_owned())
+        .collect();
+    let chromacal = args
+        .first()
+        .and_then(|a| Path::new(a).file_name())
+        .is_some_and(|n| n.to_string_lossy().starts_with("chromacal"));
+    let holding =
+        args.iter().any(|a| a == "lut") && args.iter().any(|a| a == "--hold" || a == "--watch");
+    (chromacal && holding).then_some(holder)
+}
+
+/// Removes the holder's note when the holder stops holding (an error, the compositor
+/// gone); a holder killed leaves it, and [`holder`] then sees no such process.
+struct HolderNote(PathBuf);
+
+impl Drop for HolderNote {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
 }
 
 /// The output `selector` names on Wayland display `name`.
@@ -165,9 +185,11 @@ pub fn hold_until_gone(
     said: &mut dyn FnMut(&str),
 ) -> Result<(), WaylandLutError> {
     let mut first = true;
+    let mut note = None;
     loop {
         match hold_curves(name, selector, curves, profile, state_dir) {
             Ok(mut held) => {
+                note = Some(HolderNote(holder_path(state_dir, &held.output.name)));
                 said(&format!(
                     "holding the curves ({}) in the gamma ramp of {} ({} entries){}",
                     curves.describe(),
@@ -182,12 +204,12 @@ pub fn hold_until_gone(
             }
             // The first attempt's refusal is the user's to hear at once.
             Err(e) if first => return Err(e),
-            Err(WaylandLutError::Wayland(WaylandError::Connect { .. })) => return Ok(()),
             Err(_) => {}
         }
         // The compositor gone: nothing to hold any more.
         if wayland::offered_interfaces(name).is_err() {
             said("the compositor is gone: stopping");
+            drop(note);
             return Ok(());
         }
         std::thread::sleep(std::time::Duration::from_secs_f64(RETAKE_S));
@@ -269,10 +291,11 @@ pub fn reset_kde(output: &str) -> Result<(), WaylandLutError> {
     ])
 }
 
-/// wlroots: stop chromacal's holder of `output`'s ramp (the compositor then puts its
-/// own back); the holder's note, or `None` when nothing of chromacal's holds it.
-pub fn release_held(state_dir: &Path, output: &str) -> Option<GammaHolder> {
-    let held = holder(state_dir, output)?;
+/// wlroots: stop chromacal's holder of `output`'s ramp on Wayland display `display`
+/// (the compositor then puts its own back); the holder's note, or `None` when nothing
+/// of chromacal's holds it there.
+pub fn release_held(state_dir: &Path, display: &str, output: &str) -> Option<GammaHolder> {
+    let held = holder(state_dir, output).filter(|h| h.display == display)?;
     let _ = std::process::Command::new("kill")
         .args(["-TERM", &held.pid.to_string()])
         .status();
@@ -297,5 +320,33 @@ mod tests {
         assert_eq!(with(&["wl_output", "gtk_shell1"]), CurvesPath::Colord);
         assert_eq!(CurvesPath::parse("gnome"), Ok(Some(CurvesPath::Colord)));
         assert!(CurvesPath::parse("x11").is_err());
+    }
+
+    #[test]
+    fn a_note_whose_process_is_not_a_holding_chromacal_names_no_holder() {
+        let dir = tempfile::tempdir().unwrap();
+        let note = |pid: u32| {
+            let n = GammaHolder {
+                pid,
+                display: "/run/user/1000/wayland-1".into(),
+                output: "DP-1".into(),
+                profile: "p".into(),
+            };
+            std::fs::write(
+                holder_path(dir.path(), "DP-1"),
+                serde_json::to_string(&n).unwrap(),
+            )
+            .unwrap();
+        };
+        // This test's own process: alive, but not `chromacal lut load --hold`.
+        note(std::process::id());
+        assert_eq!(holder(dir.path(), "DP-1"), None);
+        assert_eq!(
+            release_held(dir.path(), "/run/user/1000/wayland-1", "DP-1"),
+            None
+        );
+        // No such process.
+        note(u32::MAX - 1);
+        assert_eq!(holder(dir.path(), "DP-1"), None);
     }
 }

@@ -193,8 +193,10 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
         let mut watch =
             watch_wayland_output(Some(display), &selector, aim).map_err(|e| e.to_string())?;
         meter = meter.with_screen_source(Box::new(move || watch().map_err(|e| e.to_string())));
-    } else if args.output.is_some() {
-        return Err("--output names an output of --x-display or --wayland-display".into());
+    } else if args.output.is_some() || args.aim != "0.5,0.5" {
+        return Err(
+            "--output and --aim are for the screen of --x-display or --wayland-display".into(),
+        );
     }
     let quirks = EmulatorQuirks {
         not_remote: args.not_remote,

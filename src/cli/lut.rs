@@ -97,14 +97,17 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
     if let Some(name) = wayland {
         use super::lut_wayland::Action;
         let action = match args.command {
+            // --watch (the login service's) holds on wlroots, as --hold does: there
+            // the curves stay only while a client holds them.
             LutCommand::Load {
                 profile,
                 hold,
+                watch,
                 target,
                 ..
             } => Action::Load {
                 profile,
-                hold,
+                hold: hold || watch,
                 target: target.target()?,
             },
             LutCommand::Show { json } => Action::Show { json },

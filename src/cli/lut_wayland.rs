@@ -11,7 +11,7 @@ use chromacal::calibrate::wayland_lut::{
 use chromacal::export::calibration_for;
 use chromacal::profile::Profile;
 use chromacal::profile::store::ProfileStore;
-use chromacal_display::wayland::gamma::gamma_offers;
+use chromacal_display::wayland::gamma::{GammaOffer, gamma_offers};
 use chromacal_display::wayland::offered_interfaces;
 use chromacal_display::x11::OutputSelector;
 use chromacal_model::target::Target;
@@ -96,13 +96,18 @@ pub fn run(
                     let device = chromacal_formats::edid::colord_device_id(
                         edid.as_ref(),
                         &output.name,
-                        |_| None,
+                        chromacal::calibrate::displays::pnp_vendor_name,
                     );
                     let registered = tokio::runtime::Builder::new_current_thread()
                         .enable_all()
                         .build()?
                         .block_on(chromacal::export::colord::register(&icc, &device))
                         .map_err(|e| format!("colord: {e}"))?;
+                    if !registered.device_existed {
+                        return Err(Failure::from(format!(
+                            "colord had no device {device}: the desktop did not register this monitor under that id, so it would not apply the profile (registered on a new device). `colormgr get-devices` lists the ones it has; give that id to `chromacal export --register-colord ID`"
+                        )));
+                    }
                     outln!(
                         "colord: {} ({}) is the default profile of {device}; GNOME applies it, vcgt included",
                         registered.profile_id,
@@ -148,15 +153,25 @@ pub fn run(
                         h.pid,
                         h.profile
                     )?,
-                    None if via == CurvesPath::Wlroots => {
-                        outln!("  held by no chromacal process: the compositor's own ramp")?
-                    }
+                    None if via == CurvesPath::Wlroots => outln!(
+                        "  held by no chromacal process{}",
+                        match offer {
+                            Some(GammaOffer::Size(_)) => ": the compositor's own ramp",
+                            _ => " (another program may hold it)",
+                        }
+                    )?,
                     None => {}
                 }
             }
         }
         Action::Reset => match via {
-            CurvesPath::Wlroots => match release_held(state_dir, &output.name) {
+            CurvesPath::Wlroots => match release_held(
+                state_dir,
+                &chromacal_display::wayland::socket_path(name)?
+                    .display()
+                    .to_string(),
+                &output.name,
+            ) {
                 Some(h) => outln!(
                     "stopped chromacal's holder of the gamma ramp of {} (pid {}): the compositor's own ramp is back",
                     output.name,

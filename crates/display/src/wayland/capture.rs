@@ -37,11 +37,23 @@ struct BufferSpec {
     stride: u32,
 }
 
+impl BufferSpec {
+    /// Pixels to copy, rows that hold them, and a size a shared-memory pool takes.
+    fn is_sound(&self) -> bool {
+        self.width > 0
+            && self.height > 0
+            && u64::from(self.stride) >= u64::from(self.width) * 4
+            && u64::from(self.stride) * u64::from(self.height) <= i32::MAX as u64
+    }
+}
+
 #[derive(Default)]
 struct CopyEvents {
     outputs: Vec<(wl_output::WlOutput, WaylandOutput, bool)>,
-    /// The shm buffer offered for the frame in flight.
+    /// The shm buffer offered for the frame in flight (one chromacal can read).
     spec: Option<BufferSpec>,
+    /// Every shm format offered for it.
+    offered: Vec<WEnum<wl_shm::Format>>,
     /// All buffer types announced (version 3's buffer_done, or at once before it).
     specs_done: bool,
     y_invert: bool,
@@ -145,45 +157,14 @@ impl OutputCopier {
             .globals
             .bind(&qh, 1..=1, ())
             .map_err(|_| missing("wl_shm", "a copy of the screen is written into"))?;
-        let globals: Vec<(u32, u32)> = display.globals.contents().with_list(|list| {
-            list.iter()
-                .filter(|g| g.interface == "wl_output")
-                .map(|g| (g.name, g.version))
-                .collect()
-        });
-        for (index, (global, version)) in globals.iter().enumerate() {
-            let proxy: wl_output::WlOutput =
-                display
-                    .globals
-                    .registry()
-                    .bind(*global, (*version).min(4), &qh, index);
-            let info = WaylandOutput {
-                global: *global,
-                scale: 1,
-                ..WaylandOutput::default()
-            };
-            events.outputs.push((proxy, info, false));
-        }
+        events.outputs = super::bind_outputs(&display, &qh);
         for _ in 0..2 {
             queue
                 .roundtrip(&mut events)
                 .map_err(|e| display.protocol_error(format!("reading its outputs: {e}")))?;
         }
-        let infos: Vec<WaylandOutput> = events.outputs.iter().map(|o| o.1.clone()).collect();
-        let info =
-            super::pick(selector, &infos)
-                .cloned()
-                .ok_or_else(|| WaylandError::NoOutput {
-                    display: display.name().to_string(),
-                    wanted: selector.describe(),
-                    outputs: infos.iter().map(|o| o.name.clone()).collect(),
-                })?;
-        let output = events
-            .outputs
-            .iter()
-            .find(|o| o.1.global == info.global)
-            .map(|o| o.0.clone())
-            .ok_or_else(|| display.protocol_error("the output went away"))?;
+        let (index, info) = super::choose(&display, selector, &super::described(&events.outputs))?;
+        let output = events.outputs[index].0.clone();
         Ok(OutputCopier {
             display,
             queue,
@@ -201,39 +182,49 @@ impl OutputCopier {
         done: impl Fn(&CopyEvents) -> bool,
     ) -> Result<(), WaylandError> {
         let deadline = Instant::now() + COPY_TIMEOUT;
-        while !done(&self.events) {
-            if Instant::now() > deadline {
-                return Err(self.display.protocol_error(format!(
-                    "{what}: no answer within {} s",
-                    COPY_TIMEOUT.as_secs()
-                )));
-            }
-            self.queue
-                .roundtrip(&mut self.events)
-                .map_err(|e| self.display.protocol_error(format!("{what}: {e}")))?;
-            if !done(&self.events) {
-                std::thread::sleep(Duration::from_millis(2));
-            }
+        match super::dispatch_until(&mut self.queue, &mut self.events, deadline, done) {
+            Ok(true) => Ok(()),
+            Ok(false) => Err(self.display.protocol_error(format!(
+                "{what}: no answer within {} s",
+                COPY_TIMEOUT.as_secs()
+            ))),
+            Err(e) => Err(self.display.protocol_error(format!("{what}: {e}"))),
         }
-        Ok(())
     }
 
     /// Copy the output's next frame.
     pub fn copy(&mut self) -> Result<Frame, WaylandError> {
         let qh = self.queue.handle();
         self.events.spec = None;
+        self.events.offered.clear();
         self.events.specs_done = false;
         self.events.ready = false;
         self.events.failed = false;
         self.events.y_invert = false;
         let version = self.manager.version();
         let frame = self.manager.capture_output(0, &self.output, &qh, ());
+        // Version 3 says when it has offered every buffer type; before it, the shm
+        // buffer is the one offer.
         self.dispatch_until("waiting for the copy's buffer", |e| {
-            e.failed || (e.spec.is_some() && (e.specs_done || version < 3))
+            e.failed || e.specs_done || (version < 3 && !e.offered.is_empty())
         })?;
         let spec = match (self.events.failed, self.events.spec) {
-            (false, Some(spec)) => spec,
-            _ => {
+            (false, Some(spec)) if spec.is_sound() => spec,
+            (false, Some(spec)) => {
+                frame.destroy();
+                return Err(self.display.protocol_error(format!(
+                    "the compositor offered a copy of {}×{} pixels with {} bytes a row",
+                    spec.width, spec.height, spec.stride
+                )));
+            }
+            (false, None) => {
+                frame.destroy();
+                return Err(self.display.protocol_error(format!(
+                    "the compositor offered the copy only in formats chromacal does not read: {:?}",
+                    self.events.offered
+                )));
+            }
+            (true, _) => {
                 frame.destroy();
                 return Err(self
                     .display
@@ -367,17 +358,22 @@ impl Dispatch<zwlr_screencopy_frame_v1::ZwlrScreencopyFrameV1, ()> for CopyEvent
         use zwlr_screencopy_frame_v1::Event;
         match event {
             Event::Buffer {
-                format: WEnum::Value(format),
+                format,
                 width,
                 height,
                 stride,
-            } if decodable(format) => {
-                state.spec = Some(BufferSpec {
-                    format,
-                    width,
-                    height,
-                    stride,
-                });
+            } => {
+                state.offered.push(format);
+                if let WEnum::Value(format) = format
+                    && decodable(format)
+                {
+                    state.spec = Some(BufferSpec {
+                        format,
+                        width,
+                        height,
+                        stride,
+                    });
+                }
             }
             Event::BufferDone => state.specs_done = true,
             Event::Flags {

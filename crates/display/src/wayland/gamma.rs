@@ -3,7 +3,7 @@
 //! told its ramp's size (or that it failed: another client holds it, or the output
 //! has no ramp); the ramp it sets stays only while the client holds the control: the
 //! compositor drops it when the client disconnects. So whoever loads curves here must
-//! stay (`lut load --hold`, the daemon), and a size of 0 (headless and nested
+//! stay (`lut load --hold`), and a size of 0 (headless and nested
 //! outputs) is an output without a ramp, never a ramp loaded.
 
 use std::fs::File;
@@ -23,7 +23,7 @@ use crate::x11::{GammaRamp, OutputSelector};
 
 /// What an output's gamma control said.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case", tag = "gamma")]
+#[serde(rename_all = "kebab-case", tag = "gamma", content = "size")]
 pub enum GammaOffer {
     /// The compositor has no wlr-gamma-control (GNOME, KDE: they apply a profile's
     /// `vcgt` themselves).
@@ -80,7 +80,7 @@ pub enum GammaError {
     #[error(transparent)]
     Wayland(#[from] WaylandError),
     #[error(
-        "the Wayland compositor offers no gamma ramp on {output}: {}. Load the profile as the output's colour profile in the compositor where it applies one (KDE: kscreen-doctor; GNOME: colord, `export --register-colord`), or let chromacal put the curves into the codes it shows",
+        "the Wayland compositor offers no gamma ramp on {output}: {}. There the curves can only be applied in the codes (chromacal's own runs and verifications do so) or by colour-managed programs through the exported ICC profile (`chromacal export --format icc2`)",
         .offer.describe()
     )]
     NoRamp { output: String, offer: GammaOffer },
@@ -103,26 +103,8 @@ fn open(
     let (display, mut queue) = WaylandDisplay::connect::<GammaEvents>(name)?;
     let qh = queue.handle();
     let mut events = GammaEvents::default();
-    let globals: Vec<(u32, u32)> = display.globals.contents().with_list(|list| {
-        list.iter()
-            .filter(|g| g.interface == "wl_output")
-            .map(|g| (g.name, g.version))
-            .collect()
-    });
-    for (index, (global, version)) in globals.iter().enumerate() {
-        let proxy: wl_output::WlOutput =
-            display
-                .globals
-                .registry()
-                .bind(*global, (*version).min(4), &qh, index);
-        let info = WaylandOutput {
-            global: *global,
-            scale: 1,
-            ..WaylandOutput::default()
-        };
-        events.outputs.push((proxy, info, false));
-        events.offers.push(None);
-    }
+    events.outputs = super::bind_outputs(&display, &qh);
+    events.offers = vec![None; events.outputs.len()];
     let manager: Option<zwlr_gamma_control_manager_v1::ZwlrGammaControlManagerV1> =
         display.globals.bind(&qh, 1..=1, ()).ok();
     let controls = match &manager {
@@ -154,11 +136,10 @@ pub fn gamma_offers(name: Option<&str>) -> Result<Vec<(String, GammaOffer)>, Way
     for c in controls {
         c.destroy();
     }
-    Ok(events
-        .outputs
-        .iter()
+    Ok(super::described(&events.outputs)
+        .into_iter()
         .zip(&events.offers)
-        .map(|((_, info, _), offer)| (info.name.clone(), offer.unwrap_or(GammaOffer::Failed)))
+        .map(|(info, offer)| (info.name, offer.unwrap_or(GammaOffer::Failed)))
         .collect())
 }
 
@@ -170,18 +151,7 @@ pub fn hold_gamma(
     ramp_of: impl FnOnce(usize) -> GammaRamp,
 ) -> Result<HeldGamma, GammaError> {
     let (display, queue, events, mut controls) = open(name)?;
-    let infos: Vec<WaylandOutput> = events.outputs.iter().map(|o| o.1.clone()).collect();
-    let output = super::pick(selector, &infos)
-        .cloned()
-        .ok_or_else(|| WaylandError::NoOutput {
-            display: display.name().to_string(),
-            wanted: selector.describe(),
-            outputs: infos.iter().map(|o| o.name.clone()).collect(),
-        })?;
-    let index = infos
-        .iter()
-        .position(|o| o.global == output.global)
-        .unwrap_or(0);
+    let (index, output) = super::choose(&display, selector, &super::described(&events.outputs))?;
     let offer = events.offers[index].unwrap_or(GammaOffer::Failed);
     let size = match offer {
         GammaOffer::Size(n) if n >= 2 => n,
@@ -323,3 +293,25 @@ impl Dispatch<zwlr_gamma_control_v1::ZwlrGammaControlV1, usize> for GammaEvents 
 }
 
 wayland_client::delegate_noop!(GammaEvents: ignore zwlr_gamma_control_manager_v1::ZwlrGammaControlManagerV1);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_offer_serialises_with_its_size_where_it_has_one() {
+        let json = |o: GammaOffer| serde_json::to_value(o).unwrap();
+        assert_eq!(
+            json(GammaOffer::Size(256)),
+            serde_json::json!({"gamma": "size", "size": 256})
+        );
+        assert_eq!(
+            json(GammaOffer::Failed),
+            serde_json::json!({"gamma": "failed"})
+        );
+        assert_eq!(
+            json(GammaOffer::NotOffered),
+            serde_json::json!({"gamma": "not-offered"})
+        );
+    }
+}

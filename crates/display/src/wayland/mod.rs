@@ -274,6 +274,137 @@ pub fn offered_interfaces(name: Option<&str>) -> Result<Vec<(String, u32)>, Wayl
     Ok(display.interfaces())
 }
 
+/// Every `wl_output` of `display` bound on `qh` (up to version 4, user data its index),
+/// with what is known of it so far: the outputs' events fill it in.
+pub(crate) fn bind_outputs<State>(
+    display: &WaylandDisplay,
+    qh: &QueueHandle<State>,
+) -> Vec<(wl_output::WlOutput, WaylandOutput, bool)>
+where
+    State: Dispatch<wl_output::WlOutput, usize> + 'static,
+{
+    let globals: Vec<(u32, u32)> = display.globals.contents().with_list(|list| {
+        list.iter()
+            .filter(|g| g.interface == "wl_output")
+            .map(|g| (g.name, g.version))
+            .collect()
+    });
+    globals
+        .iter()
+        .enumerate()
+        .map(|(index, (global, version))| {
+            let proxy: wl_output::WlOutput =
+                display
+                    .globals
+                    .registry()
+                    .bind(*global, (*version).min(4), qh, index);
+            let info = WaylandOutput {
+                global: *global,
+                scale: 1,
+                ..WaylandOutput::default()
+            };
+            (proxy, info, false)
+        })
+        .collect()
+}
+
+/// The outputs as described once their events are in: each named (an output of
+/// wl_output before version 4 has no name: `wl_output-N` by its registry name), with
+/// its kernel EDID.
+pub(crate) fn described(
+    outputs: &[(wl_output::WlOutput, WaylandOutput, bool)],
+) -> Vec<WaylandOutput> {
+    let mut infos: Vec<WaylandOutput> = outputs
+        .iter()
+        .map(|(_, info, _)| {
+            let mut info = info.clone();
+            if info.name.is_empty() {
+                info.name = format!("wl_output-{}", info.global);
+            }
+            info
+        })
+        .collect();
+    attach_edids(&mut infos, &drm::sysfs_root());
+    infos
+}
+
+/// The output `selector` names among `outputs`, with its index, or why there is none.
+pub(crate) fn choose(
+    display: &WaylandDisplay,
+    selector: &OutputSelector,
+    outputs: &[WaylandOutput],
+) -> Result<(usize, WaylandOutput), WaylandError> {
+    let chosen = pick(selector, outputs).ok_or_else(|| WaylandError::NoOutput {
+        display: display.name().to_string(),
+        wanted: selector.describe(),
+        outputs: outputs.iter().map(|o| o.name.clone()).collect(),
+    })?;
+    let index = outputs
+        .iter()
+        .position(|o| o.global == chosen.global)
+        .unwrap_or(0);
+    Ok((index, chosen.clone()))
+}
+
+/// Each output's EDID from the kernel connector of the same name (under the sysfs
+/// root), so that an output can be picked by its monitor's serial.
+pub fn attach_edids(outputs: &mut [WaylandOutput], sysfs: &std::path::Path) {
+    let edids = drm::connector_edids(sysfs);
+    for info in outputs {
+        if let Some(found) = drm::edid_for_output(&edids, &info.name) {
+            info.edid = Some(found.edid.clone());
+            info.edid_source = Some(found.path.display().to_string());
+        }
+    }
+}
+
+/// Dispatch `queue`'s events into `state` until `done` says so (`Ok(true)`) or
+/// `deadline` passes (`Ok(false)`), waiting on the socket in between, never longer
+/// than the deadline: a compositor that stopped answering times out rather than
+/// hanging its client.
+pub(crate) fn dispatch_until<State>(
+    queue: &mut EventQueue<State>,
+    state: &mut State,
+    deadline: std::time::Instant,
+    done: impl Fn(&State) -> bool,
+) -> Result<bool, String> {
+    loop {
+        queue.dispatch_pending(state).map_err(|e| e.to_string())?;
+        if done(state) {
+            return Ok(true);
+        }
+        queue.flush().map_err(|e| e.to_string())?;
+        let Some(guard) = queue.prepare_read() else {
+            continue;
+        };
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            return Ok(false);
+        }
+        let timespec = rustix::event::Timespec {
+            tv_sec: i64::try_from(left.as_secs()).unwrap_or(i64::MAX),
+            tv_nsec: i64::from(left.subsec_nanos()),
+        };
+        let fd = guard.connection_fd();
+        let mut fds = [rustix::event::PollFd::new(
+            &fd,
+            rustix::event::PollFlags::IN,
+        )];
+        match rustix::event::poll(&mut fds, Some(&timespec)) {
+            Ok(n) if n > 0 => match guard.read() {
+                Ok(_) => {}
+                // A batch of events only for objects already gone (delete_id, a
+                // destroyed pool's): nothing to dispatch, nothing wrong.
+                Err(wayland_client::backend::WaylandError::Io(e))
+                    if e.kind() == std::io::ErrorKind::WouldBlock => {}
+                Err(e) => return Err(e.to_string()),
+            },
+            Ok(_) | Err(rustix::io::Errno::INTR) => drop(guard),
+            Err(e) => return Err(e.to_string()),
+        }
+    }
+}
+
 /// Every output of Wayland display `name`, in the compositor's order, each with the
 /// kernel's EDID of its connector where `sysfs` has one.
 pub fn list_outputs(
@@ -282,53 +413,22 @@ pub fn list_outputs(
 ) -> Result<Vec<WaylandOutput>, WaylandError> {
     let (display, mut queue) = WaylandDisplay::connect::<OutputEvents>(name)?;
     let qh = queue.handle();
-    let mut state = OutputEvents::default();
-    let globals: Vec<(u32, u32)> = display.globals.contents().with_list(|list| {
-        list.iter()
-            .filter(|g| g.interface == "wl_output")
-            .map(|g| (g.name, g.version))
-            .collect()
-    });
-    for (index, (global, version)) in globals.iter().enumerate() {
-        let output: wl_output::WlOutput =
-            display
-                .globals
-                .registry()
-                .bind(*global, (*version).min(4), &qh, index);
-        state.outputs.push((
-            output,
-            WaylandOutput {
-                global: *global,
-                scale: 1,
-                ..WaylandOutput::default()
-            },
-            false,
-        ));
-    }
+    let mut state = OutputEvents {
+        outputs: bind_outputs(&display, &qh),
+    };
     // Two round trips: the binds, then every output's events up to `done`.
     for _ in 0..2 {
         queue
             .roundtrip(&mut state)
             .map_err(|e| display.protocol_error(format!("listing outputs: {e}")))?;
     }
-    let edids = drm::connector_edids(sysfs);
-    let outputs = state
-        .outputs
-        .into_iter()
-        .map(|(proxy, mut info, _)| {
-            if proxy.version() >= 3 {
-                proxy.release();
-            }
-            if info.name.is_empty() {
-                info.name = format!("wl_output-{}", info.global);
-            }
-            if let Some(found) = drm::edid_for_output(&edids, &info.name) {
-                info.edid = Some(found.edid.clone());
-                info.edid_source = Some(found.path.display().to_string());
-            }
-            info
-        })
-        .collect();
+    let mut outputs = described(&state.outputs);
+    for (proxy, _, _) in &state.outputs {
+        if proxy.version() >= 3 {
+            proxy.release();
+        }
+    }
+    attach_edids(&mut outputs, sysfs);
     Ok(outputs)
 }
 

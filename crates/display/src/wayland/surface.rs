@@ -34,6 +34,9 @@ use wayland_protocols::wp::idle_inhibit::zv1::client::{
 };
 use wayland_protocols::wp::presentation_time::client::{wp_presentation, wp_presentation_feedback};
 use wayland_protocols::xdg::shell::client::{xdg_surface, xdg_toplevel, xdg_wm_base};
+use wayland_protocols_wlr::output_power_management::v1::client::{
+    zwlr_output_power_manager_v1, zwlr_output_power_v1,
+};
 
 use super::gamma::{GammaError, GammaOffer, HeldGamma, hold_gamma};
 use super::{REPLY_TIMEOUT, WaylandDisplay, WaylandError, WaylandOutput, apply_output_event};
@@ -60,6 +63,9 @@ const FULLSCREEN_WAIT: Duration = Duration::from_secs(2);
 /// before the surface stops waiting for it.
 const FEEDBACK_GRACE_FRAMES: f64 = 6.0;
 
+/// Frames running without feedback before the surface stops asking for it.
+const FEEDBACK_MISSES: u32 = 3;
+
 /// Most times one patch is drawn again because the compositor configured the surface
 /// anew meanwhile.
 const MOST_REDRAWS: usize = 5;
@@ -76,8 +82,6 @@ struct Buffer {
 pub struct SurfaceEvents {
     outputs: Vec<(wl_output::WlOutput, WaylandOutput, bool)>,
     formats: Vec<wl_shm::Format>,
-    /// The last xdg_surface configure not yet acknowledged.
-    configure: Option<u32>,
     /// The toplevel's size, surface coordinates (0: the client chooses).
     size: (i32, i32),
     /// Has been configured at least once.
@@ -93,6 +97,10 @@ pub struct SurfaceEvents {
     discarded: Vec<u64>,
     /// Frame callbacks done (the fallback without wp_presentation).
     callbacks_done: Vec<u64>,
+    /// The output is powered off (wlr-output-power-management, where offered).
+    powered_off: bool,
+    /// It was off at some time since this was last cleared.
+    was_off: bool,
 }
 
 /// The patch surface.
@@ -117,6 +125,10 @@ pub struct PatchSurface {
     frame: u64,
     /// The compositor offers wp_presentation but sends no feedback.
     feedback_silent: bool,
+    /// Frames drawn running for which no feedback came.
+    feedback_misses: u32,
+    /// The 10-bit caveat was said.
+    said_depth: bool,
     settle_s: f64,
     closed: bool,
 }
@@ -157,43 +169,19 @@ impl PatchSurface {
             globals.bind(&qh, 1..=1, ()).ok();
         let idle: Option<zwp_idle_inhibit_manager_v1::ZwpIdleInhibitManagerV1> =
             globals.bind(&qh, 1..=1, ()).ok();
-        let outputs: Vec<(u32, u32)> = globals.contents().with_list(|list| {
-            list.iter()
-                .filter(|g| g.interface == "wl_output")
-                .map(|g| (g.name, g.version))
-                .collect()
-        });
-        for (index, (global, version)) in outputs.iter().enumerate() {
-            let proxy: wl_output::WlOutput =
-                globals
-                    .registry()
-                    .bind(*global, (*version).min(4), &qh, index);
-            let info = WaylandOutput {
-                global: *global,
-                scale: 1,
-                ..WaylandOutput::default()
-            };
-            events.outputs.push((proxy, info, false));
-        }
+        let power: Option<zwlr_output_power_manager_v1::ZwlrOutputPowerManagerV1> =
+            globals.bind(&qh, 1..=1, ()).ok();
+        events.outputs = super::bind_outputs(&display, &qh);
         for _ in 0..2 {
             queue
                 .roundtrip(&mut events)
                 .map_err(|e| display.protocol_error(format!("reading its outputs: {e}")))?;
         }
-        let infos: Vec<WaylandOutput> = events.outputs.iter().map(|o| o.1.clone()).collect();
-        let output = super::pick(&target.output, &infos)
-            .cloned()
-            .ok_or_else(|| WaylandError::NoOutput {
-                display: display.name().to_string(),
-                wanted: target.output.describe(),
-                outputs: infos.iter().map(|o| o.name.clone()).collect(),
-            })?;
-        let output_proxy = events
-            .outputs
-            .iter()
-            .find(|o| o.1.global == output.global)
-            .map(|o| o.0.clone())
-            .ok_or_else(|| display.protocol_error("the output went away"))?;
+        let (index, output) =
+            super::choose(&display, &target.output, &super::described(&events.outputs))?;
+        let output_proxy = events.outputs[index].0.clone();
+        // Whether the output is powered: a frame drawn while it is off is not seen.
+        let _power = power.map(|m| m.get_output_power(&output_proxy, &qh, ()));
         if display.offers("wp_color_manager_v1") {
             tracing::warn!(
                 output = %output.name,
@@ -227,6 +215,8 @@ impl PatchSurface {
             format: wl_shm::Format::Xrgb8888,
             frame: 0,
             feedback_silent: false,
+            feedback_misses: 0,
+            said_depth: false,
             settle_s,
             closed: false,
         };
@@ -234,11 +224,9 @@ impl PatchSurface {
         // A compositor that makes the surface full-screen says so in a configure of
         // its own; one that will not is given a moment, then the surface is used as
         // it is (with a warning: its patches may not cover the output).
-        if s.wait_for("making the surface full-screen", FULLSCREEN_WAIT, |e| {
+        if !s.wait_for("making the surface full-screen", FULLSCREEN_WAIT, |e| {
             e.fullscreen
-        })
-        .is_err()
-        {
+        })? {
             tracing::warn!(output = %s.output.name, "the compositor did not make the patch surface full-screen");
         }
         s.draw(&BLACK)?;
@@ -276,72 +264,44 @@ impl PatchSurface {
         what: &str,
         done: impl Fn(&SurfaceEvents) -> bool,
     ) -> Result<(), DisplayError> {
-        self.wait_for(what, REPLY_TIMEOUT.max(PRESENT_TIMEOUT), done)
+        let timeout = REPLY_TIMEOUT.max(PRESENT_TIMEOUT);
+        if self.wait_for(what, timeout, done)? {
+            Ok(())
+        } else {
+            Err(self.timed_out(what, timeout))
+        }
     }
 
+    /// Dispatch events until `done` says so (`Ok(true)`) or `timeout` passes
+    /// (`Ok(false)`); the compositor closing the surface or the connection failing is
+    /// an error.
     fn wait_for(
         &mut self,
         what: &str,
         timeout: Duration,
         done: impl Fn(&SurfaceEvents) -> bool,
-    ) -> Result<(), DisplayError> {
+    ) -> Result<bool, DisplayError> {
         let deadline = Instant::now() + timeout;
-        loop {
-            self.queue
-                .dispatch_pending(&mut self.events)
-                .map_err(|e| self.lost(format!("{what}: {e}")))?;
-            self.ack_configure();
-            if self.events.closed {
-                return Err(self.lost("the compositor closed the patch surface"));
-            }
-            if done(&self.events) {
-                return Ok(());
-            }
-            self.queue
-                .flush()
-                .map_err(|e| self.lost(format!("{what}: {e}")))?;
-            let Some(guard) = self.queue.prepare_read() else {
-                continue;
-            };
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Err(self.lost(format!(
-                    "{what}: the compositor did not answer within {} s (is the output {} on and not locked?)",
-                    timeout.as_secs(),
-                    self.output.name
-                )));
-            }
-            let timespec = rustix::event::Timespec {
-                tv_sec: left.as_secs() as i64,
-                tv_nsec: i64::from(left.subsec_nanos()),
-            };
-            let fd = guard.connection_fd();
-            let mut fds = [rustix::event::PollFd::new(
-                &fd,
-                rustix::event::PollFlags::IN,
-            )];
-            match rustix::event::poll(&mut fds, Some(&timespec)) {
-                Ok(n) if n > 0 => {
-                    guard
-                        .read()
-                        .map_err(|e| self.lost(format!("{what}: {e}")))?;
-                }
-                Ok(_) => drop(guard),
-                Err(rustix::io::Errno::INTR) => drop(guard),
-                Err(e) => return Err(self.lost(format!("{what}: {e}"))),
-            }
+        let finished = super::dispatch_until(&mut self.queue, &mut self.events, deadline, |e| {
+            e.closed || done(e)
+        })
+        .map_err(|e| self.lost(format!("{what}: {e}")))?;
+        if self.events.closed {
+            return Err(self.lost("the compositor closed the patch surface"));
         }
+        Ok(finished)
+    }
+
+    fn timed_out(&self, what: &str, timeout: Duration) -> DisplayError {
+        self.lost(format!(
+            "{what}: the compositor did not answer within {} s (is the output {} on and not locked?)",
+            timeout.as_secs(),
+            self.output.name
+        ))
     }
 
     fn lost(&self, what: impl std::fmt::Display) -> DisplayError {
         DisplayError::Lost(format!("{}: {what}", self.name()))
-    }
-
-    /// Acknowledge a configure, and size the buffers to it.
-    fn ack_configure(&mut self) {
-        if let Some(serial) = self.events.configure.take() {
-            self.xdg_surface.ack_configure(serial);
-        }
     }
 
     /// The codes at the buffer format's depth for codes at `codes.bit_depth`.
@@ -445,8 +405,18 @@ impl PatchSurface {
 
     /// One attempt of [`Self::draw`]: `false` when a configure came first.
     fn paint_and_present(&mut self, patch: &Patch) -> Result<bool, DisplayError> {
+        // A configure that comes while a free buffer is awaited may change the size:
+        // then the frame is painted again at it.
+        self.events.reconfigured = false;
         let bits = patch.codes.bit_depth.max(patch.background.bit_depth);
         let index = self.free_buffer(self.format_for(bits))?;
+        if self.events.reconfigured {
+            return Ok(false);
+        }
+        if bits > 8 && !self.said_depth {
+            self.said_depth = true;
+            tracing::warn!(output = %self.output.name, "the patches are 10-bit buffers (XRGB2101010); whether the compositor composites and scans them out at 10 bits is its setting (sway: output NAME render_bit_depth 10)");
+        }
         let (w, h) = self.pixels;
         let patch_pixel = shm_pixel(self.format, self.surface_codes(&patch.codes)?);
         let background = shm_pixel(self.format, self.surface_codes(&patch.background)?);
@@ -494,7 +464,9 @@ impl PatchSurface {
     /// (sway 1.7 on its headless backend): a few refreshes after the callback
     /// without feedback, the surface stops waiting for feedback, and says so once.
     fn present(&mut self, index: usize) -> Result<bool, DisplayError> {
-        self.events.reconfigured = false;
+        // One deadline for the patch, however often the compositor discards it.
+        let deadline = Instant::now() + PRESENT_TIMEOUT;
+        let what = "presenting the patch";
         loop {
             self.frame += 1;
             let frame = self.frame;
@@ -512,32 +484,57 @@ impl PatchSurface {
             let heard = |e: &SurfaceEvents| {
                 e.presented.contains(&frame) || e.discarded.contains(&frame) || e.reconfigured
             };
+            let left = deadline.saturating_duration_since(Instant::now());
             if feedback.is_some() {
-                self.wait("presenting the patch", |e| {
+                if !self.wait_for(what, left, |e| {
                     heard(e) || e.callbacks_done.contains(&frame)
-                })?;
+                })? {
+                    return Err(self.timed_out(what, PRESENT_TIMEOUT));
+                }
                 if !heard(&self.events) {
-                    // Drawn: the feedback follows within a refresh or two.
+                    // Drawn: the feedback follows within a refresh or two. A compositor
+                    // that misses it several frames running sends none at all.
                     let grace =
                         Duration::from_secs_f64(FEEDBACK_GRACE_FRAMES * self.output.frame_s());
-                    if self.wait_for("presenting the patch", grace, heard).is_err() {
-                        tracing::warn!(output = %self.output.name, "the compositor offers wp_presentation but sent no feedback: a patch counts as shown a refresh after the compositor has drawn it");
-                        self.feedback_silent = true;
+                    if self.wait_for(what, grace, heard)? {
+                        self.feedback_misses = 0;
+                    } else {
+                        self.feedback_misses += 1;
+                        if self.feedback_misses >= FEEDBACK_MISSES {
+                            tracing::warn!(output = %self.output.name, "the compositor offers wp_presentation but sent no feedback for {FEEDBACK_MISSES} frames running: a patch counts as shown a refresh after the compositor has drawn it");
+                            self.feedback_silent = true;
+                        }
                     }
                 }
-            } else {
-                self.wait("drawing the patch", |e| {
-                    e.callbacks_done.contains(&frame) || e.reconfigured
-                })?;
+            } else if !self.wait_for(what, left, |e| {
+                e.callbacks_done.contains(&frame) || e.reconfigured
+            })? {
+                return Err(self.timed_out(what, PRESENT_TIMEOUT));
             }
-            if self.events.presented.contains(&frame) {
-                self.events.presented.retain(|f| *f > frame);
+            // A frame drawn while the output was off (DPMS) was seen by no one: once
+            // the output is on again, it is committed anew.
+            if self.events.powered_off || self.events.was_off {
+                let left = deadline.saturating_duration_since(Instant::now());
+                if !self.wait_for("waiting for the output to be powered on", left, |e| {
+                    !e.powered_off
+                })? {
+                    return Err(self.timed_out(what, PRESENT_TIMEOUT));
+                }
+                self.events.was_off = false;
+                continue;
+            }
+            let presented = self.events.presented.contains(&frame);
+            let discarded = self.events.discarded.contains(&frame);
+            self.events.presented.retain(|f| *f > frame);
+            self.events.discarded.retain(|f| *f > frame);
+            self.events.callbacks_done.retain(|f| *f > frame);
+            if presented {
                 return Ok(true);
             }
             if self.events.reconfigured {
                 return Ok(false);
             }
-            if self.events.discarded.contains(&frame) {
+            if discarded {
                 tracing::debug!(
                     frame,
                     "the compositor discarded the frame; committing it again"
@@ -596,7 +593,7 @@ fn straight_ramp(target: &SurfaceTarget, output: &WaylandOutput) -> Option<HeldG
             None
         }
         Err(e) => {
-            tracing::info!(output = %output.name, "the gamma ramp is not held straight: {e} (a night-light tool holding it would bend the patches)");
+            tracing::warn!(output = %output.name, "the gamma ramp could not be held straight ({e}): if another program holds it (a night-light tool, or chromacal lut load --hold: stop it with chromacal lut reset), the patches are measured through its curves");
             None
         }
     }
@@ -647,13 +644,26 @@ impl PatchDisplay for PatchSurface {
     }
 
     async fn blank(&mut self) -> Result<(), DisplayError> {
-        self.draw(&BLACK)
+        // Black at the depth shown last, so that the buffers are not made anew.
+        let bit_depth = match self.format {
+            wl_shm::Format::Xrgb2101010 => 10,
+            _ => 8,
+        };
+        let black = Codes {
+            rgb: [0; 3],
+            bit_depth,
+        };
+        self.draw(&Patch {
+            codes: black,
+            background: black,
+            ..BLACK
+        })
     }
 
     fn load_curves(&mut self, _curves: Option<&CalibrationCurves>) -> Result<bool, DisplayError> {
-        // The compositor owns the output's gamma (wlr-gamma-control is `lut load`'s
-        // job, held by the daemon): during a characterisation the curves go into the
-        // codes.
+        // The run holds the output's ramp straight where it can (wlroots), and the
+        // compositor owns it elsewhere: the curves go into the codes (`lut load`
+        // puts them where the compositor applies them, after the run).
         Ok(false)
     }
 }
@@ -737,14 +747,17 @@ impl Dispatch<xdg_wm_base::XdgWmBase, ()> for SurfaceEvents {
 impl Dispatch<xdg_surface::XdgSurface, ()> for SurfaceEvents {
     fn event(
         state: &mut Self,
-        _: &xdg_surface::XdgSurface,
+        surface: &xdg_surface::XdgSurface,
         event: xdg_surface::Event,
         _: &(),
         _: &Connection,
         _: &QueueHandle<Self>,
     ) {
+        // Acknowledged at once: the next commit answers it, and a commit made before
+        // the frame was painted anew at the configured size is drawn again
+        // (`reconfigured`).
         if let xdg_surface::Event::Configure { serial } = event {
-            state.configure = Some(serial);
+            surface.ack_configure(serial);
             state.configured = true;
             state.reconfigured = true;
         }
@@ -810,6 +823,26 @@ impl Dispatch<wl_callback::WlCallback, u64> for SurfaceEvents {
     }
 }
 
+impl Dispatch<zwlr_output_power_v1::ZwlrOutputPowerV1, ()> for SurfaceEvents {
+    fn event(
+        state: &mut Self,
+        _: &zwlr_output_power_v1::ZwlrOutputPowerV1,
+        event: zwlr_output_power_v1::Event,
+        _: &(),
+        _: &Connection,
+        _: &QueueHandle<Self>,
+    ) {
+        if let zwlr_output_power_v1::Event::Mode {
+            mode: WEnum::Value(mode),
+        } = event
+        {
+            state.powered_off = mode == zwlr_output_power_v1::Mode::Off;
+            state.was_off |= state.powered_off;
+        }
+    }
+}
+
+wayland_client::delegate_noop!(SurfaceEvents: ignore zwlr_output_power_manager_v1::ZwlrOutputPowerManagerV1);
 wayland_client::delegate_noop!(SurfaceEvents: ignore wl_compositor::WlCompositor);
 wayland_client::delegate_noop!(SurfaceEvents: ignore wl_surface::WlSurface);
 wayland_client::delegate_noop!(SurfaceEvents: ignore wl_shm_pool::WlShmPool);
