@@ -599,6 +599,16 @@ fn straight_ramp(target: &SurfaceTarget, output: &WaylandOutput) -> Option<HeldG
     }
 }
 
+/// Run `work`, which waits on the compositor, without holding up the other tasks of
+/// a multi-threaded runtime (the daemon's): there it moves the worker's other tasks
+/// elsewhere first. A single-threaded runtime (a command's) has nothing else to run.
+fn blocking<T>(work: impl FnOnce() -> T) -> T {
+    match tokio::runtime::Handle::try_current().map(|h| h.runtime_flavor()) {
+        Ok(tokio::runtime::RuntimeFlavor::MultiThread) => tokio::task::block_in_place(work),
+        _ => work(),
+    }
+}
+
 /// One pixel's bytes in `format` (little-endian, as wl_shm formats are): codes at 8
 /// bits for XRGB8888, at 10 for XRGB2101010.
 fn shm_pixel(format: wl_shm::Format, rgb: [u32; 3]) -> [u8; 4] {
@@ -638,7 +648,7 @@ impl PatchDisplay for PatchSurface {
     }
 
     async fn show(&mut self, patch: &Patch) -> Result<(), DisplayError> {
-        self.draw(patch)?;
+        blocking(|| self.draw(patch))?;
         tokio::time::sleep(Duration::from_secs_f64(self.settle_s)).await;
         Ok(())
     }
@@ -653,10 +663,12 @@ impl PatchDisplay for PatchSurface {
             rgb: [0; 3],
             bit_depth,
         };
-        self.draw(&Patch {
-            codes: black,
-            background: black,
-            ..BLACK
+        blocking(|| {
+            self.draw(&Patch {
+                codes: black,
+                background: black,
+                ..BLACK
+            })
         })
     }
 
