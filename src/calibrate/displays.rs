@@ -55,6 +55,26 @@ pub struct DeviceOnOutput {
     pub profile: Option<String>,
 }
 
+/// The devices among `devices` whose `[display]` puts their patches here
+/// (`shows_here`), each with its current profile (stores under `state_dir`).
+fn devices_on(
+    devices: &[crate::config::devices::DeviceConfig],
+    state_dir: &Path,
+    shows_here: impl Fn(&crate::config::DisplayConfig) -> bool,
+) -> Vec<DeviceOnOutput> {
+    devices
+        .iter()
+        .filter(|d| shows_here(&d.loaded.config.display))
+        .map(|d| DeviceOnOutput {
+            name: d.name.clone(),
+            profile: ProfileStore::new(&d.store_dir(state_dir))
+                .history()
+                .ok()
+                .and_then(|h| h.current),
+        })
+        .collect()
+}
+
 /// Every output of `x`, with the devices of `loaded` (stores under `state_dir`) that
 /// put their window on it.
 pub fn list_displays(
@@ -78,26 +98,15 @@ pub fn list_displays(
                 .crtc
                 .and_then(|_| x.gamma(output).ok())
                 .map(|r| r.is_identity());
-            let devices = devices
-                .iter()
-                .filter(|d| {
-                    let display = &d.loaded.config.display;
-                    display.sink() == Sink::Window
-                        && display
-                            .output
-                            .clone()
-                            .unwrap_or_default()
-                            .pick(&outputs)
-                            .is_some_and(|o| o.id == output.id)
-                })
-                .map(|d| DeviceOnOutput {
-                    name: d.name.clone(),
-                    profile: ProfileStore::new(&d.store_dir(state_dir))
-                        .history()
-                        .ok()
-                        .and_then(|h| h.current),
-                })
-                .collect();
+            let devices = devices_on(&devices, state_dir, |display| {
+                display.sink() == Sink::Window
+                    && display
+                        .output
+                        .clone()
+                        .unwrap_or_default()
+                        .pick(&outputs)
+                        .is_some_and(|o| o.id == output.id)
+            });
             DisplayEntry {
                 colord_device_id: colord_device_id(edid.as_ref(), &output.name, pnp_vendor_name),
                 output: output.clone(),
@@ -267,22 +276,11 @@ pub fn list_wayland_displays(
                 Some(Err(e)) => (None, Some(e.to_string())),
                 None => (None, None),
             };
-            let devices = devices
-                .iter()
-                .filter(|d| {
-                    let display = &d.loaded.config.display;
-                    display.sink() == Sink::Wayland
-                        && wayland::pick(&display.output.clone().unwrap_or_default(), &outputs)
-                            .is_some_and(|o| o.global == output.global)
-                })
-                .map(|d| DeviceOnOutput {
-                    name: d.name.clone(),
-                    profile: ProfileStore::new(&d.store_dir(state_dir))
-                        .history()
-                        .ok()
-                        .and_then(|h| h.current),
-                })
-                .collect();
+            let devices = devices_on(&devices, state_dir, |display| {
+                display.sink() == Sink::Wayland
+                    && wayland::pick(&display.output.clone().unwrap_or_default(), &outputs)
+                        .is_some_and(|o| o.global == output.global)
+            });
             WaylandEntry {
                 colord_device_id: colord_device_id(edid.as_ref(), &output.name, pnp_vendor_name),
                 gamma: offers

@@ -23,6 +23,25 @@ use std::future::Future;
 use chromacal_model::screen::Patch;
 use chromacal_model::target::CalibrationCurves;
 
+/// A black screen at 8 bits: what chromacal's window and surface show when they open
+/// and when blanked.
+pub const BLACK: Patch = Patch {
+    codes: chromacal_model::screen::Codes {
+        rgb: [0; 3],
+        bit_depth: 8,
+    },
+    background: chromacal_model::screen::Codes {
+        rgb: [0; 3],
+        bit_depth: 8,
+    },
+    geometry: chromacal_model::screen::Geometry {
+        x: 0.5,
+        y: 0.5,
+        width: 0.0,
+        height: 0.0,
+    },
+};
+
 /// Why a display could not show a patch.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DisplayError {

@@ -24,7 +24,7 @@ use x11rb::protocol::xproto::{
 };
 use x11rb::wrapper::ConnectionExt as _;
 
-use super::{DisplayError, PatchDisplay};
+use super::{BLACK, DisplayError, PatchDisplay};
 use crate::x11::capture::PixelFormat;
 use crate::x11::{GammaRamp, OutputInfo, OutputSelector, X11Error, XDisplay};
 use chromacal_model::screen::{Codes, Patch};
@@ -37,24 +37,6 @@ pub struct WindowTarget {
     pub x_display: Option<String>,
     pub output: OutputSelector,
 }
-
-/// A black screen: what the window shows when it opens and when blanked.
-const BLACK: Patch = Patch {
-    codes: Codes {
-        rgb: [0; 3],
-        bit_depth: 8,
-    },
-    background: Codes {
-        rgb: [0; 3],
-        bit_depth: 8,
-    },
-    geometry: chromacal_model::screen::Geometry {
-        x: 0.5,
-        y: 0.5,
-        width: 0.0,
-        height: 0.0,
-    },
-};
 
 /// The patch window.
 pub struct PatchWindow {

@@ -13,14 +13,13 @@ use std::os::fd::AsFd as _;
 use std::os::unix::fs::FileExt as _;
 use std::time::{Duration, Instant};
 
-use wayland_client::globals::GlobalListContents;
-use wayland_client::protocol::{wl_buffer, wl_output, wl_registry, wl_shm, wl_shm_pool};
+use wayland_client::protocol::{wl_buffer, wl_output, wl_shm, wl_shm_pool};
 use wayland_client::{Connection, Dispatch, EventQueue, Proxy as _, QueueHandle, WEnum};
 use wayland_protocols_wlr::screencopy::v1::client::{
     zwlr_screencopy_frame_v1, zwlr_screencopy_manager_v1,
 };
 
-use super::{WaylandDisplay, WaylandError, WaylandOutput, apply_output_event};
+use super::{WaylandDisplay, WaylandError, WaylandOutput};
 use crate::x11::capture::Sample;
 use crate::x11::{GammaRamp, OutputSelector};
 use chromacal_model::screen::ScreenContent;
@@ -304,32 +303,7 @@ pub fn watch_wayland_output(
     })
 }
 
-impl Dispatch<wl_registry::WlRegistry, GlobalListContents> for CopyEvents {
-    fn event(
-        _: &mut Self,
-        _: &wl_registry::WlRegistry,
-        _: wl_registry::Event,
-        _: &GlobalListContents,
-        _: &Connection,
-        _: &QueueHandle<Self>,
-    ) {
-    }
-}
-
-impl Dispatch<wl_output::WlOutput, usize> for CopyEvents {
-    fn event(
-        state: &mut Self,
-        _: &wl_output::WlOutput,
-        event: wl_output::Event,
-        index: &usize,
-        _: &Connection,
-        _: &QueueHandle<Self>,
-    ) {
-        if let Some((_, info, done)) = state.outputs.get_mut(*index) {
-            apply_output_event(info, done, event);
-        }
-    }
-}
+super::dispatch_outputs!(CopyEvents);
 
 /// The shm formats a copy can be decoded from.
 fn decodable(format: wl_shm::Format) -> bool {

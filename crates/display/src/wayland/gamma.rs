@@ -11,14 +11,13 @@ use std::os::fd::AsFd as _;
 use std::os::unix::fs::FileExt as _;
 
 use serde::Serialize;
-use wayland_client::globals::GlobalListContents;
-use wayland_client::protocol::{wl_output, wl_registry};
+use wayland_client::protocol::wl_output;
 use wayland_client::{Connection, Dispatch, EventQueue, QueueHandle};
 use wayland_protocols_wlr::gamma_control::v1::client::{
     zwlr_gamma_control_manager_v1, zwlr_gamma_control_v1,
 };
 
-use super::{WaylandDisplay, WaylandError, WaylandOutput, apply_output_event};
+use super::{WaylandDisplay, WaylandError, WaylandOutput};
 use crate::x11::{GammaRamp, OutputSelector};
 
 /// What an output's gamma control said.
@@ -245,32 +244,7 @@ impl HeldGamma {
     }
 }
 
-impl Dispatch<wl_registry::WlRegistry, GlobalListContents> for GammaEvents {
-    fn event(
-        _: &mut Self,
-        _: &wl_registry::WlRegistry,
-        _: wl_registry::Event,
-        _: &GlobalListContents,
-        _: &Connection,
-        _: &QueueHandle<Self>,
-    ) {
-    }
-}
-
-impl Dispatch<wl_output::WlOutput, usize> for GammaEvents {
-    fn event(
-        state: &mut Self,
-        _: &wl_output::WlOutput,
-        event: wl_output::Event,
-        index: &usize,
-        _: &Connection,
-        _: &QueueHandle<Self>,
-    ) {
-        if let Some((_, info, done)) = state.outputs.get_mut(*index) {
-            apply_output_event(info, done, event);
-        }
-    }
-}
+super::dispatch_outputs!(GammaEvents);
 
 impl Dispatch<zwlr_gamma_control_v1::ZwlrGammaControlV1, usize> for GammaEvents {
     fn event(

@@ -137,39 +137,56 @@ pub fn socket_path(name: Option<&str>) -> Result<PathBuf, WaylandError> {
     }
 }
 
+/// The registry's and the outputs' events, taken in the same way by every state of
+/// this module's connections (`$state` has `outputs`, as [`bind_outputs`] makes them):
+/// an output plugged in meanwhile is seen by the next connection; each bound output's
+/// events fill in its entry.
+macro_rules! dispatch_outputs {
+    ($state:ty) => {
+        impl
+            wayland_client::Dispatch<
+                wayland_client::protocol::wl_registry::WlRegistry,
+                wayland_client::globals::GlobalListContents,
+            > for $state
+        {
+            fn event(
+                _: &mut Self,
+                _: &wayland_client::protocol::wl_registry::WlRegistry,
+                _: wayland_client::protocol::wl_registry::Event,
+                _: &wayland_client::globals::GlobalListContents,
+                _: &wayland_client::Connection,
+                _: &wayland_client::QueueHandle<Self>,
+            ) {
+            }
+        }
+
+        impl wayland_client::Dispatch<wayland_client::protocol::wl_output::WlOutput, usize>
+            for $state
+        {
+            fn event(
+                state: &mut Self,
+                _: &wayland_client::protocol::wl_output::WlOutput,
+                event: wayland_client::protocol::wl_output::Event,
+                index: &usize,
+                _: &wayland_client::Connection,
+                _: &wayland_client::QueueHandle<Self>,
+            ) {
+                if let Some((_, info, done)) = state.outputs.get_mut(*index) {
+                    $crate::wayland::apply_output_event(info, done, event);
+                }
+            }
+        }
+    };
+}
+pub(crate) use dispatch_outputs;
+
 /// What the outputs' events have said so far.
 #[derive(Default)]
 pub(crate) struct OutputEvents {
     pub(crate) outputs: Vec<(wl_output::WlOutput, WaylandOutput, bool)>,
 }
 
-impl Dispatch<wl_registry::WlRegistry, GlobalListContents> for OutputEvents {
-    fn event(
-        _: &mut Self,
-        _: &wl_registry::WlRegistry,
-        _: wl_registry::Event,
-        _: &GlobalListContents,
-        _: &Connection,
-        _: &QueueHandle<Self>,
-    ) {
-        // Outputs plugged in during a listing are seen by the next one.
-    }
-}
-
-impl Dispatch<wl_output::WlOutput, usize> for OutputEvents {
-    fn event(
-        state: &mut Self,
-        _: &wl_output::WlOutput,
-        event: wl_output::Event,
-        index: &usize,
-        _: &Connection,
-        _: &QueueHandle<Self>,
-    ) {
-        if let Some((_, info, done)) = state.outputs.get_mut(*index) {
-            apply_output_event(info, done, event);
-        }
-    }
-}
+dispatch_outputs!(OutputEvents);
 
 /// One `wl_output` event into what is known of the output.
 pub(crate) fn apply_output_event(

@@ -24,9 +24,8 @@ use std::os::fd::AsFd as _;
 use std::os::unix::fs::FileExt as _;
 use std::time::{Duration, Instant};
 
-use wayland_client::globals::GlobalListContents;
 use wayland_client::protocol::{
-    wl_buffer, wl_callback, wl_compositor, wl_output, wl_registry, wl_shm, wl_shm_pool, wl_surface,
+    wl_buffer, wl_callback, wl_compositor, wl_output, wl_shm, wl_shm_pool, wl_surface,
 };
 use wayland_client::{Connection, Dispatch, EventQueue, QueueHandle, WEnum};
 use wayland_protocols::wp::idle_inhibit::zv1::client::{
@@ -39,9 +38,9 @@ use wayland_protocols_wlr::output_power_management::v1::client::{
 };
 
 use super::gamma::{GammaError, GammaOffer, HeldGamma, hold_gamma};
-use super::{REPLY_TIMEOUT, WaylandDisplay, WaylandError, WaylandOutput, apply_output_event};
+use super::{REPLY_TIMEOUT, WaylandDisplay, WaylandError, WaylandOutput};
 use crate::x11::{GammaRamp, OutputSelector};
-use crate::{DisplayError, PatchDisplay};
+use crate::{BLACK, DisplayError, PatchDisplay};
 use chromacal_model::screen::{Codes, Patch};
 use chromacal_model::target::CalibrationCurves;
 
@@ -619,24 +618,6 @@ fn shm_pixel(format: wl_shm::Format, rgb: [u32; 3]) -> [u8; 4] {
     value.to_le_bytes()
 }
 
-/// A black screen: what the surface shows when it opens and when blanked.
-const BLACK: Patch = Patch {
-    codes: Codes {
-        rgb: [0; 3],
-        bit_depth: 8,
-    },
-    background: Codes {
-        rgb: [0; 3],
-        bit_depth: 8,
-    },
-    geometry: chromacal_model::screen::Geometry {
-        x: 0.5,
-        y: 0.5,
-        width: 0.0,
-        height: 0.0,
-    },
-};
-
 impl PatchDisplay for PatchSurface {
     fn name(&self) -> String {
         format!(
@@ -680,32 +661,7 @@ impl PatchDisplay for PatchSurface {
     }
 }
 
-impl Dispatch<wl_registry::WlRegistry, GlobalListContents> for SurfaceEvents {
-    fn event(
-        _: &mut Self,
-        _: &wl_registry::WlRegistry,
-        _: wl_registry::Event,
-        _: &GlobalListContents,
-        _: &Connection,
-        _: &QueueHandle<Self>,
-    ) {
-    }
-}
-
-impl Dispatch<wl_output::WlOutput, usize> for SurfaceEvents {
-    fn event(
-        state: &mut Self,
-        _: &wl_output::WlOutput,
-        event: wl_output::Event,
-        index: &usize,
-        _: &Connection,
-        _: &QueueHandle<Self>,
-    ) {
-        if let Some((_, info, done)) = state.outputs.get_mut(*index) {
-            apply_output_event(info, done, event);
-        }
-    }
-}
+super::dispatch_outputs!(SurfaceEvents);
 
 impl Dispatch<wl_shm::WlShm, ()> for SurfaceEvents {
     fn event(
