@@ -41,13 +41,27 @@ pub fn standard_deviation(values: &[f64]) -> f64 {
 
 /// The `p`-th percentile by linear interpolation between order statistics
 /// (Hyndman & Fan 1996, definition 7, as NumPy's default).
+///
+/// The two order statistics are selected, not sorted for (Hoare's selection, O(n)):
+/// `render` takes the percentiles of a ΔE00 for every pixel of an image, where a sort
+/// of 4 million values was a tenth of the command's time.
 pub fn percentile(values: &[f64], p: f64) -> f64 {
-    let mut sorted = values.to_vec();
-    sorted.sort_by(|a, b| a.total_cmp(b));
-    let rank = (p / 100.0).clamp(0.0, 1.0) * (sorted.len() - 1) as f64;
+    let mut order = values.to_vec();
+    let rank = (p / 100.0).clamp(0.0, 1.0) * (order.len() - 1) as f64;
     let lo = rank.floor() as usize;
     let hi = rank.ceil() as usize;
-    sorted[lo] + (sorted[hi] - sorted[lo]) * (rank - lo as f64)
+    let (_, at_lo, above) = order.select_nth_unstable_by(lo, |a, b| a.total_cmp(b));
+    let at_lo = *at_lo;
+    // The next order statistic is the least of those above.
+    let at_hi = match hi > lo {
+        true => above
+            .iter()
+            .copied()
+            .min_by(|a, b| a.total_cmp(b))
+            .unwrap_or(at_lo),
+        false => at_lo,
+    };
+    at_lo + (at_hi - at_lo) * (rank - lo as f64)
 }
 
 #[cfg(test)]
@@ -63,5 +77,22 @@ mod tests {
         assert_eq!((s.n, s.mean, s.max), (5, 3.0, 5.0));
         assert!(ErrorStats::of(&[]).is_none());
         assert!((standard_deviation(&[1.0, 3.0]) - 2f64.sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn selected_percentiles_equal_the_sorted_ones() {
+        // A fixed pseudo-random sample with ties.
+        let values: Vec<f64> = (0..1001u64)
+            .map(|i| ((i * 7919) % 613) as f64 / 17.0)
+            .collect();
+        let mut sorted = values.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        for p in [0.0, 1.0, 50.0, 95.0, 99.9, 100.0] {
+            let rank = p / 100.0 * (sorted.len() - 1) as f64;
+            let (lo, hi) = (rank.floor() as usize, rank.ceil() as usize);
+            let expected = sorted[lo] + (sorted[hi] - sorted[lo]) * (rank - lo as f64);
+            assert_eq!(percentile(&values, p), expected, "p{p}");
+        }
+        assert_eq!(percentile(&[2.5], 95.0), 2.5);
     }
 }
