@@ -448,7 +448,10 @@ pub fn where_patches_go(config: &Config) -> Option<String> {
         ),
         Sink::Wayland => format!(
             "patches full-screen on {} of Wayland display {}; aim the instrument at the screen's centre",
-            output(),
+            match &config.display.output {
+                None => "the first output".to_string(),
+                Some(selector) => selector.describe(),
+            },
             named(&config.display.wayland_display, "WAYLAND_DISPLAY")
         ),
         Sink::Simulated | Sink::Emulator => return None,
