@@ -55,6 +55,33 @@ pub struct DeviceOnOutput {
     pub profile: Option<String>,
 }
 
+/// An output's EDID parsed, or why it does not parse (neither: it has none).
+fn parsed_edid(bytes: Option<&[u8]>) -> (Option<Edid>, Option<String>) {
+    match bytes.map(Edid::parse) {
+        Some(Ok(e)) => (Some(e), None),
+        Some(Err(e)) => (None, Some(e.to_string())),
+        None => (None, None),
+    }
+}
+
+/// A line for each configured device on an output, with its current profile.
+fn device_lines(devices: &[DeviceOnOutput]) -> String {
+    devices
+        .iter()
+        .map(|d| {
+            format!(
+                "    device {}: {}\n",
+                d.name,
+                d.profile
+                    .as_deref()
+                    .map_or("no profile yet".to_string(), |p| format!(
+                        "current profile {p}"
+                    ))
+            )
+        })
+        .collect()
+}
+
 /// The devices among `devices` whose `[display]` puts their patches here
 /// (`shows_here`), each with its current profile (stores under `state_dir`).
 fn devices_on(
@@ -89,11 +116,7 @@ pub fn list_displays(
     Ok(outputs
         .iter()
         .map(|output| {
-            let (edid, edid_error) = match output.edid.as_deref().map(Edid::parse) {
-                Some(Ok(e)) => (Some(e), None),
-                Some(Err(e)) => (None, Some(e.to_string())),
-                None => (None, None),
-            };
+            let (edid, edid_error) = parsed_edid(output.edid.as_deref());
             let lut_identity = output
                 .crtc
                 .and_then(|_| x.gamma(output).ok())
@@ -185,17 +208,7 @@ pub fn describe_displays(x_display: &str, entries: &[DisplayEntry]) -> String {
             (None, None) => out += "    EDID: none\n",
         }
         out += &format!("    colord device: {}\n", e.colord_device_id);
-        for d in &e.devices {
-            out += &format!(
-                "    device {}: {}\n",
-                d.name,
-                d.profile
-                    .as_deref()
-                    .map_or("no profile yet".to_string(), |p| format!(
-                        "current profile {p}"
-                    ))
-            );
-        }
+        out += &device_lines(&e.devices);
     }
     let disconnected: Vec<&str> = entries
         .iter()
@@ -271,11 +284,7 @@ pub fn list_wayland_displays(
     let entries = outputs
         .iter()
         .map(|output| {
-            let (edid, edid_error) = match output.edid.as_deref().map(Edid::parse) {
-                Some(Ok(e)) => (Some(e), None),
-                Some(Err(e)) => (None, Some(e.to_string())),
-                None => (None, None),
-            };
+            let (edid, edid_error) = parsed_edid(output.edid.as_deref());
             let devices = devices_on(&devices, state_dir, |display| {
                 display.sink() == Sink::Wayland
                     && wayland::pick(&display.output.clone().unwrap_or_default(), &outputs)
@@ -333,17 +342,7 @@ pub fn describe_wayland_displays(listing: &WaylandListing) -> String {
             }
         }
         out += &format!("    colord device: {}\n", e.colord_device_id);
-        for d in &e.devices {
-            out += &format!(
-                "    device {}: {}\n",
-                d.name,
-                d.profile
-                    .as_deref()
-                    .map_or("no profile yet".to_string(), |p| format!(
-                        "current profile {p}"
-                    ))
-            );
-        }
+        out += &device_lines(&e.devices);
     }
     out += "  the compositor offers:\n";
     for ((protocol, offered), (_, what)) in listing.protocols.iter().zip(WAYLAND_PROTOCOLS) {

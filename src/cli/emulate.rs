@@ -174,22 +174,16 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
         others.push((*other, emulator));
     }
     let mut meter = Meter::new(monitor.clone(), simulated, faults.device(), faults.seed);
+    let aim = parse_aim(&args.aim)?;
+    let selector = args
+        .output
+        .as_deref()
+        .map(OutputSelector::parse)
+        .unwrap_or_default();
     if let Some(display) = &args.x_display {
-        let aim = parse_aim(&args.aim)?;
-        let selector = args
-            .output
-            .as_deref()
-            .map(OutputSelector::parse)
-            .unwrap_or_default();
         let mut watch = watch_output(Some(display), &selector, aim).map_err(|e| e.to_string())?;
         meter = meter.with_screen_source(Box::new(move || watch().map_err(|e| e.to_string())));
     } else if let Some(display) = &args.wayland_display {
-        let aim = parse_aim(&args.aim)?;
-        let selector = args
-            .output
-            .as_deref()
-            .map(OutputSelector::parse)
-            .unwrap_or_default();
         let mut watch =
             watch_wayland_output(Some(display), &selector, aim).map_err(|e| e.to_string())?;
         meter = meter.with_screen_source(Box::new(move || watch().map_err(|e| e.to_string())));

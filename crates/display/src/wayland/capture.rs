@@ -162,7 +162,11 @@ impl OutputCopier {
                 .roundtrip(&mut events)
                 .map_err(|e| display.protocol_error(format!("reading its outputs: {e}")))?;
         }
-        let (index, info) = super::choose(&display, selector, &super::described(&events.outputs))?;
+        let (index, info) = super::choose(
+            &display,
+            selector,
+            &super::described(&events.outputs, &crate::drm::sysfs_root()),
+        )?;
         let output = events.outputs[index].0.clone();
         Ok(OutputCopier {
             display,

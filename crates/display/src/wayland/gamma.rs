@@ -135,7 +135,7 @@ pub fn gamma_offers(name: Option<&str>) -> Result<Vec<(String, GammaOffer)>, Way
     for c in controls {
         c.destroy();
     }
-    Ok(super::described(&events.outputs)
+    Ok(super::named(&events.outputs)
         .into_iter()
         .zip(&events.offers)
         .map(|(info, offer)| (info.name, offer.unwrap_or(GammaOffer::Failed)))
@@ -150,7 +150,11 @@ pub fn hold_gamma(
     ramp_of: impl FnOnce(usize) -> GammaRamp,
 ) -> Result<HeldGamma, GammaError> {
     let (display, queue, events, mut controls) = open(name)?;
-    let (index, output) = super::choose(&display, selector, &super::described(&events.outputs))?;
+    let (index, output) = super::choose(
+        &display,
+        selector,
+        &super::described(&events.outputs, &crate::drm::sysfs_root()),
+    )?;
     let offer = events.offers[index].unwrap_or(GammaOffer::Failed);
     let size = match offer {
         GammaOffer::Size(n) if n >= 2 => n,

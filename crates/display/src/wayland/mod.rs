@@ -325,13 +325,10 @@ where
         .collect()
 }
 
-/// The outputs as described once their events are in: each named (an output of
-/// wl_output before version 4 has no name: `wl_output-N` by its registry name), with
-/// its kernel EDID.
-pub(crate) fn described(
-    outputs: &[(wl_output::WlOutput, WaylandOutput, bool)],
-) -> Vec<WaylandOutput> {
-    let mut infos: Vec<WaylandOutput> = outputs
+/// The outputs as their events left them, each named (an output of wl_output before
+/// version 4 has no name: `wl_output-N` by its registry name).
+pub(crate) fn named(outputs: &[(wl_output::WlOutput, WaylandOutput, bool)]) -> Vec<WaylandOutput> {
+    outputs
         .iter()
         .map(|(_, info, _)| {
             let mut info = info.clone();
@@ -340,8 +337,16 @@ pub(crate) fn described(
             }
             info
         })
-        .collect();
-    attach_edids(&mut infos, &drm::sysfs_root());
+        .collect()
+}
+
+/// [`named`], each with its kernel EDID from under `sysfs`.
+pub(crate) fn described(
+    outputs: &[(wl_output::WlOutput, WaylandOutput, bool)],
+    sysfs: &std::path::Path,
+) -> Vec<WaylandOutput> {
+    let mut infos = named(outputs);
+    attach_edids(&mut infos, sysfs);
     infos
 }
 
@@ -439,13 +444,12 @@ pub fn list_outputs(
             .roundtrip(&mut state)
             .map_err(|e| display.protocol_error(format!("listing outputs: {e}")))?;
     }
-    let mut outputs = described(&state.outputs);
+    let outputs = described(&state.outputs, sysfs);
     for (proxy, _, _) in &state.outputs {
         if proxy.version() >= 3 {
             proxy.release();
         }
     }
-    attach_edids(&mut outputs, sysfs);
     Ok(outputs)
 }
 

@@ -176,8 +176,11 @@ impl PatchSurface {
                 .roundtrip(&mut events)
                 .map_err(|e| display.protocol_error(format!("reading its outputs: {e}")))?;
         }
-        let (index, output) =
-            super::choose(&display, &target.output, &super::described(&events.outputs))?;
+        let (index, output) = super::choose(
+            &display,
+            &target.output,
+            &super::described(&events.outputs, &crate::drm::sysfs_root()),
+        )?;
         let output_proxy = events.outputs[index].0.clone();
         // Whether the output is powered: a frame drawn while it is off is not seen.
         let _power = power.map(|m| m.get_output_power(&output_proxy, &qh, ()));
