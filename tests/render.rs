@@ -1129,6 +1129,82 @@ fn spectra_and_a_spectral_image_render_as_their_xyz_would() {
     );
 }
 
+/// The default codes come from a bounded search (`crf::nearest`) that measures only
+/// the corners that could be nearest: they are the literal search's, which measures all
+/// 8 in the same order and keeps the first strictly nearer, on every pixel of a scene
+/// from below the display's black to beyond its white, neutral and saturated, all over
+/// the screen, at 8, 10 and 16 bits.
+#[test]
+fn the_bounded_nearest_codes_are_the_literal_search_s() {
+    use chromacal_color::delta_e_2000;
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let white = crf.white();
+    let mut state = 0x5DEE_CE66_D1CE_4E5Bu64;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let pixels: Vec<ScenePixel> = (0..30_000)
+        .map(|k| {
+            let y = 1.1 * white.y * uniform().powi(3);
+            // One in three on the white's own chromaticity.
+            let tint = if k % 3 == 0 { 0.0 } else { 0.6 };
+            let xyz = Xyz::new(
+                y * white.x / white.y * (1.0 + tint * (uniform() - 0.5)),
+                y,
+                y * white.z / white.y * (1.0 + tint * (uniform() - 0.5)),
+            );
+            ScenePixel {
+                xyz,
+                position: ScreenPosition::new(uniform(), uniform()),
+            }
+        })
+        .collect();
+    let scene = Scene {
+        pixels,
+        white: None,
+    };
+    for bits in [8, 10, 16] {
+        let rendering = crf
+            .render(&scene, &settings(GamutMapping::Clip, bits))
+            .unwrap();
+        let top = f64::from((1u32 << bits) - 1);
+        for (k, (p, r)) in scene.pixels.iter().zip(&rendering.pixels).enumerate() {
+            let mapped = Xyz::from(r.mapped);
+            let mapped_lab = xyz_to_lab(&mapped, &white);
+            let scaled = crf
+                .drive_for(&mapped, p.position)
+                .map(|d| d.clamp(0.0, 1.0) * top);
+            let error = |codes: [u32; 3]| {
+                let shown = model.forward(codes.map(|c| f64::from(c) / top), p.position);
+                delta_e_2000(&mapped_lab, &xyz_to_lab(&shown, &white))
+            };
+            let rounded = scaled.map(|v| v.round() as u32);
+            let mut best = (rounded, error(rounded));
+            for corner in 0..8 {
+                let codes = [0, 1, 2].map(|c| {
+                    if corner >> c & 1 == 1 {
+                        (scaled[c].ceil() as u32).min(top as u32)
+                    } else {
+                        scaled[c].floor() as u32
+                    }
+                });
+                if codes != rounded {
+                    let e = error(codes);
+                    if e < best.1 {
+                        best = (codes, e);
+                    }
+                }
+            }
+            assert_eq!(r.codes, best.0, "{bits} bits, pixel {k}: {:?}", p.xyz);
+            assert_eq!(r.inversion_delta_e00, best.1, "{bits} bits, pixel {k}");
+        }
+    }
+}
+
 /// Issue 27: at 8 bits the codes are the nearest of the 8 around the exact drive, in
 /// ΔE00 by the profile's forward model, not each channel rounded on its own. Never
 /// worse than rounding, better on some colours, and no neighbour of the chosen codes
@@ -1634,6 +1710,52 @@ fn a_scene_rendered_over_the_cores_keeps_its_order() {
     }
 }
 
+/// A scene larger than `INVERSION_SAMPLE` pixels has its inversion ΔE00 measured on
+/// evenly spaced pixels when written as codes: the same codes and mapping ΔE00 as the
+/// whole rendering, and the inversion's statistics those of every second pixel of it
+/// (70,000 pixels: every second one), which the command says.
+#[test]
+fn a_large_image_s_inversion_is_measured_on_a_stated_sample() {
+    use chromacal_crf::INVERSION_SAMPLE;
+    use chromacal_model::fit::stats::ErrorStats;
+    let model = model();
+    let crf = ColourReproduction::new(&model).unwrap();
+    let n = 70_000;
+    assert!(n > INVERSION_SAMPLE && n <= 2 * INVERSION_SAMPLE);
+    let pixels: Vec<ScenePixel> = (0..n)
+        .map(|k| {
+            let f = |m: usize| ((k * m) % 997) as f64 / 996.0;
+            ScenePixel {
+                xyz: Xyz::new(90.0 * f(7), 0.5 + 90.0 * f(13), 100.0 * f(31)),
+                position: ScreenPosition::new(f(3), f(5)),
+            }
+        })
+        .collect();
+    let scene = Scene {
+        pixels,
+        white: None,
+    };
+    let settings = settings(GamutMapping::Clip, 16);
+    let whole = crf.render(&scene, &settings).unwrap();
+    let (codes, summary) = crf.render_codes(&scene, &settings).unwrap();
+    assert!(
+        codes
+            .iter()
+            .zip(&whole.pixels)
+            .all(|(c, p)| *c == p.codes.map(|v| v as u16))
+    );
+    assert_eq!(summary.mapping_all, whole.summary.mapping_all);
+    assert_eq!(summary.mapping_outside, whole.summary.mapping_outside);
+    let every_second: Vec<f64> = whole
+        .pixels
+        .iter()
+        .step_by(2)
+        .map(|p| p.inversion_delta_e00)
+        .collect();
+    assert_eq!(summary.inversion, ErrorStats::of(&every_second));
+    assert_eq!(summary.inversion.as_ref().unwrap().n, n / 2);
+}
+
 /// An image written as a PNG keeps only its codes and ΔE00 (`render_codes`): the
 /// same codes and summary as the whole rendering, for every mapping and both code
 /// choices; and a 2048 × 2048 PFM renders in under 400 MB (1.83 GB when every
@@ -1714,4 +1836,10 @@ fn an_image_renders_to_the_same_codes_in_a_bounded_memory() {
         .unwrap_or_else(|| panic!("no peak in {stderr}"));
     eprintln!("2048² PFM to a 16-bit PNG: peak {} MB", peak_kb / 1000);
     assert!(peak_kb < 400_000, "{peak_kb} kB");
+    // The summary says what its inversion ΔE00 is over.
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        said.contains("(quantisation, inversion) over 65536 evenly spaced pixels (every 64)"),
+        "{said}"
+    );
 }

@@ -22,6 +22,7 @@ pub mod gamut;
 pub mod gamut_bench;
 pub mod inverse_table;
 pub mod lut3d;
+mod nearest;
 pub mod render;
 pub mod scene;
 pub mod spectral;
@@ -47,6 +48,43 @@ use tone::{SceneLuminance, ToneCurve, ToneOperator};
 
 /// Pixels rendered together over the cores before they are handed on.
 const BAND: usize = 1 << 16;
+
+/// Pixels whose inversion ΔE00 `render_codes` measures at most (every pixel of a
+/// smaller scene): a 2048² image is measured on every 64th pixel.
+pub const INVERSION_SAMPLE: usize = 1 << 16;
+
+/// One pixel as `render_each` hands it on.
+struct PixelOutcome {
+    codes: [u32; 3],
+    target: Xyz,
+    mapped: Xyz,
+    outside: bool,
+    mapping_delta_e00: f64,
+    /// What the codes show and its ΔE00 from `mapped`, where measured.
+    inversion: Option<(Xyz, f64)>,
+}
+
+/// How a run's drives become codes: the largest code, and for the nearest codes
+/// each channel's excitation at every code, the law evaluated once a code rather
+/// than twice a pixel (at 16 bits, 1.5 MB).
+struct Quantiser {
+    top: f64,
+    lights: Option<[Vec<f64>; 3]>,
+}
+
+impl Quantiser {
+    fn new(model: &MonitorModel, settings: &RenderSettings) -> Quantiser {
+        let top = ((1u64 << settings.bits) - 1) as f64;
+        let lights = (settings.codes == CodeChoice::NearestInDeltaE00).then(|| {
+            [0, 1, 2].map(|c| {
+                (0..=top as u32)
+                    .map(|code| model.laws[c].excitation(code as f64 / top))
+                    .collect()
+            })
+        });
+        Quantiser { top, lights }
+    }
+}
 
 /// Why a scene could not be rendered.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -92,7 +130,8 @@ pub enum CodeChoice {
     /// channel on its own is not that: at 8 bits, for 42 of 660 in-gamut colours a
     /// neighbouring code was closer by more than 0.1 ΔE00 (worst 0.89 against 0.38),
     /// since a code step moves the colour by different amounts, in different
-    /// directions, in each channel. Eight forward evaluations a pixel.
+    /// directions, in each channel. Eight forward evaluations a pixel, and a ΔE00
+    /// only for the corners that could be nearest (`nearest`).
     #[default]
     NearestInDeltaE00,
 }
@@ -326,46 +365,66 @@ impl<'a> ColourReproduction<'a> {
     /// Render `scene` with `settings`.
     pub fn render(&self, scene: &Scene, settings: &RenderSettings) -> Result<Rendering, CrfError> {
         let mut pixels = Vec::with_capacity(scene.pixels.len());
-        let transform = self.render_each(scene, settings, |pixel| pixels.push(pixel))?;
+        let transform = self.render_each(scene, settings, 1, |p| {
+            // A stride of 1 measures every pixel's inversion.
+            let (shown, inversion_delta_e00) = p.inversion.unwrap_or((p.mapped, f64::NAN));
+            pixels.push(RenderedPixel {
+                codes: p.codes,
+                target: p.target.into(),
+                mapped: p.mapped.into(),
+                shown: shown.into(),
+                outside: p.outside,
+                mapping_delta_e00: p.mapping_delta_e00,
+                inversion_delta_e00,
+            })
+        })?;
         let summary = summarise(&pixels, settings, transform);
         Ok(Rendering { pixels, summary })
     }
 
     /// [`ColourReproduction::render`]'s codes and summary alone, for an image written
-    /// as codes: each pixel's codes as 16-bit values (bits ≤ 16) and its two ΔE00 kept,
-    /// 30 bytes a pixel where the whole rendered pixel is 112. The same codes and
-    /// summary.
+    /// as codes: each pixel's codes as 16-bit values (bits ≤ 16) and its mapping's
+    /// ΔE00 kept, 14 bytes a pixel where the whole rendered pixel is 112. The same
+    /// codes. The mapping's ΔE00 is every pixel's; the inversion's, which only the
+    /// codes' quantisation makes, is measured on every pixel of a scene up to
+    /// [`INVERSION_SAMPLE`] pixels and on that many evenly spaced ones of a larger
+    /// scene (the summary says how many).
     pub fn render_codes(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
     ) -> Result<(Vec<[u16; 3]>, RenderSummary), CrfError> {
         let n = scene.pixels.len();
+        let stride = n.div_ceil(INVERSION_SAMPLE).max(1);
         let (mut codes, mut all, mut outside, mut inversion) = (
             Vec::with_capacity(n),
             Vec::with_capacity(n),
             Vec::new(),
-            Vec::with_capacity(n),
+            Vec::with_capacity(n.div_ceil(stride)),
         );
-        let transform = self.render_each(scene, settings, |p| {
+        let transform = self.render_each(scene, settings, stride, |p| {
             codes.push(p.codes.map(|c| c as u16));
             all.push(p.mapping_delta_e00);
             if p.outside {
                 outside.push(p.mapping_delta_e00);
             }
-            inversion.push(p.inversion_delta_e00);
+            if let Some((_, e)) = p.inversion {
+                inversion.push(e);
+            }
         })?;
         let summary = summary_of(n, &all, &outside, &inversion, settings, transform);
         Ok((codes, summary))
     }
 
-    /// Render every pixel of `scene`, handing each to `each` in order; the scene-wide
+    /// Render every pixel of `scene`, handing each to `each` in order, its inversion
+    /// measured on every `stride`-th pixel (the first included); the scene-wide
     /// transform the mapping was fitted with, if any.
     fn render_each(
         &self,
         scene: &Scene,
         settings: &RenderSettings,
-        mut each: impl FnMut(RenderedPixel),
+        stride: usize,
+        mut each: impl FnMut(PixelOutcome),
     ) -> Result<Option<SceneTransform>, CrfError> {
         if !(1..=16).contains(&settings.bits) {
             return Err(CrfError::BitDepth(settings.bits));
@@ -445,8 +504,8 @@ impl<'a> ColourReproduction<'a> {
             chromacal_model::spatial::SpatialMap::Uniform
         )
         .then_some(&centre);
-        let top = ((1u64 << settings.bits) - 1) as f64;
-        let render_pixel = |index: usize| -> Result<RenderedPixel, CrfError> {
+        let quantiser = Quantiser::new(self.model, settings);
+        let render_pixel = |index: usize| -> Result<PixelOutcome, CrfError> {
             let pixel = &scene.pixels[index];
             let made;
             let (target, gamut) = match (whole_scene, everywhere) {
@@ -460,23 +519,33 @@ impl<'a> ColourReproduction<'a> {
             let outside = !gamut.contains(&target);
             let mapped = self.map(settings.gamut, transform.as_ref(), gamut, &target);
             let drive = self.drive_for(&mapped, pixel.position);
-            // Each colour's L*a*b* made once for the ΔE00 it takes part in.
-            let mapped_lab = xyz_to_lab(&mapped, &self.white);
-            let (codes, shown, inversion_delta_e00) =
-                self.codes_for(drive, &mapped_lab, pixel.position, top, settings.codes);
-            Ok(RenderedPixel {
+            let measured = index.is_multiple_of(stride);
+            // Each colour's L*a*b* made once for the ΔE00 it takes part in, and only
+            // where one is wanted.
+            let mapped_lab =
+                (settings.codes == CodeChoice::NearestInDeltaE00 || measured || mapped != target)
+                    .then(|| xyz_to_lab(&mapped, &self.white));
+            let (codes, inversion) = self.codes_for(
+                drive,
+                &mapped,
+                mapped_lab.as_ref(),
+                pixel.position,
+                &quantiser,
+                measured,
+            );
+            Ok(PixelOutcome {
                 codes,
-                target: target.into(),
-                mapped: mapped.into(),
-                shown: shown.into(),
+                target,
+                mapped,
                 outside,
                 // A colour the mapping left as it was is 0 away from itself.
-                mapping_delta_e00: if mapped == target {
-                    0.0
-                } else {
-                    delta_e_2000(&xyz_to_lab(&target, &self.white), &mapped_lab)
+                mapping_delta_e00: match mapped_lab {
+                    Some(lab) if mapped != target => {
+                        delta_e_2000(&xyz_to_lab(&target, &self.white), &lab)
+                    }
+                    _ => 0.0,
                 },
-                inversion_delta_e00,
+                inversion,
             })
         };
         // Over all cores, a band of pixels at a time, handed on in the scene's order
@@ -497,55 +566,45 @@ impl<'a> ColourReproduction<'a> {
         Ok(transform)
     }
 
-    /// The codes (0 … `top`) for `drive`, chosen as `choice` says to show the colour
-    /// `mapped` (its L*a*b*) at `position`; what the display shows for them, and its
-    /// ΔE00 from `mapped`. For the nearest codes each channel's law is evaluated once
-    /// for the code below and once for the code above the drive, shared by the corners
-    /// that use it.
+    /// The codes for `drive`, chosen as `quantiser` says to show the colour `mapped`
+    /// (its L*a*b* `mapped_lab`, which the nearest codes and a measured pixel need) at
+    /// `position`; when `measured`, what the display shows for them and its ΔE00 from
+    /// `mapped`. For the nearest codes each channel's light at the code below and above
+    /// the drive comes from the quantiser's table, and [`nearest::nearest`] measures
+    /// only the corners that could be nearest.
     fn codes_for(
         &self,
         drive: Drive,
-        mapped: &Lab,
+        mapped: &Xyz,
+        mapped_lab: Option<&Lab>,
         position: ScreenPosition,
-        top: f64,
-        choice: CodeChoice,
-    ) -> ([u32; 3], Xyz, f64) {
+        quantiser: &Quantiser,
+        measured: bool,
+    ) -> ([u32; 3], Option<(Xyz, f64)>) {
+        let top = quantiser.top;
         let scaled = drive.map(|d| d.clamp(0.0, 1.0) * top);
         let rounded = scaled.map(|v| v.round() as u32);
-        if choice == CodeChoice::Rounded {
-            let shown = self
-                .model
-                .forward(rounded.map(|c| c as f64 / top), position);
-            let error = delta_e_2000(mapped, &xyz_to_lab(&shown, &self.white));
-            return (rounded, shown, error);
-        }
+        let (Some(mapped_lab), Some(lights)) = (mapped_lab, &quantiser.lights) else {
+            let inversion = mapped_lab.filter(|_| measured).map(|lab| {
+                let shown = self
+                    .model
+                    .forward(rounded.map(|c| c as f64 / top), position);
+                (shown, delta_e_2000(lab, &xyz_to_lab(&shown, &self.white)))
+            });
+            return (rounded, inversion);
+        };
         let gains = self.model.spatial.gains(position);
         let low = scaled.map(|v| v.floor() as u32);
         let high = scaled.map(|v| (v.ceil() as u32).min(top as u32));
-        let excitation = |c: usize, code: u32| self.model.laws[c].excitation(code as f64 / top);
-        let low_light = [0, 1, 2].map(|c| excitation(c, low[c]));
-        let high_light = [0, 1, 2].map(|c| {
-            if high[c] == low[c] {
-                low_light[c]
-            } else {
-                excitation(c, high[c])
-            }
-        });
         // `MonitorModel::forward` of the codes, from their channels' excitations.
         let shows = |codes: [u32; 3]| {
-            let e = [0, 1, 2].map(|c| {
-                let light = if codes[c] == low[c] {
-                    low_light[c]
-                } else {
-                    high_light[c]
-                };
-                gains[c] * light
-            });
-            let shown = self.model.light_above_black(&Vector3::from(e)) + self.model.black;
-            (shown, xyz_to_lab(&shown, &self.white))
+            let e = [0, 1, 2].map(|c| gains[c] * lights[c][codes[c] as usize]);
+            self.model.light_above_black(&Vector3::from(e)) + self.model.black
         };
-        let (rounded_shows, rounded_lab) = shows(rounded);
-        let mut best = (rounded, rounded_shows, delta_e_2000(mapped, &rounded_lab));
+        // The rounded codes first, then the corners in order: the literal search's.
+        let mut candidates = [([0u32; 3], Xyz::zeros()); nearest::MOST];
+        candidates[0] = (rounded, shows(rounded));
+        let mut count = 1;
         for corner in 0..8 {
             let codes = [0, 1, 2].map(|c| {
                 if corner >> c & 1 == 1 {
@@ -554,16 +613,20 @@ impl<'a> ColourReproduction<'a> {
                     low[c]
                 }
             });
-            if codes == rounded {
-                continue;
-            }
-            let (shown, lab) = shows(codes);
-            let error = delta_e_2000(mapped, &lab);
-            if error < best.2 {
-                best = (codes, shown, error);
+            if codes != rounded {
+                candidates[count] = (codes, shows(codes));
+                count += 1;
             }
         }
-        best
+        let (k, error) = nearest::nearest(
+            &candidates[..count],
+            mapped,
+            mapped_lab,
+            &self.white,
+            measured,
+        );
+        let (codes, shown) = candidates[k];
+        (codes, error.filter(|_| measured).map(|e| (shown, e)))
     }
 
     /// The scene with its white carried to the display's chromaticity (luminance

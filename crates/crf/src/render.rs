@@ -697,8 +697,19 @@ fn describe(summary: &RenderSummary, spectral: Option<&str>, output: &CodesOutpu
         ));
     }
     if let Some(s) = &summary.inversion {
+        // A large image's inversion is measured on evenly spaced pixels
+        // (`ColourReproduction::render_codes`); its codes on every one.
+        let over = if s.n < summary.pixels {
+            format!(
+                " over {} evenly spaced pixels (every {})",
+                s.n,
+                summary.pixels.div_ceil(s.n)
+            )
+        } else {
+            String::new()
+        };
         lines.push(format!(
-            "ΔE00 of the codes against the mapped colour (quantisation, inversion): mean {:.3}, max {:.3}",
+            "ΔE00 of the codes against the mapped colour (quantisation, inversion){over}: mean {:.3}, max {:.3}",
             s.mean, s.max
         ));
     }
