@@ -1140,13 +1140,9 @@ fn the_bounded_nearest_codes_are_the_literal_search_s() {
     let model = model();
     let crf = ColourReproduction::new(&model).unwrap();
     let white = crf.white();
-    let mut state = 0x5DEE_CE66_D1CE_4E5Bu64;
-    let mut uniform = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5DEE_CE66_D1CE_4E5B);
+    let mut uniform = move || rng.random::<f64>();
     let pixels: Vec<ScenePixel> = (0..30_000)
         .map(|k| {
             let y = 1.1 * white.y * uniform().powi(3);

@@ -277,13 +277,9 @@ mod tests {
     /// finite, and the bound finite for most of them.
     #[test]
     fn the_local_form_stays_within_its_bound_of_the_formula() {
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x2545_F491_4F6C_DD1D);
+        let mut uniform = move || rng.random::<f64>();
         let (mut judged, mut worst) = (0, 0.0_f64);
         for i in 0..200_000 {
             let size = 10f64.powf(-4.0 + 4.0 * (i % 5) as f64 / 4.0);

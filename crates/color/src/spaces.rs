@@ -408,13 +408,9 @@ mod tests {
     #[test]
     fn the_lab_tangent_is_within_its_bound() {
         let white = Xyz::new(95.047, 100.0, 108.883);
-        let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x9E37_79B9_7F4A_7C15);
+        let mut uniform = move || rng.random::<f64>();
         for i in 0..100_000 {
             let size = 10f64.powf(-6.0 + 5.0 * (i % 6) as f64 / 5.0) * 100.0;
             let y = 100.0 * uniform().powi(4);

@@ -102,13 +102,9 @@ mod tests {
     #[test]
     fn the_bounded_search_finds_the_literal_one() {
         let white = Xyz::new(95.0, 100.0, 108.9);
-        let mut state = 0x1234_5678_9ABC_DEF1u64;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x1234_5678_9ABC_DEF1);
+        let mut uniform = move || rng.random::<f64>();
         let mut measured = 0;
         for i in 0..100_000 {
             let y = 100.0 * uniform().powi(3);
