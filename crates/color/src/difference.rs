@@ -137,9 +137,13 @@ pub fn delta_e_2000(lab1: &Lab, lab2: &Lab) -> f64 {
 /// five cosines and an exponential.
 ///
 /// It is for choosing among close candidates (a pixel's neighbouring codes), not for
-/// reporting: its relative error is below 1.1 · (|δ|∞ / C′ + 0.01 |δ|∞) (measured
-/// over 8 million random pairs with C′ > 5 |δ|∞), which [`LocalDeltaE2000::bound`]
-/// doubles. Near the neutral axis, where the hue has no direction, it gives none.
+/// reporting: its relative error is below 1.2 · (|δ|∞ / C′ + 0.01 |δ|∞) (measured
+/// over 8 million random pairs with C′ > 5 |δ|∞, and in an adversarial search over
+/// hues and chromas for |δ|∞ from 10⁻⁴ to 20), plus 5 × 10⁻⁶ where the mean hue
+/// crosses 0°: eq. 20 takes h̄′ − 275° without going round the circle, so Δθ jumps
+/// there by 3 × 10⁻⁴ degrees whatever the step. [`LocalDeltaE2000::bound`] takes
+/// about twice each (2.5 × the first, 2 × 10⁻⁵). Near the neutral axis, where the hue
+/// has no direction, it gives none.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LocalDeltaE2000 {
     /// 1 + G (eq. 3).
@@ -225,7 +229,7 @@ impl LocalDeltaE2000 {
         if self.chroma < 5.0 * size {
             return f64::INFINITY;
         }
-        2.2 * (size / self.chroma + 0.01 * size)
+        2.5 * (size / self.chroma + 0.01 * size) + 2e-5
     }
 }
 
@@ -273,7 +277,9 @@ mod tests {
     }
 
     /// The local form against the formula over random colours and differences from
-    /// 10⁻⁴ to 1 in each coordinate: within half its own bound everywhere the bound is
+    /// 10⁻⁶ to 20 in each coordinate, a third of them where the bound is tightest
+    /// (hue within 0.1° of 0°, where eq. 20's Δθ jumps; C* near 25 at 270°, where G
+    /// and R_T change fastest): within half its own bound everywhere the bound is
     /// finite, and the bound finite for most of them.
     #[test]
     fn the_local_form_stays_within_its_bound_of_the_formula() {
@@ -282,9 +288,15 @@ mod tests {
         let mut uniform = move || rng.random::<f64>();
         let (mut judged, mut worst) = (0, 0.0_f64);
         for i in 0..200_000 {
-            let size = 10f64.powf(-4.0 + 4.0 * (i % 5) as f64 / 4.0);
-            let chroma = 100.0 * uniform().powi(2);
-            let angle = std::f64::consts::TAU * uniform();
+            let size = 10f64.powf(-6.0 + 7.3 * (i % 8) as f64 / 7.0);
+            let (chroma, angle) = match i % 6 {
+                0 => (100.0 * uniform(), (0.2 * uniform() - 0.1).to_radians()),
+                1 => (
+                    20.0 + 10.0 * uniform(),
+                    (265.0 + 10.0 * uniform()).to_radians(),
+                ),
+                _ => (100.0 * uniform().powi(2), std::f64::consts::TAU * uniform()),
+            };
             let one = lab(
                 100.0 * uniform(),
                 chroma * angle.cos(),
@@ -300,7 +312,7 @@ mod tests {
                 judged += 1;
             }
         }
-        assert!(judged > 150_000, "{judged}");
+        assert!(judged > 120_000, "{judged}");
         assert!(worst < 0.5, "{worst} of the bound");
         assert!(LocalDeltaE2000::at(&lab(50.0, 0.0, 0.0)).is_none());
     }

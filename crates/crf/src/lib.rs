@@ -49,9 +49,18 @@ use tone::{SceneLuminance, ToneCurve, ToneOperator};
 /// Pixels rendered together over the cores before they are handed on.
 const BAND: usize = 1 << 16;
 
-/// Pixels whose inversion ΔE00 `render_codes` measures at most (every pixel of a
-/// smaller scene): a 2048² image is measured on every 64th pixel.
+/// Pixels whose inversion ΔE00 `render_codes` measures, about (every pixel of a
+/// smaller scene): a 2048² image is measured on one pixel in 64.
 pub const INVERSION_SAMPLE: usize = 1 << 16;
+
+/// Whether `render_codes` measures the inversion of pixel `index` when it measures
+/// one pixel in `stride`: those whose index times the golden ratio falls in the first
+/// 1/`stride` of a unit (a Weyl sequence). Spread over the image, not the same columns
+/// in every row as every `stride`-th pixel would be of an image `stride` divides.
+pub fn inversion_measured(index: usize, stride: usize) -> bool {
+    const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
+    stride <= 1 || ((index as u64).wrapping_mul(GOLDEN) >> 32) < (1u64 << 32) / stride as u64
+}
 
 /// One pixel as `render_each` hands it on.
 struct PixelOutcome {
@@ -64,25 +73,40 @@ struct PixelOutcome {
     inversion: Option<(Xyz, f64)>,
 }
 
-/// How a run's drives become codes: the largest code, and for the nearest codes
-/// each channel's excitation at every code, the law evaluated once a code rather
-/// than twice a pixel (at 16 bits, 1.5 MB).
+/// How a run's drives become codes: the largest code, whether the nearest codes are
+/// chosen, and for those, in a scene with at least half as many pixels as codes, each
+/// channel's excitation at every code: the law evaluated once a code rather than
+/// twice a pixel (at 16 bits, 1.5 MB).
 struct Quantiser {
     top: f64,
+    nearest: bool,
     lights: Option<[Vec<f64>; 3]>,
 }
 
 impl Quantiser {
-    fn new(model: &MonitorModel, settings: &RenderSettings) -> Quantiser {
+    fn new(model: &MonitorModel, settings: &RenderSettings, pixels: usize) -> Quantiser {
         let top = ((1u64 << settings.bits) - 1) as f64;
-        let lights = (settings.codes == CodeChoice::NearestInDeltaE00).then(|| {
+        let nearest = settings.codes == CodeChoice::NearestInDeltaE00;
+        let lights = (nearest && 2 * pixels > top as usize).then(|| {
             [0, 1, 2].map(|c| {
                 (0..=top as u32)
                     .map(|code| model.laws[c].excitation(code as f64 / top))
                     .collect()
             })
         });
-        Quantiser { top, lights }
+        Quantiser {
+            top,
+            nearest,
+            lights,
+        }
+    }
+
+    /// Channel `c`'s excitation at `code`, from the table or the law.
+    fn light(&self, model: &MonitorModel, c: usize, code: u32) -> f64 {
+        match &self.lights {
+            Some(lights) => lights[c][code as usize],
+            None => model.laws[c].excitation(code as f64 / self.top),
+        }
     }
 }
 
@@ -387,8 +411,8 @@ impl<'a> ColourReproduction<'a> {
     /// ΔE00 kept, 14 bytes a pixel where the whole rendered pixel is 112. The same
     /// codes. The mapping's ΔE00 is every pixel's; the inversion's, which only the
     /// codes' quantisation makes, is measured on every pixel of a scene up to
-    /// [`INVERSION_SAMPLE`] pixels and on that many evenly spaced ones of a larger
-    /// scene (the summary says how many).
+    /// [`INVERSION_SAMPLE`] pixels and on about that many of a larger scene, chosen by
+    /// [`inversion_measured`] (the summary says how many).
     pub fn render_codes(
         &self,
         scene: &Scene,
@@ -400,7 +424,7 @@ impl<'a> ColourReproduction<'a> {
             Vec::with_capacity(n),
             Vec::with_capacity(n),
             Vec::new(),
-            Vec::with_capacity(n.div_ceil(stride)),
+            Vec::with_capacity(INVERSION_SAMPLE.min(n)),
         );
         let transform = self.render_each(scene, settings, stride, |p| {
             codes.push(p.codes.map(|c| c as u16));
@@ -417,7 +441,7 @@ impl<'a> ColourReproduction<'a> {
     }
 
     /// Render every pixel of `scene`, handing each to `each` in order, its inversion
-    /// measured on every `stride`-th pixel (the first included); the scene-wide
+    /// measured on one pixel in `stride` ([`inversion_measured`]); the scene-wide
     /// transform the mapping was fitted with, if any.
     fn render_each(
         &self,
@@ -504,7 +528,7 @@ impl<'a> ColourReproduction<'a> {
             chromacal_model::spatial::SpatialMap::Uniform
         )
         .then_some(&centre);
-        let quantiser = Quantiser::new(self.model, settings);
+        let quantiser = Quantiser::new(self.model, settings, scene.pixels.len());
         let render_pixel = |index: usize| -> Result<PixelOutcome, CrfError> {
             let pixel = &scene.pixels[index];
             let made;
@@ -519,7 +543,7 @@ impl<'a> ColourReproduction<'a> {
             let outside = !gamut.contains(&target);
             let mapped = self.map(settings.gamut, transform.as_ref(), gamut, &target);
             let drive = self.drive_for(&mapped, pixel.position);
-            let measured = index.is_multiple_of(stride);
+            let measured = inversion_measured(index, stride);
             // Each colour's L*a*b* made once for the ΔE00 it takes part in, and only
             // where one is wanted.
             let mapped_lab =
@@ -570,7 +594,7 @@ impl<'a> ColourReproduction<'a> {
     /// (its L*a*b* `mapped_lab`, which the nearest codes and a measured pixel need) at
     /// `position`; when `measured`, what the display shows for them and its ΔE00 from
     /// `mapped`. For the nearest codes each channel's light at the code below and above
-    /// the drive comes from the quantiser's table, and [`nearest::nearest`] measures
+    /// the drive comes from the quantiser, once each, and [`nearest::nearest`] measures
     /// only the corners that could be nearest.
     fn codes_for(
         &self,
@@ -584,7 +608,7 @@ impl<'a> ColourReproduction<'a> {
         let top = quantiser.top;
         let scaled = drive.map(|d| d.clamp(0.0, 1.0) * top);
         let rounded = scaled.map(|v| v.round() as u32);
-        let (Some(mapped_lab), Some(lights)) = (mapped_lab, &quantiser.lights) else {
+        let (true, Some(mapped_lab)) = (quantiser.nearest, mapped_lab) else {
             let inversion = mapped_lab.filter(|_| measured).map(|lab| {
                 let shown = self
                     .model
@@ -596,9 +620,24 @@ impl<'a> ColourReproduction<'a> {
         let gains = self.model.spatial.gains(position);
         let low = scaled.map(|v| v.floor() as u32);
         let high = scaled.map(|v| (v.ceil() as u32).min(top as u32));
+        let low_light = [0, 1, 2].map(|c| quantiser.light(self.model, c, low[c]));
+        let high_light = [0, 1, 2].map(|c| {
+            if high[c] == low[c] {
+                low_light[c]
+            } else {
+                quantiser.light(self.model, c, high[c])
+            }
+        });
         // `MonitorModel::forward` of the codes, from their channels' excitations.
         let shows = |codes: [u32; 3]| {
-            let e = [0, 1, 2].map(|c| gains[c] * lights[c][codes[c] as usize]);
+            let e = [0, 1, 2].map(|c| {
+                let light = if codes[c] == low[c] {
+                    low_light[c]
+                } else {
+                    high_light[c]
+                };
+                gains[c] * light
+            });
             self.model.light_above_black(&Vector3::from(e)) + self.model.black
         };
         // The rounded codes first, then the corners in order: the literal search's.

@@ -32,36 +32,13 @@ pub fn nearest(
     error_wanted: bool,
 ) -> (usize, Option<f64>) {
     let exact = |k: usize| delta_e_2000(asked_lab, &xyz_to_lab(&candidates[k].1, white));
-    let mut possible = [true; MOST];
-    if let Some(local) = LocalDeltaE2000::at(asked_lab) {
-        let tangent = LabTangent::at(asked, white, asked_lab);
-        // Each candidate's ΔE00 bounded: its step to first order, the first order's
-        // error for that step, and the form's error for its size.
-        let mut ranges = [(0.0, f64::INFINITY); MOST];
-        for (range, (_, shown)) in ranges.iter_mut().zip(candidates) {
-            let step = [shown.x - asked.x, shown.y - asked.y, shown.z - asked.z];
-            let delta = tangent.delta(step);
-            let lab_error = tangent.error(step);
-            let size = delta.iter().fold(lab_error, |m, d| m.max(d.abs()));
-            let relative = local.bound(size);
-            if relative < 1.0 && lab_error.is_finite() {
-                // |ΔE00 − d| ≤ relative · ΔE00 for the step taken, and ΔE00 moves by
-                // at most 4 × the step's error (its weights are at most 1, R_T at
-                // most 2 in size).
-                let d = local.delta_e(delta);
-                let slack = 4.0 * lab_error;
-                *range = (d / (1.0 + relative) - slack, d / (1.0 - relative) + slack);
-            }
-        }
-        let ranges = &ranges[..candidates.len()];
-        let least_upper = ranges.iter().fold(f64::INFINITY, |m, r| m.min(r.1));
-        for (p, range) in possible.iter_mut().zip(ranges) {
-            *p = range.0 <= least_upper;
-        }
-    }
+    let ranges = ranges(candidates, asked, asked_lab, white);
+    let ranges = &ranges[..candidates.len()];
+    let least_upper = ranges.iter().fold(f64::INFINITY, |m, r| m.min(r.1));
+    let possible = |k: usize| ranges[k].0 <= least_upper;
+    let survivors = (0..candidates.len()).filter(|&k| possible(k)).count();
     let mut best: Option<(usize, f64)> = None;
-    let survivors = possible[..candidates.len()].iter().filter(|p| **p).count();
-    for k in (0..candidates.len()).filter(|&k| possible[k]) {
+    for k in (0..candidates.len()).filter(|&k| possible(k)) {
         if survivors == 1 {
             return (k, error_wanted.then(|| exact(k)));
         }
@@ -72,10 +49,54 @@ pub fn nearest(
     }
     match best {
         Some((k, error)) => (k, Some(error)),
-        // Unreachable: the least square's own candidate always survives.
+        // Unreachable: the least upper bound's own candidate always survives.
         None => (0, Some(exact(0))),
     }
 }
+
+/// Each candidate's ΔE00 to `asked` bounded below and above, (0, ∞) where it cannot
+/// be: its step to first order ([`LabTangent::delta`]), the first order's error for
+/// that step ([`LabTangent::error`]), and the form's error for its size
+/// ([`LocalDeltaE2000::bound`]). The form about `asked_lab` is d(δ); the true step is
+/// within `e` of δ in each coordinate, which moves d by at most 4 e (the form's weights
+/// are at most 1, 1 + G at most 1.5 and R_T at most 2 in size: 2.1 measured); and the
+/// exact ΔE00 E has |d − E| ≤ r E at the true step. So E lies in
+/// [(d − 4e) / (1 + r), (d + 4e) / (1 − r)], widened by 10⁻⁹ for the rounding of the
+/// exact formula itself, which a real-number bound does not see.
+pub fn ranges(
+    candidates: &[([u32; 3], Xyz)],
+    asked: &Xyz,
+    asked_lab: &Lab,
+    white: &Xyz,
+) -> [(f64, f64); MOST] {
+    let mut ranges = [(0.0, f64::INFINITY); MOST];
+    let Some(local) = LocalDeltaE2000::at(asked_lab) else {
+        return ranges;
+    };
+    let tangent = LabTangent::at(asked, white, asked_lab);
+    for (range, (_, shown)) in ranges.iter_mut().zip(candidates) {
+        let step = [shown.x - asked.x, shown.y - asked.y, shown.z - asked.z];
+        let delta = tangent.delta(step);
+        let lab_error = tangent.error(step);
+        let size = delta.iter().fold(0.0_f64, |m, d| m.max(d.abs())) + lab_error;
+        let relative = local.bound(size);
+        let d = local.delta_e(delta);
+        let slack = 4.0 * lab_error;
+        let (least, most) = (
+            (d - slack) / (1.0 + relative) - ROUNDING,
+            (d + slack) / (1.0 - relative) + ROUNDING,
+        );
+        if relative < 1.0 && least.is_finite() && most.is_finite() {
+            *range = (least, most);
+        }
+    }
+    ranges
+}
+
+/// What the exact formula's own rounding may add to or take from a ΔE00 (its L*a*b*
+/// carry about 10⁻¹⁴ of noise; this is far above that and far below any difference a
+/// code makes).
+const ROUNDING: f64 = 1e-9;
 
 #[cfg(test)]
 mod tests {
@@ -94,6 +115,75 @@ mod tests {
             }
         }
         best
+    }
+
+    /// Every candidate's exact ΔE00 lies inside the range it is given, where the bounds
+    /// are tightest: hues within 0.1° of 0° (eq. 20's Δθ jumps there), C* near 25 at
+    /// 270° (G and R_T change fastest), near black (the tangent's curvature), and steps
+    /// from a 16-bit code's to 20 in L*a*b*. More sensitive than comparing winners, as
+    /// it judges every candidate: ranges from a fifth of the form's bound fail it.
+    #[test]
+    fn every_exact_delta_e_lies_in_its_range() {
+        use chromacal_color::spaces::lab_to_xyz;
+        use rand::{Rng, SeedableRng};
+        let white = Xyz::new(95.0, 100.0, 108.9);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xB0B5_1EDD_CAFE_F00D);
+        let mut uniform = move || rng.random::<f64>();
+        let (mut judged, mut nearest_edge) = (0, f64::INFINITY);
+        for i in 0..200_000 {
+            let (lightness, chroma, hue) = match i % 4 {
+                0 => (100.0 * uniform(), 80.0 * uniform(), 0.2 * uniform() - 0.1),
+                1 => (
+                    100.0 * uniform(),
+                    20.0 + 10.0 * uniform(),
+                    265.0 + 10.0 * uniform(),
+                ),
+                2 => (3.0 * uniform(), 20.0 * uniform(), 360.0 * uniform()),
+                _ => (100.0 * uniform(), 100.0 * uniform(), 360.0 * uniform()),
+            };
+            let hue: f64 = hue.to_radians();
+            let asked_lab = Lab {
+                l: lightness,
+                a: chroma * hue.cos(),
+                b: chroma * hue.sin(),
+            };
+            let asked = lab_to_xyz(&asked_lab, &white);
+            // Steps of 10⁻⁶ to 0.3 of the colour's own XYZ (and of 10⁻⁴ of the white).
+            let step = 10f64.powf(-6.0 + 5.5 * uniform());
+            let candidates: Vec<([u32; 3], Xyz)> = (0..MOST)
+                .map(|_| {
+                    let mut jitter = |v: f64, w: f64| {
+                        (v + (v + 1e-4 * w) * step * (2.0 * uniform() - 1.0)).max(0.0)
+                    };
+                    let shown = Xyz::new(
+                        jitter(asked.x, white.x),
+                        jitter(asked.y, white.y),
+                        jitter(asked.z, white.z),
+                    );
+                    ([0; 3], shown)
+                })
+                .collect();
+            let asked_lab = xyz_to_lab(&asked, &white);
+            let ranges = ranges(&candidates, &asked, &asked_lab, &white);
+            for ((_, shown), (least, most)) in candidates.iter().zip(ranges) {
+                if most.is_finite() {
+                    let exact = delta_e_2000(&asked_lab, &xyz_to_lab(shown, &white));
+                    assert!(
+                        least <= exact && exact <= most,
+                        "{asked_lab:?} to {shown:?}: {exact} outside [{least}, {most}]"
+                    );
+                    // How near the exact value comes to an end, in the range's own
+                    // half-width: a range 2 × too narrow would put some outside.
+                    let half = 0.5 * (most - least);
+                    if half > 0.0 {
+                        nearest_edge = nearest_edge.min((exact - least).min(most - exact) / half);
+                    }
+                    judged += 1;
+                }
+            }
+        }
+        assert!(judged > 1_000_000, "{judged}");
+        eprintln!("closest to an end: {nearest_edge:.3} of the half-width");
     }
 
     /// Candidates a code step around random colours, from black to white and from

@@ -26,7 +26,10 @@ use crate::spectral::{GRID_LEN, MethodKind, SpectralMethod, onto_grid};
 use crate::spectral_file::SpectralFile;
 use crate::spectral_image::SpectralImage;
 use crate::spectral_table::standard_methods;
-use crate::{ColourReproduction, RenderSettings, RenderSummary, Rendering, Scene, ScenePixel};
+use crate::{
+    ColourReproduction, INVERSION_SAMPLE, RenderSettings, RenderSummary, Rendering, Scene,
+    ScenePixel,
+};
 
 /// Why a scene could not be rendered: the message names the input that was wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -697,13 +700,13 @@ fn describe(summary: &RenderSummary, spectral: Option<&str>, output: &CodesOutpu
         ));
     }
     if let Some(s) = &summary.inversion {
-        // A large image's inversion is measured on evenly spaced pixels
+        // A large image's inversion is measured on a sample of its pixels
         // (`ColourReproduction::render_codes`); its codes on every one.
         let over = if s.n < summary.pixels {
             format!(
-                " over {} evenly spaced pixels (every {})",
+                " over {} pixels spread over the image (one in {})",
                 s.n,
-                summary.pixels.div_ceil(s.n)
+                summary.pixels.div_ceil(INVERSION_SAMPLE)
             )
         } else {
             String::new()
