@@ -196,7 +196,11 @@ impl LabTangent {
     /// ΔL*, Δa*, Δb* for the XYZ change `step`, to first order.
     #[inline]
     pub fn delta(&self, step: [f64; 3]) -> [f64; 3] {
-        let df = [0, 1, 2].map(|c| self.slope[c] * step[c]);
+        let df = [
+            self.slope[0] * step[0],
+            self.slope[1] * step[1],
+            self.slope[2] * step[2],
+        ];
         [
             116.0 * df[1],
             500.0 * (df[0] - df[1]),
@@ -208,7 +212,7 @@ impl LabTangent {
     /// every step no larger in X, Y and Z than `reach`: infinite where such a step
     /// could take a coordinate below half its value (too far for the tangent).
     pub fn error(&self, reach: [f64; 3]) -> f64 {
-        let remainder = [0, 1, 2].map(|c| {
+        let remainder_of = |c: usize| {
             let t = self.relative[c];
             let dt = reach[c].abs() * self.inverse_white[c];
             if t + dt <= LAB_EPSILON {
@@ -218,7 +222,8 @@ impl LabTangent {
             } else {
                 self.curvature[c] * dt * dt
             }
-        });
+        };
+        let remainder = [remainder_of(0), remainder_of(1), remainder_of(2)];
         (116.0 * remainder[1])
             .max(500.0 * (remainder[0] + remainder[1]))
             .max(200.0 * (remainder[1] + remainder[2]))
