@@ -143,6 +143,12 @@ pub fn xyz_to_lab(xyz: &Xyz, white: &Xyz) -> Lab {
     }
 }
 
+/// 2^(5/3): (t/2)^(−5/3) is 2^(5/3) t^(−5/3).
+const TWO_TO_THE_FIVE_THIRDS: f64 = 3.174_802_103_936_399;
+/// 1/9 ε^(−5/3) = 1/9 (29/6)⁵ = 20511149 / 69984: `LabTangent`'s curvature for a step
+/// from the linear part of L* into the cube root.
+const LINEAR_PART_CURVATURE: f64 = 20_511_149.0 / 69_984.0;
+
 /// L*a*b* near one colour: CIE 15:2004 eq. 8.3–8.8 differentiated at `xyz`, so that
 /// the change of L*a*b* for a small change of XYZ costs a few multiplications, not
 /// three cube roots; with a bound on what the first order leaves out.
@@ -179,10 +185,10 @@ impl LabTangent {
             // 1 / (t f²) there.
             if t > LAB_EPSILON {
                 slope[c] = f[c] / (3.0 * t) * inverse_white[c];
-                curvature[c] = 2f64.powf(5.0 / 3.0) / (9.0 * t * f[c] * f[c]);
+                curvature[c] = TWO_TO_THE_FIVE_THIRDS / (9.0 * t * f[c] * f[c]);
             } else {
                 slope[c] = LAB_KAPPA / 116.0 * inverse_white[c];
-                curvature[c] = 1.0 / (9.0 * LAB_EPSILON.powf(5.0 / 3.0));
+                curvature[c] = LINEAR_PART_CURVATURE;
             }
         }
         LabTangent {

@@ -60,6 +60,12 @@ fn per_channel<T>(mut f: impl FnMut(usize) -> T) -> [T; 3] {
 /// smaller scene): a 2048² image is measured on one pixel in 64.
 pub const INVERSION_SAMPLE: usize = 1 << 16;
 
+/// One pixel in how many `render_codes` measures the inversion of, in a scene of
+/// `pixels` pixels: 1 up to [`INVERSION_SAMPLE`] pixels.
+pub fn inversion_stride(pixels: usize) -> usize {
+    pixels.div_ceil(INVERSION_SAMPLE).max(1)
+}
+
 /// Whether `render_codes` measures the inversion of pixel `index` when it measures
 /// one pixel in `stride`: those whose index times the golden ratio falls in the first
 /// 1/`stride` of a unit (a Weyl sequence). Spread over the image, not the same columns
@@ -426,7 +432,7 @@ impl<'a> ColourReproduction<'a> {
         settings: &RenderSettings,
     ) -> Result<(Vec<[u16; 3]>, RenderSummary), CrfError> {
         let n = scene.pixels.len();
-        let stride = n.div_ceil(INVERSION_SAMPLE).max(1);
+        let stride = inversion_stride(n);
         let (mut codes, mut all, mut outside, mut inversion) = (
             Vec::with_capacity(n),
             Vec::with_capacity(n),
@@ -553,9 +559,8 @@ impl<'a> ColourReproduction<'a> {
             let measured = inversion_measured(index, stride);
             // Each colour's L*a*b* made once for the ΔE00 it takes part in, and only
             // where one is wanted.
-            let mapped_lab =
-                (settings.codes == CodeChoice::NearestInDeltaE00 || measured || mapped != target)
-                    .then(|| xyz_to_lab(&mapped, &self.white));
+            let mapped_lab = (quantiser.nearest || measured || mapped != target)
+                .then(|| xyz_to_lab(&mapped, &self.white));
             let (codes, inversion) = self.codes_for(
                 drive,
                 &mapped,

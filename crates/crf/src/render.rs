@@ -27,8 +27,8 @@ use crate::spectral_file::SpectralFile;
 use crate::spectral_image::SpectralImage;
 use crate::spectral_table::standard_methods;
 use crate::{
-    ColourReproduction, INVERSION_SAMPLE, RenderSettings, RenderSummary, Rendering, Scene,
-    ScenePixel,
+    ColourReproduction, RenderSettings, RenderSummary, Rendering, Scene, ScenePixel,
+    inversion_stride,
 };
 
 /// Why a scene could not be rendered: the message names the input that was wrong.
@@ -706,7 +706,7 @@ fn describe(summary: &RenderSummary, spectral: Option<&str>, output: &CodesOutpu
             format!(
                 " over {} pixels spread over the image (one in {})",
                 s.n,
-                summary.pixels.div_ceil(INVERSION_SAMPLE)
+                inversion_stride(summary.pixels)
             )
         } else {
             String::new()

@@ -53,13 +53,14 @@ pub fn percentile(values: &[f64], p: f64) -> f64 {
     let (_, at_lo, above) = order.select_nth_unstable_by(lo, |a, b| a.total_cmp(b));
     let at_lo = *at_lo;
     // The next order statistic is the least of those above.
-    let at_hi = match hi > lo {
-        true => above
+    let at_hi = if hi > lo {
+        above
             .iter()
             .copied()
             .min_by(|a, b| a.total_cmp(b))
-            .unwrap_or(at_lo),
-        false => at_lo,
+            .unwrap_or(at_lo)
+    } else {
+        at_lo
     };
     at_lo + (at_hi - at_lo) * (rank - lo as f64)
 }
