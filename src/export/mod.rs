@@ -173,6 +173,12 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
             kappa[0], kappa[1], kappa[2]
         ));
     }
+    if let Some(lambda) = terms.drive_crosstalk.filter(|_| !carries_terms) {
+        notes.push(format!(
+            "the model's crosstalk term in drive (each channel's light changes by λ = {:+.4}, {:+.4}, {:+.4} per channel beside it at full drive, less as the channel nears full drive); the curves and matrix are exact without it",
+            lambda[0], lambda[1], lambda[2]
+        ));
+    }
     if terms.chromaticity_shift.is_some() && !carries_terms {
         notes.push(
             "the model's drive-dependent primary chromaticity term (the primaries are those of full drive)"
@@ -191,7 +197,10 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
         .additivity
         .iter()
         .filter(|a| a.verdict == Verdict::Fails)
-        .filter(|a| terms.interaction.is_none() && (terms.crosstalk.is_none() || a.drive >= 1.0))
+        .filter(|a| {
+            let crosstalk = terms.crosstalk.is_some() || terms.drive_crosstalk.is_some();
+            terms.interaction.is_none() && (!crosstalk || a.drive >= 1.0)
+        })
         .collect();
     // The largest departure in X, Y or Z (a white can add up in luminance and not in Z).
     let worst = uncarried

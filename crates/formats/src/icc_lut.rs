@@ -18,7 +18,9 @@
 //!   straight line from 0, chosen by `output_top` so that the black falls on a grid
 //!   step, as near the identity as that allows). The additive model is linear in the shares and
 //!   the interaction term bilinear and the crosstalk term cubic, so the grid
-//!   interpolates them almost exactly.
+//!   interpolates them almost exactly; the crosstalk in drive follows each channel's
+//!   drive, E⁻¹ of its share, steep near black, and is interpolated to 3 × 10⁻⁴ of
+//!   white.
 //! * `B2A0`: the input tables scale each PCS component to the grid's range (the most
 //!   any code gives); the grid holds the shares the model's inverse gives, which are
 //!   linear in XYZ for the additive part, so the grid interpolates them almost
@@ -313,8 +315,8 @@ mod tests {
         assert!(ModelLuts::of(&model(AdditivityTerms::default()), None, 100.0, &chad).is_none());
     }
 
-    /// A model with each gain term: the interaction, then crosstalk.
-    fn gain_term_models() -> [MonitorModel; 2] {
+    /// A model with each gain term: the interaction, crosstalk, crosstalk in drive.
+    fn gain_term_models() -> [MonitorModel; 3] {
         [
             model(AdditivityTerms {
                 interaction: Some([-0.08, -0.05, -0.1]),
@@ -322,6 +324,10 @@ mod tests {
             }),
             model(AdditivityTerms {
                 crosstalk: Some([0.12, 0.08, 0.1]),
+                ..Default::default()
+            }),
+            model(AdditivityTerms {
+                drive_crosstalk: Some([0.09, 0.07, 0.1]),
                 ..Default::default()
             }),
         ]
@@ -347,8 +353,16 @@ mod tests {
                 worst = worst.max((got[j] - want[j]).abs());
             }
         }
-        // 1.5 × 10⁻⁵ is the encoding's step; the grid adds the term's curvature.
-        assert!(worst < 1e-4, "{worst}");
+        // 1.5 × 10⁻⁵ is the encoding's step; the grid adds the term's curvature. The
+        // crosstalk in drive follows δ = E⁻¹(ê), no polynomial in the grid's shares
+        // (steepest near black), so it gets 3 × 10⁻⁴ of white at worst here; on the
+        // Lenovo's profile the judge finds the ICC 0.002 ΔE00 behind its model.
+        let tolerance = if m.terms.drive_crosstalk.is_some() {
+            4e-4
+        } else {
+            1e-4
+        };
+        assert!(worst < tolerance, "{worst}");
         // The black, where a* and b* are most sensitive, comes out as the model's, to
         // far below the encoding's step.
         let black = forward_lookup(&luts.a2b0, [0.0; 3]);

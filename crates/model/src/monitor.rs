@@ -63,8 +63,11 @@ pub struct MonitorModel {
 /// l_c = K_c E_c the light of channel c in units of its primary, and ê_c = l_c / E_c(1)
 /// its share of full drive (clamped to [0, 1]), the light above black is
 ///
-/// XYZ − XYZ_black = Σ_c m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c) + Σ_c u_c ê_c (1 − ê_c),
-/// s_c = Σ_{k≠c} ê_k
+/// XYZ − XYZ_black = Σ_c m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c)
+///                  + Σ_c u_c ê_c (1 − ê_c),
+/// s_c = Σ_{k≠c} ê_k, t_c = Σ_{k≠c} δ_k
+///
+/// with δ_c = E_c⁻¹(ê_c E_c(1)) the channel's drive (`MonitorModel::drives_of_shares`).
 ///
 /// γ (interaction): a channel's light changes in proportion to what the other channels
 /// give, as when a shared supply sags (Brainard 1989's channel independence failing);
@@ -74,7 +77,15 @@ pub struct MonitorModel {
 /// (the charge of a lit neighbour's data line couples into the subpixel), so that its
 /// greys read above the sum of its ramps at mid drive and on the sum at white (the
 /// shared MacBook Pro: +2.3 % at 0.5, +0.4 % at white; a brightness limiter instead
-/// departs most at white, which γ models). u
+/// departs most at white, which γ models). λ (crosstalk in drive): the same coupling
+/// following the neighbours' drives rather than their light. The charge a lit
+/// neighbour's data line couples into a subpixel follows that line's voltage, which the
+/// panel's driver sets from the code, so a dark grey's neighbours at drive 0.3 couple
+/// in 30 % of their full effect where they give 7 % of their light: in light (κ) the
+/// term cannot lift the dim greys that the dense LCD sets show lifted by 3–5 % from
+/// drive 0.15 up (`docs/benchmarks.md`), in drive it can. The simulated crosstalk
+/// (`channel_crosstalk`) is of this kind. Both are candidates; cross-validation
+/// chooses (never both). u
 /// (chromaticity shift): the XYZ a channel adds besides its primary's direction,
 /// largest at mid drive and none at black and full drive, as a TN panel's or a CRT's
 /// blue moves in chromaticity with drive (the channel's own curve is still E_c).
@@ -87,6 +98,9 @@ pub struct AdditivityTerms {
     /// κ of red, green and blue.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub crosstalk: Option<[f64; 3]>,
+    /// λ of red, green and blue: crosstalk that follows the other channels' drives.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub drive_crosstalk: Option<[f64; 3]>,
     /// u of red, green and blue, XYZ each.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chromaticity_shift: Option<[[f64; 3]; 3]>,
@@ -101,7 +115,10 @@ pub struct AdditivityTerms {
 
 impl AdditivityTerms {
     pub fn is_empty(&self) -> bool {
-        self.interaction.is_none() && self.crosstalk.is_none() && self.chromaticity_shift.is_none()
+        self.interaction.is_none()
+            && self.crosstalk.is_none()
+            && self.drive_crosstalk.is_none()
+            && self.chromaticity_shift.is_none()
     }
 
     /// No term at all, the limiter included: nothing to write in a model file.
@@ -109,13 +126,16 @@ impl AdditivityTerms {
         self.is_empty() && self.limiter.is_none()
     }
 
-    /// Each channel's gain at drive shares `shares`: 1 + γ_c s_c + κ_c (1 − ê_c) s_c.
-    pub fn gains(&self, shares: &[f64; 3]) -> [f64; 3] {
+    /// Each channel's gain at light shares `shares` and drives `drives`:
+    /// 1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c.
+    pub fn gains(&self, shares: &[f64; 3], drives: &[f64; 3]) -> [f64; 3] {
         let s = interaction_basis(shares);
         let x = crosstalk_basis(shares);
+        let y = crosstalk_basis(drives);
         [0, 1, 2].map(|c| {
             1.0 + self.interaction.map_or(0.0, |g| g[c] * s[c])
                 + self.crosstalk.map_or(0.0, |k| k[c] * x[c])
+                + self.drive_crosstalk.map_or(0.0, |l| l[c] * y[c])
         })
     }
 
@@ -128,6 +148,9 @@ impl AdditivityTerms {
         if self.crosstalk.is_some() {
             names.push("crosstalk between channels");
         }
+        if self.drive_crosstalk.is_some() {
+            names.push("crosstalk between channels' drives");
+        }
         if self.chromaticity_shift.is_some() {
             names.push("drive-dependent primary chromaticity");
         }
@@ -138,6 +161,7 @@ impl AdditivityTerms {
     fn is_finite(&self) -> bool {
         self.interaction.iter().flatten().all(|v| v.is_finite())
             && self.crosstalk.iter().flatten().all(|v| v.is_finite())
+            && self.drive_crosstalk.iter().flatten().all(|v| v.is_finite())
             && self
                 .chromaticity_shift
                 .iter()
@@ -208,7 +232,7 @@ pub fn interaction_basis(shares: &[f64; 3]) -> [f64; 3] {
 }
 
 /// (1 − ê_c) s_c: the multiplier of κ_c, what the others give while channel c has
-/// room to rise.
+/// room to rise; of drives δ instead of shares, (1 − δ_c) t_c, the multiplier of λ_c.
 pub fn crosstalk_basis(shares: &[f64; 3]) -> [f64; 3] {
     let s = interaction_basis(shares);
     [0, 1, 2].map(|c| (1.0 - shares[c]) * s[c])
@@ -223,6 +247,27 @@ impl MonitorModel {
     /// E(1) of each channel.
     fn full_drive_excitations(&self) -> [f64; 3] {
         [0, 1, 2].map(|c| self.laws[c].full_drive_excitation())
+    }
+
+    /// δ: each channel's drive at light shares `shares` (its law inverted at the
+    /// centre), what the crosstalk in drive follows: 0 for a channel that gives no
+    /// light, and beyond [0, 1] (the extended inverse's shares) carried on by the
+    /// share's excess, so that the terms stay continuous there. Zeros without that
+    /// term, the only one that uses it (a law's inverse is not free).
+    pub fn drives_of_shares(&self, shares: &[f64; 3]) -> [f64; 3] {
+        if self.terms.drive_crosstalk.is_none() {
+            return [0.0; 3];
+        }
+        let full = self.full_drive_excitations();
+        [0, 1, 2].map(|c| {
+            let inside = shares[c].clamp(0.0, 1.0);
+            let drive = if inside > 0.0 {
+                self.laws[c].drive(inside * full[c])
+            } else {
+                0.0
+            };
+            drive + (shares[c] - inside)
+        })
     }
 
     /// The light above black of channel lights `light` (l_c = K_c E_c), terms included:
@@ -240,7 +285,7 @@ impl MonitorModel {
     /// are `shares`, terms included: m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c)
     /// + u_c ê_c (1 − ê_c), one column a channel.
     fn channel_contributions(&self, light: &Vector3<f64>, shares: &[f64; 3]) -> Matrix3<f64> {
-        let gains = self.terms.gains(shares);
+        let gains = self.terms.gains(shares, &self.drives_of_shares(shares));
         let w = chromaticity_shift_basis(shares);
         let mut contributions = Matrix3::zeros();
         for c in 0..3 {
@@ -305,7 +350,8 @@ impl MonitorModel {
                 }
             }
             let mut next = inverse * target;
-            for (c, gain) in self.terms.gains(&shares).into_iter().enumerate() {
+            let drives = self.drives_of_shares(&shares);
+            for (c, gain) in self.terms.gains(&shares, &drives).into_iter().enumerate() {
                 next[c] /= gain.max(1e-3);
             }
             let step = (next - light).abs().max();
@@ -774,6 +820,7 @@ mod tests {
             terms: AdditivityTerms {
                 interaction: Some([-0.03, -0.02, -0.05]),
                 crosstalk: Some([0.04, 0.03, 0.05]),
+                drive_crosstalk: None,
                 chromaticity_shift: Some([[0.0, 0.5, 1.5], [0.8, 0.0, -0.4], [-1.0, 1.2, 0.0]]),
                 limiter: None,
             },
@@ -833,6 +880,54 @@ mod tests {
         let back: MonitorModel = toml::from_str(&text).unwrap();
         assert_eq!(back, m);
         assert!(!toml::to_string(&srgb_like()).unwrap().contains("[terms]"));
+    }
+
+    #[test]
+    fn crosstalk_in_drive_lifts_dim_greys_and_inverts() {
+        let plain = srgb_like();
+        let m = MonitorModel {
+            terms: AdditivityTerms {
+                drive_crosstalk: Some([0.1, 0.08, 0.12]),
+                ..AdditivityTerms::default()
+            },
+            ..srgb_like()
+        };
+        let lift = |level: f64| m.forward_centre([level; 3]).y / plain.forward_centre([level; 3]).y;
+        // λ_c (1 − δ_c) t_c at a grey: 2 λ d (1 − d), in drive, not in light.
+        let g = 0.2;
+        let alone = plain.contributions_at([g; 3]);
+        let expected: f64 = (0..3)
+            .map(|c| alone[(1, c)] * m.terms.drive_crosstalk.unwrap()[c])
+            .sum::<f64>()
+            * 2.0
+            * g
+            * (1.0 - g);
+        let added = m.forward_centre([g; 3]).y - plain.forward_centre([g; 3]).y;
+        assert!(
+            (added - expected).abs() < 1e-4 * expected,
+            "{added} against {expected}"
+        );
+        assert!(lift(0.2) > 1.02 && (m.white() - plain.white()).norm() < 1e-12);
+        for pos in [ScreenPosition::CENTRE, ScreenPosition::new(0.1, 0.9)] {
+            for d in [
+                [0.5, 0.2, 0.9],
+                [0.01, 0.0, 0.3],
+                [0.002, 0.6, 0.6],
+                [0.7, 0.7, 0.7],
+            ] {
+                let back = m.inverse(&m.forward(d, pos), pos).unwrap();
+                assert!(!back.clipped, "{d:?}: {back:?}");
+                for c in 0..3 {
+                    assert!(
+                        (back.drive[c] - d[c]).abs() < 1e-6,
+                        "{d:?} at {pos:?}: {back:?}"
+                    );
+                }
+            }
+        }
+        let text = toml::to_string(&m).unwrap();
+        assert!(text.contains("drive_crosstalk"), "{text}");
+        assert_eq!(toml::from_str::<MonitorModel>(&text).unwrap(), m);
     }
 
     #[test]

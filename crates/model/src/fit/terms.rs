@@ -1,12 +1,13 @@
 //! Which corrections to the additive model to keep (`model::monitor::AdditivityTerms`):
-//! channel interaction (γ, 3 coefficients), crosstalk between channels (κ, 3) and
-//! drive-dependent primary chromaticity (u, 9 coefficients). Each is linear in its
+//! channel interaction (γ, 3 coefficients), crosstalk between channels following their
+//! light (κ, 3) or their drives (λ, 3) and drive-dependent primary chromaticity (u, 9
+//! coefficients). Each is linear in its
 //! coefficients once the curves and the primary matrix are fitted, so each is a
 //! weighted least-squares fit (weights 1/σ² from the run's noise) to what the additive
 //! model leaves over: u of each channel on its own ramp (greys cannot tell one
 //! channel's shift from another's, and fitting nine coefficients to them is
-//! ill-posed), then γ or κ on the greys and whites. γ and κ are never fitted together:
-//! greys alone hardly tell them apart.
+//! ill-posed), then γ, κ or λ on the greys and whites. No two gain terms are fitted
+//! together: greys alone hardly tell them apart.
 //!
 //! "Model only what is needed": the candidates (none, each term alone, the shift with
 //! either gain term) are cross-validated over drive levels as the laws are
@@ -55,20 +56,25 @@ pub enum TermSet {
     None,
     Interaction,
     Crosstalk,
+    /// Crosstalk that follows the other channels' drives (λ).
+    DriveCrosstalk,
     ChromaticityShift,
     /// Interaction and chromaticity shift (named before crosstalk was a term).
     Both,
     CrosstalkAndShift,
+    DriveCrosstalkAndShift,
 }
 
 impl TermSet {
-    pub const ALL: [TermSet; 6] = [
+    pub const ALL: [TermSet; 8] = [
         TermSet::None,
         TermSet::Interaction,
         TermSet::Crosstalk,
+        TermSet::DriveCrosstalk,
         TermSet::ChromaticityShift,
         TermSet::Both,
         TermSet::CrosstalkAndShift,
+        TermSet::DriveCrosstalkAndShift,
     ];
 
     pub fn name(self) -> &'static str {
@@ -76,9 +82,11 @@ impl TermSet {
             TermSet::None => "additive (no term)",
             TermSet::Interaction => "channel interaction",
             TermSet::Crosstalk => "crosstalk",
+            TermSet::DriveCrosstalk => "crosstalk in drive",
             TermSet::ChromaticityShift => "drive-dependent chromaticity",
             TermSet::Both => "interaction and chromaticity",
             TermSet::CrosstalkAndShift => "crosstalk and chromaticity",
+            TermSet::DriveCrosstalkAndShift => "crosstalk in drive and chromaticity",
         }
     }
 
@@ -90,10 +98,20 @@ impl TermSet {
         matches!(self, TermSet::Crosstalk | TermSet::CrosstalkAndShift)
     }
 
+    fn drive_crosstalk(self) -> bool {
+        matches!(
+            self,
+            TermSet::DriveCrosstalk | TermSet::DriveCrosstalkAndShift
+        )
+    }
+
     fn shift(self) -> bool {
         matches!(
             self,
-            TermSet::ChromaticityShift | TermSet::Both | TermSet::CrosstalkAndShift
+            TermSet::ChromaticityShift
+                | TermSet::Both
+                | TermSet::CrosstalkAndShift
+                | TermSet::DriveCrosstalkAndShift
         )
     }
 
@@ -103,6 +121,7 @@ impl TermSet {
         match self {
             TermSet::Interaction => Some(TermSet::Both),
             TermSet::Crosstalk => Some(TermSet::CrosstalkAndShift),
+            TermSet::DriveCrosstalk => Some(TermSet::DriveCrosstalkAndShift),
             _ => None,
         }
     }
@@ -115,8 +134,8 @@ pub struct TermReport {
     pub kept: bool,
     /// Cross-validated ΔE00 of the left-out readings.
     pub cross_validation: Option<ErrorStats>,
-    /// Fitted on every reading (empty for none): γ of R, G, B, κ of R, G, B, then u of
-    /// R, G, B (each only if in the set).
+    /// Fitted on every reading (empty for none): γ of R, G, B, κ of R, G, B, λ of R, G,
+    /// B, then u of R, G, B (each only if in the set).
     pub coefficients: Vec<f64>,
 }
 
@@ -196,7 +215,18 @@ fn fit_chromaticity_shift(
     (columns, shift)
 }
 
-/// A gain term (γ with `interaction_basis`, κ with `crosstalk_basis`) from the
+/// Which gain term `fit_gain_term` fits.
+#[derive(Debug, Clone, Copy)]
+enum GainTerm {
+    /// γ, on `interaction_basis` of the channels' light shares.
+    Interaction,
+    /// κ, on `crosstalk_basis` of the shares.
+    Crosstalk,
+    /// λ, on `crosstalk_basis` of the drives (`MonitorModel::drives_of_shares`).
+    DriveCrosstalk,
+}
+
+/// A gain term (γ with `interaction_basis`, κ and λ with `crosstalk_basis`) from the
 /// readings with more than one channel lit (greys, whites), on what `model` (with its
 /// shift, if any) leaves over: weighted least squares on the columns m_c l_c b_c, one
 /// per channel, each XYZ component weighted by 1/σ. `None` when the readings cannot
@@ -205,7 +235,7 @@ fn fit_gain_term(
     model: &MonitorModel,
     readings: &[&TermReading],
     noise: &NoiseModel,
-    basis: fn(&[f64; 3]) -> [f64; 3],
+    term: GainTerm,
 ) -> Option<[f64; 3]> {
     let mixed: Vec<&&TermReading> = readings
         .iter()
@@ -215,12 +245,20 @@ fn fit_gain_term(
         return Some([0.0; 3]);
     }
     let full = [0, 1, 2].map(|c| model.laws[c].full_drive_excitation());
+    // The drives, through the model's laws (`drives_of_shares` answers only where λ is).
+    let mut with_drives = model.clone();
+    with_drives.terms.drive_crosstalk = Some([0.0; 3]);
     let mut a = DMatrix::zeros(3 * mixed.len(), 3);
     let mut b = DVector::zeros(3 * mixed.len());
     for (i, r) in mixed.iter().enumerate() {
         let weight = 1.0 / noise.sigma(r.xyz.norm());
         let light = model.excitations(r.drive);
-        let s = basis(&drive_shares(&light, &full));
+        let shares = drive_shares(&light, &full);
+        let s = match term {
+            GainTerm::Interaction => interaction_basis(&shares),
+            GainTerm::Crosstalk => crosstalk_basis(&shares),
+            GainTerm::DriveCrosstalk => crosstalk_basis(&with_drives.drives_of_shares(&shares)),
+        };
         let residual = r.xyz - model.forward_centre(r.drive);
         for c in 0..3 {
             let column = model.matrix.column(c) * (light[c] * s[c]);
@@ -257,16 +295,33 @@ pub fn fit_terms(
         fitted.terms.chromaticity_shift = Some(shift);
     }
     if set.interaction() {
-        fitted.terms.interaction =
-            Some(fit_gain_term(&fitted, readings, noise, interaction_basis)?);
+        fitted.terms.interaction = Some(fit_gain_term(
+            &fitted,
+            readings,
+            noise,
+            GainTerm::Interaction,
+        )?);
     }
     if set.crosstalk() {
-        fitted.terms.crosstalk = Some(fit_gain_term(&fitted, readings, noise, crosstalk_basis)?);
+        fitted.terms.crosstalk = Some(fit_gain_term(
+            &fitted,
+            readings,
+            noise,
+            GainTerm::Crosstalk,
+        )?);
+    }
+    if set.drive_crosstalk() {
+        fitted.terms.drive_crosstalk = Some(fit_gain_term(
+            &fitted,
+            readings,
+            noise,
+            GainTerm::DriveCrosstalk,
+        )?);
     }
     within_bounds(&fitted).then_some(fitted)
 }
 
-/// Largest |γ| or |κ| and largest |u_c| as a share of |m_c| a term may have. Beyond them the
+/// Largest |γ|, |κ| or |λ| and largest |u_c| as a share of |m_c| a term may have. Beyond them the
 /// "correction" is no longer small next to the primaries, the inverse's fixed point
 /// may not converge, and the readings say something the terms were not made for.
 pub const MAX_TERM: f64 = 0.25;
@@ -274,7 +329,9 @@ pub const MAX_TERM: f64 = 0.25;
 /// Are the terms of `model` small next to its primaries?
 fn within_bounds(model: &MonitorModel) -> bool {
     let small = |g: Option<[f64; 3]>| g.is_none_or(|g| g.iter().all(|v| v.abs() < MAX_TERM));
-    let gamma_ok = small(model.terms.interaction) && small(model.terms.crosstalk);
+    let gamma_ok = small(model.terms.interaction)
+        && small(model.terms.crosstalk)
+        && small(model.terms.drive_crosstalk);
     let shift_ok = model.terms.chromaticity_shift.is_none_or(|u| {
         (0..3).all(|c| Xyz::from(u[c]).norm() < MAX_TERM * model.matrix.column(c).norm())
     });
@@ -288,6 +345,7 @@ fn coefficients(terms: &AdditivityTerms) -> Vec<f64> {
         .into_iter()
         .flatten()
         .chain(terms.crosstalk.into_iter().flatten())
+        .chain(terms.drive_crosstalk.into_iter().flatten())
         .chain(terms.chromaticity_shift.into_iter().flatten().flatten())
         .collect()
 }
@@ -352,11 +410,16 @@ fn forward_selection(scores: &[Option<Vec<f64>>], tolerance: f64) -> TermSet {
     let singles = vec![
         TermSet::Interaction,
         TermSet::Crosstalk,
+        TermSet::DriveCrosstalk,
         TermSet::ChromaticityShift,
     ];
     let kept = better_of(singles, TermSet::None).unwrap_or(TermSet::None);
     let pairs = match kept {
-        TermSet::ChromaticityShift => vec![TermSet::Both, TermSet::CrosstalkAndShift],
+        TermSet::ChromaticityShift => vec![
+            TermSet::Both,
+            TermSet::CrosstalkAndShift,
+            TermSet::DriveCrosstalkAndShift,
+        ],
         single => single.with_shift().into_iter().collect(),
     };
     better_of(pairs, kept).unwrap_or(kept)
@@ -540,9 +603,11 @@ mod tests {
             Some(additive),
             Some(interaction),
             Some(crosstalk),
+            Some(errors(0.08, 0.7)),
             Some(shift),
             Some(both),
             Some(crosstalk_and_shift),
+            Some(errors(-0.12, 0.5)),
         ];
         assert_eq!(simplest_within(&scores, 0.05, STANDARD_ERRORS), Some(1));
         assert_eq!(forward_selection(&scores, 0.05), TermSet::ChromaticityShift);
@@ -551,7 +616,9 @@ mod tests {
             Some(errors(0.0, 0.0)),
             Some(errors(0.01, 0.1)),
             Some(errors(0.02, 0.1)),
+            Some(errors(0.01, 0.1)),
             Some(errors(-0.01, 0.1)),
+            Some(errors(0.0, 0.2)),
             Some(errors(0.0, 0.2)),
             Some(errors(0.0, 0.2)),
         ];
@@ -564,9 +631,11 @@ mod tests {
                 Some(errors(0.0, 0.0)),
                 Some(errors(interaction, 0.01)),
                 Some(errors(crosstalk, 0.01)),
+                Some(errors(-0.05, 0.01)),
                 Some(errors(-0.1, 0.01)),
                 Some(errors(-0.6, 0.01)),
                 Some(errors(-0.4, 0.01)),
+                Some(errors(-0.7, 0.01)),
             ]
         };
         assert_eq!(
@@ -577,8 +646,23 @@ mod tests {
             forward_selection(&pair_better(-0.15, -0.2), 0.05),
             TermSet::CrosstalkAndShift
         );
+        // The crosstalk in drive kept (lowest of the single gain terms), its pair with
+        // the shift tried, not the others however low theirs.
+        assert_eq!(
+            forward_selection(&pair_better(-0.15, -0.1), 0.05),
+            TermSet::Both
+        );
         // A candidate that could not be scored is never kept.
-        let unscored = vec![Some(errors(0.0, 0.0)), None, None, None, None, None];
+        let unscored = vec![
+            Some(errors(0.0, 0.0)),
+            None,
+            None,
+            None,
+            None,
+            None,
+            None,
+            None,
+        ];
         assert_eq!(forward_selection(&unscored, 0.05), TermSet::None);
     }
 }
