@@ -8,8 +8,8 @@
 //!
 //! Optional terms (`AdditivityTerms`) model what the additive form misses, and are
 //! kept by the fit only where cross-validation shows they lower the error
-//! (`fit::terms`): channel interaction, crosstalk between channels, and primary
-//! chromaticity that moves with drive.
+//! (`fit::terms`): channel interaction, crosstalk between channels (following their
+//! light or their drives), and primary chromaticity that moves with drive.
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -250,19 +250,28 @@ impl MonitorModel {
     }
 
     /// δ: each channel's drive at light shares `shares` (its law inverted at the
-    /// centre), what the crosstalk in drive follows: 0 for a channel that gives no
-    /// light, and beyond [0, 1] (the extended inverse's shares) carried on by the
-    /// share's excess, so that the terms stay continuous there. Zeros without that
-    /// term, the only one that uses it (a law's inverse is not free).
+    /// centre), what the crosstalk in drive follows, taken from where the channel's
+    /// light starts (d₀, the law's drive just above 0) to full drive:
+    /// δ = (E⁻¹(ê E(1)) − d₀) / (E⁻¹(E(1)) − d₀). So δ is 0 for a channel that gives no
+    /// light and does not jump when it starts to (a law with a cut-off, GOG's or a
+    /// table's flat start, would jump to d₀ there: the forward model would step and
+    /// the inverse of a colour with a channel off have two answers), and 1 at full
+    /// drive whatever the law's top (a PQ law's E(1) is its peak's code, below 1).
+    /// Beyond [0, 1] (the extended inverse's shares) carried on by the share's excess,
+    /// so that the terms stay continuous there. Zeros without that term, the only one
+    /// that uses it (a law's inverse is not free).
     pub fn drives_of_shares(&self, shares: &[f64; 3]) -> [f64; 3] {
         if self.terms.drive_crosstalk.is_none() {
             return [0.0; 3];
         }
         let full = self.full_drive_excitations();
         [0, 1, 2].map(|c| {
+            let law = &self.laws[c];
             let inside = shares[c].clamp(0.0, 1.0);
-            let drive = if inside > 0.0 {
-                self.laws[c].drive(inside * full[c])
+            let start = law.drive(1e-12 * full[c]);
+            let span = law.drive(full[c]) - start;
+            let drive = if inside > 0.0 && span > 0.0 {
+                ((law.drive(inside * full[c]) - start) / span).clamp(0.0, 1.0)
             } else {
                 0.0
             };
@@ -282,7 +291,7 @@ impl MonitorModel {
     }
 
     /// Each channel's light above black at channel lights `light` whose drive shares
-    /// are `shares`, terms included: m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c)
+    /// are `shares`, terms included: m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c)
     /// + u_c ê_c (1 − ê_c), one column a channel.
     fn channel_contributions(&self, light: &Vector3<f64>, shares: &[f64; 3]) -> Matrix3<f64> {
         let gains = self.terms.gains(shares, &self.drives_of_shares(shares));
@@ -524,7 +533,7 @@ impl MonitorModel {
     }
 
     /// Each channel's light above black at `drive` at the centre, terms included
-    /// (m_c l_c (1 + γ_c s_c) + u_c ê_c (1 − ê_c)): the columns of a matrix whose row
+    /// (m_c l_c g_c + u_c ê_c (1 − ê_c), g_c the gain of `AdditivityTerms::gains`): the columns of a matrix whose row
     /// sums, with black, give the XYZ of `drive`. Each column is linear in m_c and u_c
     /// together, which is what lets [`Self::anchored_at`] solve for one gain a channel.
     pub fn contributions_at(&self, drive: Drive) -> Matrix3<f64> {
@@ -928,6 +937,47 @@ mod tests {
         let text = toml::to_string(&m).unwrap();
         assert!(text.contains("drive_crosstalk"), "{text}");
         assert_eq!(toml::from_str::<MonitorModel>(&text).unwrap(), m);
+    }
+
+    #[test]
+    fn crosstalk_in_drive_does_not_jump_where_a_channel_with_a_cut_off_starts() {
+        // GOG with light from v₀ = 0.05 / 1.05 on: δ runs from there, not from 0.
+        let gog = TransferLaw::GainOffsetGamma(crate::transfer::GainOffsetGamma {
+            gain: 1.05,
+            gamma: 2.4,
+        });
+        let m = MonitorModel {
+            laws: [gog.clone(), gog.clone(), gog],
+            terms: AdditivityTerms {
+                drive_crosstalk: Some([0.1, 0.1, 0.1]),
+                ..AdditivityTerms::default()
+            },
+            ..srgb_like()
+        };
+        let cut_off = 0.05 / 1.05;
+        let below = m.forward_centre([cut_off - 1e-6, 0.5, 0.5]);
+        let above = m.forward_centre([cut_off + 1e-6, 0.5, 0.5]);
+        assert!(
+            (above - below).norm() < 1e-6 * m.white().norm(),
+            "{below:?} {above:?}"
+        );
+        for d in [[0.0, 0.5, 0.5], [0.02, 0.3, 0.0], [0.2, 0.6, 0.9]] {
+            let back = m
+                .inverse(&m.forward_centre(d), ScreenPosition::CENTRE)
+                .unwrap();
+            let want = m.forward_centre(d);
+            let got = m.forward_centre(back.drive);
+            assert!(
+                (got - want).norm() < 1e-9 * m.white().norm(),
+                "{d:?}: {back:?}"
+            );
+        }
+        // Full drive is δ = 1, where the term gives nothing.
+        let plain = MonitorModel {
+            terms: AdditivityTerms::default(),
+            ..m.clone()
+        };
+        assert!((m.white() - plain.white()).norm() < 1e-12);
     }
 
     #[test]

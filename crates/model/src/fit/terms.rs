@@ -10,7 +10,7 @@
 //! together: greys alone hardly tell them apart.
 //!
 //! "Model only what is needed": the candidates (none, each term alone, the shift with
-//! either gain term) are cross-validated over drive levels as the laws are
+//! any gain term) are cross-validated over drive levels as the laws are
 //! (`law_selection`): the levels are dealt into at most `MAX_FOLDS` folds, each left
 //! out in turn, the coefficients fitted without it and its readings predicted, in
 //! ΔE00 against the display's white. A term is kept only if it lowers the error of the
@@ -383,7 +383,7 @@ fn cross_validate(
 /// more than `STANDARD_ERRORS` standard errors and than `tolerance` (`select::improves_on`).
 /// First the single terms against the additive model (of those that pass, the one with
 /// the lower error); then the shift with a gain term against what was kept (the gain
-/// term kept with the shift, or the shift kept with either gain term, the better of
+/// term kept with the shift, or the shift kept with any gain term, the better of
 /// those that pass). A term is never kept because
 /// a third candidate was best: on a fresh TN set the former rule (the simplest within
 /// two standard errors of the best) kept an interaction whose cross-validated mean
@@ -588,6 +588,22 @@ mod tests {
             .collect()
     }
 
+    /// Scores of the eight candidates in `TermSet::ALL`'s order, each pair with the
+    /// shift well below the single terms: the single gain terms at `interaction`,
+    /// `crosstalk` and `drive`, the shift at −0.1.
+    fn pair_better(interaction: f64, crosstalk: f64, drive: f64) -> Vec<Option<Vec<f64>>> {
+        vec![
+            Some(errors(0.0, 0.0)),
+            Some(errors(interaction, 0.01)),
+            Some(errors(crosstalk, 0.01)),
+            Some(errors(drive, 0.01)),
+            Some(errors(-0.1, 0.01)),
+            Some(errors(-0.6, 0.01)),
+            Some(errors(-0.4, 0.01)),
+            Some(errors(-0.7, 0.01)),
+        ]
+    }
+
     #[test]
     fn a_term_worse_than_the_model_without_it_is_not_kept_because_a_third_was_best() {
         // Issue 27's TN set: the interaction worse than additive, noisily; the shift
@@ -626,31 +642,13 @@ mod tests {
         // A pair kept only when it beats the single term kept, and only a pair that
         // holds it: the crosstalk kept, the interaction with the shift is not tried
         // however low its error.
-        let pair_better = |interaction: f64, crosstalk: f64| {
-            vec![
-                Some(errors(0.0, 0.0)),
-                Some(errors(interaction, 0.01)),
-                Some(errors(crosstalk, 0.01)),
-                Some(errors(-0.05, 0.01)),
-                Some(errors(-0.1, 0.01)),
-                Some(errors(-0.6, 0.01)),
-                Some(errors(-0.4, 0.01)),
-                Some(errors(-0.7, 0.01)),
-            ]
-        };
         assert_eq!(
-            forward_selection(&pair_better(-0.2, -0.15), 0.05),
+            forward_selection(&pair_better(-0.2, -0.15, -0.05), 0.05),
             TermSet::Both
         );
         assert_eq!(
-            forward_selection(&pair_better(-0.15, -0.2), 0.05),
+            forward_selection(&pair_better(-0.15, -0.2, -0.05), 0.05),
             TermSet::CrosstalkAndShift
-        );
-        // The crosstalk in drive kept (lowest of the single gain terms), its pair with
-        // the shift tried, not the others however low theirs.
-        assert_eq!(
-            forward_selection(&pair_better(-0.15, -0.1), 0.05),
-            TermSet::Both
         );
         // A candidate that could not be scored is never kept.
         let unscored = vec![
@@ -664,5 +662,23 @@ mod tests {
             None,
         ];
         assert_eq!(forward_selection(&unscored, 0.05), TermSet::None);
+    }
+
+    #[test]
+    fn the_crosstalk_in_drive_is_chosen_as_the_other_gain_terms_are() {
+        // The crosstalk in drive kept (lowest of the single terms), its pair with the
+        // shift tried (and kept, lower still), not the others however low theirs.
+        assert_eq!(
+            forward_selection(&pair_better(-0.15, -0.1, -0.2), 0.05),
+            TermSet::DriveCrosstalkAndShift
+        );
+        // The shift kept first: each gain term's pair with it is tried, the crosstalk
+        // in drive's the lowest.
+        let mut shift_first = pair_better(-0.05, -0.05, -0.05);
+        shift_first[4] = Some(errors(-0.3, 0.01));
+        assert_eq!(
+            forward_selection(&shift_first, 0.05),
+            TermSet::DriveCrosstalkAndShift
+        );
     }
 }
