@@ -860,6 +860,18 @@ mod tests {
         assert!((white_change - expected).norm() < 1e-9, "{white_change:?}");
     }
 
+    /// The inverse of `m` gives back `d` from its forward at `pos`, unclipped.
+    fn inverse_returns(m: &MonitorModel, d: Drive, pos: ScreenPosition) {
+        let back = m.inverse(&m.forward(d, pos), pos).unwrap();
+        assert!(!back.clipped, "{d:?}: {back:?}");
+        for c in 0..3 {
+            assert!(
+                (back.drive[c] - d[c]).abs() < 1e-6,
+                "{d:?} at {pos:?}: {back:?}"
+            );
+        }
+    }
+
     #[test]
     fn forward_then_inverse_returns_the_drive_with_terms() {
         let m = with_terms();
@@ -870,15 +882,7 @@ mod tests {
                 [1.0, 1.0, 1.0],
                 [0.7, 0.7, 0.7],
             ] {
-                let xyz = m.forward(d, pos);
-                let back = m.inverse(&xyz, pos).unwrap();
-                assert!(!back.clipped, "{d:?}: {back:?}");
-                for c in 0..3 {
-                    assert!(
-                        (back.drive[c] - d[c]).abs() < 1e-6,
-                        "{d:?} at {pos:?}: {back:?}"
-                    );
-                }
+                inverse_returns(&m, d, pos);
             }
         }
         let text = toml::to_string(&m).unwrap();
@@ -924,14 +928,7 @@ mod tests {
                 [0.002, 0.6, 0.6],
                 [0.7, 0.7, 0.7],
             ] {
-                let back = m.inverse(&m.forward(d, pos), pos).unwrap();
-                assert!(!back.clipped, "{d:?}: {back:?}");
-                for c in 0..3 {
-                    assert!(
-                        (back.drive[c] - d[c]).abs() < 1e-6,
-                        "{d:?} at {pos:?}: {back:?}"
-                    );
-                }
+                inverse_returns(&m, d, pos);
             }
         }
         let text = toml::to_string(&m).unwrap();
