@@ -242,8 +242,11 @@ enum GainTerm {
 /// together, from the readings with more than one channel lit (greys, whites), on what
 /// `model` (with its shift, if any) leaves over: weighted least squares on the columns
 /// m_c l_c b_c, one per channel and term, each XYZ component weighted by 1/σ. The
-/// coefficients in the order of `terms`; `None` when the readings cannot tell them
-/// apart.
+/// coefficients in the order of `terms`. Directions the readings do not reach at all
+/// (below 10⁻⁶ of the largest singular value) get none; γ and λ that the readings tell
+/// apart only badly can run off in opposite directions, and `within_bounds` then
+/// refuses the fit, which leaves that candidate unscored. `None` when the solve fails
+/// or a coefficient is not finite.
 fn fit_gain_terms(
     model: &MonitorModel,
     readings: &[&TermReading],
