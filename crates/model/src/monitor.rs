@@ -258,12 +258,8 @@ impl MonitorModel {
     /// the inverse of a colour with a channel off have two answers), and 1 at full
     /// drive whatever the law's top (a PQ law's E(1) is its peak's code, below 1).
     /// Beyond [0, 1] (the extended inverse's shares) carried on by the share's excess,
-    /// so that the terms stay continuous there. Zeros without that term, the only one
-    /// that uses it (a law's inverse is not free).
+    /// so that the terms stay continuous there.
     pub fn drives_of_shares(&self, shares: &[f64; 3]) -> [f64; 3] {
-        if self.terms.drive_crosstalk.is_none() {
-            return [0.0; 3];
-        }
         let full = self.full_drive_excitations();
         [0, 1, 2].map(|c| {
             let law = &self.laws[c];
@@ -277,6 +273,15 @@ impl MonitorModel {
             };
             drive + (shares[c] - inside)
         })
+    }
+
+    /// [`Self::drives_of_shares`] where the crosstalk in drive needs them, zeros without
+    /// it (the only term that uses them; a law's inverse is not free).
+    fn term_drives(&self, shares: &[f64; 3]) -> [f64; 3] {
+        if self.terms.drive_crosstalk.is_none() {
+            return [0.0; 3];
+        }
+        self.drives_of_shares(shares)
     }
 
     /// The light above black of channel lights `light` (l_c = K_c E_c), terms included:
@@ -294,7 +299,7 @@ impl MonitorModel {
     /// are `shares`, terms included: m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c)
     /// + u_c ê_c (1 − ê_c), one column a channel.
     fn channel_contributions(&self, light: &Vector3<f64>, shares: &[f64; 3]) -> Matrix3<f64> {
-        let gains = self.terms.gains(shares, &self.drives_of_shares(shares));
+        let gains = self.terms.gains(shares, &self.term_drives(shares));
         let w = chromaticity_shift_basis(shares);
         let mut contributions = Matrix3::zeros();
         for c in 0..3 {
@@ -359,7 +364,7 @@ impl MonitorModel {
                 }
             }
             let mut next = inverse * target;
-            let drives = self.drives_of_shares(&shares);
+            let drives = self.term_drives(&shares);
             for (c, gain) in self.terms.gains(&shares, &drives).into_iter().enumerate() {
                 next[c] /= gain.max(1e-3);
             }

@@ -261,9 +261,6 @@ fn fit_gain_terms(
         return Some(vec![[0.0; 3]; terms.len()]);
     }
     let full = [0, 1, 2].map(|c| model.laws[c].full_drive_excitation());
-    // The drives, through the model's laws (`drives_of_shares` answers only where λ is).
-    let mut with_drives = model.clone();
-    with_drives.terms.drive_crosstalk = Some([0.0; 3]);
     let mut a = DMatrix::zeros(3 * mixed.len(), 3 * terms.len());
     let mut b = DVector::zeros(3 * mixed.len());
     for (i, r) in mixed.iter().enumerate() {
@@ -274,7 +271,7 @@ fn fit_gain_terms(
             let s = match term {
                 GainTerm::Interaction => interaction_basis(&shares),
                 GainTerm::Crosstalk => crosstalk_basis(&shares),
-                GainTerm::DriveCrosstalk => crosstalk_basis(&with_drives.drives_of_shares(&shares)),
+                GainTerm::DriveCrosstalk => crosstalk_basis(&model.drives_of_shares(&shares)),
             };
             for c in 0..3 {
                 let column = model.matrix.column(c) * (light[c] * s[c]);
