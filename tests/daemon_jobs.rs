@@ -245,9 +245,13 @@ async fn warm_up_waits_for_the_screen_to_settle_and_is_bounded() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_uniformity_job_gives_the_profile_a_new_spatial_map() {
     let dir = tempfile::tempdir().unwrap();
+    // The monitor does not age while idle, so the readings depend on the seeds alone:
+    // with ageing, the idle time (longer on a loaded machine) moved every reading's
+    // noise, and in 6 runs of 420 on a loaded machine the degree-2 surface passed the noise
+    // test beside the degree-4 one and missed the corner by 0.006 to 0.012.
     let daemon = start_daemon(
         dir.path(),
-        "[daemon]\nsimulated_time_scale = 0.001\n[plan]\nuniformity_grid = 5\n",
+        "[daemon]\nsimulated_time_scale = 0.001\nsimulated_idle_ages = false\n[plan]\nuniformity_grid = 5\n",
     );
     let api = daemon.endpoint();
     start_job(&api, "calibrate").await;
