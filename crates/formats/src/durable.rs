@@ -180,8 +180,11 @@ pub fn lock_file(path: &Path, holder: &str) -> std::io::Result<Lock> {
         }
         Err(fs::TryLockError::Error(e)) => return Err(e),
     }
+    // The line in one write: `writeln!` on a file writes each piece apart, and a
+    // process refused in between read "chromacal calibrate (pid" without the pid.
+    let line = format!("{holder} (pid {})\n", std::process::id());
     file.set_len(0)?;
-    writeln!(file, "{holder} (pid {})", std::process::id())?;
+    file.write_all(line.as_bytes())?;
     file.sync_all()?;
     Ok(Lock::Taken(file))
 }
