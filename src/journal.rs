@@ -142,7 +142,10 @@ impl Journal {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        writeln!(file, "{line}").map_err(io_error(path))?;
+        // One write, as `append` makes: a reader never finds the header without its
+        // line's end.
+        file.write_all(format!("{line}\n").as_bytes())
+            .map_err(io_error(path))?;
         file.sync_all().map_err(io_error(path))?;
         if let Some(dir) = path.parent() {
             sync_directory(dir);
