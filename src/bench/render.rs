@@ -190,7 +190,7 @@ pub(super) fn render_table(out: &mut Tables, quick: bool) -> Result<(), BenchErr
     let crf = ColourReproduction::new(&centre_only).map_err(|e| e.to_string())?;
     let whole = ColourReproduction::new(&full).map_err(|e| e.to_string())?;
     let codes_buffer = || RefCell::new(vec![[0u16; 3]; n]);
-    let buffers: Vec<RefCell<Vec<[u16; 3]>>> = (0..5).map(|_| codes_buffer()).collect();
+    let buffers: Vec<RefCell<Vec<[u16; 3]>>> = (0..6).map(|_| codes_buffer()).collect();
     let judged = |codes: &RefCell<Vec<[u16; 3]>>, asked: &[Xyz], on_screen: bool| {
         let codes = codes.borrow();
         if on_screen {
@@ -199,9 +199,20 @@ pub(super) fn render_table(out: &mut Tables, quick: bool) -> Result<(), BenchErr
             error_of(&full, asked, &centre, &|k| from_codes(codes[k]))
         }
     };
+    // The same colours as 32-bit floats, as moxcms is given them.
+    let asked_f32: Vec<[f32; 3]> = asked_centre
+        .iter()
+        .map(|x| [x.x as f32, x.y as f32, x.z as f32])
+        .collect();
     let mut tools: Vec<Tool<'_>> = Vec::new();
     tools.push(Tool {
-        name: "chromacal (matrix and laws, tabulated inverse)".into(),
+        name: "chromacal (matrix and laws, tabulated inverse, f32 XYZ)".into(),
+        cores: "1".into(),
+        run: Box::new(|| crf.codes16_f32(&asked_f32, centre, &mut buffers[5].borrow_mut())),
+        error: Box::new(|| judged(&buffers[5], &asked_centre, false)),
+    });
+    tools.push(Tool {
+        name: "chromacal (matrix and laws, tabulated inverse, f64 XYZ)".into(),
         cores: "1".into(),
         run: Box::new(|| crf.codes16(&asked_centre, centre, &mut buffers[0].borrow_mut())),
         error: Box::new(|| judged(&buffers[0], &asked_centre, false)),
@@ -302,8 +313,12 @@ pub(super) fn render_table(out: &mut Tables, quick: bool) -> Result<(), BenchErr
         )
     )?;
     code_choice_table(out, &full, rounds)?;
-    // The loop over the screen (the spatial map at each pixel) on one core: tool 3.
-    let loop_seconds = median(seconds.iter().map(|r| r[3]).collect());
+    // The loop over the screen (the spatial map at each pixel) on one core.
+    let over_screen = tools
+        .iter()
+        .position(|t| t.name.contains("spatial map") && t.cores == "1")
+        .ok_or("the loop over the screen is not among the tools")?;
+    let loop_seconds = median(seconds.iter().map(|r| r[over_screen]).collect());
     // A quick look renders a 256 × 256 corner of it (the loop's time scaled to it).
     let side = if quick { 256 } else { SIDE };
     let scale = (side * side) as f64 / n as f64;

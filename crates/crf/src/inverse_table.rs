@@ -63,39 +63,157 @@ impl InverseTable {
 /// Pixels a batch handles at a time.
 pub const BLOCK: usize = 256;
 
-/// 16-bit codes of a block of pixels from each channel's excitation over its full
-/// (`shares[c][j]`, any value), through `tables`: first the table positions
-/// √share · (N − 1), channel by channel in loops the compiler vectorises; then one
-/// lookup a channel.
-pub fn codes16_of_shares(
-    tables: [&InverseTable; 3],
-    shares: &mut [[f32; BLOCK]; 3],
-    n: usize,
-    out: &mut [[u16; 3]],
-) {
-    let scale = (CODE_TABLE_SIZE - 1) as f32;
-    for channel in shares.iter_mut() {
-        for s in channel.iter_mut() {
-            // NaN (a zero gain) stays NaN, and a NaN index casts to 0: black.
-            *s = s.clamp(0.0, 1.0).sqrt() * scale + 0.5;
+/// The entry of a code table nearest √share · (N − 1), `share` clamped to [0, 1].
+///
+/// The float is rounded to an integer by adding 2²³, which leaves the nearest integer
+/// (ties to even) in the low bits of the sum's mantissa for any value in [0, 2²³). A
+/// cast (`as usize`) would round down after adding a half, but it saturates and sends
+/// NaN to 0 lane by lane, and that keeps the loop from being vectorised: with it the
+/// index took most of a pixel's time. NaN (a channel with no gain) stays NaN, whose low
+/// bits are 0: black, as the cast gave.
+#[inline(always)]
+pub fn code_index(share: f32) -> u32 {
+    const SCALE: f32 = (CODE_TABLE_SIZE - 1) as f32;
+    const ROUND: f32 = 8_388_608.0;
+    (share.clamp(0.0, 1.0).sqrt() * SCALE + ROUND).to_bits() & (CODE_TABLE_SIZE as u32 - 1)
+}
+
+/// A profile's inverse as the batch loop reads it (a profile without additivity
+/// terms): the inverse matrix's rows over each channel's full light, the black, and
+/// each channel's table, in 32-bit floats.
+#[derive(Debug, Clone, Copy)]
+pub struct BatchInverse<'a> {
+    pub rows: [[f32; 3]; 3],
+    pub black: [f32; 3],
+    pub tables: [&'a InverseTable; 3],
+}
+
+/// What the batch loop may be compiled for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Instructions {
+    /// The best the processor has (AVX2 and FMA, say), found at run time by `pulp`.
+    Best,
+    /// The target's baseline: for the test that both give the same codes.
+    Baseline,
+}
+
+impl BatchInverse<'_> {
+    /// 16-bit codes of `xyz` (read as `f32` by `to_f32`) into `out`, each channel's
+    /// light divided by `gains(k)` for pixel k where the screen is not uniform.
+    ///
+    /// Compiled again for the processor's best instructions when asked, the same
+    /// operations in the same order (Rust fuses no multiply and add of its own): the
+    /// same codes as the baseline build gives, as a test holds.
+    pub fn codes16<T>(
+        &self,
+        xyz: &[T],
+        to_f32: impl Fn(&T) -> [f32; 3],
+        gains: Option<impl Fn(usize) -> [f64; 3]>,
+        out: &mut [[u16; 3]],
+        instructions: Instructions,
+    ) {
+        let batch = Batch {
+            inverse: self,
+            xyz,
+            to_f32,
+            gains,
+            out,
+        };
+        match instructions {
+            Instructions::Best => pulp::Arch::new().dispatch(batch),
+            Instructions::Baseline => batch.run(),
         }
     }
-    for c in 0..3 {
-        let table: &[u16; CODE_TABLE_SIZE] = &tables[c].codes;
-        for (o, p) in out[..n].iter_mut().zip(&shares[c][..n]) {
-            o[c] = table[(*p as usize).min(CODE_TABLE_SIZE - 1)];
+}
+
+/// One call of the batch loop, as `pulp` runs it (a closure would not be inlined into
+/// the function it compiles for AVX2, and would run as the baseline built it).
+struct Batch<'a, 'b, T, F, G> {
+    inverse: &'a BatchInverse<'a>,
+    xyz: &'b [T],
+    to_f32: F,
+    gains: Option<G>,
+    out: &'b mut [[u16; 3]],
+}
+
+impl<T, F: Fn(&T) -> [f32; 3], G: Fn(usize) -> [f64; 3]> pulp::WithSimd for Batch<'_, '_, T, F, G> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        self.run()
+    }
+}
+
+impl<T, F: Fn(&T) -> [f32; 3], G: Fn(usize) -> [f64; 3]> Batch<'_, '_, T, F, G> {
+    /// Block by block: the matrix rows give each channel's share of its full light,
+    /// divided by the gains where there are some, the share its table entry
+    /// ([`code_index`]), and the tables the codes: one load a channel.
+    #[inline(always)]
+    fn run(self) {
+        let BatchInverse {
+            rows,
+            black,
+            tables,
+        } = *self.inverse;
+        let share = |x: &T, r: &[f32; 3]| {
+            let x = (self.to_f32)(x);
+            r[0] * (x[0] - black[0]) + r[1] * (x[1] - black[1]) + r[2] * (x[2] - black[2])
+        };
+        let [t0, t1, t2] = tables.map(|t| &*t.codes);
+        let (mut shares, mut index) = ([[0f32; BLOCK]; 3], [[0u32; BLOCK]; 3]);
+        let blocks = self.xyz.chunks(BLOCK).zip(self.out.chunks_mut(BLOCK));
+        for (b, (block, codes)) in blocks.enumerate() {
+            match &self.gains {
+                // A uniform screen's gains are 1: the table entries at once.
+                None => {
+                    for (j, x) in block.iter().enumerate() {
+                        for (entries, r) in index.iter_mut().zip(&rows) {
+                            entries[j] = code_index(share(x, r));
+                        }
+                    }
+                }
+                Some(gains) => {
+                    for (j, x) in block.iter().enumerate() {
+                        let g = gains(b * BLOCK + j);
+                        for c in 0..3 {
+                            shares[c][j] = share(x, &rows[c]) / g[c] as f32;
+                        }
+                    }
+                    for (entries, channel) in index.iter_mut().zip(&shares) {
+                        for (i, s) in entries.iter_mut().zip(channel) {
+                            *i = code_index(*s);
+                        }
+                    }
+                }
+            }
+            // An index is below the table's size by its mask: no bounds check.
+            let at = |c: usize, j: usize| index[c][j] as usize & (CODE_TABLE_SIZE - 1);
+            let pixel = |j: usize| [t0[at(0, j)], t1[at(1, j)], t2[at(2, j)]];
+            // As many codes as colours (`zip` stops at the shorter).
+            let n = block.len().min(codes.len());
+            let codes = &mut codes[..n];
+            // Each pixel but the last as four codes, one store, the fourth overwritten
+            // by the next pixel: a store a pixel instead of three.
+            let last = codes.len() - 1;
+            let flat = codes.as_flattened_mut();
+            for j in 0..last {
+                let [r, g, b] = pixel(j);
+                flat[3 * j..3 * j + 4].copy_from_slice(&[r, g, b, 0]);
+            }
+            codes[last] = pixel(last);
         }
     }
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use chromacal_model::transfer::{Cowan, GainOffsetGamma, Power};
 
-    #[test]
-    fn the_table_follows_the_exact_inverse() {
-        for law in [
+    /// A law of each kind the tables must follow: a power, a cut-off, a Cowan toe.
+    pub(crate) fn laws() -> [TransferLaw; 3] {
+        [
             TransferLaw::Power(Power { gamma: 2.2 }),
             TransferLaw::GainOffsetGamma(GainOffsetGamma::from_cutoff(0.05, 2.4)),
             TransferLaw::Cowan(Cowan {
@@ -103,7 +221,12 @@ mod tests {
                 b: 0.06,
                 toe: 1.0 / 255.0,
             }),
-        ] {
+        ]
+    }
+
+    #[test]
+    fn the_table_follows_the_exact_inverse() {
+        for law in laws() {
             let table = InverseTable::of(&law);
             let full = law.full_drive_excitation();
             let mut worst: f64 = 0.0;

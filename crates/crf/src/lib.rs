@@ -43,7 +43,7 @@ use chromacal_model::fit::stats::ErrorStats;
 use chromacal_model::fit::validate::delta_e00_xyz;
 use chromacal_model::{Drive, MonitorModel, ScreenPosition};
 use gamut::{GamutAt, GamutMapping, Smith, StoneCowanBeatty};
-use inverse_table::InverseTable;
+use inverse_table::{Instructions, InverseTable};
 use tone::{SceneLuminance, ToneCurve, ToneOperator};
 
 /// Pixels rendered together over the cores before they are handed on.
@@ -341,45 +341,62 @@ impl<'a> ColourReproduction<'a> {
     ) {
         if !self.model.terms.is_empty() {
             for (k, (x, o)) in xyz.iter().zip(out.iter_mut()).enumerate() {
-                *o = self
-                    .drive_for(x, positions(k))
-                    .map(|d| (d * 65535.0 + 0.5) as u16);
+                *o = self.drive_codes16(x, positions(k));
             }
             return;
         }
+        let to_f32 = |x: &Xyz| [x.x as f32, x.y as f32, x.z as f32];
+        self.codes16_tabulated(xyz, to_f32, positions, out, Instructions::Best);
+    }
+
+    /// As [`Self::codes16`], for colours held as 32-bit floats, as images carry them
+    /// (PFM, OpenEXR) and as other colour engines take them: half the memory `Xyz`'s
+    /// doubles take, and memory is what bounds the loop on a large image.
+    pub fn codes16_f32(
+        &self,
+        xyz: &[[f32; 3]],
+        positions: impl Fn(usize) -> ScreenPosition,
+        out: &mut [[u16; 3]],
+    ) {
+        if !self.model.terms.is_empty() {
+            for (k, (x, o)) in xyz.iter().zip(out.iter_mut()).enumerate() {
+                let x = Xyz::new(x[0].into(), x[1].into(), x[2].into());
+                *o = self.drive_codes16(&x, positions(k));
+            }
+            return;
+        }
+        self.codes16_tabulated(xyz, |x| *x, positions, out, Instructions::Best);
+    }
+
+    /// The 16-bit codes of `drive_for`.
+    fn drive_codes16(&self, xyz: &Xyz, position: ScreenPosition) -> [u16; 3] {
+        self.drive_for(xyz, position)
+            .map(|d| (d * 65535.0 + 0.5) as u16)
+    }
+
+    /// The batch loop of [`Self::codes16`] over colours read as `f32` by `to_f32`
+    /// ([`inverse_table::BatchInverse`]).
+    fn codes16_tabulated<T>(
+        &self,
+        xyz: &[T],
+        to_f32: impl Fn(&T) -> [f32; 3],
+        positions: impl Fn(usize) -> ScreenPosition,
+        out: &mut [[u16; 3]],
+        instructions: Instructions,
+    ) {
+        let m = &self.matrix_inverse;
+        let inverse = inverse_table::BatchInverse {
+            rows: [0, 1, 2]
+                .map(|c| [m[(c, 0)], m[(c, 1)], m[(c, 2)]].map(|v| (v / self.full[c]) as f32)),
+            black: [self.model.black.x, self.model.black.y, self.model.black.z].map(|v| v as f32),
+            tables: [&self.tables[0], &self.tables[1], &self.tables[2]],
+        };
         let uniform = matches!(
             self.model.spatial,
             chromacal_model::spatial::SpatialMap::Uniform
         );
-        let m = &self.matrix_inverse;
-        let rows =
-            [0, 1, 2].map(|c| [m[(c, 0)], m[(c, 1)], m[(c, 2)]].map(|v| (v / self.full[c]) as f32));
-        let black = self.model.black.map(|v| v as f32);
-        let tables = [&self.tables[0], &self.tables[1], &self.tables[2]];
-        use inverse_table::BLOCK;
-        let mut shares = [[0f32; BLOCK]; 3];
-        for (b, (block, codes)) in xyz.chunks(BLOCK).zip(out.chunks_mut(BLOCK)).enumerate() {
-            for (j, x) in block.iter().enumerate() {
-                let d = [
-                    x.x as f32 - black.x,
-                    x.y as f32 - black.y,
-                    x.z as f32 - black.z,
-                ];
-                let gains = if uniform {
-                    [1.0; 3]
-                } else {
-                    self.model
-                        .spatial
-                        .gains(positions(b * BLOCK + j))
-                        .map(|g| g as f32)
-                };
-                for c in 0..3 {
-                    let r = &rows[c];
-                    shares[c][j] = (r[0] * d[0] + r[1] * d[1] + r[2] * d[2]) / gains[c];
-                }
-            }
-            inverse_table::codes16_of_shares(tables, &mut shares, block.len(), codes);
-        }
+        let gains = (!uniform).then_some(|k| self.model.spatial.gains(positions(k)));
+        inverse.codes16(xyz, to_f32, gains, out, instructions);
     }
 
     /// As `drive_for`, each law inverted exactly (and the additivity terms' fixed
@@ -815,5 +832,89 @@ fn summary_of(
             _ => None,
         },
         image_light: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chromacal_model::monitor::AdditivityTerms;
+    use chromacal_model::spatial::{SpatialMap, Surface};
+
+    /// sRGB-like primaries (white Y = 100), one law of each kind, black 0.1, and a
+    /// spatial map or none.
+    fn model(spatial: SpatialMap) -> MonitorModel {
+        MonitorModel {
+            matrix: Matrix3::new(
+                41.24, 35.76, 18.05, //
+                21.26, 71.52, 7.22, //
+                1.93, 11.92, 95.05,
+            ),
+            black: Xyz::new(0.1, 0.11, 0.12),
+            laws: inverse_table::tests::laws(),
+            spatial,
+            terms: AdditivityTerms::default(),
+        }
+    }
+
+    #[test]
+    fn the_batch_loop_gives_the_same_codes_for_every_instruction_set() {
+        // Colours from below black to beyond white, NaN and infinities among them, at
+        // a block's edge and over the screen: the loop built for the processor's best
+        // instructions and the one built for the baseline agree code for code, and
+        // both show the colours they were asked for.
+        let n = 3 * inverse_table::BLOCK + 17;
+        let spread = |k: usize, s: usize| ((k * 7919 + s * 104_729) % 1000) as f64 / 999.0;
+        let colour = |k: usize| Xyz::from([0, 1, 2].map(|s| 125.0 * spread(k, s) - 10.0));
+        let drive = |k: usize| [0, 1, 2].map(|s| 0.03 + 0.94 * spread(k, s));
+        let at = |k: usize| ScreenPosition::new((k % 29) as f64 / 28.0, (k % 31) as f64 / 30.0);
+        let surface = Surface {
+            degree: 2,
+            coefficients: vec![0.0, 0.0, -0.1, 0.0, -0.1],
+        };
+        for spatial in [SpatialMap::Uniform, SpatialMap::Scalar { surface }] {
+            let model = model(spatial);
+            // Every other colour one the display makes where it is shown.
+            let mut asked: Vec<Xyz> = (0..n)
+                .map(|k| match k % 2 {
+                    0 => model.forward(drive(k), at(k)),
+                    _ => colour(k),
+                })
+                .collect();
+            asked[5] = Xyz::new(f64::NAN, 1.0, 1.0);
+            asked[7] = Xyz::new(f64::INFINITY, 1.0, f64::NEG_INFINITY);
+            let crf = ColourReproduction::new(&model).unwrap();
+            let to_f32 = |x: &Xyz| [x.x as f32, x.y as f32, x.z as f32];
+            let mut best = vec![[0u16; 3]; n];
+            let mut baseline = vec![[1u16; 3]; n];
+            crf.codes16_tabulated(&asked, to_f32, at, &mut best, Instructions::Best);
+            crf.codes16_tabulated(&asked, to_f32, at, &mut baseline, Instructions::Baseline);
+            assert_eq!(best, baseline);
+            // The public paths, f64 and f32, are the same loop.
+            let mut from_f64 = vec![[2u16; 3]; n];
+            crf.codes16(&asked, at, &mut from_f64);
+            let as_f32: Vec<[f32; 3]> = asked.iter().map(to_f32).collect();
+            let mut from_f32 = vec![[3u16; 3]; n];
+            crf.codes16_f32(&as_f32, at, &mut from_f32);
+            assert_eq!(from_f64, best);
+            assert_eq!(from_f32, best);
+            assert_eq!(best[5][0], 0, "NaN gives black");
+            assert_eq!(best[7][2], 0, "−∞ gives black");
+            // Inside the gamut the codes show the colour to within 0.05 ΔE00.
+            let white = model.white();
+            let mut inside = 0;
+            for (k, (x, c)) in asked.iter().zip(&best).enumerate() {
+                let drive = crf.drive_exact_for(x, at(k));
+                if !x.iter().all(|v| v.is_finite())
+                    || drive.iter().any(|d| !(0.02..0.98).contains(d))
+                {
+                    continue;
+                }
+                let shown = model.forward(c.map(|v| f64::from(v) / 65535.0), at(k));
+                assert!(delta_e00_xyz(x, &shown, &white) < 0.05, "{x:?} {c:?}");
+                inside += 1;
+            }
+            assert!(inside > n / 3, "{inside}");
+        }
     }
 }
