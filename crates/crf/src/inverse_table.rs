@@ -63,19 +63,22 @@ impl InverseTable {
 /// Pixels a batch handles at a time.
 pub const BLOCK: usize = 256;
 
-/// The entry of a code table nearest √share · (N − 1), `share` clamped to [0, 1].
+/// The entry of a code table nearest √share · (N − 1), `share` clamped to [0, 1] and
+/// NaN taken as 0 (black).
 ///
 /// The float is rounded to an integer by adding 2²³, which leaves the nearest integer
 /// (ties to even) in the low bits of the sum's mantissa for any value in [0, 2²³). A
 /// cast (`as usize`) would round down after adding a half, but it saturates and sends
 /// NaN to 0 lane by lane, and that keeps the loop from being vectorised: with it the
-/// index took most of a pixel's time. NaN (a channel with no gain) stays NaN, whose low
-/// bits are 0: black, as the cast gave.
+/// index took most of a pixel's time. `max` rather than `clamp` at the bottom: it
+/// gives 0 for any NaN, where a NaN left through would give the index of whatever
+/// payload it carries (a NaN of all ones bits is the last entry: white).
 #[inline(always)]
+#[allow(clippy::manual_clamp)] // `clamp` keeps NaN, which is the point of not using it
 pub fn code_index(share: f32) -> u32 {
     const SCALE: f32 = (CODE_TABLE_SIZE - 1) as f32;
     const ROUND: f32 = 8_388_608.0;
-    (share.clamp(0.0, 1.0).sqrt() * SCALE + ROUND).to_bits() & (CODE_TABLE_SIZE as u32 - 1)
+    (share.max(0.0).min(1.0).sqrt() * SCALE + ROUND).to_bits() & (CODE_TABLE_SIZE as u32 - 1)
 }
 
 /// A profile's inverse as the batch loop reads it (a profile without additivity
@@ -177,7 +180,12 @@ impl<T, F: Fn(&T) -> [f32; 3], G: Fn(usize) -> [f64; 3]> Batch<'_, '_, T, F, G> 
                     for (j, x) in block.iter().enumerate() {
                         let g = gains(b * BLOCK + j);
                         for c in 0..3 {
-                            shares[c][j] = share(x, &rows[c]) / g[c] as f32;
+                            // A channel with no gain there gives no light: black, as
+                            // `drive_for` gives (not the ±∞ of a division by 0).
+                            shares[c][j] = match g[c] as f32 {
+                                g if g > 0.0 => share(x, &rows[c]) / g,
+                                _ => 0.0,
+                            };
                         }
                     }
                     for (entries, channel) in index.iter_mut().zip(&shares) {

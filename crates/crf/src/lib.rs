@@ -858,6 +858,16 @@ mod tests {
     }
 
     #[test]
+    fn the_batch_loop_is_compiled_for_avx2_where_the_processor_has_it() {
+        // Otherwise the test below compares the baseline build with itself.
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            assert!(!matches!(pulp::Arch::new(), pulp::Arch::Scalar));
+        }
+    }
+
+    #[test]
     fn the_batch_loop_gives_the_same_codes_for_every_instruction_set() {
         // Colours from below black to beyond white, NaN and infinities among them, at
         // a block's edge and over the screen: the loop built for the processor's best
@@ -881,7 +891,10 @@ mod tests {
                     _ => colour(k),
                 })
                 .collect();
-            asked[5] = Xyz::new(f64::NAN, 1.0, 1.0);
+            // A NaN of all ones bits (its payload would be the last entry: white), a
+            // quiet NaN, and infinities.
+            asked[5] = Xyz::new(f64::from_bits(u64::MAX), 1.0, 1.0);
+            asked[6] = Xyz::new(1.0, f64::NAN, 1.0);
             asked[7] = Xyz::new(f64::INFINITY, 1.0, f64::NEG_INFINITY);
             let crf = ColourReproduction::new(&model).unwrap();
             let to_f32 = |x: &Xyz| [x.x as f32, x.y as f32, x.z as f32];
@@ -898,8 +911,18 @@ mod tests {
             crf.codes16_f32(&as_f32, at, &mut from_f32);
             assert_eq!(from_f64, best);
             assert_eq!(from_f32, best);
-            assert_eq!(best[5][0], 0, "NaN gives black");
-            assert_eq!(best[7][2], 0, "−∞ gives black");
+            assert_eq!(best[5], [0; 3], "a NaN, whatever its bits, gives black");
+            assert_eq!(best[6], [0; 3], "a NaN gives black");
+            assert_eq!(best[7][1], 0, "−∞ gives black");
+            // As many codes as colours: a longer output keeps what is past them, a
+            // shorter one takes the first.
+            let mut longer = vec![[9u16; 3]; n + 5];
+            crf.codes16(&asked, at, &mut longer);
+            assert_eq!(longer[..n], best[..]);
+            assert!(longer[n..].iter().all(|c| *c == [9; 3]));
+            let mut shorter = vec![[9u16; 3]; n - 3];
+            crf.codes16(&asked, at, &mut shorter);
+            assert_eq!(shorter[..], best[..n - 3]);
             // Inside the gamut the codes show the colour to within 0.05 ΔE00.
             let white = model.white();
             let mut inside = 0;
