@@ -339,14 +339,7 @@ impl<'a> ColourReproduction<'a> {
         positions: impl Fn(usize) -> ScreenPosition,
         out: &mut [[u16; 3]],
     ) {
-        if !self.model.terms.is_empty() {
-            for (k, (x, o)) in xyz.iter().zip(out.iter_mut()).enumerate() {
-                *o = self.drive_codes16(x, positions(k));
-            }
-            return;
-        }
-        let to_f32 = |x: &Xyz| [x.x as f32, x.y as f32, x.z as f32];
-        self.codes16_tabulated(xyz, to_f32, positions, out, Instructions::Best);
+        self.codes16_of(xyz, positions, out, Instructions::Best);
     }
 
     /// As [`Self::codes16`], for colours held as 32-bit floats, as images carry them
@@ -358,32 +351,27 @@ impl<'a> ColourReproduction<'a> {
         positions: impl Fn(usize) -> ScreenPosition,
         out: &mut [[u16; 3]],
     ) {
-        if !self.model.terms.is_empty() {
-            for (k, (x, o)) in xyz.iter().zip(out.iter_mut()).enumerate() {
-                let x = Xyz::new(x[0].into(), x[1].into(), x[2].into());
-                *o = self.drive_codes16(&x, positions(k));
-            }
-            return;
-        }
-        self.codes16_tabulated(xyz, |x| *x, positions, out, Instructions::Best);
+        self.codes16_of(xyz, positions, out, Instructions::Best);
     }
 
-    /// The 16-bit codes of `drive_for`.
-    fn drive_codes16(&self, xyz: &Xyz, position: ScreenPosition) -> [u16; 3] {
-        self.drive_for(xyz, position)
-            .map(|d| (d * 65535.0 + 0.5) as u16)
-    }
-
-    /// The batch loop of [`Self::codes16`] over colours read as `f32` by `to_f32`
-    /// ([`inverse_table::BatchInverse`]).
-    fn codes16_tabulated<T>(
+    /// [`Self::codes16`] for colours of either precision: through `drive_for` with
+    /// additivity terms, else the batch loop ([`inverse_table::BatchInverse`]) compiled
+    /// for `instructions`.
+    fn codes16_of<T: Colour>(
         &self,
         xyz: &[T],
-        to_f32: impl Fn(&T) -> [f32; 3],
         positions: impl Fn(usize) -> ScreenPosition,
         out: &mut [[u16; 3]],
         instructions: Instructions,
     ) {
+        if !self.model.terms.is_empty() {
+            for (k, (x, o)) in xyz.iter().zip(out.iter_mut()).enumerate() {
+                *o = self
+                    .drive_for(&x.xyz(), positions(k))
+                    .map(|d| (d * 65535.0 + 0.5) as u16);
+            }
+            return;
+        }
         let m = &self.matrix_inverse;
         let inverse = inverse_table::BatchInverse {
             rows: [0, 1, 2]
@@ -396,7 +384,7 @@ impl<'a> ColourReproduction<'a> {
             chromacal_model::spatial::SpatialMap::Uniform
         );
         let gains = (!uniform).then_some(|k| self.model.spatial.gains(positions(k)));
-        inverse.codes16(xyz, to_f32, gains, out, instructions);
+        inverse.codes16(xyz, T::xyz_f32, gains, out, instructions);
     }
 
     /// As `drive_for`, each law inverted exactly (and the additivity terms' fixed
@@ -835,6 +823,34 @@ fn summary_of(
     }
 }
 
+/// A colour as the batch loop takes it: XYZ in doubles (`Xyz`) or in 32-bit floats.
+trait Colour {
+    fn xyz(&self) -> Xyz;
+    fn xyz_f32(&self) -> [f32; 3];
+}
+
+impl Colour for Xyz {
+    fn xyz(&self) -> Xyz {
+        *self
+    }
+
+    #[inline(always)]
+    fn xyz_f32(&self) -> [f32; 3] {
+        [self.x as f32, self.y as f32, self.z as f32]
+    }
+}
+
+impl Colour for [f32; 3] {
+    fn xyz(&self) -> Xyz {
+        Xyz::new(self[0].into(), self[1].into(), self[2].into())
+    }
+
+    #[inline(always)]
+    fn xyz_f32(&self) -> [f32; 3] {
+        *self
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -910,16 +926,15 @@ mod tests {
             asked[6] = Xyz::new(1.0, f64::NAN, 1.0);
             asked[7] = Xyz::new(f64::INFINITY, 1.0, f64::NEG_INFINITY);
             let crf = ColourReproduction::new(&model).unwrap();
-            let to_f32 = |x: &Xyz| [x.x as f32, x.y as f32, x.z as f32];
             let mut best = vec![[0u16; 3]; n];
             let mut baseline = vec![[1u16; 3]; n];
-            crf.codes16_tabulated(&asked, to_f32, at, &mut best, Instructions::Best);
-            crf.codes16_tabulated(&asked, to_f32, at, &mut baseline, Instructions::Baseline);
+            crf.codes16_of(&asked, at, &mut best, Instructions::Best);
+            crf.codes16_of(&asked, at, &mut baseline, Instructions::Baseline);
             assert_eq!(best, baseline);
             // The public paths, f64 and f32, are the same loop.
             let mut from_f64 = vec![[2u16; 3]; n];
             crf.codes16(&asked, at, &mut from_f64);
-            let as_f32: Vec<[f32; 3]> = asked.iter().map(to_f32).collect();
+            let as_f32: Vec<[f32; 3]> = asked.iter().map(Colour::xyz_f32).collect();
             let mut from_f32 = vec![[3u16; 3]; n];
             crf.codes16_f32(&as_f32, at, &mut from_f32);
             assert_eq!(from_f64, best);
