@@ -49,6 +49,9 @@ use tone::{SceneLuminance, ToneCurve, ToneOperator};
 /// Pixels rendered together over the cores before they are handed on.
 const BAND: usize = 1 << 16;
 
+/// Pixels a core renders at a time into a scene's codes (`render_codes`).
+const STRETCH: usize = 1 << 12;
+
 /// `[f(0), f(1), f(2)]`: a channel-wise array written out, for the per-pixel paths
 /// (`[0, 1, 2].map` was left a call there: a fifth of a render's time).
 #[inline(always)]
@@ -84,6 +87,39 @@ struct PixelOutcome {
     mapping_delta_e00: f64,
     /// What the codes show and its ΔE00 from `mapped`, where measured.
     inversion: Option<(Xyz, f64)>,
+}
+
+/// What every pixel of one render shares (`ColourReproduction::pixel_path`).
+struct PixelPath<'s> {
+    scene: &'s Scene,
+    /// The scene with its white carried to the display's, or the scene itself.
+    adapted: std::borrow::Cow<'s, Scene>,
+    curve: ToneCurve,
+    /// Each pixel's target and gamut, made beforehand only for a mapping fitted to
+    /// the whole scene (Stone–Cowan–Beatty, Smith); empty otherwise.
+    targets: Vec<Xyz>,
+    gamuts: Vec<GamutAt>,
+    /// The gamut at the centre: every pixel's on a uniform screen.
+    centre: GamutAt,
+    uniform: bool,
+    transform: Option<SceneTransform>,
+    mapping: GamutMapping,
+    quantiser: Quantiser,
+    /// One pixel in how many has its inversion measured.
+    stride: usize,
+}
+
+/// What one core keeps of its stretch of a scene's pixels besides their codes.
+#[derive(Default)]
+struct Stretch {
+    /// How many pixels the mapping left as they were (0 ΔE00).
+    unmoved: usize,
+    /// The mapping's ΔE00 of the others, in order.
+    moved: Vec<f64>,
+    /// The mapping's ΔE00 of the pixels outside the gamut, in order.
+    outside: Vec<f64>,
+    /// The inversion's ΔE00 where measured, in order.
+    inversion: Vec<f64>,
 }
 
 /// How a run's drives become codes: the largest code, whether the nearest codes are
@@ -438,23 +474,54 @@ impl<'a> ColourReproduction<'a> {
     ) -> Result<(Vec<[u16; 3]>, RenderSummary), CrfError> {
         let n = scene.pixels.len();
         let stride = inversion_stride(n);
-        let (mut codes, mut all, mut outside, mut inversion) = (
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
-            Vec::new(),
-            Vec::with_capacity(INVERSION_SAMPLE.min(n)),
+        let path = self.pixel_path(scene, settings, stride)?;
+        // Each core fills its own stretch of the codes and keeps its own ΔE00s; the
+        // stretches are joined in the scene's order, so the summary is the one a
+        // pixel-by-pixel render makes (the same sums in the same order) and the bad
+        // pixel reported is the first.
+        let mut codes = vec![[0u16; 3]; n];
+        let stretches: Vec<Result<Stretch, CrfError>> = codes
+            .par_chunks_mut(STRETCH)
+            .enumerate()
+            .map(|(s, out)| {
+                let mut stretch = Stretch::default();
+                for (k, slot) in out.iter_mut().enumerate() {
+                    let p = self.render_pixel(&path, s * STRETCH + k)?;
+                    *slot = p.codes.map(|c| c as u16);
+                    // A pixel the mapping left as it was is counted, not kept: most
+                    // of an image, and 0 in every statistic but the count.
+                    if p.mapping_delta_e00 == 0.0 {
+                        stretch.unmoved += 1;
+                    } else {
+                        stretch.moved.push(p.mapping_delta_e00);
+                    }
+                    if p.outside {
+                        stretch.outside.push(p.mapping_delta_e00);
+                    }
+                    if let Some((_, e)) = p.inversion {
+                        stretch.inversion.push(e);
+                    }
+                }
+                Ok(stretch)
+            })
+            .collect();
+        let mut whole = Stretch::default();
+        for stretch in stretches {
+            let stretch = stretch?;
+            whole.unmoved += stretch.unmoved;
+            whole.moved.extend(stretch.moved);
+            whole.outside.extend(stretch.outside);
+            whole.inversion.extend(stretch.inversion);
+        }
+        let mut summary = summary_of(
+            n,
+            &[],
+            &whole.outside,
+            &whole.inversion,
+            settings,
+            path.transform,
         );
-        let transform = self.render_each(scene, settings, stride, |p| {
-            codes.push(p.codes.map(|c| c as u16));
-            all.push(p.mapping_delta_e00);
-            if p.outside {
-                outside.push(p.mapping_delta_e00);
-            }
-            if let Some((_, e)) = p.inversion {
-                inversion.push(e);
-            }
-        })?;
-        let summary = summary_of(n, &all, &outside, &inversion, settings, transform);
+        summary.mapping_all = ErrorStats::of_with_zeros(&whole.moved, whole.unmoved);
         Ok((codes, summary))
     }
 
@@ -468,6 +535,34 @@ impl<'a> ColourReproduction<'a> {
         stride: usize,
         mut each: impl FnMut(PixelOutcome),
     ) -> Result<Option<SceneTransform>, CrfError> {
+        let path = self.pixel_path(scene, settings, stride)?;
+        // Over all cores, a band of pixels at a time, handed on in the scene's order
+        // (the first bad pixel is the one reported, as one by one): the memory is one
+        // band's, whatever the scene's size.
+        let mut band = Vec::with_capacity(BAND);
+        for start in (0..scene.pixels.len()).step_by(BAND) {
+            let end = (start + BAND).min(scene.pixels.len());
+            (start..end)
+                .into_par_iter()
+                .with_min_len(1024)
+                .map(|index| self.render_pixel(&path, index))
+                .collect_into_vec(&mut band);
+            for pixel in band.drain(..) {
+                each(pixel?);
+            }
+        }
+        Ok(path.transform)
+    }
+
+    /// What every pixel of a render of `scene` shares, made once: the checks of the
+    /// scene and the settings, the scene as adapted, its tone curve, the scene-wide
+    /// transform, and the quantiser.
+    fn pixel_path<'s>(
+        &self,
+        scene: &'s Scene,
+        settings: &RenderSettings,
+        stride: usize,
+    ) -> Result<PixelPath<'s>, CrfError> {
         if !(1..=16).contains(&settings.bits) {
             return Err(CrfError::BitDepth(settings.bits));
         }
@@ -488,22 +583,16 @@ impl<'a> ColourReproduction<'a> {
         // (A 2048² image peaked at 1.83 GB holding them; the codes are the same.)
         let adapted = self.adapt(scene, settings.adaptation)?;
         let curve = self.tone_curve(&adapted, settings.tone)?;
-        let target_of = |p: &ScenePixel| p.xyz * curve.factor(p.xyz.y);
-        let gamut_of = |index: usize, p: &ScenePixel| {
-            self.gamut_at(p.position).ok_or_else(|| CrfError::BadPixel {
-                index,
-                what: format!(
-                    "the profile's spatial map gives a channel no light at ({}, {})",
-                    p.position.x, p.position.y
-                ),
-            })
-        };
         let whole_scene = matches!(
             settings.gamut,
             GamutMapping::StoneCowanBeatty(_) | GamutMapping::Smith
         );
         let targets: Vec<Xyz> = if whole_scene {
-            adapted.pixels.iter().map(target_of).collect()
+            adapted
+                .pixels
+                .iter()
+                .map(|p| p.xyz * curve.factor(p.xyz.y))
+                .collect()
         } else {
             Vec::new()
         };
@@ -512,7 +601,7 @@ impl<'a> ColourReproduction<'a> {
                 .pixels
                 .iter()
                 .enumerate()
-                .map(|(index, p)| gamut_of(index, p))
+                .map(|(index, p)| self.gamut_of(index, p))
                 .collect::<Result<_, _>>()?
         } else {
             Vec::new()
@@ -541,70 +630,85 @@ impl<'a> ColourReproduction<'a> {
             _ => None,
         };
         // A uniform screen has one gamut everywhere: made once.
-        let everywhere = matches!(
+        let uniform = matches!(
             self.model.spatial,
             chromacal_model::spatial::SpatialMap::Uniform
-        )
-        .then_some(&centre);
-        let quantiser = Quantiser::new(self.model, settings, scene.pixels.len());
-        let render_pixel = |index: usize| -> Result<PixelOutcome, CrfError> {
-            let pixel = &scene.pixels[index];
-            let made;
-            let (target, gamut) = match (whole_scene, everywhere) {
-                (true, _) => (targets[index], &gamuts[index]),
-                (false, Some(gamut)) => (target_of(&adapted.pixels[index]), gamut),
-                (false, None) => {
-                    made = gamut_of(index, pixel)?;
-                    (target_of(&adapted.pixels[index]), &made)
-                }
-            };
-            let outside = !gamut.contains(&target);
-            let mapped = self.map(settings.gamut, transform.as_ref(), gamut, &target);
-            let drive = self.drive_for(&mapped, pixel.position);
-            let measured = inversion_measured(index, stride);
-            // Each colour's L*a*b* made once for the ΔE00 it takes part in, and only
-            // where one is wanted.
-            let mapped_lab = (quantiser.nearest || measured || mapped != target)
-                .then(|| xyz_to_lab(&mapped, &self.white));
-            let (codes, inversion) = self.codes_for(
-                drive,
-                &mapped,
-                mapped_lab.as_ref(),
-                pixel.position,
-                &quantiser,
-                measured,
-            );
-            Ok(PixelOutcome {
-                codes,
-                target,
-                mapped,
-                outside,
-                // A colour the mapping left as it was is 0 away from itself.
-                mapping_delta_e00: match mapped_lab {
-                    Some(lab) if mapped != target => {
-                        delta_e_2000(&xyz_to_lab(&target, &self.white), &lab)
-                    }
-                    _ => 0.0,
-                },
-                inversion,
-            })
-        };
-        // Over all cores, a band of pixels at a time, handed on in the scene's order
-        // (the first bad pixel is the one reported, as one by one): the memory is one
-        // band's, whatever the scene's size.
-        let mut band = Vec::with_capacity(BAND);
-        for start in (0..scene.pixels.len()).step_by(BAND) {
-            let end = (start + BAND).min(scene.pixels.len());
-            (start..end)
-                .into_par_iter()
-                .with_min_len(1024)
-                .map(render_pixel)
-                .collect_into_vec(&mut band);
-            for pixel in band.drain(..) {
-                each(pixel?);
+        );
+        Ok(PixelPath {
+            scene,
+            adapted,
+            curve,
+            targets,
+            gamuts,
+            centre,
+            uniform,
+            transform,
+            mapping: settings.gamut,
+            quantiser: Quantiser::new(self.model, settings, scene.pixels.len()),
+            stride,
+        })
+    }
+
+    /// The gamut at pixel `index` (`p`) of a scene, or why it has none.
+    fn gamut_of(&self, index: usize, p: &ScenePixel) -> Result<GamutAt, CrfError> {
+        self.gamut_at(p.position).ok_or_else(|| CrfError::BadPixel {
+            index,
+            what: format!(
+                "the profile's spatial map gives a channel no light at ({}, {})",
+                p.position.x, p.position.y
+            ),
+        })
+    }
+
+    /// Pixel `index` of `path`'s scene through the whole path: tone, gamut, inverse
+    /// model and codes.
+    fn render_pixel(&self, path: &PixelPath, index: usize) -> Result<PixelOutcome, CrfError> {
+        let pixel = &path.scene.pixels[index];
+        let made;
+        // Targets made beforehand are those of a mapping fitted to the whole scene.
+        let (target, gamut) = if path.targets.is_empty() {
+            let xyz = path.adapted.pixels[index].xyz;
+            let target = xyz * path.curve.factor(xyz.y);
+            if path.uniform {
+                (target, &path.centre)
+            } else {
+                made = self.gamut_of(index, pixel)?;
+                (target, &made)
             }
-        }
-        Ok(transform)
+        } else {
+            (path.targets[index], &path.gamuts[index])
+        };
+        let outside = !gamut.contains(&target);
+        let mapped = self.map(path.mapping, path.transform.as_ref(), gamut, &target);
+        let drive = self.drive_for(&mapped, pixel.position);
+        let measured = inversion_measured(index, path.stride);
+        let quantiser = &path.quantiser;
+        // Each colour's L*a*b* made once for the ΔE00 it takes part in, and only
+        // where one is wanted.
+        let mapped_lab = (quantiser.nearest || measured || mapped != target)
+            .then(|| xyz_to_lab(&mapped, &self.white));
+        let (codes, inversion) = self.codes_for(
+            drive,
+            &mapped,
+            mapped_lab.as_ref(),
+            pixel.position,
+            quantiser,
+            measured,
+        );
+        Ok(PixelOutcome {
+            codes,
+            target,
+            mapped,
+            outside,
+            // A colour the mapping left as it was is 0 away from itself.
+            mapping_delta_e00: match mapped_lab {
+                Some(lab) if mapped != target => {
+                    delta_e_2000(&xyz_to_lab(&target, &self.white), &lab)
+                }
+                _ => 0.0,
+            },
+            inversion,
+        })
     }
 
     /// The codes for `drive`, chosen as `quantiser` says to show the colour `mapped`

@@ -26,6 +26,31 @@ impl ErrorStats {
     }
 }
 
+impl ErrorStats {
+    /// As [`ErrorStats::of`] the values and `zeros` more values of 0, for errors
+    /// (never below 0) most of which are 0: a render's pixels the mapping left as
+    /// they were. The same numbers as `of` over all of them in any order of the
+    /// zeros (a sum is unchanged by adding 0), without holding the zeros.
+    pub fn of_with_zeros(values: &[f64], zeros: usize) -> Option<Self> {
+        let n = values.len() + zeros;
+        if n == 0 {
+            return None;
+        }
+        let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        Some(ErrorStats {
+            n,
+            // A sum starts from −0, which a zero added makes +0.
+            mean: if zeros > 0 {
+                values.iter().sum::<f64>() + 0.0
+            } else {
+                values.iter().sum::<f64>()
+            } / n as f64,
+            p95: percentile_with_zeros(values, zeros, 95.0),
+            max: if zeros > 0 { max.max(0.0) } else { max },
+        })
+    }
+}
+
 pub fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len() as f64
 }
@@ -65,6 +90,27 @@ pub fn percentile(values: &[f64], p: f64) -> f64 {
     at_lo + (at_hi - at_lo) * (rank - lo as f64)
 }
 
+/// [`percentile`] of the values and `zeros` more values of 0, the values not below 0:
+/// the zeros are the first order statistics.
+fn percentile_with_zeros(values: &[f64], zeros: usize, p: f64) -> f64 {
+    let n = values.len() + zeros;
+    let rank = (p / 100.0).clamp(0.0, 1.0) * (n - 1) as f64;
+    let (lo, hi) = (rank.floor() as usize, rank.ceil() as usize);
+    let mut order = values.to_vec();
+    let mut statistic = |i: usize| {
+        if i < zeros {
+            0.0
+        } else {
+            *order
+                .select_nth_unstable_by(i - zeros, |a, b| a.total_cmp(b))
+                .1
+        }
+    };
+    let at_lo = statistic(lo);
+    let at_hi = if hi > lo { statistic(hi) } else { at_lo };
+    at_lo + (at_hi - at_lo) * (rank - lo as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -95,5 +141,41 @@ mod tests {
             assert_eq!(percentile(&values, p), expected, "p{p}");
         }
         assert_eq!(percentile(&[2.5], 95.0), 2.5);
+    }
+
+    /// Errors with zeros counted equal the same errors with the zeros held, for any
+    /// share of zeros (none, a few, most, all but one, all) and any rank.
+    #[test]
+    fn zeros_counted_give_the_statistics_of_zeros_held() {
+        let values: Vec<f64> = (0..997u64)
+            .map(|i| ((i * 7919) % 613) as f64 / 17.0 + 0.01)
+            .collect();
+        for zeros in [0, 1, 30, 5_000, 20_000] {
+            for kept in [0, 1, 2, 50, 997] {
+                let kept = &values[..kept];
+                // The zeros among the values, the values in their order, as a render
+                // meets them.
+                let half = kept.len() / 2;
+                let mut held = kept[..half].to_vec();
+                held.extend(std::iter::repeat_n(0.0, zeros));
+                held.extend_from_slice(&kept[half..]);
+                let counted = ErrorStats::of_with_zeros(kept, zeros);
+                assert_eq!(counted, ErrorStats::of(&held), "{zeros} zeros, {kept:?}");
+                // To the bit: a mean of −0 prints as "-0.000".
+                let bits =
+                    |s: Option<ErrorStats>| s.map(|s| [s.mean, s.p95, s.max].map(f64::to_bits));
+                assert_eq!(bits(counted), bits(ErrorStats::of(&held)));
+                for p in [0.0, 50.0, 95.0, 99.99, 100.0] {
+                    if !held.is_empty() {
+                        assert_eq!(
+                            percentile_with_zeros(kept, zeros, p),
+                            percentile(&held, p),
+                            "p{p}, {zeros} zeros, {} kept",
+                            kept.len()
+                        );
+                    }
+                }
+            }
+        }
     }
 }
