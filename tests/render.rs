@@ -1133,12 +1133,24 @@ fn spectra_and_a_spectral_image_render_as_their_xyz_would() {
 /// the corners that could be nearest: they are the literal search's, which measures all
 /// 8 in the same order and keeps the first strictly nearer, on every pixel of a scene
 /// from below the display's black to beyond its white, neutral and saturated, all over
-/// the screen, at 8, 10 and 16 bits.
+/// the screen, at 8, 10 and 16 bits; for the profile as fitted (additive: the corners'
+/// steps from its box's edges) and with additivity terms (each corner's shown colour).
 #[test]
 fn the_bounded_nearest_codes_are_the_literal_search_s() {
+    let additive = model();
+    let mut with_terms = model();
+    with_terms.terms.interaction = Some([0.03, -0.02, 0.025]);
+    with_terms.terms.chromaticity_shift =
+        Some([[0.8, -0.3, 0.4], [-0.2, 0.5, 0.1], [0.3, 0.2, -1.5]]);
+    assert!(additive.terms.is_empty() && !with_terms.terms.is_empty());
+    for model in [additive, with_terms] {
+        nearest_codes_are_the_literal_search_s(&model);
+    }
+}
+
+fn nearest_codes_are_the_literal_search_s(model: &MonitorModel) {
     use chromacal_color::delta_e_2000;
-    let model = model();
-    let crf = ColourReproduction::new(&model).unwrap();
+    let crf = ColourReproduction::new(model).unwrap();
     let white = crf.white();
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5DEE_CE66_D1CE_4E5B);

@@ -203,7 +203,12 @@ impl LocalDeltaE2000 {
                 1.0 / (1.0 + 0.045 * chroma),
                 1.0 / (1.0 + 0.015 * chroma * t),
             ],
-            rotation: -(2.0 * d_theta).to_radians().sin() * r_c,
+            // (No sine of 0: R_T is 0 there.)
+            rotation: if d_theta == 0.0 {
+                0.0
+            } else {
+                -(2.0 * d_theta).to_radians().sin() * r_c
+            },
         })
     }
 
@@ -225,6 +230,7 @@ impl LocalDeltaE2000 {
     /// The bound on |ΔE00 − [`Self::delta_e`]| / ΔE00 for differences up to `size`
     /// (|δ|∞): twice the measured worst, infinite where the colour is too near
     /// neutral for the form (C′ < 5 |δ|∞).
+    #[inline]
     pub fn bound(&self, size: f64) -> f64 {
         if self.chroma < 5.0 * size {
             return f64::INFINITY;

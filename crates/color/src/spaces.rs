@@ -217,6 +217,7 @@ impl LabTangent {
     /// A bound on what [`Self::delta`] leaves out, in the largest coordinate, for
     /// every step no larger in X, Y and Z than `reach`: infinite where such a step
     /// could take a coordinate below half its value (too far for the tangent).
+    #[inline]
     pub fn error(&self, reach: [f64; 3]) -> f64 {
         let remainder_of = |c: usize| {
             let t = self.relative[c];

@@ -335,7 +335,11 @@ impl<'a> ColourReproduction<'a> {
     /// The gamut at `position`: P_c = K_c(p) E_c(1) m_c; `None` where a channel's
     /// spatial gain gives no light (a hand-made map), which no colour can be shown at.
     pub fn gamut_at(&self, position: ScreenPosition) -> Option<GamutAt> {
-        let k = self.model.spatial.gains(position);
+        self.gamut_with_gains(self.model.spatial.gains(position))
+    }
+
+    /// The gamut where the spatial map's gains are `k`.
+    fn gamut_with_gains(&self, k: [f64; 3]) -> Option<GamutAt> {
         let mut primaries = self.model.matrix;
         for (c, (gain, full)) in k.iter().zip(self.full).enumerate() {
             let scale = gain * full;
@@ -353,10 +357,14 @@ impl<'a> ColourReproduction<'a> {
     /// Each law's inverse comes from its table (`inverse_table`); `drive_exact_for`
     /// inverts the laws themselves.
     pub fn drive_for(&self, xyz: &Xyz, position: ScreenPosition) -> Drive {
+        self.drive_with_gains(xyz, position, self.model.spatial.gains(position))
+    }
+
+    /// [`Self::drive_for`] where the spatial map's gains are `k` (those at `position`).
+    fn drive_with_gains(&self, xyz: &Xyz, position: ScreenPosition, k: [f64; 3]) -> Drive {
         if !self.model.terms.is_empty() {
             return self.drive_exact_for(xyz, position);
         }
-        let k = self.model.spatial.gains(position);
         let light = self.matrix_inverse * (xyz - self.model.black);
         per_channel(|c| {
             let scale = k[c] * self.full[c];
@@ -651,19 +659,16 @@ impl<'a> ColourReproduction<'a> {
 
     /// The gamut at pixel `index` (`p`) of a scene, or why it has none.
     fn gamut_of(&self, index: usize, p: &ScenePixel) -> Result<GamutAt, CrfError> {
-        self.gamut_at(p.position).ok_or_else(|| CrfError::BadPixel {
-            index,
-            what: format!(
-                "the profile's spatial map gives a channel no light at ({}, {})",
-                p.position.x, p.position.y
-            ),
-        })
+        self.gamut_at(p.position).ok_or_else(|| no_gamut(index, p))
     }
 
     /// Pixel `index` of `path`'s scene through the whole path: tone, gamut, inverse
     /// model and codes.
+    #[inline]
     fn render_pixel(&self, path: &PixelPath, index: usize) -> Result<PixelOutcome, CrfError> {
         let pixel = &path.scene.pixels[index];
+        // The spatial map's gains at the pixel, for its gamut, its drive and its codes.
+        let gains = self.model.spatial.gains(pixel.position);
         let made;
         // Targets made beforehand are those of a mapping fitted to the whole scene.
         let (target, gamut) = if path.targets.is_empty() {
@@ -672,15 +677,20 @@ impl<'a> ColourReproduction<'a> {
             if path.uniform {
                 (target, &path.centre)
             } else {
-                made = self.gamut_of(index, pixel)?;
-                (target, &made)
+                // Made in place (a gamut is 168 bytes, and copies of it were a
+                // twelfth of a render's time).
+                made = self.gamut_with_gains(gains);
+                match &made {
+                    Some(gamut) => (target, gamut),
+                    None => return Err(no_gamut(index, pixel)),
+                }
             }
         } else {
             (path.targets[index], &path.gamuts[index])
         };
         let outside = !gamut.contains(&target);
         let mapped = self.map(path.mapping, path.transform.as_ref(), gamut, &target);
-        let drive = self.drive_for(&mapped, pixel.position);
+        let drive = self.drive_with_gains(&mapped, pixel.position, gains);
         let measured = inversion_measured(index, path.stride);
         let quantiser = &path.quantiser;
         // Each colour's L*a*b* made once for the ΔE00 it takes part in, and only
@@ -691,7 +701,7 @@ impl<'a> ColourReproduction<'a> {
             drive,
             &mapped,
             mapped_lab.as_ref(),
-            pixel.position,
+            (pixel.position, gains),
             quantiser,
             measured,
         );
@@ -713,16 +723,18 @@ impl<'a> ColourReproduction<'a> {
 
     /// The codes for `drive`, chosen as `quantiser` says to show the colour `mapped`
     /// (its L*a*b* `mapped_lab`, which the nearest codes and a measured pixel need) at
-    /// `position`; when `measured`, what the display shows for them and its ΔE00 from
-    /// `mapped`. For the nearest codes each channel's light at the code below and above
-    /// the drive comes from the quantiser, once each, and [`nearest::nearest`] measures
-    /// only the corners that could be nearest.
+    /// `position`, where the spatial map's gains are `gains`; when `measured`, what the
+    /// display shows for them and its ΔE00 from `mapped`. For the nearest codes each
+    /// channel's light at the code below and above the drive comes from the quantiser,
+    /// once each; every corner's ΔE00 is bounded from its step from `mapped`
+    /// ([`nearest::ranges_of_steps`]) and [`nearest::choose`] measures only the
+    /// corners that could be nearest.
     fn codes_for(
         &self,
         drive: Drive,
         mapped: &Xyz,
         mapped_lab: Option<&Lab>,
-        position: ScreenPosition,
+        (position, gains): (ScreenPosition, [f64; 3]),
         quantiser: &Quantiser,
         measured: bool,
     ) -> ([u32; 3], Option<(Xyz, f64)>) {
@@ -738,7 +750,6 @@ impl<'a> ColourReproduction<'a> {
             });
             return (rounded, inversion);
         };
-        let gains = self.model.spatial.gains(position);
         let low = per_channel(|c| scaled[c].floor() as u32);
         let high = per_channel(|c| (scaled[c].ceil() as u32).min(top as u32));
         let low_light = per_channel(|c| quantiser.light(self.model, c, low[c]));
@@ -761,32 +772,62 @@ impl<'a> ColourReproduction<'a> {
             });
             self.model.light_above_black(&Vector3::from(e)) + self.model.black
         };
-        // The rounded codes first, then the corners in order: the literal search's.
-        let mut candidates = [([0u32; 3], Xyz::zeros()); nearest::MOST];
-        candidates[0] = (rounded, shows(rounded));
-        let mut count = 1;
-        for corner in 0..8 {
-            let codes = per_channel(|c| {
+        let corner_codes = |corner: usize| {
+            per_channel(|c| {
                 if corner >> c & 1 == 1 {
                     high[c]
                 } else {
                     low[c]
                 }
+            })
+        };
+        // Each corner's step from the colour asked: without additivity terms, what
+        // the display shows is linear in the channels' light, so the low corner's step
+        // and the box's three edges, added, give every corner's.
+        let steps: [[f64; 8]; 3] = if self.model.terms.is_empty() {
+            let low_step = shows(low) - mapped;
+            let edges = per_channel(|c| {
+                self.model.matrix.column(c) * (gains[c] * (high_light[c] - low_light[c]))
             });
-            if codes != rounded {
-                candidates[count] = (codes, shows(codes));
+            per_channel(|axis| {
+                std::array::from_fn(|corner| {
+                    let mut step = low_step[axis];
+                    for (c, edge) in edges.iter().enumerate() {
+                        if corner >> c & 1 == 1 {
+                            step += edge[axis];
+                        }
+                    }
+                    step
+                })
+            })
+        } else {
+            let shown: [Xyz; 8] = std::array::from_fn(|corner| shows(corner_codes(corner)));
+            per_channel(|axis| std::array::from_fn(|corner| shown[corner][axis] - mapped[axis]))
+        };
+        let corner_ranges = nearest::ranges_of_steps(&steps, mapped, mapped_lab, &self.white);
+        // The rounded codes first, then the corners in order: the literal search's.
+        // (Each channel's rounded code is its low or high one.)
+        let rounded_corner = (0..3).fold(0, |k, c| k | usize::from(rounded[c] != low[c]) << c);
+        let mut corners = [rounded_corner; 9];
+        let mut count = 1;
+        for corner in 0..8 {
+            if corner_codes(corner) != rounded {
+                corners[count] = corner;
                 count += 1;
             }
         }
-        let (k, error) = nearest::nearest(
-            &candidates[..count],
-            mapped,
-            mapped_lab,
-            &self.white,
-            measured,
-        );
-        let (codes, shown) = candidates[k];
-        (codes, error.filter(|_| measured).map(|e| (shown, e)))
+        let corners = &corners[..count];
+        let ranges: [(f64, f64); 9] =
+            std::array::from_fn(|k| corner_ranges[corners[k.min(count - 1)]]);
+        // The ΔE00 of a candidate that must be measured: from what its codes show,
+        // as `MonitorModel::forward` gives it.
+        let exact = |k: usize| {
+            let shown = shows(corner_codes(corners[k]));
+            delta_e_2000(mapped_lab, &xyz_to_lab(&shown, &self.white))
+        };
+        let (k, error) = nearest::choose(&ranges[..count], exact, measured);
+        let codes = corner_codes(corners[k]);
+        (codes, error.filter(|_| measured).map(|e| (shows(codes), e)))
     }
 
     /// The scene with its white carried to the display's chromaticity (luminance
@@ -872,6 +913,17 @@ impl<'a> ColourReproduction<'a> {
                 gamut::perpendicular_lab(gamut, &moved, &self.white)
             }
         }
+    }
+}
+
+/// Why pixel `index` (`p`) has no gamut.
+fn no_gamut(index: usize, p: &ScenePixel) -> CrfError {
+    CrfError::BadPixel {
+        index,
+        what: format!(
+            "the profile's spatial map gives a channel no light at ({}, {})",
+            p.position.x, p.position.y
+        ),
     }
 }
 

@@ -10,35 +10,30 @@
 //! ([`LocalDeltaE2000`]), each with a bound on what the first order leaves out. Only
 //! the candidates whose bounds overlap the best one's are measured exactly, in the
 //! order and with the ties of the literal search, so the codes are the same; at 16
-//! bits that is one candidate for most pixels.
+//! bits that is one candidate for most pixels. The bounds take the candidates as
+//! steps from the colour asked, which for a profile without additivity terms are the
+//! low corner's step and the box's three edges added: no matrix product a candidate
+//! until one is measured.
 
 use chromacal_color::Xyz;
-use chromacal_color::difference::{LocalDeltaE2000, delta_e_2000};
-use chromacal_color::spaces::{Lab, LabTangent, xyz_to_lab};
+use chromacal_color::difference::LocalDeltaE2000;
+use chromacal_color::spaces::{Lab, LabTangent};
 
-/// The most candidates a pixel has: its rounded codes, then the 8 corners.
-pub const MOST: usize = 9;
-
-/// Of `candidates` (codes and the colour they show, the first the rounded codes), the
-/// index of the first whose colour is nearest in ΔE00 to `asked` (whose L*a*b* against
-/// `white` is `asked_lab`): the same index as measuring each and keeping the first
-/// strictly smaller. With it, the winner's ΔE00 when `error_wanted` or when it had to be
+/// Of candidates whose ΔE00 to the colour asked lies in `ranges` (from
+/// [`ranges_of_steps`]), and is `exact(k)` when measured, the index of the first whose
+/// ΔE00 is least: the same index as measuring each and keeping the first strictly
+/// smaller. With it, the winner's ΔE00 when `error_wanted` or when it had to be
 /// measured anyway.
-pub fn nearest(
-    candidates: &[([u32; 3], Xyz)],
-    asked: &Xyz,
-    asked_lab: &Lab,
-    white: &Xyz,
+pub fn choose(
+    ranges: &[(f64, f64)],
+    exact: impl Fn(usize) -> f64,
     error_wanted: bool,
 ) -> (usize, Option<f64>) {
-    let exact = |k: usize| delta_e_2000(asked_lab, &xyz_to_lab(&candidates[k].1, white));
-    let ranges = ranges(candidates, asked, asked_lab, white);
-    let ranges = &ranges[..candidates.len()];
     let least_upper = ranges.iter().fold(f64::INFINITY, |m, r| m.min(r.1));
     let possible = |k: usize| ranges[k].0 <= least_upper;
-    let survivors = (0..candidates.len()).filter(|&k| possible(k)).count();
+    let survivors = (0..ranges.len()).filter(|&k| possible(k)).count();
     let mut best: Option<(usize, f64)> = None;
-    for k in (0..candidates.len()).filter(|&k| possible(k)) {
+    for k in (0..ranges.len()).filter(|&k| possible(k)) {
         if survivors == 1 {
             return (k, error_wanted.then(|| exact(k)));
         }
@@ -54,39 +49,47 @@ pub fn nearest(
     }
 }
 
-/// Each candidate's ΔE00 to `asked` bounded below and above, (0, ∞) where it cannot
-/// be: its step to first order ([`LabTangent::delta`]), the first order's error for
-/// that step ([`LabTangent::error`]), and the form's error for its size
+/// The ΔE00 from `asked` (its L*a*b* against `white` `asked_lab`) to each colour
+/// `steps[k]` away in XYZ, bounded below and above, (0, ∞) where it cannot be: the
+/// step to first order ([`LabTangent::delta`]), the first order's error for that
+/// step ([`LabTangent::error`]), and the form's error for its size
 /// ([`LocalDeltaE2000::bound`]). The form about `asked_lab` is d(δ); the true step is
 /// within `e` of δ in each coordinate, which moves d by at most 4 e (the form's weights
 /// are at most 1, 1 + G at most 1.5 and R_T at most 2 in size: 2.1 measured); and the
 /// exact ΔE00 E has |d − E| ≤ r E at the true step. So E lies in
 /// [(d − 4e) / (1 + r), (d + 4e) / (1 − r)], widened by 10⁻⁹ for the rounding of the
 /// exact formula itself, which a real-number bound does not see.
-pub fn ranges(
-    candidates: &[([u32; 3], Xyz)],
+pub fn ranges_of_steps<const N: usize>(
+    steps: &[[f64; N]; 3],
     asked: &Xyz,
     asked_lab: &Lab,
     white: &Xyz,
-) -> [(f64, f64); MOST] {
-    let mut ranges = [(0.0, f64::INFINITY); MOST];
+) -> [(f64, f64); N] {
+    let mut ranges = [(0.0, f64::INFINITY); N];
     let Some(local) = LocalDeltaE2000::at(asked_lab) else {
         return ranges;
     };
     let tangent = LabTangent::at(asked, white, asked_lab);
-    for (range, (_, shown)) in ranges.iter_mut().zip(candidates) {
-        let step = [shown.x - asked.x, shown.y - asked.y, shown.z - asked.z];
+    // The steps' X, Y and Z each in one array: the same arithmetic for every step,
+    // so that the compiler takes several steps at a time through the vector lanes.
+    let (mut least, mut most) = ([0.0; N], [0.0; N]);
+    for k in 0..N {
+        let step = [steps[0][k], steps[1][k], steps[2][k]];
         let delta = tangent.delta(step);
         let lab_error = tangent.error(step);
-        let size = delta.iter().fold(0.0_f64, |m, d| m.max(d.abs())) + lab_error;
+        let slack = 4.0 * lab_error;
+        let size = delta[0].abs().max(delta[1].abs()).max(delta[2].abs()) + lab_error;
         let relative = local.bound(size);
         let d = local.delta_e(delta);
-        let slack = 4.0 * lab_error;
-        let (least, most) = (
-            (d - slack) / (1.0 + relative) - ROUNDING,
-            (d + slack) / (1.0 - relative) + ROUNDING,
-        );
-        if relative < 1.0 && least.is_finite() && most.is_finite() {
+        least[k] = (d - slack) / (1.0 + relative) - ROUNDING;
+        most[k] = if relative < 1.0 {
+            (d + slack) / (1.0 - relative) + ROUNDING
+        } else {
+            f64::INFINITY
+        };
+    }
+    for (range, (least, most)) in ranges.iter_mut().zip(least.into_iter().zip(most)) {
+        if least.is_finite() && most.is_finite() {
             *range = (least, most);
         }
     }
@@ -101,6 +104,41 @@ const ROUNDING: f64 = 1e-9;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chromacal_color::difference::delta_e_2000;
+    use chromacal_color::spaces::xyz_to_lab;
+
+    /// The most candidates a pixel has: its rounded codes, then the 8 corners.
+    const MOST: usize = 9;
+
+    /// `choose` over candidates given by their colours, as a render's codes are.
+    fn nearest(
+        candidates: &[([u32; 3], Xyz)],
+        asked: &Xyz,
+        asked_lab: &Lab,
+        white: &Xyz,
+        error_wanted: bool,
+    ) -> (usize, Option<f64>) {
+        let ranges = ranges(candidates, asked, asked_lab, white);
+        let exact = |k: usize| delta_e_2000(asked_lab, &xyz_to_lab(&candidates[k].1, white));
+        choose(&ranges[..candidates.len()], exact, error_wanted)
+    }
+
+    /// [`ranges_of_steps`] of candidates given by their colours.
+    fn ranges(
+        candidates: &[([u32; 3], Xyz)],
+        asked: &Xyz,
+        asked_lab: &Lab,
+        white: &Xyz,
+    ) -> [(f64, f64); MOST] {
+        // Unused places step as far as the last candidate, bounded as it is.
+        let shown = |k: usize| candidates[k.min(candidates.len() - 1)].1;
+        let steps: [[f64; MOST]; 3] = [
+            std::array::from_fn(|k| shown(k).x - asked.x),
+            std::array::from_fn(|k| shown(k).y - asked.y),
+            std::array::from_fn(|k| shown(k).z - asked.z),
+        ];
+        ranges_of_steps(&steps, asked, asked_lab, white)
+    }
 
     /// The literal search: every candidate measured, the first strictly smaller kept.
     fn literal(candidates: &[([u32; 3], Xyz)], asked_lab: &Lab, white: &Xyz) -> (usize, f64) {
