@@ -9,8 +9,9 @@
 //! step ([`LabTangent`]), and CIEDE2000 to first order in the L*a*b* step
 //! ([`LocalDeltaE2000`]), each with a bound on what it leaves out. Only the
 //! candidates whose bounds overlap the best one's are measured exactly, in the order
-//! and with the ties of the literal search, so the codes are the same: at 16 bits
-//! one candidate is left for 99 % of pixels, at 8 bits for about half. The bounds take
+//! and with the ties of the literal search, so the codes are the same. On random
+//! 2048² scenes in the gamut one candidate is left for 97–99.9 % of pixels at 16
+//! bits and for 73–83 % at 8 bits (7–37 % with L*a*b* to first order). The bounds take
 //! the candidates as steps from the colour asked, which for a profile without
 //! additivity terms are the low corner's step and the box's three edges added: no
 //! matrix product a candidate until one is measured.
