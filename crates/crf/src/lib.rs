@@ -806,12 +806,16 @@ impl<'a> ColourReproduction<'a> {
         };
         let corner_ranges = nearest::ranges_of_steps(&steps, mapped, mapped_lab, &self.white);
         // The rounded codes first, then the corners in order: the literal search's.
-        // (Each channel's rounded code is its low or high one.)
+        // (Each channel's rounded code is its low or high one.) A corner whose codes
+        // an earlier one has is left out: with the same ΔE00 it cannot be strictly
+        // nearer. That is every corner high in a channel whose drive is on a code, as
+        // a colour clipped to the gamut's faces has.
         let rounded_corner = (0..3).fold(0, |k, c| k | usize::from(rounded[c] != low[c]) << c);
+        let on_a_code = (0..3).fold(0, |k, c| k | usize::from(high[c] == low[c]) << c);
         let mut corners = [rounded_corner; 9];
         let mut count = 1;
         for corner in 0..8 {
-            if corner_codes(corner) != rounded {
+            if corner & on_a_code == 0 && corner_codes(corner) != rounded {
                 corners[count] = corner;
                 count += 1;
             }
