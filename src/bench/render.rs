@@ -423,13 +423,13 @@ fn command_rows(
         timed(&mut || write_png16_codes(&png, side, side, &codes, 16).map_err(|e| e.to_string()))?;
     let mut rows = Vec::new();
     for (bits, choice, name) in [
-        (
-            16,
-            CodeChoice::NearestInDeltaE00,
-            "16 bits, nearest codes (the default)",
-        ),
+        (16, CodeChoice::NearestInDeltaE00, "16 bits, nearest codes"),
         (16, CodeChoice::Rounded, "16 bits, --codes rounded"),
-        (8, CodeChoice::NearestInDeltaE00, "8 bits, nearest codes"),
+        (
+            8,
+            CodeChoice::NearestInDeltaE00,
+            "8 bits, nearest codes (the defaults)",
+        ),
     ] {
         let request = RenderRequest {
             source: SceneSource::Image(image.clone()),
