@@ -234,19 +234,24 @@ impl LabTangent {
     /// could take a coordinate below half its value (too far for the tangent).
     #[inline]
     pub fn error(&self, reach: [f64; 3]) -> f64 {
-        let remainder_of = |c: usize| {
-            let t = self.relative[c];
-            let dt = reach[c].abs() * self.inverse_white[c];
-            if t + dt <= LAB_EPSILON {
-                0.0
-            } else if t > LAB_EPSILON && dt > 0.5 * t {
-                f64::INFINITY
-            } else {
-                self.curvature[c] * dt * dt
-            }
-        };
-        let remainder = [remainder_of(0), remainder_of(1), remainder_of(2)];
-        in_lab(remainder)
+        let remainder_of =
+            |c: usize| self.first_order_remainder(c, reach[c].abs() * self.inverse_white[c]);
+        in_lab([remainder_of(0), remainder_of(1), remainder_of(2)])
+    }
+
+    /// What the first order leaves out of f(t) for coordinate `c` over a step of `dt`
+    /// (relative to the white) either way: 0 on L*'s linear part, infinite beyond half
+    /// of t, and half the curvature's largest times dt² between.
+    #[inline]
+    fn first_order_remainder(&self, c: usize, dt: f64) -> f64 {
+        let t = self.relative[c];
+        if t + dt <= LAB_EPSILON {
+            0.0
+        } else if t > LAB_EPSILON && dt > 0.5 * t {
+            f64::INFINITY
+        } else {
+            self.curvature[c] * dt * dt
+        }
     }
 
     /// ΔL*, Δa*, Δb* for the XYZ change `step` to second order, with a bound on what
@@ -261,16 +266,14 @@ impl LabTangent {
     pub fn delta_to_second_order(&self, step: [f64; 3]) -> ([f64; 3], f64) {
         let df = [0, 1, 2].map(|c| (self.slope[c] + self.half_second[c] * step[c]) * step[c]);
         let remainder_of = |c: usize| {
-            let t = self.relative[c];
             let dt = step[c].abs() * self.inverse_white[c];
-            if t + dt <= LAB_EPSILON {
-                0.0
-            } else if t > LAB_EPSILON && dt > 0.5 * t {
-                f64::INFINITY
-            } else if t - dt > LAB_EPSILON {
+            let first = self.first_order_remainder(c, dt);
+            if first == 0.0 || first == f64::INFINITY {
+                first
+            } else if self.relative[c] - dt > LAB_EPSILON {
                 self.third[c] * dt * dt * dt
             } else {
-                self.curvature[c] * dt * dt + (self.half_second[c] * step[c] * step[c]).abs()
+                first + (self.half_second[c] * step[c] * step[c]).abs()
             }
         };
         let remainder = [remainder_of(0), remainder_of(1), remainder_of(2)];
@@ -507,12 +510,14 @@ mod tests {
                 continue;
             }
             let exact = xyz_to_lab(&moved, &white);
-            let off = [
-                exact.l - lab.l - delta[0],
-                exact.a - lab.a - delta[1],
-                exact.b - lab.b - delta[2],
-            ];
-            let worst = off.iter().fold(0.0_f64, |m, d| m.max(d.abs()));
+            // The largest coordinate of the exact change less `delta`.
+            let off_by = |delta: [f64; 3]| {
+                (exact.l - lab.l - delta[0])
+                    .abs()
+                    .max((exact.a - lab.a - delta[1]).abs())
+                    .max((exact.b - lab.b - delta[2]).abs())
+            };
+            let worst = off_by(delta);
             assert!(
                 worst <= error + 1e-9,
                 "{xyz:?} + {step:?}: off by {worst}, bound {error}"
@@ -523,12 +528,7 @@ mod tests {
             // To second order: within its own bound, and far inside the first
             // order's where the step is small against the colour.
             let (second, second_error) = tangent.delta_to_second_order(step);
-            let off = [
-                exact.l - lab.l - second[0],
-                exact.a - lab.a - second[1],
-                exact.b - lab.b - second[2],
-            ];
-            let worst = off.iter().fold(0.0_f64, |m, d| m.max(d.abs()));
+            let worst = off_by(second);
             assert!(
                 worst <= second_error + 1e-9,
                 "{xyz:?} + {step:?}: second order off by {worst}, bound {second_error}"
