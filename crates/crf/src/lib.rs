@@ -469,9 +469,10 @@ impl<'a> ColourReproduction<'a> {
     }
 
     /// [`ColourReproduction::render`]'s codes and summary alone, for an image written
-    /// as codes: each pixel's codes as 16-bit values (bits ≤ 16) and its mapping's
-    /// ΔE00 kept, 14 bytes a pixel where the whole rendered pixel is 112. The same
-    /// codes. The mapping's ΔE00 is every pixel's; the inversion's, which only the
+    /// as codes: each pixel's codes as 16-bit values (bits ≤ 16), 6 bytes a pixel
+    /// where the whole rendered pixel is 112, and the mapping's ΔE00 of the pixels it
+    /// moved (those it left are counted). The same codes. The mapping's ΔE00 is
+    /// summarised over every pixel; the inversion's, which only the
     /// codes' quantisation makes, is measured on every pixel of a scene up to
     /// [`INVERSION_SAMPLE`] pixels and on about that many of a larger scene, chosen by
     /// [`inversion_measured`] (the summary says how many).
