@@ -522,15 +522,14 @@ impl<'a> ColourReproduction<'a> {
             whole.outside.extend(stretch.outside);
             whole.inversion.extend(stretch.inversion);
         }
-        let mut summary = summary_of(
+        let summary = summary_of(
             n,
-            &[],
+            ErrorStats::of_with_zeros(&whole.moved, whole.unmoved),
             &whole.outside,
             &whole.inversion,
             settings,
             path.transform,
         );
-        summary.mapping_all = ErrorStats::of_with_zeros(&whole.moved, whole.unmoved);
         Ok((codes, summary))
     }
 
@@ -814,16 +813,15 @@ impl<'a> ColourReproduction<'a> {
         let rounded_corner = (0..3).fold(0, |k, c| k | usize::from(rounded[c] != low[c]) << c);
         let on_a_code = (0..3).fold(0, |k, c| k | usize::from(high[c] == low[c]) << c);
         let mut corners = [rounded_corner; 9];
+        let mut ranges = [corner_ranges[rounded_corner]; 9];
         let mut count = 1;
-        for corner in 0..8 {
+        for (corner, range) in corner_ranges.into_iter().enumerate() {
             if corner & on_a_code == 0 && corner_codes(corner) != rounded {
                 corners[count] = corner;
+                ranges[count] = range;
                 count += 1;
             }
         }
-        let corners = &corners[..count];
-        let ranges: [(f64, f64); 9] =
-            std::array::from_fn(|k| corner_ranges[corners[k.min(count - 1)]]);
         // The ΔE00 of a candidate that must be measured: from what its codes show,
         // as `MonitorModel::forward` gives it.
         let exact = |k: usize| {
@@ -946,7 +944,7 @@ fn summarise(
     let inversion: Vec<f64> = pixels.iter().map(|p| p.inversion_delta_e00).collect();
     summary_of(
         pixels.len(),
-        &all,
+        ErrorStats::of(&all),
         &outside,
         &inversion,
         settings,
@@ -954,11 +952,11 @@ fn summarise(
     )
 }
 
-/// The summary of `pixels` pixels from their ΔE00: of the mapping over all and over
-/// those outside the gamut, and of the inversion.
+/// The summary of `pixels` pixels: the mapping's ΔE00 over all of them (`mapping_all`), its
+/// ΔE00 over those outside the gamut, and the inversion's.
 fn summary_of(
     pixels: usize,
-    all: &[f64],
+    mapping_all: Option<ErrorStats>,
     outside: &[f64],
     inversion: &[f64],
     settings: &RenderSettings,
@@ -969,7 +967,7 @@ fn summary_of(
         outside: outside.len(),
         tone: settings.tone.name(),
         gamut: settings.gamut.name(),
-        mapping_all: ErrorStats::of(all),
+        mapping_all,
         mapping_outside: ErrorStats::of(outside),
         inversion: ErrorStats::of(inversion),
         stone_cowan_beatty: match transform {
