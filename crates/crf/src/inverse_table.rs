@@ -201,15 +201,28 @@ impl<T, F: Fn(&T) -> [f32; 3], G: Fn(usize) -> [f64; 3]> Batch<'_, '_, T, F, G> 
             // As many codes as colours (`zip` stops at the shorter).
             let n = block.len().min(codes.len());
             let codes = &mut codes[..n];
-            // Each pixel but the last as four codes, one store, the fourth overwritten
-            // by the next pixel: a store a pixel instead of three.
-            let last = codes.len() - 1;
-            let flat = codes.as_flattened_mut();
-            for j in 0..last {
-                let [r, g, b] = pixel(j);
-                flat[3 * j..3 * j + 4].copy_from_slice(&[r, g, b, 0]);
+            // Four pixels' twelve codes as three 64-bit words, each written by one
+            // store (the compiler merges the four 16-bit parts of a word), instead of
+            // a store a code.
+            let groups = codes.as_flattened_mut().chunks_exact_mut(12);
+            let mut j = 0;
+            for group in groups {
+                let [r0, g0, b0] = pixel(j);
+                let [r1, g1, b1] = pixel(j + 1);
+                let [r2, g2, b2] = pixel(j + 2);
+                let [r3, g3, b3] = pixel(j + 3);
+                for (part, word) in group.chunks_exact_mut(4).zip([
+                    [r0, g0, b0, r1],
+                    [g1, b1, r2, g2],
+                    [b2, r3, g3, b3],
+                ]) {
+                    part.copy_from_slice(&word);
+                }
+                j += 4;
             }
-            codes[last] = pixel(last);
+            for (k, code) in codes.iter_mut().enumerate().skip(j) {
+                *code = pixel(k);
+            }
         }
     }
 }
