@@ -256,7 +256,10 @@ pub async fn open_devices(
 ) -> Result<Devices, DevicesError> {
     let Some(address) = config.instrument.address().map_err(DevicesError::Config)? else {
         let rig = SimulatedRig::new(
-            config.monitor.resolve(base_dir)?,
+            config
+                .monitor
+                .resolve(base_dir)?
+                .in_mode(config.plan.signal),
             config.instrument.simulated.clone().unwrap_or_default(),
             config.display.settle_s,
             realtime_scale,

@@ -929,7 +929,10 @@ pub fn rig_for(
     base_dir: &Path,
     realtime_scale: Option<f64>,
 ) -> Result<SimulatedRig, CalibrateError> {
-    let spec = config.monitor.resolve(base_dir)?;
+    let spec = config
+        .monitor
+        .resolve(base_dir)?
+        .in_mode(config.plan.signal);
     let instrument = config.instrument.simulated.clone().unwrap_or_default();
     Ok(SimulatedRig::new(
         spec,

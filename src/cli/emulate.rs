@@ -130,7 +130,8 @@ fn emulate(args: EmulateArgs) -> Result<(), String> {
     }
     let spec = monitor_config
         .resolve(&loaded.base_dir)
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| e.to_string())?
+        .in_mode(loaded.config.plan.signal);
     let faults = FaultSpec::parse(&args.faults)?;
     let clock = Arc::new(VirtualClock::new(None));
     let monitor = Arc::new(Mutex::new(

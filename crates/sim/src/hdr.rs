@@ -2,13 +2,17 @@
 //! power supply: the physics the `hdr-oled` and `hdr-lcd` presets add to a virtual
 //! monitor.
 //!
-//! * **Signal processing.** In its HDR mode a display decodes each channel's code as
-//!   PQ (SMPTE ST 2084), absolute cd/m², rolls the top off to its own peak as BT.2390's
-//!   EETF does from the mastering peak it assumes, clips what falls below its darkest
-//!   controllable level to black, and drives the panel through the inverse of the
-//!   panel's nominal gamma. The panel's real transfer (a law or a measured table) then
-//!   makes the light, so its departures from the nominal gamma are the tracking error
-//!   a calibration has to find.
+//! * **Signal processing.** In its PQ mode (HDR10) a display decodes each channel's
+//!   code as PQ (SMPTE ST 2084), absolute cd/m², rolls the top off to its own peak as
+//!   BT.2390's EETF does from the mastering peak it assumes, clips what falls below
+//!   its darkest controllable level to black, and drives the panel through the
+//!   inverse of the panel's nominal gamma. In its HLG mode it applies BT.2100's HLG
+//!   EOTF instead: each channel's scene light from the inverse OETF, then the OOTF,
+//!   which scales all three by the scene luminance to the power γ − 1 (the system
+//!   gamma of the display's peak): a channel's light depends on the other two, so
+//!   the display is not additive channel by channel. The panel's real transfer (a
+//!   law or a measured table) then makes the light, so its departures from the
+//!   nominal gamma are the tracking error a calibration has to find.
 //! * **Automatic brightness limiting (ABL).** An OLED's supply (and an LCD's backlight
 //!   budget) limits the light the whole screen may emit: with the screen's average
 //!   light p (cd/m², the average picture level times the peak) every emitter's light
@@ -24,13 +28,19 @@
 
 use serde::{Deserialize, Serialize};
 
-use chromacal_color::hdr::bt2390_eetf;
+use chromacal_color::hdr::{bt2390_eetf, hlg_eotf, hlg_system_gamma};
 use chromacal_color::ictcp::pq_eotf;
+use chromacal_model::plan::Signal;
 
 /// An HDR display's processing and limits (`[monitor.hdr]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HdrBehaviour {
+    /// The signal the display decodes: `pq` (its HDR10 mode) or `hlg`. A display is
+    /// put in one mode or the other by the signal's metadata or its menu; a simulated
+    /// rig puts it in the mode of the run's `plan.signal`.
+    #[serde(default = "pq_mode")]
+    pub decodes: Signal,
     /// The mastering peak (cd/m²) the display's tone mapping assumes: it rolls PQ
     /// signals off from there to its own peak (the monitor's `white_luminance`).
     pub rolloff_from: f64,
@@ -44,6 +54,15 @@ pub struct HdrBehaviour {
     /// dims its backlight with the content.
     pub global_dimming_floor: Option<f64>,
 }
+
+/// The mode a display decodes in when its config does not say.
+fn pq_mode() -> Signal {
+    Signal::Pq
+}
+
+/// The room luminance (cd/m²) an HLG display's system gamma assumes: BT.2100's
+/// reference viewing environment.
+pub const HLG_REFERENCE_AMBIENT: f64 = 5.0;
 
 /// Automatic brightness limiting: g(p) = (F / p) · tanh((p / F)^k)^(1/k) of the
 /// screen's mean light p.
@@ -71,6 +90,9 @@ impl HdrBehaviour {
         .all(|v| v.is_finite());
         if !finite {
             return Err("hdr: every number must be finite".into());
+        }
+        if !self.decodes.is_hdr() {
+            return Err("hdr.decodes must be \"pq\" or \"hlg\"".into());
         }
         if !(self.rolloff_from >= peak && self.rolloff_from <= 10_000.0) {
             return Err(format!(
@@ -104,6 +126,30 @@ impl HdrBehaviour {
         Ok(())
     }
 
+    /// The panel drives (before the panel's own transfer) for the codes `signal` of
+    /// the three channels on a display of peak `peak` cd/m²: PQ channel by channel,
+    /// HLG through its OOTF, which couples them.
+    pub fn panel_drives(&self, signal: [f64; 3], peak: f64) -> [f64; 3] {
+        match self.decodes {
+            Signal::Hlg => {
+                // BT.2100's HLG EOTF for this peak, black 0 (the panel's own black is
+                // added after it, as the PQ mode's is).
+                let gamma = hlg_system_gamma(peak, HLG_REFERENCE_AMBIENT);
+                hlg_eotf(signal, peak, 0.0, gamma).map(|nits| self.panel_drive_of_light(nits, peak))
+            }
+            _ => signal.map(|v| self.panel_drive(v, peak)),
+        }
+    }
+
+    /// The panel drive for light `nits` cd/m² asked of it: black below the clip, else
+    /// through the inverse of the panel's nominal gamma.
+    fn panel_drive_of_light(&self, nits: f64, peak: f64) -> f64 {
+        if nits < self.black_clip {
+            return 0.0;
+        }
+        (nits / peak).clamp(0.0, 1.0).powf(1.0 / self.panel_gamma)
+    }
+
     /// The panel drive (before the panel's own transfer) for PQ code `signal` on a
     /// display of peak `peak` cd/m².
     pub fn panel_drive(&self, signal: f64, peak: f64) -> f64 {
@@ -112,10 +158,7 @@ impl HdrBehaviour {
         } else {
             pq_eotf(signal).min(peak)
         };
-        if nits < self.black_clip {
-            return 0.0;
-        }
-        (nits / peak).clamp(0.0, 1.0).powf(1.0 / self.panel_gamma)
+        self.panel_drive_of_light(nits, peak)
     }
 
     /// The limiter's gain on every emitter for a screen whose mean light is
@@ -144,6 +187,7 @@ mod tests {
 
     fn oled() -> HdrBehaviour {
         HdrBehaviour {
+            decodes: Signal::Pq,
             rolloff_from: 4000.0,
             panel_gamma: 2.2,
             black_clip: 0.0,
@@ -174,6 +218,57 @@ mod tests {
         };
         assert_eq!(clipped.panel_drive(pq_inverse_eotf(0.04), peak), 0.0);
         assert!(clipped.panel_drive(pq_inverse_eotf(0.06), peak) > 0.0);
+    }
+
+    #[test]
+    fn in_its_hlg_mode_the_panel_follows_bt2100_s_eotf_and_its_ootf_couples_the_channels() {
+        let hdr = HdrBehaviour {
+            decodes: Signal::Hlg,
+            ..oled()
+        };
+        let peak = 800.0;
+        let gamma = hlg_system_gamma(peak, HLG_REFERENCE_AMBIENT);
+        assert!((gamma - 1.2 * 1.111f64.powf((0.8f64).log2())).abs() < 1e-12);
+        // A grey asks for BT.2100's luminance of its signal: 75 % HLG is about a
+        // fifth of the peak on an 800 cd/m² display (γ 1.16), 100 % the peak.
+        for signal in [0.1, 0.5, 0.75, 1.0] {
+            let asked = chromacal_color::hdr::hlg_eotf_grey(signal, peak, 0.0, gamma);
+            let u = hdr.panel_drives([signal; 3], peak);
+            for v in u {
+                assert!(
+                    (v.powf(2.2) * peak / asked - 1.0).abs() < 1e-9,
+                    "{signal}: {u:?}"
+                );
+            }
+        }
+        let grey = hdr
+            .panel_drives([0.75; 3], peak)
+            .map(|u| u.powf(2.2) * peak);
+        assert!((grey[1] / peak - 0.2).abs() < 0.03, "{grey:?}");
+        // A channel alone gets less light than it has in the grey: the OOTF scales
+        // it by the scene's luminance, which is the channel's weight of the grey's,
+        // to the power γ − 1. So the display is not the sum of its channels.
+        for (c, weight) in [0.2627f64, 0.6780, 0.0593].into_iter().enumerate() {
+            let mut alone = [0.0; 3];
+            alone[c] = 0.75;
+            let light = hdr.panel_drives(alone, peak).map(|u| u.powf(2.2) * peak);
+            let ratio = light[c] / grey[c];
+            assert!(
+                (ratio / weight.powf(gamma - 1.0) - 1.0).abs() < 1e-9,
+                "{c}: {ratio}"
+            );
+            assert!(ratio < 0.95, "{c}: {ratio}");
+        }
+        // The PQ mode is per channel, as before.
+        let pq = oled().panel_drives([0.75, 0.0, 0.0], peak);
+        assert_eq!(pq[0], oled().panel_drive(0.75, peak));
+        assert_eq!(pq[1], 0.0);
+        // An SDR "mode" is no HDR mode.
+        let sdr = HdrBehaviour {
+            decodes: Signal::Sdr,
+            ..oled()
+        };
+        assert!(sdr.check(peak).unwrap_err().contains("decodes"));
     }
 
     #[test]

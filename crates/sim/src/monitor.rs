@@ -230,6 +230,20 @@ pub struct MonitorSpec {
     pub hdr: Option<HdrBehaviour>,
 }
 
+impl MonitorSpec {
+    /// The display put in the HDR mode of `signal` (its HLG or its PQ mode), as a
+    /// signal's metadata or its user does before a run: unchanged for an SDR signal,
+    /// none, or a display without an HDR mode.
+    pub fn in_mode(mut self, signal: Option<chromacal_model::plan::Signal>) -> MonitorSpec {
+        if let (Some(hdr), Some(signal)) = (self.hdr.as_mut(), signal)
+            && signal.is_hdr()
+        {
+            hdr.decodes = signal;
+        }
+        self
+    }
+}
+
 /// The cos⁴ falloff shape h(r) = 1 − cos⁴θ with tan θ = r / 2 (the eye or instrument
 /// two half-widths from the screen), scaled to 1 at the corners (r = √2).
 fn falloff_shape(r: f64) -> f64 {
@@ -398,7 +412,7 @@ impl VirtualMonitor {
     fn outputs(&self, drive: Drive) -> [f64; 3] {
         let mut q = drive.map(|v| self.quantise(v));
         if let (Some(hdr), Some(peak)) = (&self.spec.hdr, self.spec.white_luminance) {
-            q = q.map(|v| hdr.panel_drive(v, peak));
+            q = hdr.panel_drives(q, peak);
         }
         let chi = self.spec.failures.channel_crosstalk;
         [0, 1, 2].map(|c| {
@@ -771,6 +785,45 @@ mod tests {
         m.clock().advance(100.0);
         let grey = m.xyz_at(ScreenPosition::CENTRE).unwrap().y;
         assert!((grey / 100.0 - 1.0).abs() < 0.05, "{grey}");
+    }
+
+    /// `hdr-oled` put in its HLG mode (as a run with an HLG signal puts it): a grey
+    /// is brighter than the sum of its channels shown alone, by the OOTF's
+    /// luminance-dependent gain; in its PQ mode the same codes add up.
+    #[test]
+    fn an_hdr_oled_in_its_hlg_mode_is_not_the_sum_of_its_channels() {
+        use chromacal_model::plan::Signal;
+        let shown = |spec: &MonitorSpec, drive: [f64; 3]| {
+            let mut m = monitor(spec.clone());
+            m.show(centre_patch(drive));
+            m.clock().advance(100.0);
+            m.xyz_at(ScreenPosition::CENTRE).unwrap()
+        };
+        let preset = crate::presets::preset("hdr-oled").unwrap();
+        assert_eq!(preset.hdr.as_ref().unwrap().decodes, Signal::Pq);
+        let sdr = preset.clone().in_mode(Some(Signal::Sdr));
+        assert_eq!(sdr.hdr.as_ref().unwrap().decodes, Signal::Pq);
+        let hlg = preset.clone().in_mode(Some(Signal::Hlg));
+        assert_eq!(hlg.hdr.as_ref().unwrap().decodes, Signal::Hlg);
+        assert_eq!(
+            crate::presets::preset("crt")
+                .unwrap()
+                .in_mode(Some(Signal::Hlg))
+                .hdr,
+            None
+        );
+        for (spec, grey_over_sum) in [(&preset, 0.98..1.02), (&hlg, 1.08..1.25)] {
+            let black = shown(spec, [0.0; 3]).y;
+            let grey = shown(spec, [0.6; 3]).y - black;
+            let sum: f64 = (0..3)
+                .map(|c| {
+                    let mut d = [0.0; 3];
+                    d[c] = 0.6;
+                    shown(spec, d).y - black
+                })
+                .sum();
+            assert!(grey_over_sum.contains(&(grey / sum)), "{}", grey / sum);
+        }
     }
 
     /// `hdr-lcd`: a black patch on a black screen is darker than the same black beside

@@ -20,6 +20,7 @@ use super::hdr::{Abl, HdrBehaviour};
 use super::monitor::{
     Failures, MeasuredTransfer, MonitorSpec, PrimarySpectra, SimError, SimTransfer,
 };
+use chromacal_model::plan::Signal;
 use chromacal_model::transfer::{Cowan, GainOffsetGamma, Power, TransferLaw};
 
 /// Names of the built-in virtual monitors.
@@ -33,7 +34,8 @@ pub const PRESET_NAMES: [&str; 4] = ["crt", "lcd", "hdr-oled", "hdr-lcd"];
 /// * `lcd`: the Apple Studio Display primaries (Fairchild & Wyble 1998), a Cowan law
 ///   whose toe is lifted as LCD curves are, 160 cd/m² white, 1000:1 contrast, 5 %
 ///   falloff.
-/// * `hdr-oled`: an OLED TV in its PQ mode (`hdr`): 800 cd/m² on a small window,
+/// * `hdr-oled`: an OLED TV in its PQ mode (`hdr`; its HLG mode for a run sending HLG,
+///   `MonitorSpec::in_mode`): 800 cd/m² on a small window,
 ///   180 on a full field (the limiter, time constant 2 s), BT.2390 roll-off from a
 ///   4,000 cd/m² master, black clipped below 0.02 cd/m², 10 bits; panel laws off the
 ///   nominal 2.2 by ±0.06. Its emitters are the CRT's phosphors (the only other
@@ -108,6 +110,7 @@ pub fn preset(name: &str) -> Result<MonitorSpec, SimError> {
             falloff: [0.03; 3],
             failures: Failures::default(),
             hdr: Some(HdrBehaviour {
+                decodes: Signal::Pq,
                 rolloff_from: 4000.0,
                 panel_gamma: 2.2,
                 black_clip: 0.02,
@@ -137,6 +140,7 @@ pub fn preset(name: &str) -> Result<MonitorSpec, SimError> {
                 falloff: [0.06; 3],
                 failures: Failures::default(),
                 hdr: Some(HdrBehaviour {
+                    decodes: Signal::Pq,
                     rolloff_from: 4000.0,
                     panel_gamma: 2.2,
                     black_clip: 0.0,
