@@ -414,6 +414,12 @@ pub(crate) fn hdr_defaults(config: &mut Config) {
     if signal == Signal::Pq && config.fit.laws == LawKind::ALL {
         config.fit.laws.push(LawKind::Pq);
     }
+    if signal == Signal::Hlg {
+        if config.fit.laws == LawKind::ALL {
+            config.fit.laws.push(LawKind::Hlg);
+        }
+        config.fit.hlg_ootf = true;
+    }
     if signal.is_hdr() && config.display.stability.is_none() {
         config.display.stability = Some(Stability {
             max_reads: 10,
@@ -763,6 +769,18 @@ mod tests {
         let sdr = parse_config("[target]\ntone = \"srgb\"\n", "c.toml").unwrap();
         assert_eq!(sdr.plan.signal, None);
         assert!(!sdr.fit.laws.contains(&LawKind::Pq));
+        // HLG: its law and its OOTF are tried, and only for it.
+        let hlg = "[target]\ntone = \"hlg\"\npeak = 1000\n[plan]\nbit_depth = 10\n";
+        let config = parse_config(hlg, "c.toml").unwrap();
+        assert_eq!(config.plan.signal, Some(Signal::Hlg));
+        assert!(config.fit.laws.contains(&LawKind::Hlg) && !config.fit.laws.contains(&LawKind::Pq));
+        assert!(config.fit.hlg_ootf);
+        let mut again = config.clone();
+        hdr_defaults(&mut again);
+        assert_eq!(again.fit.laws, config.fit.laws);
+        for other in [sdr, parse_config(pq, "c.toml").unwrap()] {
+            assert!(!other.fit.hlg_ootf && !other.fit.laws.contains(&LawKind::Hlg));
+        }
     }
 
     #[test]

@@ -199,7 +199,11 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
         .filter(|a| a.verdict == Verdict::Fails)
         .filter(|a| {
             let crosstalk = terms.crosstalk.is_some() || terms.drive_crosstalk.is_some();
-            terms.interaction.is_none() && (!crosstalk || a.drive >= 1.0)
+            // The HLG OOTF is a display's greys departing from their channels by design,
+            // and the LUT tags carry it.
+            terms.interaction.is_none()
+                && terms.hlg_ootf.is_none()
+                && (!crosstalk || a.drive >= 1.0)
         })
         .collect();
     // The largest departure in X, Y or Z (a white can add up in luminance and not in Z).

@@ -28,7 +28,7 @@ use chromacal_color::spectrum::Observer;
 use chromacal_color::{UvPrime, Xyz};
 use chromacal_model::measurement::{MeasurementSet, Role};
 use chromacal_model::transfer::{
-    Cowan, GainOffsetGamma, LawKind, Power, Pq, ThreeTerm, TransferLaw,
+    Cowan, GainOffsetGamma, Hlg, LawKind, Power, Pq, ThreeTerm, TransferLaw,
 };
 use chromacal_model::{MonitorModel, ScreenPosition};
 
@@ -188,6 +188,9 @@ pub fn candidate_curve(
         LawKind::Pq => TransferLaw::Pq(Pq {
             peak: get("peak")?,
             rolloff_from: get("rolloff_from")?,
+            exponent: get("exponent")?,
+        }),
+        LawKind::Hlg => TransferLaw::Hlg(Hlg {
             exponent: get("exponent")?,
         }),
         LawKind::Table => return None,

@@ -334,6 +334,14 @@ impl<'a> ColourReproduction<'a> {
 
     /// The gamut at `position`: P_c = K_c(p) E_c(1) m_c; `None` where a channel's
     /// spatial gain gives no light (a hand-made map), which no colour can be shown at.
+    ///
+    /// Through the HLG OOTF (`AdditivityTerms::hlg_ootf`) a channel gives more light
+    /// in a mixture than alone, up to (1 / w_c)^(γ − 1) times in white, and the colours
+    /// the display shows are Y_S^(γ−1) Σ_c P_c E_c over the scene-light cube. The
+    /// box of P_c (1 / w_c)^(γ − 1) holds them all and meets them on the grey axis,
+    /// where they are t^γ times white, and at black and white: on the box's other
+    /// corners the OOTF gives less (a secondary (w_a + w_b)^(γ−1) of the box's), and
+    /// a colour between is inverted by the model itself, each channel clipped.
     pub fn gamut_at(&self, position: ScreenPosition) -> Option<GamutAt> {
         self.gamut_with_gains(self.model.spatial.gains(position))
     }
@@ -341,8 +349,11 @@ impl<'a> ColourReproduction<'a> {
     /// The gamut where the spatial map's gains are `k`.
     fn gamut_with_gains(&self, k: [f64; 3]) -> Option<GamutAt> {
         let mut primaries = self.model.matrix;
-        for (c, (gain, full)) in k.iter().zip(self.full).enumerate() {
-            let scale = gain * full;
+        let ootf = self.model.terms.hlg_ootf.map_or([1.0; 3], |gamma| {
+            chromacal_model::monitor::HLG_LUMINANCE_WEIGHTS.map(|w| w.powf(1.0 - gamma))
+        });
+        for (c, ((gain, full), in_white)) in k.iter().zip(self.full).zip(ootf).enumerate() {
+            let scale = gain * full * in_white;
             if !(scale > 0.0 && scale.is_finite()) {
                 return None;
             }
@@ -688,9 +699,24 @@ impl<'a> ColourReproduction<'a> {
         } else {
             (path.targets[index], &path.gamuts[index])
         };
-        let outside = !gamut.contains(&target);
-        let mapped = self.map(path.mapping, path.transform.as_ref(), gamut, &target);
-        let drive = self.drive_with_gains(&mapped, pixel.position, gains);
+        let mut outside = !gamut.contains(&target);
+        let mut mapped = self.map(path.mapping, path.transform.as_ref(), gamut, &target);
+        let drive = match self.model.terms.hlg_ootf {
+            // The HLG OOTF's box holds colours the display cannot show (`gamut_at`):
+            // those the model's own inverse has to clip are outside too, and become
+            // what their clipped drive shows.
+            Some(_) => match self.model.inverse(&mapped, pixel.position) {
+                Ok(r) => {
+                    if r.clipped {
+                        outside = true;
+                        mapped = self.model.forward(r.drive, pixel.position);
+                    }
+                    r.drive
+                }
+                Err(_) => [0.0; 3],
+            },
+            None => self.drive_with_gains(&mapped, pixel.position, gains),
+        };
         let measured = inversion_measured(index, path.stride);
         let quantiser = &path.quantiser;
         // Each colour's L*a*b* made once for the ΔE00 it takes part in, and only

@@ -9,7 +9,8 @@
 //! Optional terms (`AdditivityTerms`) model what the additive form misses, and are
 //! kept by the fit only where cross-validation shows they lower the error
 //! (`fit::terms`): channel interaction, crosstalk between channels (following their
-//! light or their drives), and primary chromaticity that moves with drive.
+//! light or their drives), primary chromaticity that moves with drive, and, for a
+//! display decoding an HLG signal, BT.2100's OOTF.
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -89,6 +90,15 @@ pub struct MonitorModel {
 /// (chromaticity shift): the XYZ a channel adds besides its primary's direction,
 /// largest at mid drive and none at black and full drive, as a TN panel's or a CRT's
 /// blue moves in chromaticity with drive (the channel's own curve is still E_c).
+///
+/// γ_S (the HLG OOTF, `hlg_ootf`): a display decoding HLG (BT.2100 Table 5) scales
+/// each channel's scene light E_c by the scene luminance to the power γ_S − 1, the
+/// system gamma, Y_S = Σ_k w_k E_k on BT.2020's weights, so that a channel's light
+/// depends on the other two by a factor, not by a small term: alone, channel c
+/// shows (w_c E_c)^(γ_S − 1) E_c, in a mixture Y_S^(γ_S − 1) E_c. Its ramps give
+/// ê_c = E_c^γ_S, so its gain in a mixture is (Y_S / (w_c E_c))^(γ_S − 1) with
+/// E_k = ê_k^(1/γ_S) (`ootf_gains`): a red in a white gives 1 / 0.2627^0.2 = 1.31
+/// times its light alone at γ_S = 1.2. The gain multiplies the others'.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AdditivityTerms {
@@ -104,6 +114,9 @@ pub struct AdditivityTerms {
     /// u of red, green and blue, XYZ each.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chromaticity_shift: Option<[[f64; 3]; 3]>,
+    /// γ_S, the system gamma of BT.2100's HLG OOTF.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hlg_ootf: Option<f64>,
     /// The brightness limiter (`fit::limiter`): not a term of a patch's colour (the
     /// model is defined for the plan's patch on black, which it does not dim) but of a
     /// whole screen's, its light scaled by g(p) of the screen's mean light p
@@ -119,6 +132,7 @@ impl AdditivityTerms {
             && self.crosstalk.is_none()
             && self.drive_crosstalk.is_none()
             && self.chromaticity_shift.is_none()
+            && self.hlg_ootf.is_none()
     }
 
     /// No term at all, the limiter included: nothing to write in a model file.
@@ -127,15 +141,19 @@ impl AdditivityTerms {
     }
 
     /// Each channel's gain at light shares `shares` and drives `drives`:
-    /// 1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c.
+    /// 1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c, times the HLG OOTF's.
     pub fn gains(&self, shares: &[f64; 3], drives: &[f64; 3]) -> [f64; 3] {
         let s = interaction_basis(shares);
         let x = crosstalk_basis(shares);
         let y = crosstalk_basis(drives);
+        let ootf = self
+            .hlg_ootf
+            .map_or([1.0; 3], |gamma| ootf_gains(shares, gamma));
         [0, 1, 2].map(|c| {
-            1.0 + self.interaction.map_or(0.0, |g| g[c] * s[c])
+            (1.0 + self.interaction.map_or(0.0, |g| g[c] * s[c])
                 + self.crosstalk.map_or(0.0, |k| k[c] * x[c])
-                + self.drive_crosstalk.map_or(0.0, |l| l[c] * y[c])
+                + self.drive_crosstalk.map_or(0.0, |l| l[c] * y[c]))
+                * ootf[c]
         })
     }
 
@@ -154,6 +172,9 @@ impl AdditivityTerms {
         if self.chromaticity_shift.is_some() {
             names.push("drive-dependent primary chromaticity");
         }
+        if self.hlg_ootf.is_some() {
+            names.push("the HLG OOTF (BT.2100)");
+        }
         names
     }
 
@@ -168,6 +189,7 @@ impl AdditivityTerms {
                 .flatten()
                 .flatten()
                 .all(|v| v.is_finite())
+            && self.hlg_ootf.is_none_or(|g| g.is_finite() && g > 0.0)
             && self.limiter.is_none_or(|l| {
                 l.full_field > 0.0
                     && l.full_field.is_finite()
@@ -236,6 +258,29 @@ pub fn interaction_basis(shares: &[f64; 3]) -> [f64; 3] {
 pub fn crosstalk_basis(shares: &[f64; 3]) -> [f64; 3] {
     let s = interaction_basis(shares);
     [0, 1, 2].map(|c| (1.0 - shares[c]) * s[c])
+}
+
+/// BT.2020's luminance weights of R, G, B: the HLG OOTF's Y_S (BT.2100 Table 5).
+pub const HLG_LUMINANCE_WEIGHTS: [f64; 3] = [0.2627, 0.6780, 0.0593];
+
+/// The HLG OOTF's gain on each channel at light shares `shares` for system gamma
+/// `gamma` (`AdditivityTerms`): (Y_S / (w_c E_c))^(γ − 1), E_k = ê_k^(1/γ),
+/// Y_S = Σ_k w_k E_k. It depends on the shares' ratios only, so a grey keeps its
+/// gains at every level. 1 for a channel giving no light (whose light the gain
+/// multiplies is 0: its product with the gain goes to 0 with ê_c as ê_c^(1/γ)), and
+/// for shares below 0 (the extended inverse's), taken as 0.
+pub fn ootf_gains(shares: &[f64; 3], gamma: f64) -> [f64; 3] {
+    let w = HLG_LUMINANCE_WEIGHTS;
+    let scene = shares.map(|s| s.max(0.0).powf(1.0 / gamma));
+    let luminance: f64 = (0..3).map(|k| w[k] * scene[k]).sum();
+    [0, 1, 2].map(|c| {
+        let own = w[c] * scene[c];
+        if own > 0.0 {
+            (luminance / own).powf(gamma - 1.0)
+        } else {
+            1.0
+        }
+    })
 }
 
 /// ê_c (1 − ê_c): the weight of u_c.
@@ -836,10 +881,76 @@ mod tests {
                 crosstalk: Some([0.04, 0.03, 0.05]),
                 drive_crosstalk: None,
                 chromaticity_shift: Some([[0.0, 0.5, 1.5], [0.8, 0.0, -0.4], [-1.0, 1.2, 0.0]]),
+                hlg_ootf: None,
                 limiter: None,
             },
             ..srgb_like()
         }
+    }
+
+    /// The HLG OOTF (BT.2100 Table 5) as a term: a channel alone is its law's, a
+    /// mixture is what the OOTF makes of the channels' scene light, and the inverse
+    /// finds the drive of every colour the model makes, near white too, where the
+    /// gains are largest (blue 1/0.0593^0.2 = 1.76 at γ 1.2).
+    #[test]
+    fn the_hlg_ootf_scales_each_channel_by_the_scene_luminance_and_inverts() {
+        let plain = srgb_like();
+        let gamma = 1.2;
+        let m = MonitorModel {
+            terms: AdditivityTerms {
+                hlg_ootf: Some(gamma),
+                ..AdditivityTerms::default()
+            },
+            spatial: SpatialMap::Uniform,
+            ..srgb_like()
+        };
+        let p = ScreenPosition::CENTRE;
+        let w = HLG_LUMINANCE_WEIGHTS;
+        for c in 0..3 {
+            let mut alone = [0.0; 3];
+            alone[c] = 0.7;
+            assert!((m.forward(alone, p) - plain.forward(alone, p)).norm() < 1e-12);
+        }
+        // White: each channel's light alone times (1 / w_c)^(γ − 1).
+        let expected: Xyz = (0..3)
+            .map(|c| plain.matrix.column(c) * (1.0 / w[c]).powf(gamma - 1.0))
+            .sum::<Xyz>()
+            + plain.black;
+        assert!((m.white() - expected).norm() < 1e-9 * expected.norm());
+        // A mixture: scene light E_k = ê_k^(1/γ), luminance Σ w_k E_k.
+        let drive = [0.3, 0.8, 0.5];
+        let shares = plain.excitations(drive).map(|e| e.max(0.0));
+        let scene = [0, 1, 2].map(|k| shares[k].powf(1.0 / gamma));
+        let luminance: f64 = (0..3).map(|k| w[k] * scene[k]).sum();
+        let mixed: Xyz = (0..3)
+            .map(|c| {
+                plain.matrix.column(c)
+                    * (shares[c] * (luminance / (w[c] * scene[c])).powf(gamma - 1.0))
+            })
+            .sum::<Xyz>()
+            + plain.black;
+        assert!((m.forward(drive, p) - mixed).norm() < 1e-9 * mixed.norm());
+        // The gains depend on the shares' ratios only: a grey keeps them at every level.
+        assert_eq!(ootf_gains(&[0.2; 3], gamma), ootf_gains(&[0.9; 3], gamma));
+        // Round trips over the cube, its top corner included.
+        let mut worst: f64 = 0.0;
+        for r in 0..=10 {
+            for g in 0..=10 {
+                for b in 0..=10 {
+                    let d = [r, g, b].map(|v| 0.02 + 0.98 * f64::from(v) / 10.0);
+                    let back = m.inverse(&m.forward(d, p), p).unwrap();
+                    assert!(back.converged && !back.clipped, "{d:?}: {back:?}");
+                    let shown = m.forward(back.drive, p);
+                    worst = worst.max((shown - m.forward(d, p)).norm() / m.white().norm());
+                }
+            }
+        }
+        assert!(worst < 1e-9, "{worst}");
+        // It survives the model file.
+        let text = toml::to_string(&m).unwrap();
+        assert!(text.contains("hlg_ootf = 1.2"), "{text}");
+        let back: MonitorModel = toml::from_str(&text).unwrap();
+        assert_eq!(back.terms.hlg_ootf, Some(gamma));
     }
 
     #[test]

@@ -16,7 +16,7 @@
 //! whose turning point lies between the toe and full drive is not monotone where it is
 //! used; [`TransferLaw::monotonicity`] finds it and the fitting refuses to publish it.
 
-use chromacal_color::hdr::bt2390_eetf;
+use chromacal_color::hdr::{bt2390_eetf, hlg_inverse_oetf, hlg_oetf};
 use chromacal_color::ictcp::{PQ_PEAK, pq_eotf, pq_inverse_eotf};
 use serde::{Deserialize, Serialize};
 
@@ -270,6 +270,37 @@ impl Pq {
     }
 }
 
+/// One channel of a display decoding HLG (BT.2100 Table 5), shown alone: the inverse
+/// OETF's scene light E(v), 1 at full signal, to a power p, E(v)^p. Alone, channel c
+/// shows (w_c E)^(γ_S − 1) E through the OOTF, which is E^γ_S of its full light: p is
+/// the system gamma γ_S where the panel tracks the gamma its processing inverts, and
+/// departs from it where the panel does. What the channel gives beside the others is
+/// the OOTF's (`AdditivityTerms::hlg_ootf`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Hlg {
+    /// p.
+    pub exponent: f64,
+}
+
+impl Hlg {
+    pub fn excitation(&self, v: f64) -> f64 {
+        (hlg_inverse_oetf(v.clamp(0.0, 1.0)) / hlg_inverse_oetf(1.0)).powf(self.exponent)
+    }
+
+    /// The drive of excitation `e`: the OETF of e^(1/p).
+    pub fn drive(&self, e: f64) -> f64 {
+        if e <= 0.0 {
+            return 0.0;
+        }
+        // Full signal exactly (the OETF of its own inverse at 1 misses it by 10⁻⁸).
+        if e >= 1.0 {
+            return 1.0;
+        }
+        let scene = e.powf(1.0 / self.exponent) * hlg_inverse_oetf(1.0);
+        hlg_oetf(scene).clamp(0.0, 1.0)
+    }
+}
+
 /// Monotone piecewise-cubic interpolation of a measured ramp (Fritsch & Carlson 1980,
 /// with the end conditions of Fritsch & Butland 1984 as in SciPy's PCHIP). The knots
 /// start at (0, 0) and their excitations never decrease, so the curve never does.
@@ -437,6 +468,8 @@ pub enum LawKind {
     Table,
     /// Tried only for a display sent PQ signals (not in `ALL`).
     Pq,
+    /// Tried only for a display sent HLG signals (not in `ALL`).
+    Hlg,
 }
 
 impl LawKind {
@@ -456,6 +489,7 @@ impl LawKind {
             LawKind::ThreeTerm => "three-term",
             LawKind::Table => "table",
             LawKind::Pq => "pq",
+            LawKind::Hlg => "hlg",
         }
     }
 
@@ -463,7 +497,7 @@ impl LawKind {
     /// above zero: what "simplest" means when laws are compared.
     pub fn parameter_count(self, levels: usize) -> usize {
         match self {
-            LawKind::Power => 1,
+            LawKind::Power | LawKind::Hlg => 1,
             LawKind::GainOffsetGamma | LawKind::Cowan | LawKind::Pq => 2,
             LawKind::ThreeTerm => 3,
             LawKind::Table => levels,
@@ -487,6 +521,7 @@ pub enum TransferLaw {
     GainOffsetGamma(GainOffsetGamma),
     Table(Table),
     Pq(Pq),
+    Hlg(Hlg),
 }
 
 impl TransferLaw {
@@ -498,6 +533,7 @@ impl TransferLaw {
             TransferLaw::GainOffsetGamma(_) => LawKind::GainOffsetGamma,
             TransferLaw::Table(_) => LawKind::Table,
             TransferLaw::Pq(_) => LawKind::Pq,
+            TransferLaw::Hlg(_) => LawKind::Hlg,
         }
     }
 
@@ -510,6 +546,7 @@ impl TransferLaw {
             TransferLaw::GainOffsetGamma(l) => l.excitation(v),
             TransferLaw::Table(l) => l.excitation(v),
             TransferLaw::Pq(l) => l.excitation(v),
+            TransferLaw::Hlg(l) => l.excitation(v),
         }
     }
 
@@ -523,6 +560,7 @@ impl TransferLaw {
             TransferLaw::GainOffsetGamma(l) => l.drive(e),
             TransferLaw::Table(l) => l.drive(e),
             TransferLaw::Pq(l) => l.drive(e),
+            TransferLaw::Hlg(l) => l.drive(e),
         }
     }
 
@@ -546,6 +584,7 @@ impl TransferLaw {
                 ("rolloff_from", l.rolloff_from),
                 ("exponent", l.exponent),
             ],
+            TransferLaw::Hlg(l) => vec![("exponent", l.exponent)],
         }
     }
 
@@ -583,6 +622,9 @@ impl TransferLaw {
                     "pq",
                     "peak must be in (0, 10000], rolloff_from from the peak to 10000, exponent positive",
                 )
+            }
+            TransferLaw::Hlg(l) if !(l.exponent > 0.0 && l.exponent.is_finite()) => {
+                invalid("hlg", "exponent must be positive")
             }
             _ => Ok(()),
         }

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use super::least_squares::{Curve, LeastSquares, LeastSquaresError, fit_curve, fit_linear};
 use super::primaries::ChannelRamp;
 use crate::transfer::{
-    Cowan, GainOffsetGamma, LawKind, Power, Pq, Table, ThreeTerm, TransferError, TransferLaw,
+    Cowan, GainOffsetGamma, Hlg, LawKind, Power, Pq, Table, ThreeTerm, TransferError, TransferLaw,
 };
 use chromacal_color::ictcp::{PQ_PEAK, pq_eotf};
 use nalgebra::DMatrix;
@@ -157,6 +157,8 @@ pub fn fit_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
         LawKind::GainOffsetGamma => fit_gog(ramp),
         LawKind::Pq if !pinned => Err(LawFitError::NeedsFullDrive { law: kind }),
         LawKind::Pq => fit_pq(ramp),
+        LawKind::Hlg if !pinned => Err(LawFitError::NeedsFullDrive { law: kind }),
+        LawKind::Hlg => fit_hlg(ramp),
     }
 }
 
@@ -419,6 +421,40 @@ fn fit_pq_with_rolloff(
         pq_law(t, rolloff).excitation(v)
     };
     points.fit(LawKind::Pq, &curve, &[peak0.ln(), 1.0])
+}
+
+/// The HLG law (`transfer::Hlg`), θ = [p], from BT.2100's system gamma at 1,000
+/// cd/m² (1.2): E(v)^p as exp(p ln E(v)), whose derivative is E(v)^p ln E(v).
+fn fit_hlg(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
+    let kind = LawKind::Hlg;
+    let points = Points::from_ramp(ramp, false);
+    need_levels(kind, &points, 1)?;
+    let scene = |v: f64| {
+        chromacal_color::hdr::hlg_inverse_oetf(v.clamp(0.0, 1.0))
+            / chromacal_color::hdr::hlg_inverse_oetf(1.0)
+    };
+    let curve = |t: &[f64], v: f64, g: &mut [f64]| {
+        let ln_e = scene(v).max(f64::MIN_POSITIVE).ln();
+        let f = (t[0] * ln_e).exp();
+        g[0] = f * ln_e;
+        f
+    };
+    let fit = points.fit(kind, &curve, &[1.2])?;
+    let law = TransferLaw::Hlg(Hlg {
+        exponent: fit.params[0],
+    });
+    law.monotonicity()
+        .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
+    let ses = standard_errors_with_pin(&fit, &points, ramp);
+    Ok(LawFit {
+        law,
+        amplitude: 1.0,
+        parameters: vec![parameter("exponent", fit.params[0], ses[0])],
+        chi2: fit.chi2,
+        dof: fit.dof,
+        free_parameters: 1,
+        notes: Vec::new(),
+    })
 }
 
 /// A start for the gain-offset-gamma fit: the best (least χ²) of a few cut-offs, each
@@ -847,6 +883,48 @@ mod tests {
         let unpinned = ramp(&levels, display, &WIGGLE, false);
         assert!(matches!(
             fit_law(LawKind::Pq, &unpinned, 1.0 / 1023.0),
+            Err(LawFitError::NeedsFullDrive { .. })
+        ));
+    }
+
+    /// One channel of a display in HLG mode, shown alone: BT.2100's inverse OETF, the
+    /// OOTF on the channel's own luminance (γ 1.16 at 800 cd/m²) and a panel a little
+    /// off the gamma its processing inverts (2.3 for 2.2). The HLG law's exponent is
+    /// the system gamma times that departure, and it follows the channel far closer
+    /// than a power of the code does; its inverse is its inverse.
+    #[test]
+    fn the_hlg_law_follows_a_channel_of_an_hlg_display() {
+        use chromacal_color::hdr::hlg_inverse_oetf;
+        let gamma = 1.16;
+        let scene = |v: f64| hlg_inverse_oetf(v) / hlg_inverse_oetf(1.0);
+        let display = |v: f64| scene(v).powf(gamma).powf(2.3 / 2.2);
+        let levels: Vec<f64> = (1..=16).map(|k| k as f64 / 16.0).collect();
+        let r = ramp(&levels, display, &WIGGLE, true);
+        let fit = fit_law(LawKind::Hlg, &r, 1.0 / 1023.0).unwrap();
+        let TransferLaw::Hlg(law) = &fit.law else {
+            panic!("{:?}", fit.law)
+        };
+        check(&fit, "exponent", gamma * 2.3 / 2.2);
+        assert!((law.exponent - gamma * 2.3 / 2.2).abs() < 0.01, "{law:?}");
+        let worst = |f: &LawFit| {
+            (1..200)
+                .map(|k| k as f64 / 200.0)
+                .map(|v| (f.law.excitation(v) - display(v)).abs())
+                .fold(0.0, f64::max)
+        };
+        let power = fit_law(LawKind::Power, &r, 1.0 / 1023.0).unwrap();
+        assert!(worst(&fit) < 0.005, "hlg {}", worst(&fit));
+        assert!(worst(&power) > 5.0 * worst(&fit), "power {}", worst(&power));
+        for v in [0.0, 0.05, 0.3, 0.5, 0.51, 0.9, 1.0] {
+            let back = fit.law.drive(fit.law.excitation(v));
+            assert!((back - v).abs() < 1e-9, "{v}: {back}");
+        }
+        assert!(matches!(
+            fit_law(
+                LawKind::Hlg,
+                &ramp(&levels, display, &WIGGLE, false),
+                1.0 / 1023.0
+            ),
             Err(LawFitError::NeedsFullDrive { .. })
         ));
     }

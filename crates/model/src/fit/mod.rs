@@ -97,6 +97,9 @@ pub struct FitOptions {
     pub anchor_at_white: bool,
     /// How the transfer law is chosen from the candidates' cross-validated errors.
     pub law_rule: LawRule,
+    /// The display decodes an HLG signal: BT.2100's OOTF is tried among the terms
+    /// (`terms`). Set for a run whose `plan.signal` is HLG.
+    pub hlg_ootf: bool,
 }
 
 /// How the transfer law is chosen from the candidates' cross-validated errors
@@ -129,6 +132,7 @@ impl Default for FitOptions {
             additivity_terms: true,
             anchor_at_white: false,
             law_rule: LawRule::default(),
+            hlg_ootf: false,
         }
     }
 }
@@ -363,9 +367,18 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let corrected = correct_for_drift(all, &black, drift_model.as_ref())?;
     let mut ramps = channel_ramps(&corrected, &black, &noise)?;
     let greys = grey_readings(&corrected);
+    // A display decoding HLG is not the sum of its channels by design (BT.2100's
+    // OOTF): its greys would bend the curves by what the OOTF adds, so the curves
+    // are the ramps' alone, and the greys go to the OOTF term (and, corrected by
+    // it, to the curves fitted again: `refit`).
+    let curve_greys = if options.hlg_ootf {
+        &[][..]
+    } else {
+        &greys[..]
+    };
     add_grey_excitations(
         &mut ramps,
-        &greys,
+        curve_greys,
         &black.xyz,
         &noise,
         options.max_condition_number,
@@ -374,7 +387,7 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let selection = select_law(
         options,
         &ramps,
-        &greys,
+        curve_greys,
         &black,
         &white_reference,
         &noise,
@@ -454,6 +467,7 @@ fn terms_for_what_additivity_misses(
             evidence.noise,
             white_reference,
             &checks.additivity,
+            options.hlg_ootf,
         )
     } else {
         TermChoice::additive("switched off (fit.additivity_terms = false)")

@@ -23,6 +23,10 @@
 //! if the display were additive. Crosstalk shows only where a grey is measured beside
 //! its channels below full drive; with one such level cross-validation cannot judge
 //! a gain term, and the additivity check does (`gain_term_on_the_checks_evidence`).
+//!
+//! For a display decoding HLG (`FitOptions::hlg_ootf`) one more single candidate:
+//! BT.2100's OOTF, whose system gamma is not linear in anything, found by a golden
+//! section search on the greys and whites (`fit_ootf`), kept as the others are.
 
 use nalgebra::{DMatrix, DVector, Matrix3};
 use serde::{Deserialize, Serialize};
@@ -68,10 +72,12 @@ pub enum TermSet {
     /// tell apart: the interaction grows towards white, the crosstalk in drive is
     /// largest at dim and mid greys and vanishes at white.
     InteractionAndDriveCrosstalk,
+    /// BT.2100's HLG OOTF: tried only for a display decoding HLG.
+    HlgOotf,
 }
 
 impl TermSet {
-    pub const ALL: [TermSet; 9] = [
+    pub const ALL: [TermSet; 10] = [
         TermSet::None,
         TermSet::Interaction,
         TermSet::Crosstalk,
@@ -81,6 +87,7 @@ impl TermSet {
         TermSet::CrosstalkAndShift,
         TermSet::DriveCrosstalkAndShift,
         TermSet::InteractionAndDriveCrosstalk,
+        TermSet::HlgOotf,
     ];
 
     pub fn name(self) -> &'static str {
@@ -94,6 +101,7 @@ impl TermSet {
             TermSet::CrosstalkAndShift => "crosstalk and chromaticity",
             TermSet::DriveCrosstalkAndShift => "crosstalk in drive and chromaticity",
             TermSet::InteractionAndDriveCrosstalk => "interaction and crosstalk in drive",
+            TermSet::HlgOotf => "the HLG OOTF (BT.2100)",
         }
     }
 
@@ -297,9 +305,56 @@ fn fit_gain_terms(
         .then_some(coefficients)
 }
 
+/// The range of the HLG OOTF's system gamma searched. BT.2100 gives 1.2 at 1,000
+/// cd/m², BT.2390's extension 1.0 near 400 and 1.5 near 5,000, less in a bright
+/// room; a fit at either end is taken for readings the term does not explain.
+pub const OOTF_GAMMA_RANGE: (f64, f64) = (0.8, 1.8);
+
+/// The HLG OOTF's system gamma that fits the readings with more than one channel lit
+/// (greys, whites) best, in weighted least squares on `model` (the ramps do not
+/// depend on it): a golden section search over `OOTF_GAMMA_RANGE` to 10⁻⁵. `None`
+/// without such readings or where the best is at an end of the range.
+fn fit_ootf(model: &MonitorModel, readings: &[&TermReading], noise: &NoiseModel) -> Option<f64> {
+    let mixed: Vec<&&TermReading> = readings
+        .iter()
+        .filter(|r| Role::from_drive(r.drive) != Role::Ramp)
+        .collect();
+    if mixed.is_empty() {
+        return None;
+    }
+    let mut trial = model.clone();
+    let mut misfit = |gamma: f64| {
+        trial.terms.hlg_ootf = Some(gamma);
+        mixed
+            .iter()
+            .map(|r| {
+                ((r.xyz - trial.forward_centre(r.drive)).norm() / noise.sigma(r.xyz.norm())).powi(2)
+            })
+            .sum::<f64>()
+    };
+    let (mut low, mut high) = OOTF_GAMMA_RANGE;
+    let ratio = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut a, mut b) = (high - ratio * (high - low), low + ratio * (high - low));
+    let (mut fa, mut fb) = (misfit(a), misfit(b));
+    while high - low > 1e-5 {
+        if fa <= fb {
+            (high, b, fb) = (b, a, fa);
+            a = high - ratio * (high - low);
+            fa = misfit(a);
+        } else {
+            (low, a, fa) = (a, b, fb);
+            b = low + ratio * (high - low);
+            fb = misfit(b);
+        }
+    }
+    let gamma = (low + high) / 2.0;
+    let inside = OOTF_GAMMA_RANGE.0 + 1e-3 < gamma && gamma < OOTF_GAMMA_RANGE.1 - 1e-3;
+    (inside && gamma.is_finite()).then_some(gamma)
+}
+
 /// `model` (its additive part) with the terms of `set` fitted to `readings`: the shift
 /// first from the ramps (with the columns it moves), then the interaction or the
-/// crosstalk from the greys and whites on top of it.
+/// crosstalk from the greys and whites on top of it; the HLG OOTF on its own.
 pub fn fit_terms(
     model: &MonitorModel,
     set: TermSet,
@@ -310,6 +365,10 @@ pub fn fit_terms(
         terms: AdditivityTerms::default(),
         ..model.clone()
     };
+    if set == TermSet::HlgOotf {
+        fitted.terms.hlg_ootf = Some(fit_ootf(&fitted, readings, noise)?);
+        return Some(fitted);
+    }
     if set.shift() {
         let (columns, shift) = fit_chromaticity_shift(model, readings, noise);
         fitted.matrix = Matrix3::from_columns(&columns);
@@ -362,6 +421,7 @@ fn coefficients(terms: &AdditivityTerms) -> Vec<f64> {
         .chain(terms.crosstalk.into_iter().flatten())
         .chain(terms.drive_crosstalk.into_iter().flatten())
         .chain(terms.chromaticity_shift.into_iter().flatten().flatten())
+        .chain(terms.hlg_ootf)
         .collect()
 }
 
@@ -436,6 +496,7 @@ fn forward_selection(scores: &[Option<Vec<f64>>], tolerance: f64) -> TermSet {
         TermSet::Crosstalk,
         TermSet::DriveCrosstalk,
         TermSet::ChromaticityShift,
+        TermSet::HlgOotf,
     ];
     let gain_pair = TermSet::InteractionAndDriveCrosstalk;
     // The pair against none only where it is also below every single term: where a
@@ -539,19 +600,26 @@ impl Evidence {
 
 /// Fit and cross-validate each candidate set of terms on `readings` with the curves
 /// and matrix of `model`, choose by `forward_selection` (and where it cannot judge
-/// a gain term, by the additivity check, `gain_term_on_the_checks_evidence`).
+/// a gain term, by the additivity check, `gain_term_on_the_checks_evidence`). The HLG
+/// OOTF is a candidate only where `hlg` says the display decodes HLG.
 pub fn choose_terms(
     model: &MonitorModel,
     readings: &[TermReading],
     noise: &NoiseModel,
     white: &Xyz,
     additivity: &[GreyAdditivity],
+    hlg: bool,
 ) -> TermChoice {
     let folds = level_folds(readings.iter().map(|r| r.level).collect(), MAX_FOLDS);
     let n = folds.len();
+    let tried = |set: &TermSet| hlg || *set != TermSet::HlgOotf;
     let scores: Vec<Option<Vec<f64>>> = TermSet::ALL
         .iter()
-        .map(|set| cross_validate(model, *set, readings, &folds, noise, white))
+        .map(|set| {
+            tried(set)
+                .then(|| cross_validate(model, *set, readings, &folds, noise, white))
+                .flatten()
+        })
         .collect();
     let xyz: Vec<Xyz> = readings.iter().map(|r| r.xyz).collect();
     let tolerance = noise_delta_e00(&xyz, noise, white);
@@ -563,7 +631,11 @@ pub fn choose_terms(
     let all: Vec<&TermReading> = readings.iter().collect();
     let fitted: Vec<Option<MonitorModel>> = TermSet::ALL
         .iter()
-        .map(|set| fit_terms(model, *set, &all, noise))
+        .map(|set| {
+            tried(set)
+                .then(|| fit_terms(model, *set, &all, noise))
+                .flatten()
+        })
         .collect();
     let fitted_of = |set: TermSet| {
         fitted[TermSet::ALL.iter().position(|s| *s == set).unwrap_or(0)]
@@ -581,6 +653,7 @@ pub fn choose_terms(
         .iter()
         .zip(&scores)
         .zip(&fitted)
+        .filter(|((set, _), _)| tried(set))
         .map(|((set, score), fit)| TermReport {
             terms: *set,
             kept: *set == chosen,
