@@ -185,6 +185,11 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
                 .into(),
         );
     }
+    if let Some(gamma) = terms.hlg_ootf.filter(|_| !carries_terms) {
+        notes.push(format!(
+            "the model's HLG OOTF (BT.2100, system gamma {gamma:.3}): each channel's light in a mixture is its light alone times (Y_S / (w_c E_c))^(γ − 1), a grey's more than its channels' sum; the curves and matrix are each channel's alone"
+        ));
+    }
     if !terms.is_empty() && carries_terms {
         notes.push(
             "the terms in the matrix/TRC tags, which hold the additive part for readers that do not read the LUT tags"

@@ -335,13 +335,15 @@ impl<'a> ColourReproduction<'a> {
     /// The gamut at `position`: P_c = K_c(p) E_c(1) m_c; `None` where a channel's
     /// spatial gain gives no light (a hand-made map), which no colour can be shown at.
     ///
-    /// Through the HLG OOTF (`AdditivityTerms::hlg_ootf`) a channel gives more light
-    /// in a mixture than alone, up to (1 / w_c)^(γ − 1) times in white, and the colours
-    /// the display shows are Y_S^(γ−1) Σ_c P_c E_c over the scene-light cube. The
-    /// box of P_c (1 / w_c)^(γ − 1) holds them all and meets them on the grey axis,
-    /// where they are t^γ times white, and at black and white: on the box's other
-    /// corners the OOTF gives less (a secondary (w_a + w_b)^(γ−1) of the box's), and
-    /// a colour between is inverted by the model itself, each channel clipped.
+    /// Through the HLG OOTF (`AdditivityTerms::hlg_ootf`) with γ > 1 a channel gives
+    /// more light in a mixture than alone, up to (1 / w_c)^(γ − 1) times in white,
+    /// and the colours the display shows are Y_S^(γ−1) Σ_c P_c E_c over the
+    /// scene-light cube. The box of P_c (1 / w_c)^(γ − 1) holds them all and meets
+    /// them on the grey axis, where they are t^γ times white, and at black and white:
+    /// on the box's other corners the OOTF gives less (a secondary (w_a + w_b)^(γ−1)
+    /// of the box's), and a colour between is inverted by the model itself, each
+    /// channel clipped. With γ < 1 (a dim display, a bright room) a channel gives the
+    /// most alone: the box is the channels' own.
     pub fn gamut_at(&self, position: ScreenPosition) -> Option<GamutAt> {
         self.gamut_with_gains(self.model.spatial.gains(position))
     }
@@ -350,7 +352,7 @@ impl<'a> ColourReproduction<'a> {
     fn gamut_with_gains(&self, k: [f64; 3]) -> Option<GamutAt> {
         let mut primaries = self.model.matrix;
         let ootf = self.model.terms.hlg_ootf.map_or([1.0; 3], |gamma| {
-            chromacal_model::monitor::HLG_LUMINANCE_WEIGHTS.map(|w| w.powf(1.0 - gamma))
+            chromacal_model::monitor::HLG_LUMINANCE_WEIGHTS.map(|w| w.powf(1.0 - gamma).max(1.0))
         });
         for (c, ((gain, full), in_white)) in k.iter().zip(self.full).zip(ootf).enumerate() {
             let scale = gain * full * in_white;
@@ -1055,6 +1057,67 @@ mod tests {
             laws: inverse_table::tests::laws(),
             spatial,
             terms: AdditivityTerms::default(),
+        }
+    }
+
+    /// With the HLG OOTF the display's colours are not the box of its channels alone:
+    /// with γ > 1 its greys reach further (a white 1.3 times the channels' sum in
+    /// blue), with γ < 1 the channels alone do. The render keeps the greys up to
+    /// white inside and shown as asked, takes the channels alone as inside whatever
+    /// γ, and counts a colour the model's inverse has to clip as outside, mapped to
+    /// what its clipped drive shows.
+    #[test]
+    fn an_hlg_ootf_model_renders_its_greys_and_clips_what_it_cannot_show() {
+        let settings = RenderSettings {
+            adaptation: None,
+            tone: ToneOperator::Colorimetric,
+            gamut: GamutMapping::Clip,
+            bits: 16,
+            codes: CodeChoice::Rounded,
+        };
+        for gamma in [0.9, 1.2] {
+            let m = MonitorModel {
+                terms: AdditivityTerms {
+                    hlg_ootf: Some(gamma),
+                    ..AdditivityTerms::default()
+                },
+                ..model(SpatialMap::Uniform)
+            };
+            let crf = ColourReproduction::new(&m).unwrap();
+            let white = m.white();
+            let p = ScreenPosition::CENTRE;
+            let at = |xyz: Xyz| ScenePixel { xyz, position: p };
+            let mut asked: Vec<Xyz> = [0.2, 0.787, 0.95, 1.0]
+                .iter()
+                .map(|f| (white - m.black) * *f + m.black)
+                .collect();
+            asked.extend((0..3).map(|c| {
+                let mut d = [0.0; 3];
+                d[c] = 1.0;
+                m.forward(d, p)
+            }));
+            // A red brighter than the display's: outside.
+            asked.push((m.forward([1.0, 0.0, 0.0], p) - m.black) * 1.2 + m.black);
+            let scene = Scene {
+                pixels: asked.iter().map(|x| at(*x)).collect(),
+                white: None,
+            };
+            let rendered = crf.render(&scene, &settings).unwrap();
+            let (inside, beyond) = rendered.pixels.split_at(asked.len() - 1);
+            for (x, px) in asked.iter().zip(inside) {
+                assert!(!px.outside, "γ {gamma}: {x:?} {px:?}");
+                let shown = m.forward(px.codes.map(|c| f64::from(c) / 65535.0), p);
+                let miss = delta_e00_xyz(x, &shown, &white);
+                assert!(miss < 0.01, "γ {gamma}: {x:?} shown {shown:?} ({miss})");
+            }
+            let px = &beyond[0];
+            assert!(px.outside, "γ {gamma}: {px:?}");
+            let shown = m.forward(px.codes.map(|c| f64::from(c) / 65535.0), p);
+            let mapped = Xyz::from(px.mapped);
+            assert!(
+                delta_e00_xyz(&mapped, &shown, &white) < 0.01,
+                "γ {gamma}: {px:?}"
+            );
         }
     }
 

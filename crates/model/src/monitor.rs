@@ -917,21 +917,34 @@ mod tests {
             .sum::<Xyz>()
             + plain.black;
         assert!((m.white() - expected).norm() < 1e-9 * expected.norm());
-        // A mixture: scene light E_k = ê_k^(1/γ), luminance Σ w_k E_k.
-        let drive = [0.3, 0.8, 0.5];
-        let shares = plain.excitations(drive).map(|e| e.max(0.0));
-        let scene = [0, 1, 2].map(|k| shares[k].powf(1.0 / gamma));
-        let luminance: f64 = (0..3).map(|k| w[k] * scene[k]).sum();
-        let mixed: Xyz = (0..3)
-            .map(|c| {
-                plain.matrix.column(c)
-                    * (shares[c] * (luminance / (w[c] * scene[c])).powf(gamma - 1.0))
-            })
-            .sum::<Xyz>()
-            + plain.black;
-        assert!((m.forward(drive, p) - mixed).norm() < 1e-9 * mixed.norm());
+        // A display that is BT.2100's HLG EOTF exactly (BT.2020 primaries, each
+        // channel the HLG law with p = γ, its column the channel's light alone):
+        // the model is that EOTF (chromacal-color's) at every mixture.
+        let bt2020 =
+            chromacal_color::gamut::AdditiveGamut::of_space(&chromacal_color::gamut::REC_2020)
+                .unwrap()
+                .primaries;
+        let hlg = MonitorModel {
+            matrix: Matrix3::from_fn(|j, c| bt2020[(j, c)] * w[c].powf(gamma - 1.0)),
+            black: Xyz::zeros(),
+            laws: [0, 1, 2].map(|_| TransferLaw::Hlg(crate::transfer::Hlg { exponent: gamma })),
+            ..m.clone()
+        };
+        for drive in [[0.3, 0.8, 0.5], [0.9, 0.1, 0.0], [0.6; 3], [0.05, 0.5, 1.0]] {
+            let eotf = chromacal_color::hdr::hlg_eotf(drive, 1.0, 0.0, gamma);
+            let want = bt2020 * nalgebra::Vector3::from(eotf);
+            let got = hlg.forward(drive, p);
+            assert!(
+                (got - want).norm() < 1e-9 * want.norm().max(1e-9),
+                "{drive:?}: {got:?} {want:?}"
+            );
+        }
         // The gains depend on the shares' ratios only: a grey keeps them at every level.
-        assert_eq!(ootf_gains(&[0.2; 3], gamma), ootf_gains(&[0.9; 3], gamma));
+        let (dim, bright) = (ootf_gains(&[0.2; 3], gamma), ootf_gains(&[0.9; 3], gamma));
+        assert!(
+            (0..3).all(|c| (dim[c] - bright[c]).abs() < 1e-12),
+            "{dim:?} {bright:?}"
+        );
         // Round trips over the cube, its top corner included.
         let mut worst: f64 = 0.0;
         for r in 0..=10 {

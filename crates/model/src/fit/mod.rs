@@ -365,29 +365,12 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
     let (drift_model, drift) = drift_of_reference_white(all, &black, options.correct_drift);
     let noise = noise_of_run(all, &black, &drift);
     let corrected = correct_for_drift(all, &black, drift_model.as_ref())?;
-    let mut ramps = channel_ramps(&corrected, &black, &noise)?;
-    let greys = grey_readings(&corrected);
-    // A display decoding HLG is not the sum of its channels by design (BT.2100's
-    // OOTF): its greys would bend the curves by what the OOTF adds, so the curves
-    // are the ramps' alone, and the greys go to the OOTF term (and, corrected by
-    // it, to the curves fitted again: `refit`).
-    let curve_greys = if options.hlg_ootf {
-        &[][..]
-    } else {
-        &greys[..]
-    };
-    add_grey_excitations(
-        &mut ramps,
-        curve_greys,
-        &black.xyz,
-        &noise,
-        options.max_condition_number,
-    );
+    let (ramps, greys) = ramps_with_greys(&corrected, &black, &noise, options)?;
     let white_reference = reference_white(&corrected, &black, &ramps);
     let selection = select_law(
         options,
         &ramps,
-        curve_greys,
+        curve_greys(&greys, options),
         &black,
         &white_reference,
         &noise,
@@ -447,6 +430,42 @@ fn fit_measurements(set: &MeasurementSet, options: &FitOptions) -> Result<Fitted
         },
         model,
     })
+}
+
+/// A grey reading: its index, its drive level and its XYZ.
+type Grey = (usize, f64, Xyz);
+
+/// Steps 3 and 4: each channel's ramp, with the greys' shares of it where they shape
+/// the curves (`curve_greys`), and the greys.
+fn ramps_with_greys(
+    corrected: &[Corrected<'_>],
+    black: &BlackEstimate,
+    noise: &NoiseModel,
+    options: &FitOptions,
+) -> Result<([ChannelRamp; 3], Vec<Grey>), FitError> {
+    let mut ramps = channel_ramps(corrected, black, noise)?;
+    let greys = grey_readings(corrected);
+    add_grey_excitations(
+        &mut ramps,
+        curve_greys(&greys, options),
+        &black.xyz,
+        noise,
+        options.max_condition_number,
+    );
+    Ok((ramps, greys))
+}
+
+/// The greys that shape the curves: all of them, but none on a display decoding HLG
+/// whose OOTF may be kept. Such a display is not the sum of its channels by design
+/// (BT.2100's OOTF), so its greys would bend the curves by what the OOTF adds: the
+/// curves are the ramps' alone, and the greys go to the OOTF term (and, corrected by
+/// it, to the curves fitted again: `refit`).
+fn curve_greys<'a>(greys: &'a [Grey], options: &FitOptions) -> &'a [Grey] {
+    if options.hlg_ootf && options.additivity_terms {
+        &[]
+    } else {
+        greys
+    }
 }
 
 /// Step 5, after the matrix: the terms for what additivity misses (`terms`), chosen on
