@@ -25,8 +25,8 @@
 //! a gain term, and the additivity check does (`gain_term_on_the_checks_evidence`).
 //!
 //! For a display decoding HLG (`FitOptions::hlg_ootf`) one more single candidate:
-//! BT.2100's OOTF, whose system gamma is not linear in anything, found by a golden
-//! section search on the greys and whites (`fit_ootf`), kept as the others are.
+//! BT.2100's OOTF, whose system gamma is not linear in anything, found by argmin's
+//! golden-section search on the greys and whites (`fit_ootf`), kept as the others are.
 
 use nalgebra::{DMatrix, DVector, Matrix3};
 use serde::{Deserialize, Serialize};
@@ -312,43 +312,57 @@ pub const OOTF_GAMMA_RANGE: (f64, f64) = (0.8, 1.8);
 
 /// The HLG OOTF's system gamma that fits the readings with more than one channel lit
 /// (greys, whites) best, in weighted least squares on `model` (the ramps do not
-/// depend on it): a golden section search over `OOTF_GAMMA_RANGE` to 10⁻⁵. `None`
-/// without such readings or where the best is at an end of the range.
+/// depend on it): argmin's golden-section search over `OOTF_GAMMA_RANGE`, to a
+/// bracket of 10⁻⁶ of γ, from BT.2100's 1.2. `None` without such readings, when the
+/// search fails, or where the best is at an end of the range.
 fn fit_ootf(model: &MonitorModel, readings: &[&TermReading], noise: &NoiseModel) -> Option<f64> {
-    let mixed: Vec<&&TermReading> = readings
+    use argmin::core::{CostFunction, Error, Executor};
+    use argmin::solver::goldensectionsearch::GoldenSectionSearch;
+    /// χ² of the mixed readings with the OOTF of a given γ.
+    struct Misfit<'a> {
+        model: &'a MonitorModel,
+        mixed: Vec<&'a TermReading>,
+        noise: &'a NoiseModel,
+    }
+    impl CostFunction for Misfit<'_> {
+        type Param = f64;
+        type Output = f64;
+        fn cost(&self, gamma: &f64) -> Result<f64, Error> {
+            let mut trial = self.model.clone();
+            trial.terms.hlg_ootf = Some(*gamma);
+            Ok(self
+                .mixed
+                .iter()
+                .map(|r| {
+                    let miss = (r.xyz - trial.forward_centre(r.drive)).norm();
+                    (miss / self.noise.sigma(r.xyz.norm())).powi(2)
+                })
+                .sum())
+        }
+    }
+    let mixed: Vec<&TermReading> = readings
         .iter()
+        .copied()
         .filter(|r| Role::from_drive(r.drive) != Role::Ramp)
         .collect();
     if mixed.is_empty() {
         return None;
     }
-    let mut trial = model.clone();
-    let mut misfit = |gamma: f64| {
-        trial.terms.hlg_ootf = Some(gamma);
-        mixed
-            .iter()
-            .map(|r| {
-                ((r.xyz - trial.forward_centre(r.drive)).norm() / noise.sigma(r.xyz.norm())).powi(2)
-            })
-            .sum::<f64>()
+    let (low, high) = OOTF_GAMMA_RANGE;
+    let solver = GoldenSectionSearch::new(low, high)
+        .and_then(|s| s.with_tolerance(1e-6))
+        .ok()?;
+    let problem = Misfit {
+        model,
+        mixed,
+        noise,
     };
-    let (mut low, mut high) = OOTF_GAMMA_RANGE;
-    let ratio = (5f64.sqrt() - 1.0) / 2.0;
-    let (mut a, mut b) = (high - ratio * (high - low), low + ratio * (high - low));
-    let (mut fa, mut fb) = (misfit(a), misfit(b));
-    while high - low > 1e-5 {
-        if fa <= fb {
-            (high, b, fb) = (b, a, fa);
-            a = high - ratio * (high - low);
-            fa = misfit(a);
-        } else {
-            (low, a, fa) = (a, b, fb);
-            b = low + ratio * (high - low);
-            fb = misfit(b);
-        }
-    }
-    let gamma = (low + high) / 2.0;
-    let inside = OOTF_GAMMA_RANGE.0 + 1e-3 < gamma && gamma < OOTF_GAMMA_RANGE.1 - 1e-3;
+    let result = Executor::new(problem, solver)
+        .configure(|state| state.param(1.2).max_iters(200))
+        .run()
+        .ok()?;
+    let gamma = result.state().best_param?;
+    let inside = low + 1e-3 < gamma && gamma < high - 1e-3;
     (inside && gamma.is_finite()).then_some(gamma)
 }
 
