@@ -3,7 +3,8 @@
 //! transfer table (so the PQ law the fit keeps is not the law that made the light),
 //! with a brightness limiter, 10-bit codes, and the instrument's noise. Once in
 //! process, once across a real TCP socket (the Resolve protocol, `bits="10"`) and a
-//! real tty (an emulated PR-670).
+//! real tty (an emulated PR-670). And the same OLED in its HLG mode, through BT.2100's
+//! OOTF.
 
 use chromacal::journal::Journal;
 use chromacal::profile::Profile;

@@ -208,7 +208,8 @@ pub async fn verify(
 
 /// The verification a calibration with a target ends with: the default chart through
 /// the new curves, on the run's own devices, against sRGB (for a PQ signal the
-/// bt2100 chart against BT.2100 PQ in ΔE ITP), judged by `[verify]`'s criteria
+/// bt2100 chart against BT.2100 PQ in ΔE ITP, for HLG bt2100-hlg against BT.2100
+/// HLG), judged by `[verify]`'s criteria
 /// (DisplayCAL's defaults when it names none), and kept in `store`.
 pub async fn after_calibration(
     store: &ProfileStore,
@@ -225,6 +226,11 @@ pub async fn after_calibration(
             Against::Encoding(SourceSpace::Rec2100Pq),
             Metric::Itp,
         ),
+        Some(chromacal_model::plan::Signal::Hlg) => (
+            crate::verify::chart::bt2100_hlg_chart(),
+            Against::Encoding(SourceSpace::Rec2100Hlg),
+            Metric::Itp,
+        ),
         _ => (
             crate::verify::chart::default_chart(),
             Against::Encoding(SourceSpace::Srgb),
@@ -235,7 +241,7 @@ pub async fn after_calibration(
         (None, false) => {
             if metric == Metric::Itp {
                 tracing::warn!(
-                    "the config's [[verify.criterion]] limits are read as ΔE ITP on this PQ run: a limit written for ΔE00 does not mean the same there"
+                    "the config's [[verify.criterion]] limits are read as ΔE ITP on this HDR run: a limit written for ΔE00 does not mean the same there"
                 );
             }
             CriteriaSet {

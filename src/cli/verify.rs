@@ -29,18 +29,20 @@ pub struct VerifyArgs {
     current: bool,
     /// What each patch is set against: srgb, bt709, bt1886, p3, rec2020, rec2100-pq,
     /// rec2100-hlg (what an application asks for in that encoding) or profile (the
-    /// profile's prediction) [default: srgb; rec2100-pq for the bt2100 chart].
+    /// profile's prediction) [default: srgb; rec2100-pq for the bt2100 chart,
+    /// rec2100-hlg for bt2100-hlg].
     #[arg(long)]
     against: Option<Against>,
     /// default (≥ 17 greys, primaries and secondaries at four levels, the
     /// ColorChecker, white and black read three times), short (26 patches), long
     /// (≥ 100), bt2100 (for a display in PQ mode: PQ greys from 0.1 to 1,000 cd/m²
-    /// and the ColorChecker at 203 cd/m², as BT.2100 PQ codes), or a file: a .ti1/.ti3
+    /// and the ColorChecker at 203 cd/m², as BT.2100 PQ codes), bt2100-hlg (in HLG
+    /// mode: HLG greys and the ColorChecker at 75 % HLG), or a file: a .ti1/.ti3
     /// (RGB_R RGB_G RGB_B, 0–100) or a CSV (R, G, B, 0–1), in the --against encoding.
     #[arg(long, default_value = "default")]
     chart: String,
     /// de00 (CIEDE2000) or itp (ITU-R BT.2124 ΔE ITP) [default: de00; itp for the
-    /// bt2100 chart].
+    /// bt2100 charts].
     #[arg(long)]
     metric: Option<Metric>,
     /// displaycal (DisplayCAL's default tolerances), displaycal-recommended, iso14861
@@ -80,20 +82,29 @@ pub struct VerifyArgs {
 pub fn run(args: VerifyArgs) -> Result<(), Failure> {
     let loaded = load_config_searching(args.config.as_deref(), &config_search_paths())?;
     let chart = chart::chart(&args.chart)?;
-    let hdr_chart = chart.name == "bt2100";
-    let metric = args
-        .metric
-        .unwrap_or(if hdr_chart { Metric::Itp } else { Metric::De00 });
+    // The HDR charts' encoding: each is codes of one signal.
+    let hdr_encoding = match chart.name.as_str() {
+        "bt2100" => Some(SourceSpace::Rec2100Pq),
+        "bt2100-hlg" => Some(SourceSpace::Rec2100Hlg),
+        _ => None,
+    };
+    let metric = args.metric.unwrap_or(if hdr_encoding.is_some() {
+        Metric::Itp
+    } else {
+        Metric::De00
+    });
     let criteria = criteria(args.criteria.as_deref(), &loaded.config.verify, metric)?;
     if let Some(path) = &args.report {
         super::report::check_output_dir(path)?;
     }
-    let pq = Against::Encoding(SourceSpace::Rec2100Pq);
-    let against = match (hdr_chart, args.against) {
-        (true, None) => pq,
-        (true, Some(a @ Against::Encoding(_))) if a != pq => {
+    let against = match (hdr_encoding, args.against) {
+        (Some(own), None) => Against::Encoding(own),
+        (Some(own), Some(a @ Against::Encoding(space))) if space != own => {
             return Err(Failure::from(format!(
-                "the bt2100 chart is BT.2100 PQ codes: verify it --against rec2100-pq, not {}",
+                "the {} chart is {} codes: verify it --against {}, not {}",
+                chart.name,
+                own.name(),
+                own.key(),
                 a.name()
             )));
         }

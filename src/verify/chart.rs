@@ -284,7 +284,48 @@ pub fn bt2100_chart() -> Chart {
     }
 }
 
-/// A chart by name (`default`, `short`, `long`, `bt2100`) or from a file: an ArgyllCMS `.ti1` or
+/// BT.2408's HLG reference white: 75 % of the signal.
+pub const HLG_REFERENCE_WHITE: f64 = 0.75;
+
+/// The chart for an HDR display in its HLG mode (`--chart bt2100-hlg`, read with
+/// `--against rec2100-hlg`): the white and the black three times each, 15 calibration
+/// greys, HLG greys from 5 to 100 % of the signal, and the ColorChecker under D65 with
+/// its perfect white at BT.2408's reference white (75 %: scene light 0.265 of the
+/// signal's top), all as BT.2100 HLG codes on BT.2020 primaries. HLG is relative: what
+/// each code asks for comes from the display's own peak and system gamma.
+pub fn bt2100_hlg_chart() -> Chart {
+    use chromacal_color::gamut::{AdditiveGamut, REC_2020};
+    use chromacal_color::hdr::{hlg_inverse_oetf, hlg_oetf};
+    let mut patches = repeats(3);
+    patches.extend(display_greys(15));
+    for percent in [5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 75.0, 90.0] {
+        patches.push(patch(
+            format!("HLG grey {percent} %"),
+            Kind::EncodedGrey,
+            Input::Encoded([percent / 100.0; 3]),
+        ));
+    }
+    let to_rgb = AdditiveGamut::of_space(&REC_2020).and_then(|g| g.primaries.try_inverse());
+    if let (Some(to_rgb), Some(colours)) = (to_rgb, colorchecker_xyz(Illuminant::D65, 1.0)) {
+        let white = hlg_inverse_oetf(HLG_REFERENCE_WHITE) / hlg_inverse_oetf(1.0);
+        for (name, xyz) in COLORCHECKER.iter().zip(colours) {
+            // Scene light relative to the signal's top (a rounding's negative is 0).
+            let rgb = to_rgb * (xyz * white);
+            let scene = [rgb.x, rgb.y, rgb.z].map(|v| v.max(0.0) * hlg_inverse_oetf(1.0));
+            patches.push(patch(
+                format!("ColorChecker {name}"),
+                Kind::ColorChecker,
+                Input::Encoded(scene.map(hlg_oetf)),
+            ));
+        }
+    }
+    Chart {
+        name: "bt2100-hlg".into(),
+        patches,
+    }
+}
+
+/// A chart by name (`default`, `short`, `long`, `bt2100`, `bt2100-hlg`) or from a file: an ArgyllCMS `.ti1` or
 /// `.ti3` (its `RGB_R RGB_G RGB_B` columns, 0–100), or a CSV with a header naming `R`,
 /// `G` and `B` columns (0–1). Its patches are codes of the reference encoding.
 pub fn chart(name: &str) -> Result<Chart, ChartError> {
@@ -293,6 +334,7 @@ pub fn chart(name: &str) -> Result<Chart, ChartError> {
         "short" => Ok(short_chart()),
         "long" => Ok(long_chart()),
         "bt2100" => Ok(bt2100_chart()),
+        "bt2100-hlg" => Ok(bt2100_hlg_chart()),
         path => read_chart(Path::new(path)),
     }
 }
@@ -430,6 +472,29 @@ mod tests {
         assert_eq!(count(Kind::ColorChecker), 24);
         assert_eq!(short_chart().patches.len(), 26);
         assert!(long_chart().patches.len() >= 100);
+        // The HLG chart: its reference white's grey at 75 % of the signal, and the
+        // ColorChecker's white patch (its reflectance about 0.9) just below it.
+        let hlg = bt2100_hlg_chart();
+        let encoded = |label: &str| {
+            hlg.patches
+                .iter()
+                .find(|p| p.label == label)
+                .map(|p| match p.input {
+                    Input::Encoded(rgb) => rgb,
+                    _ => panic!("{label} is not encoded"),
+                })
+                .unwrap()
+        };
+        assert_eq!(encoded("HLG grey 75 %"), [0.75; 3]);
+        let white = encoded("ColorChecker white 9.5");
+        assert!(white.iter().all(|v| (0.70..0.75).contains(v)), "{white:?}");
+        assert_eq!(
+            hlg.patches
+                .iter()
+                .filter(|p| p.kind == Kind::ColorChecker)
+                .count(),
+            24
+        );
     }
 
     #[test]

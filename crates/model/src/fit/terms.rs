@@ -306,7 +306,7 @@ fn fit_gain_terms(
 }
 
 /// The range of the HLG OOTF's system gamma searched. BT.2100 gives 1.2 at 1,000
-/// cd/m², BT.2390's extension 1.0 near 400 and 1.5 near 5,000, less in a bright
+/// cd/m², BT.2390's extension 1.04 at 400 and 1.53 at 5,000, less in a bright
 /// room; a fit at either end is taken for readings the term does not explain.
 pub const OOTF_GAMMA_RANGE: (f64, f64) = (0.8, 1.8);
 
