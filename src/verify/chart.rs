@@ -295,7 +295,7 @@ pub const HLG_REFERENCE_WHITE: f64 = 0.75;
 /// each code asks for comes from the display's own peak and system gamma.
 pub fn bt2100_hlg_chart() -> Chart {
     use chromacal_color::gamut::{AdditiveGamut, REC_2020};
-    use chromacal_color::hdr::{hlg_inverse_oetf, hlg_oetf};
+    use chromacal_color::hdr::{hlg_inverse_oetf, hlg_oetf, hlg_scene_light};
     let mut patches = repeats(3);
     patches.extend(display_greys(15));
     for percent in [5.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 75.0, 90.0] {
@@ -307,7 +307,7 @@ pub fn bt2100_hlg_chart() -> Chart {
     }
     let to_rgb = AdditiveGamut::of_space(&REC_2020).and_then(|g| g.primaries.try_inverse());
     if let (Some(to_rgb), Some(colours)) = (to_rgb, colorchecker_xyz(Illuminant::D65, 1.0)) {
-        let white = hlg_inverse_oetf(HLG_REFERENCE_WHITE) / hlg_inverse_oetf(1.0);
+        let white = hlg_scene_light(HLG_REFERENCE_WHITE);
         for (name, xyz) in COLORCHECKER.iter().zip(colours) {
             // Scene light relative to the signal's top (a rounding's negative is 0).
             let rgb = to_rgb * (xyz * white);

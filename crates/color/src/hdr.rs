@@ -35,12 +35,22 @@ pub fn hlg_inverse_oetf(signal: f64) -> f64 {
     }
 }
 
+/// The room luminance (cd/m²) of BT.2100's reference viewing environment, which the
+/// HLG system gamma assumes unless told otherwise.
+pub const HLG_REFERENCE_AMBIENT: f64 = 5.0;
+
+/// The scene light of HLG signal `signal`, the inverse OETF normalised to 1 at full
+/// signal (which the published constants miss by 10⁻⁸).
+pub fn hlg_scene_light(signal: f64) -> f64 {
+    hlg_inverse_oetf(signal) / hlg_inverse_oetf(1.0)
+}
+
 /// BT.2100 Table 5 note 5f, extended as BT.2390 §6.2 recommends: the HLG system gamma
 /// of a display of nominal peak `peak` cd/m² (1.2 at 1,000 cd/m², γ = 1.2 · 1.111^log₂(L_W/1000)),
 /// lowered for a room brighter than the reference 5 cd/m² (−0.076 log₁₀(L_amb / 5)).
 pub fn hlg_system_gamma(peak: f64, ambient: f64) -> f64 {
     let gamma = 1.2 * 1.111f64.powf((peak.max(1.0) / 1000.0).log2());
-    gamma - 0.076 * (ambient.max(0.01) / 5.0).log10()
+    gamma - 0.076 * (ambient.max(0.01) / HLG_REFERENCE_AMBIENT).log10()
 }
 
 /// BT.2100 Table 5 HLG EOTF on the grey axis (R = G = B, so the OOTF's luminance is the
@@ -54,7 +64,7 @@ pub fn hlg_eotf_grey(signal: f64, white: f64, black: f64, gamma: f64) -> f64 {
 }
 
 /// BT.2020's luminance weights of linear R, G, B (BT.2100 Table 5's Y_S).
-const BT2020_LUMINANCE: [f64; 3] = [0.2627, 0.6780, 0.0593];
+pub const BT2020_LUMINANCE: [f64; 3] = [0.2627, 0.6780, 0.0593];
 
 /// BT.2100 Table 5 HLG EOTF of a BT.2020 R′G′B′ signal: each channel's scene light
 /// E = OETF⁻¹(max(0, (1 − β) E′ + β)) (β lifting the display's black `black`), then
@@ -63,12 +73,7 @@ const BT2020_LUMINANCE: [f64; 3] = [0.2627, 0.6780, 0.0593];
 /// of nominal peak `white`.
 pub fn hlg_eotf(signal: [f64; 3], white: f64, black: f64, gamma: f64) -> [f64; 3] {
     let beta = (3.0 * (black.max(0.0) / white).powf(1.0 / gamma)).sqrt();
-    // Normalised to the signal's top, which the published constants miss by 10⁻⁸.
-    let top = hlg_inverse_oetf(1.0);
-    let scene = signal.map(|e| {
-        let lifted = ((1.0 - beta) * e.clamp(0.0, 1.0) + beta).max(0.0);
-        hlg_inverse_oetf(lifted) / top
-    });
+    let scene = signal.map(|e| hlg_scene_light(((1.0 - beta) * e.clamp(0.0, 1.0) + beta).max(0.0)));
     let luminance: f64 = (0..3).map(|c| BT2020_LUMINANCE[c] * scene[c]).sum();
     if !(luminance > 0.0) {
         return [0.0; 3];

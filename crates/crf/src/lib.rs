@@ -352,7 +352,7 @@ impl<'a> ColourReproduction<'a> {
     fn gamut_with_gains(&self, k: [f64; 3]) -> Option<GamutAt> {
         let mut primaries = self.model.matrix;
         let ootf = self.model.terms.hlg_ootf.map_or([1.0; 3], |gamma| {
-            chromacal_model::monitor::HLG_LUMINANCE_WEIGHTS.map(|w| w.powf(1.0 - gamma).max(1.0))
+            chromacal_color::hdr::BT2020_LUMINANCE.map(|w| w.powf(1.0 - gamma).max(1.0))
         });
         for (c, ((gain, full), in_white)) in k.iter().zip(self.full).zip(ootf).enumerate() {
             let scale = gain * full * in_white;

@@ -19,7 +19,7 @@ use super::{CodeChoice, ColourReproduction, CrfError, RenderSettings, Scene, Sce
 use chromacal_color::Xyz;
 use chromacal_color::adaptation::{AdaptationTransform, adapt};
 use chromacal_color::gamut::{AdditiveGamut, DISPLAY_P3, REC_2020, RgbSpace, SRGB};
-use chromacal_color::hdr::{bt2390_eetf, hlg_eotf, hlg_system_gamma};
+use chromacal_color::hdr::{HLG_REFERENCE_AMBIENT, bt2390_eetf, hlg_eotf, hlg_system_gamma};
 use chromacal_color::ictcp::{pq_eotf, pq_inverse_eotf};
 use chromacal_color::spaces::{Xyy, xyy_to_xyz};
 use chromacal_model::fit::stats::ErrorStats;
@@ -167,16 +167,16 @@ impl SourceSpace {
                 Some(m) if m > white => bt2390_eetf(v, m, white, black),
                 _ => pq_eotf(v).clamp(black.max(0.0), white),
             }),
-            SourceSpace::Rec2100Hlg => {
-                hlg_eotf(rgb, white, black, hlg_system_gamma(white, HLG_ROOM))
-            }
+            SourceSpace::Rec2100Hlg => hlg_eotf(
+                rgb,
+                white,
+                black,
+                hlg_system_gamma(white, HLG_REFERENCE_AMBIENT),
+            ),
             sdr => rgb.map(|v| white * sdr.decode_relative(v, share)),
         }
     }
 }
-
-/// BT.2100's reference surround for HLG, cd/m².
-const HLG_ROOM: f64 = 5.0;
 
 /// BT.1886's exponent.
 const BT1886_GAMMA: f64 = 2.4;
@@ -444,7 +444,7 @@ fn hdr_notes(options: &LutOptions, white: &Xyz, black: &Xyz) -> Vec<String> {
                 "HLG EOTF for a {:.1} cd/m2 peak, black {:.4}, system gamma {:.3} (5 cd/m2 surround)",
                 white.y,
                 black.y,
-                hlg_system_gamma(white.y, HLG_ROOM)
+                hlg_system_gamma(white.y, HLG_REFERENCE_AMBIENT)
             ),
         ],
         _ => Vec::new(),

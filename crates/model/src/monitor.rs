@@ -260,9 +260,6 @@ pub fn crosstalk_basis(shares: &[f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|c| (1.0 - shares[c]) * s[c])
 }
 
-/// BT.2020's luminance weights of R, G, B: the HLG OOTF's Y_S (BT.2100 Table 5).
-pub const HLG_LUMINANCE_WEIGHTS: [f64; 3] = [0.2627, 0.6780, 0.0593];
-
 /// The HLG OOTF's gain on each channel at light shares `shares` for system gamma
 /// `gamma` (`AdditivityTerms`): (Y_S / (w_c E_c))^(γ − 1), E_k = ê_k^(1/γ),
 /// Y_S = Σ_k w_k E_k. It depends on the shares' ratios only, so a grey keeps its
@@ -270,7 +267,7 @@ pub const HLG_LUMINANCE_WEIGHTS: [f64; 3] = [0.2627, 0.6780, 0.0593];
 /// multiplies is 0: its product with the gain goes to 0 with ê_c as ê_c^(1/γ)), and
 /// for shares below 0 (the extended inverse's), taken as 0.
 pub fn ootf_gains(shares: &[f64; 3], gamma: f64) -> [f64; 3] {
-    let w = HLG_LUMINANCE_WEIGHTS;
+    let w = chromacal_color::hdr::BT2020_LUMINANCE;
     let scene = shares.map(|s| s.max(0.0).powf(1.0 / gamma));
     let luminance: f64 = (0..3).map(|k| w[k] * scene[k]).sum();
     [0, 1, 2].map(|c| {
@@ -905,7 +902,7 @@ mod tests {
             ..srgb_like()
         };
         let p = ScreenPosition::CENTRE;
-        let w = HLG_LUMINANCE_WEIGHTS;
+        let w = chromacal_color::hdr::BT2020_LUMINANCE;
         for c in 0..3 {
             let mut alone = [0.0; 3];
             alone[c] = 0.7;

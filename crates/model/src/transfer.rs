@@ -16,7 +16,7 @@
 //! whose turning point lies between the toe and full drive is not monotone where it is
 //! used; [`TransferLaw::monotonicity`] finds it and the fitting refuses to publish it.
 
-use chromacal_color::hdr::{bt2390_eetf, hlg_inverse_oetf, hlg_oetf};
+use chromacal_color::hdr::{bt2390_eetf, hlg_inverse_oetf, hlg_oetf, hlg_scene_light};
 use chromacal_color::ictcp::{PQ_PEAK, pq_eotf, pq_inverse_eotf};
 use serde::{Deserialize, Serialize};
 
@@ -284,7 +284,7 @@ pub struct Hlg {
 
 impl Hlg {
     pub fn excitation(&self, v: f64) -> f64 {
-        (hlg_inverse_oetf(v.clamp(0.0, 1.0)) / hlg_inverse_oetf(1.0)).powf(self.exponent)
+        hlg_scene_light(v.clamp(0.0, 1.0)).powf(self.exponent)
     }
 
     /// The drive of excitation `e`: the OETF of e^(1/p).

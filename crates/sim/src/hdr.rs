@@ -28,7 +28,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use chromacal_color::hdr::{bt2390_eetf, hlg_eotf, hlg_system_gamma};
+use chromacal_color::hdr::{HLG_REFERENCE_AMBIENT, bt2390_eetf, hlg_eotf, hlg_system_gamma};
 use chromacal_color::ictcp::pq_eotf;
 use chromacal_model::plan::Signal;
 
@@ -59,10 +59,6 @@ pub struct HdrBehaviour {
 fn pq_mode() -> Signal {
     Signal::Pq
 }
-
-/// The room luminance (cd/m²) an HLG display's system gamma assumes: BT.2100's
-/// reference viewing environment.
-pub const HLG_REFERENCE_AMBIENT: f64 = 5.0;
 
 /// Automatic brightness limiting: g(p) = (F / p) · tanh((p / F)^k)^(1/k) of the
 /// screen's mean light p.
@@ -248,7 +244,10 @@ mod tests {
         // A channel alone gets less light than it has in the grey: the OOTF scales
         // it by the scene's luminance, which is the channel's weight of the grey's,
         // to the power γ − 1. So the display is not the sum of its channels.
-        for (c, weight) in [0.2627f64, 0.6780, 0.0593].into_iter().enumerate() {
+        for (c, weight) in chromacal_color::hdr::BT2020_LUMINANCE
+            .into_iter()
+            .enumerate()
+        {
             let mut alone = [0.0; 3];
             alone[c] = 0.75;
             let light = hdr.panel_drives(alone, peak).map(|u| u.powf(2.2) * peak);

@@ -429,12 +429,10 @@ fn fit_hlg(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     let kind = LawKind::Hlg;
     let points = Points::from_ramp(ramp, false);
     need_levels(kind, &points, 1)?;
-    let scene = |v: f64| {
-        chromacal_color::hdr::hlg_inverse_oetf(v.clamp(0.0, 1.0))
-            / chromacal_color::hdr::hlg_inverse_oetf(1.0)
-    };
     let curve = |t: &[f64], v: f64, g: &mut [f64]| {
-        let ln_e = scene(v).max(f64::MIN_POSITIVE).ln();
+        let ln_e = chromacal_color::hdr::hlg_scene_light(v.clamp(0.0, 1.0))
+            .max(f64::MIN_POSITIVE)
+            .ln();
         let f = (t[0] * ln_e).exp();
         g[0] = f * ln_e;
         f
@@ -846,6 +844,15 @@ mod tests {
 
     const WIGGLE: [f64; 7] = [0.4, -1.1, 0.7, 0.2, -0.5, 1.3, -0.8];
 
+    /// The largest miss of a fitted law from the `display` it was fitted to, over 199
+    /// drives between 0 and 1.
+    fn worst_miss(fit: &LawFit, display: impl Fn(f64) -> f64) -> f64 {
+        (1..200)
+            .map(|k| k as f64 / 200.0)
+            .map(|v| (fit.law.excitation(v) - display(v)).abs())
+            .fold(0.0, f64::max)
+    }
+
     /// A display in PQ mode whose panel is not the law's: the processing inverts a
     /// 2.2 gamma, the panel follows a gain-offset-gamma of 2.3 with a small cut-off,
     /// and the roll-off starts from a 4,000 cd/m² master onto a 750 cd/m² peak. The PQ
@@ -870,12 +877,7 @@ mod tests {
             law.rolloff_from > law.peak,
             "{law:?}: the roll-off was found"
         );
-        let worst = |f: &LawFit| {
-            (1..200)
-                .map(|k| k as f64 / 200.0)
-                .map(|v| (f.law.excitation(v) - display(v)).abs())
-                .fold(0.0, f64::max)
-        };
+        let worst = |f: &LawFit| worst_miss(f, display);
         let power = fit_law(LawKind::Power, &r, 1.0 / 1023.0).unwrap();
         assert!(worst(&fit) < 0.02, "pq {}", worst(&fit));
         assert!(worst(&power) > 5.0 * worst(&fit), "power {}", worst(&power));
@@ -894,10 +896,12 @@ mod tests {
     /// than a power of the code does; its inverse is its inverse.
     #[test]
     fn the_hlg_law_follows_a_channel_of_an_hlg_display() {
-        use chromacal_color::hdr::hlg_inverse_oetf;
         let gamma = 1.16;
-        let scene = |v: f64| hlg_inverse_oetf(v) / hlg_inverse_oetf(1.0);
-        let display = |v: f64| scene(v).powf(gamma).powf(2.3 / 2.2);
+        let display = |v: f64| {
+            chromacal_color::hdr::hlg_scene_light(v)
+                .powf(gamma)
+                .powf(2.3 / 2.2)
+        };
         let levels: Vec<f64> = (1..=16).map(|k| k as f64 / 16.0).collect();
         let r = ramp(&levels, display, &WIGGLE, true);
         let fit = fit_law(LawKind::Hlg, &r, 1.0 / 1023.0).unwrap();
@@ -906,12 +910,7 @@ mod tests {
         };
         check(&fit, "exponent", gamma * 2.3 / 2.2);
         assert!((law.exponent - gamma * 2.3 / 2.2).abs() < 0.01, "{law:?}");
-        let worst = |f: &LawFit| {
-            (1..200)
-                .map(|k| k as f64 / 200.0)
-                .map(|v| (f.law.excitation(v) - display(v)).abs())
-                .fold(0.0, f64::max)
-        };
+        let worst = |f: &LawFit| worst_miss(f, display);
         let power = fit_law(LawKind::Power, &r, 1.0 / 1023.0).unwrap();
         assert!(worst(&fit) < 0.005, "hlg {}", worst(&fit));
         assert!(worst(&power) > 5.0 * worst(&fit), "power {}", worst(&power));
