@@ -189,6 +189,15 @@ pub fn candidate_curve(
             peak: get("peak")?,
             rolloff_from: get("rolloff_from")?,
             exponent: get("exponent")?,
+            curvature: 0.0,
+            toe: 0.0,
+        }),
+        LawKind::PqCowan => TransferLaw::Pq(Pq {
+            peak: get("peak")?,
+            rolloff_from: get("rolloff_from")?,
+            exponent: get("exponent")?,
+            curvature: get("curvature")?,
+            toe: get("toe")?,
         }),
         LawKind::Hlg => TransferLaw::Hlg(Hlg {
             exponent: get("exponent")?,

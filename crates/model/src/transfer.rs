@@ -9,6 +9,8 @@
 //! | [`ThreeTerm`] | ln E = A ln v + B ln²v + C | Rougeron & Péroche 1998, §4.3.1 |
 //! | [`GainOffsetGamma`] | E = (a·v + (1 − a))^γ, 0 below the cut-off | Berns 1996 |
 //! | [`Table`] | monotone cubic through the measured ramp | Fritsch & Carlson 1980 |
+//! | [`Pq`] | E = (L(v) / peak)^a, or ln E = a ln x + b ln²x of x = L(v) / peak | SMPTE ST 2084, BT.2390; Cowan 1983 for b |
+//! | [`Hlg`] | E = E_s(v)^p of BT.2100's scene light | ITU-R BT.2100 |
 //!
 //! The log laws are undefined at v = 0 and, with B > 0, turn back near it: ln²v grows
 //! faster than ln v falls, so E rises again as v → 0. They therefore carry a *toe*, the
@@ -217,6 +219,16 @@ impl GainOffsetGamma {
 /// a = 1 when the display tracks the PQ exactly (the panel's departure from the gamma
 /// its processing assumes shows as a ≠ 1). Light is absolute here: E reaches 1 at
 /// the signal of `rolloff_from` (or of `peak`, clipping) and stays there.
+///
+/// With a `curvature` b ≠ 0 (the `pq-cowan` candidate), ln E = a ln x + b ln²x of
+/// the relative light x = L(v) / peak: Cowan's log-quadratic law (Cowan 1983) on the
+/// light the display decoded rather than on the code. A display re-encodes that light
+/// for its panel through the gamma it assumes; a panel whose own law bends away from
+/// that gamma (an LCD's Cowan curve, whose local exponent falls toward black) makes
+/// the tracking exponent drift with x, which PQ's four decades of light below the
+/// peak turn into 10 % and more near black. Below `toe` (the least relative light the
+/// law was fitted on) it goes on as a power of x with the slope it has there, so it
+/// never turns back.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Pq {
     /// cd/m² at full excitation.
@@ -225,6 +237,16 @@ pub struct Pq {
     pub rolloff_from: f64,
     /// a: the tracking exponent.
     pub exponent: f64,
+    /// b: the log-quadratic term (0: the plain PQ law).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub curvature: f64,
+    /// The relative light below which the curved law is a power of x (with b ≠ 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub toe: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Pq {
@@ -238,8 +260,47 @@ impl Pq {
         (light / self.peak).clamp(0.0, 1.0)
     }
 
+    /// ln E at ln x (b ≠ 0): log-quadratic above the toe, log-linear below it.
+    fn log_excitation(&self, ln_x: f64) -> f64 {
+        let (a, b, ln_toe) = (self.exponent, self.curvature, self.toe.ln());
+        if ln_x >= ln_toe {
+            (a + b * ln_x) * ln_x
+        } else {
+            (a + b * ln_toe) * ln_toe + (a + 2.0 * b * ln_toe) * (ln_x - ln_toe)
+        }
+    }
+
+    /// E as a function of the relative light x.
+    fn of_relative(&self, x: f64) -> f64 {
+        if self.curvature == 0.0 {
+            x.powf(self.exponent)
+        } else if x > 0.0 {
+            self.log_excitation(x.ln()).exp()
+        } else {
+            0.0
+        }
+    }
+
+    /// The relative light x of excitation `e` in (0, 1): the root of b L² + a L = ln e
+    /// that goes to ln e / a as b does, 2 ln e / (a + √(a² + 4 b ln e)), above the toe
+    /// (where a² + 4 b ln e is the slope's square, (a + 2 b ln x)², so never negative).
+    fn relative_of(&self, e: f64) -> f64 {
+        let (a, b) = (self.exponent, self.curvature);
+        if b == 0.0 {
+            return e.powf(1.0 / a);
+        }
+        let (ln_e, ln_toe) = (e.ln(), self.toe.ln());
+        let at_toe = (a + b * ln_toe) * ln_toe;
+        let ln_x = if ln_e < at_toe {
+            ln_toe + (ln_e - at_toe) / (a + 2.0 * b * ln_toe)
+        } else {
+            2.0 * ln_e / (a + (a * a + 4.0 * b * ln_e).max(0.0).sqrt())
+        };
+        ln_x.exp()
+    }
+
     pub fn excitation(&self, v: f64) -> f64 {
-        self.relative_light(v).powf(self.exponent)
+        self.of_relative(self.relative_light(v))
     }
 
     /// The smallest drive of excitation `e`: the PQ's inverse below the roll-off's knee,
@@ -252,7 +313,7 @@ impl Pq {
         if e >= 1.0 {
             return top;
         }
-        let want = e.powf(1.0 / self.exponent);
+        let want = self.relative_of(e);
         let exact = pq_inverse_eotf(want * self.peak);
         if self.rolloff_from <= self.peak || (self.relative_light(exact) - want).abs() < 1e-12 {
             return exact;
@@ -468,6 +529,9 @@ pub enum LawKind {
     Table,
     /// Tried only for a display sent PQ signals (not in `ALL`).
     Pq,
+    /// The PQ law with Cowan's log-quadratic term (`Pq::curvature`); tried beside
+    /// `Pq` for PQ signals.
+    PqCowan,
     /// Tried only for a display sent HLG signals (not in `ALL`).
     Hlg,
 }
@@ -489,6 +553,7 @@ impl LawKind {
             LawKind::ThreeTerm => "three-term",
             LawKind::Table => "table",
             LawKind::Pq => "pq",
+            LawKind::PqCowan => "pq-cowan",
             LawKind::Hlg => "hlg",
         }
     }
@@ -499,7 +564,7 @@ impl LawKind {
         match self {
             LawKind::Power | LawKind::Hlg => 1,
             LawKind::GainOffsetGamma | LawKind::Cowan | LawKind::Pq => 2,
-            LawKind::ThreeTerm => 3,
+            LawKind::ThreeTerm | LawKind::PqCowan => 3,
             LawKind::Table => levels,
         }
     }
@@ -532,6 +597,7 @@ impl TransferLaw {
             TransferLaw::ThreeTerm(_) => LawKind::ThreeTerm,
             TransferLaw::GainOffsetGamma(_) => LawKind::GainOffsetGamma,
             TransferLaw::Table(_) => LawKind::Table,
+            TransferLaw::Pq(l) if l.curvature != 0.0 => LawKind::PqCowan,
             TransferLaw::Pq(_) => LawKind::Pq,
             TransferLaw::Hlg(_) => LawKind::Hlg,
         }
@@ -579,6 +645,13 @@ impl TransferLaw {
                 vec![("gain", l.gain), ("gamma", l.gamma), ("cutoff", l.cutoff())]
             }
             TransferLaw::Table(l) => vec![("knots", l.drive.len() as f64)],
+            TransferLaw::Pq(l) if l.curvature != 0.0 => vec![
+                ("peak", l.peak),
+                ("rolloff_from", l.rolloff_from),
+                ("exponent", l.exponent),
+                ("curvature", l.curvature),
+                ("toe", l.toe),
+            ],
             TransferLaw::Pq(l) => vec![
                 ("peak", l.peak),
                 ("rolloff_from", l.rolloff_from),
@@ -621,6 +694,18 @@ impl TransferLaw {
                 invalid(
                     "pq",
                     "peak must be in (0, 10000], rolloff_from from the peak to 10000, exponent positive",
+                )
+            }
+            TransferLaw::Pq(l)
+                if l.curvature != 0.0
+                    && !(l.curvature.is_finite()
+                        && l.toe > 0.0
+                        && l.toe < 1.0
+                        && l.exponent + 2.0 * l.curvature * l.toe.ln() > 0.0) =>
+            {
+                invalid(
+                    "pq",
+                    "with a curvature, toe must lie in (0, 1) and the slope there, exponent + 2 curvature ln toe, be positive",
                 )
             }
             TransferLaw::Hlg(l) if !(l.exponent > 0.0 && l.exponent.is_finite()) => {
@@ -680,13 +765,99 @@ mod tests {
                 peak: 700.0,
                 rolloff_from: 700.0,
                 exponent: 1.03,
+                curvature: 0.0,
+                toe: 0.0,
             }),
             TransferLaw::Pq(Pq {
                 peak: 700.0,
                 rolloff_from: 4000.0,
                 exponent: 0.97,
+                curvature: 0.0,
+                toe: 0.0,
+            }),
+            // The hdr-lcd's red panel (Cowan A 2.25, B 0.03 behind a 2.2 re-encoding)
+            // in x: A / 2.2 and B / 2.2².
+            TransferLaw::Pq(Pq {
+                peak: 1000.0,
+                rolloff_from: 4000.0,
+                exponent: 1.0227,
+                curvature: 0.0062,
+                toe: 1e-4,
             }),
         ]
+    }
+
+    /// The curved PQ law is what a display shows that decodes PQ, re-encodes the light
+    /// for its panel with a gamma g and drives a panel of Cowan's law (A, B in the
+    /// panel's drive): Cowan's law of x^(1/g) is a = A / g, b = B / g² in x. Below the
+    /// toe it goes on as a power of x, continuous in value and slope, and it inverts
+    /// everywhere; a curvature that would turn it back is refused.
+    #[test]
+    fn the_curved_pq_law_is_a_cowan_panel_behind_the_pq_decoding() {
+        let (big_a, big_b, g) = (2.25, 0.03, 2.2);
+        let panel = TransferLaw::Cowan(Cowan {
+            a: big_a,
+            b: big_b,
+            toe: 1e-6,
+        });
+        let curved = Pq {
+            peak: 1000.0,
+            rolloff_from: 1000.0,
+            exponent: big_a / g,
+            curvature: big_b / (g * g),
+            toe: 1e-5,
+        };
+        let mut worst: f64 = 0.0;
+        for code in (40..=700).step_by(20) {
+            let v = code as f64 / 1023.0;
+            let x = pq_eotf(v) / 1000.0;
+            let want = panel.excitation(x.powf(1.0 / g));
+            worst = worst.max((curved.excitation(v) / want - 1.0).abs());
+        }
+        assert!(worst < 1e-9, "{worst}");
+        // The plain law with the same exponent misses the dark end by more than 10 %.
+        let plain = Pq {
+            curvature: 0.0,
+            toe: 0.0,
+            ..curved.clone()
+        };
+        let dark = pq_inverse_eotf(0.1);
+        assert!(curved.excitation(dark) / plain.excitation(dark) > 1.1);
+        // Continuous in value and in log-log slope across the toe.
+        let toe_code = pq_inverse_eotf(curved.toe * 1000.0);
+        let (below, above) = (toe_code * (1.0 - 1e-7), toe_code * (1.0 + 1e-7));
+        let ratio = curved.excitation(above) / curved.excitation(below);
+        assert!((ratio - 1.0).abs() < 1e-5, "{ratio}");
+        let slope = |v: f64| {
+            let (v0, v1) = (v * (1.0 - 1e-4), v * (1.0 + 1e-4));
+            (curved.excitation(v1) / curved.excitation(v0)).ln() / (pq_eotf(v1) / pq_eotf(v0)).ln()
+        };
+        let (s_below, s_above) = (slope(toe_code * 0.97), slope(toe_code * 1.03));
+        assert!((s_below - s_above).abs() < 1e-3, "{s_below} {s_above}");
+        // It inverts at every code, below the toe too.
+        for code in 1..=1023 {
+            let v = code as f64 / 1023.0;
+            let e = curved.excitation(v);
+            if e > 0.0 && e < 1.0 {
+                let back = curved.drive(e);
+                assert!((back - v).abs() < 1e-9, "code {code}: {back} for {v}");
+            }
+        }
+        // A curvature whose slope at the toe is not positive turns the law back.
+        let turning = TransferLaw::Pq(Pq {
+            curvature: 0.2,
+            toe: 1e-4,
+            ..curved.clone()
+        });
+        assert!(turning.monotonicity().is_err());
+        assert!(TransferLaw::Pq(curved).monotonicity().is_ok());
+        assert_eq!(TransferLaw::Pq(plain.clone()).kind(), LawKind::Pq);
+        // A plain law is written as before: no curvature, no toe.
+        let written = toml::to_string(&TransferLaw::Pq(plain)).unwrap();
+        assert!(
+            !written.contains("curvature") && !written.contains("toe"),
+            "{written}"
+        );
     }
 
     #[test]
@@ -695,6 +866,8 @@ mod tests {
             peak: 600.0,
             rolloff_from: 600.0,
             exponent: 1.0,
+            curvature: 0.0,
+            toe: 0.0,
         };
         // ST 2084: code 0.5081 is 100 cd/m², a sixth of this display's peak.
         assert!((clip.excitation(0.5081) - 100.0 / 600.0).abs() < 2e-4);

@@ -157,6 +157,8 @@ pub fn fit_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
         LawKind::GainOffsetGamma => fit_gog(ramp),
         LawKind::Pq if !pinned => Err(LawFitError::NeedsFullDrive { law: kind }),
         LawKind::Pq => fit_pq(ramp),
+        LawKind::PqCowan if !pinned => Err(LawFitError::NeedsFullDrive { law: kind }),
+        LawKind::PqCowan => fit_pq_cowan(ramp),
         LawKind::Hlg if !pinned => Err(LawFitError::NeedsFullDrive { law: kind }),
         LawKind::Hlg => fit_hlg(ramp),
     }
@@ -335,22 +337,8 @@ fn fit_pq(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     let points = Points::from_ramp(ramp, false);
     need_levels(kind, &points, 2)?;
     let peak0 = pq_start_peak(&points);
-    let mut best: Option<(LeastSquares, Option<f64>)> = None;
-    let mut failure = None;
-    for rolloff in PQ_ROLLOFFS {
-        match fit_pq_with_rolloff(&points, rolloff, peak0) {
-            Ok(fit) if best.as_ref().is_none_or(|(b, _)| fit.chi2 < b.chi2) => {
-                best = Some((fit, rolloff))
-            }
-            Ok(_) => {}
-            Err(e) => failure = Some(e),
-        }
-    }
-    let (fit, rolloff) = match (best, failure) {
-        (Some(best), _) => best,
-        (None, Some(e)) => return Err(e),
-        (None, None) => unreachable!("PQ_ROLLOFFS is not empty"),
-    };
+    let (fit, rolloff) =
+        least_chi2_over_rolloffs(|rolloff| fit_pq_with_rolloff(&points, rolloff, peak0))?;
     let pq = pq_law(&fit.params, rolloff);
     let (peak, rolloff_from, exponent) = (pq.peak, pq.rolloff_from, pq.exponent);
     let law = TransferLaw::Pq(pq);
@@ -368,12 +356,121 @@ fn fit_pq(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         chi2: fit.chi2,
         dof: fit.dof,
         free_parameters: 2,
-        notes: vec![if rolloff_from > peak {
-            format!("rolled off from {rolloff_from} cd/m² (BT.2390)")
-        } else {
-            "clipped at the peak".into()
-        }],
+        notes: vec![rolloff_note(rolloff_from, peak)],
     })
+}
+
+/// What a PQ law does at its top: rolled off from a master's peak, or clipped.
+fn rolloff_note(rolloff_from: f64, peak: f64) -> String {
+    if rolloff_from > peak {
+        format!("rolled off from {rolloff_from} cd/m² (BT.2390)")
+    } else {
+        "clipped at the peak".into()
+    }
+}
+
+/// `f` at `t` (its value returned) and its gradient in `g` by central differences,
+/// steps of 10⁻⁶ of each parameter's size: for laws whose derivative in θ is not tidy
+/// (the EETF's spline).
+fn central_differences(f: impl Fn(&[f64]) -> f64, t: &[f64], g: &mut [f64]) -> f64 {
+    let mut moved = t.to_vec();
+    for k in 0..t.len() {
+        let h = 1e-6 * (1.0 + t[k].abs());
+        moved[k] = t[k] + h;
+        let up = f(&moved);
+        moved[k] = t[k] - h;
+        let down = f(&moved);
+        moved[k] = t[k];
+        g[k] = (up - down) / (2.0 * h);
+    }
+    f(t)
+}
+
+/// The PQ law with Cowan's log-quadratic term (`transfer::Pq::curvature`), θ = [ln
+/// peak, a, b], fitted for each roll-off in `PQ_ROLLOFFS` from the plain PQ law's
+/// peak and exponent (b = 0), the least χ² kept. Its toe is the least relative light
+/// among the readings (below it the law is a power of the light, as Cowan's is linear
+/// below the least drive): what lies below was not measured.
+fn fit_pq_cowan(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
+    let kind = LawKind::PqCowan;
+    let points = Points::from_ramp(ramp, false);
+    need_levels(kind, &points, 3)?;
+    let plain = fit_pq(ramp)?;
+    let TransferLaw::Pq(start) = &plain.law else {
+        unreachable!("fit_pq gives a PQ law");
+    };
+    let least_light = points
+        .drive
+        .iter()
+        .zip(&points.excitation)
+        .filter(|(v, e)| **v > 0.0 && **e > 0.0)
+        .map(|(v, _)| pq_eotf(*v))
+        .fold(f64::INFINITY, f64::min);
+    let law_of = |t: &[f64], rolloff: Option<f64>| {
+        let pq = pq_law(&t[..2], rolloff);
+        let toe = (least_light / pq.peak).clamp(1e-9, 0.5);
+        Pq {
+            curvature: t[2].clamp(-1.0, 1.0),
+            toe,
+            ..pq
+        }
+    };
+    let (fit, rolloff) = least_chi2_over_rolloffs(|rolloff| {
+        let curve = move |t: &[f64], v: f64, g: &mut [f64]| {
+            central_differences(|t| law_of(t, rolloff).excitation(v), t, g)
+        };
+        points.fit(kind, &curve, &[start.peak.ln(), start.exponent, 0.0])
+    })?;
+    let pq = law_of(&fit.params, rolloff);
+    let notes = vec![format!(
+        "ln E = {:.4} ln x + {:.5} ln² x of the relative light x, a power of x below {:.2e}; {}",
+        pq.exponent,
+        pq.curvature,
+        pq.toe,
+        rolloff_note(pq.rolloff_from, pq.peak)
+    )];
+    let law = TransferLaw::Pq(pq.clone());
+    law.monotonicity()
+        .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
+    let ses = standard_errors_with_pin(&fit, &points, ramp);
+    Ok(LawFit {
+        law,
+        amplitude: 1.0,
+        parameters: vec![
+            parameter("peak", pq.peak, ses[0].map(|s| s * pq.peak)),
+            parameter("exponent", pq.exponent, ses[1]),
+            parameter("curvature", pq.curvature, ses[2]),
+            parameter("rolloff_from", pq.rolloff_from, None),
+            parameter("toe", pq.toe, None),
+        ],
+        chi2: fit.chi2,
+        dof: fit.dof,
+        free_parameters: 3,
+        notes,
+    })
+}
+
+/// Of `fit` with each roll-off in `PQ_ROLLOFFS`, the fit of least χ² and its roll-off;
+/// the last failure when none fits.
+fn least_chi2_over_rolloffs(
+    fit: impl Fn(Option<f64>) -> Result<LeastSquares, LawFitError>,
+) -> Result<(LeastSquares, Option<f64>), LawFitError> {
+    let mut best: Option<(LeastSquares, Option<f64>)> = None;
+    let mut failure = None;
+    for rolloff in PQ_ROLLOFFS {
+        match fit(rolloff) {
+            Ok(fit) if best.as_ref().is_none_or(|(b, _)| fit.chi2 < b.chi2) => {
+                best = Some((fit, rolloff))
+            }
+            Ok(_) => {}
+            Err(e) => failure = Some(e),
+        }
+    }
+    match (best, failure) {
+        (Some(best), _) => Ok(best),
+        (None, Some(e)) => Err(e),
+        (None, None) => unreachable!("PQ_ROLLOFFS is not empty"),
+    }
 }
 
 /// The start of the PQ law's peak: the median of the peaks each mid-range reading
@@ -400,6 +497,8 @@ fn pq_law(t: &[f64], rolloff: Option<f64>) -> Pq {
         peak,
         rolloff_from: rolloff.map_or(peak, |m| m.max(peak)),
         exponent: t[1].clamp(0.05, 20.0),
+        curvature: 0.0,
+        toe: 0.0,
     }
 }
 
@@ -410,15 +509,7 @@ fn fit_pq_with_rolloff(
     peak0: f64,
 ) -> Result<LeastSquares, LawFitError> {
     let curve = move |t: &[f64], v: f64, g: &mut [f64]| {
-        for k in 0..2 {
-            let h = 1e-6 * (1.0 + t[k].abs());
-            let (mut up, mut down) = ([t[0], t[1]], [t[0], t[1]]);
-            up[k] += h;
-            down[k] -= h;
-            g[k] = (pq_law(&up, rolloff).excitation(v) - pq_law(&down, rolloff).excitation(v))
-                / (2.0 * h);
-        }
-        pq_law(t, rolloff).excitation(v)
+        central_differences(|t| pq_law(t, rolloff).excitation(v), t, g)
     };
     points.fit(LawKind::Pq, &curve, &[peak0.ln(), 1.0])
 }
