@@ -57,6 +57,9 @@ fn stats_cells(stats: Option<&ErrorStats>) -> [String; 3] {
 fn parameter(name: &str, value: f64) -> String {
     match name {
         "knots" => format!("{value:.0} knots"),
+        // Small values (a curved PQ law's toe, 10⁻⁵ of the peak's light) in
+        // scientific notation, not as 0.0000.
+        _ if value != 0.0 && value.abs() < 1e-3 => format!("{name} {value:.3e}"),
         _ => format!("{name} {value:.4}"),
     }
 }

@@ -529,8 +529,8 @@ pub enum LawKind {
     Table,
     /// Tried only for a display sent PQ signals (not in `ALL`).
     Pq,
-    /// The PQ law with Cowan's log-quadratic term (`Pq::curvature`); tried beside
-    /// `Pq` for PQ signals.
+    /// The PQ law with Cowan's log-quadratic term (`Pq::curvature`); tried only when
+    /// `[fit] laws` names it (not in `ALL`, not added for PQ signals).
     PqCowan,
     /// Tried only for a display sent HLG signals (not in `ALL`).
     Hlg,
