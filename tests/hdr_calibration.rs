@@ -233,7 +233,7 @@ fn an_hdr_calibration_over_resolve_in_10_bits_matches_the_in_process_one() {
 /// exponent and curvature are the panel's (A / 2.2 and B / 2.2² of red's A 2.25, B
 /// 0.03), and the held-out error in ΔE ITP is under half the plain PQ law's (0.20
 /// against 0.84 on the default seeds): the plain law's one exponent misses the dark
-/// greys.
+/// greys. `fit --laws` names it too.
 #[test]
 fn a_cowan_panel_behind_pq_is_followed_by_the_curved_pq_law_where_it_is_asked_for() {
     let dir = tempfile::tempdir().unwrap();
@@ -257,6 +257,18 @@ fn a_cowan_panel_behind_pq_is_followed_by_the_curved_pq_law_where_it_is_asked_fo
     };
     assert!((red.exponent - 2.25 / 2.2).abs() < 0.02, "{red:?}");
     assert!((red.curvature - 0.03 / 4.84).abs() < 0.003, "{red:?}");
+    // The plain run's readings, fitted again with the curved law named on the command
+    // line: it is kept there too.
+    let refit = dir.path().join("refit.toml");
+    common::succeed(
+        chromacal()
+            .arg("fit")
+            .arg(&plain.provenance.source)
+            .args(["--laws", "table,pq,pq-cowan", "-o"])
+            .arg(&refit),
+    );
+    let refit = Profile::read(&refit).unwrap();
+    assert_eq!(refit.report.chosen_law(), Some(LawKind::PqCowan));
     let itp = |p: &Profile| held_out_itp(&p.report.held_out_patches).unwrap().mean;
     let (curved, plain) = (itp(&curved), itp(&plain));
     eprintln!("held-out ΔE ITP: curved {curved:.3}, plain {plain:.3}");

@@ -58,6 +58,12 @@ pub enum LawArg {
     Cowan,
     ThreeTerm,
     Table,
+    /// The PQ law, for a display sent PQ signals.
+    Pq,
+    /// The PQ law with Cowan's log-quadratic term (docs/hdr.md).
+    PqCowan,
+    /// The HLG law, for a display sent HLG signals.
+    Hlg,
 }
 
 impl From<LawArg> for LawKind {
@@ -68,6 +74,9 @@ impl From<LawArg> for LawKind {
             LawArg::Cowan => LawKind::Cowan,
             LawArg::ThreeTerm => LawKind::ThreeTerm,
             LawArg::Table => LawKind::Table,
+            LawArg::Pq => LawKind::Pq,
+            LawArg::PqCowan => LawKind::PqCowan,
+            LawArg::Hlg => LawKind::Hlg,
         }
     }
 }

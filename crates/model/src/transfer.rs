@@ -704,8 +704,8 @@ impl TransferLaw {
                         && l.exponent + 2.0 * l.curvature * l.toe.ln() > 0.0) =>
             {
                 invalid(
-                    "pq",
-                    "with a curvature, toe must lie in (0, 1) and the slope there, exponent + 2 curvature ln toe, be positive",
+                    "pq-cowan",
+                    "toe must lie in (0, 1) and the slope there, exponent + 2 curvature ln toe, be positive",
                 )
             }
             TransferLaw::Hlg(l) if !(l.exponent > 0.0 && l.exponent.is_finite()) => {
