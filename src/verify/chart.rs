@@ -289,7 +289,7 @@ pub const HLG_REFERENCE_WHITE: f64 = 0.75;
 
 /// The chart for an HDR display in its HLG mode (`--chart bt2100-hlg`, read with
 /// `--against rec2100-hlg`): the white and the black three times each, 15 calibration
-/// greys, HLG greys from 5 to 100 % of the signal, and the ColorChecker under D65 with
+/// greys, HLG greys from 5 to 90 % of the signal, and the ColorChecker under D65 with
 /// its perfect white at BT.2408's reference white (75 %: scene light 0.265 of the
 /// signal's top), all as BT.2100 HLG codes on BT.2020 primaries. HLG is relative: what
 /// each code asks for comes from the display's own peak and system gamma.
