@@ -7,6 +7,7 @@ use std::path::Path;
 use crate::journal::{Journal, JournalError, to_measurement_set};
 use chromacal_formats::cgats::{CgatsError, ti3_from_text};
 use chromacal_model::measurement::MeasurementSet;
+use chromacal_model::plan::Signal;
 
 /// Why a measurement file could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -25,6 +26,15 @@ pub enum ReadMeasurementsError {
 /// Read measurements from a run journal (JSON Lines) or an ArgyllCMS `.ti3` file,
 /// told apart by their first line.
 pub fn read_measurements(path: &Path) -> Result<MeasurementSet, ReadMeasurementsError> {
+    read_measurements_and_signal(path).map(|(set, _)| set)
+}
+
+/// The same, with the signal the display was sent when the file says (a journal's
+/// plan does; a `.ti3` does not): a fit of HDR readings needs it to know the HLG OOTF
+/// couples the channels and which HDR law to try.
+pub fn read_measurements_and_signal(
+    path: &Path,
+) -> Result<(MeasurementSet, Option<Signal>), ReadMeasurementsError> {
     let bytes =
         chromacal_formats::durable::read_limited(path, chromacal_formats::durable::limits::TABLE)
             .map_err(|source| ReadMeasurementsError::Io {
@@ -37,8 +47,9 @@ pub fn read_measurements(path: &Path) -> Result<MeasurementSet, ReadMeasurements
         if let Some((line, _)) = recovery.dropped_tail {
             tracing::warn!(line, "the journal's last line was cut short and is ignored");
         }
-        Ok(to_measurement_set(path, &header, entries))
+        let signal = header.plan.signal;
+        Ok((to_measurement_set(path, &header, entries), signal))
     } else {
-        Ok(ti3_from_text(&text, &path.display().to_string())?)
+        Ok((ti3_from_text(&text, &path.display().to_string())?, None))
     }
 }

@@ -236,27 +236,69 @@ fn an_hdr_calibration_over_resolve_in_10_bits_matches_the_in_process_one() {
 /// greys. `fit --laws` names it too.
 #[test]
 fn a_cowan_panel_behind_pq_is_followed_by_the_curved_pq_law_where_it_is_asked_for() {
+    let [red_a, red_b] = curved_law_against_plain(
+        "seed_budget = 30\n",
+        "tone = \"pq\"\npeak = 600.0",
+        ["pq", "pq-cowan"],
+        [LawKind::Pq, LawKind::PqCowan],
+    );
+    assert!((red_a - 2.25 / 2.2).abs() < 0.02, "{red_a}");
+    assert!((red_b - 0.03 / 4.84).abs() < 0.003, "{red_b}");
+}
+
+/// The same for HLG, with the default plan: the HLG law with Cowan's term is kept on
+/// `hdr-lcd` and its red exponent and curvature are the panel's behind the OOTF,
+/// p = (γ / g)(A + 2 B k) and b = B (γ / g)² with the system gamma γ = 1.2 of a
+/// 1,000 cd/m² display, g = 2.2 and k = ln(w_R^(γ − 1)) / g; the held-out error is
+/// under half the plain HLG law's (0.30 against 1.29 ΔE ITP on seed 1).
+#[test]
+fn a_cowan_panel_behind_hlg_is_followed_by_the_curved_hlg_law_where_it_is_asked_for() {
+    let [red_p, red_b] = curved_law_against_plain(
+        "",
+        "tone = \"hlg\"\npeak = 1000.0",
+        ["hlg", "hlg-cowan"],
+        [LawKind::Hlg, LawKind::HlgCowan],
+    );
+    let (gamma_over_g, k) = (1.2 / 2.2, 0.2627f64.powf(0.2).ln() / 2.2);
+    assert!(
+        (red_p - gamma_over_g * (2.25 + 2.0 * 0.03 * k)).abs() < 0.02,
+        "{red_p}"
+    );
+    assert!(
+        (red_b - 0.03 * gamma_over_g.powi(2)).abs() < 0.003,
+        "{red_b}"
+    );
+}
+
+/// Calibrate `hdr-lcd` to `target` with the table and the plain law of `laws[0]`, and
+/// with the curved one, `laws[1]`, too: each keeps its own law in every channel, a
+/// refit of the plain run's readings with the curved law named on `fit --laws` keeps
+/// the curved one, and the curved law's held-out ΔE ITP is under 0.5 and under half
+/// the plain one's. Returns the curved law's red exponent and curvature.
+fn curved_law_against_plain(
+    plan: &str,
+    target: &str,
+    laws: [&str; 2],
+    kinds: [LawKind; 2],
+) -> [f64; 2] {
     let dir = tempfile::tempdir().unwrap();
-    let run = |name: &str, laws: &str| {
+    let run = |name: &str, listed: &[&str]| {
+        let listed: Vec<String> = listed.iter().map(|l| format!("\"{l}\"")).collect();
         calibrate_profile(
             dir.path(),
             name,
             &format!(
-                "[monitor]\npreset = \"hdr-lcd\"\n[plan]\nbit_depth = 10\nseed_budget = 30\n\
-                 [target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\n[fit]\nlaws = [{laws}]\n"
+                "[monitor]\npreset = \"hdr-lcd\"\n[plan]\nbit_depth = 10\n{plan}\
+                 [target]\nwhite = \"D65\"\n{target}\n[fit]\nlaws = [\"table\", {}]\n",
+                listed.join(", ")
             ),
         )
     };
-    let curved = run("curved", "\"table\", \"pq\", \"pq-cowan\"");
-    let plain = run("plain", "\"table\", \"pq\"");
-    let kinds = |p: &Profile| p.model.laws.clone().map(|l| l.kind());
-    assert_eq!(kinds(&curved), [LawKind::PqCowan; 3]);
-    assert_eq!(kinds(&plain), [LawKind::Pq; 3]);
-    let chromacal_model::transfer::TransferLaw::Pq(red) = &curved.model.laws[0] else {
-        unreachable!("a PQ law");
-    };
-    assert!((red.exponent - 2.25 / 2.2).abs() < 0.02, "{red:?}");
-    assert!((red.curvature - 0.03 / 4.84).abs() < 0.003, "{red:?}");
+    let curved = run("curved", &laws);
+    let plain = run("plain", &laws[..1]);
+    let chosen = |p: &Profile| p.model.laws.clone().map(|l| l.kind());
+    assert_eq!(chosen(&curved), [kinds[1]; 3]);
+    assert_eq!(chosen(&plain), [kinds[0]; 3]);
     // The plain run's readings, fitted again with the curved law named on the command
     // line: it is kept there too.
     let refit = dir.path().join("refit.toml");
@@ -264,18 +306,27 @@ fn a_cowan_panel_behind_pq_is_followed_by_the_curved_pq_law_where_it_is_asked_fo
         chromacal()
             .arg("fit")
             .arg(&plain.provenance.source)
-            .args(["--laws", "table,pq,pq-cowan", "-o"])
+            .args(["--laws", &format!("table,{},{}", laws[0], laws[1]), "-o"])
             .arg(&refit),
     );
     let refit = Profile::read(&refit).unwrap();
-    assert_eq!(refit.report.chosen_law(), Some(LawKind::PqCowan));
+    assert_eq!(refit.report.chosen_law(), Some(kinds[1]));
     let itp = |p: &Profile| held_out_itp(&p.report.held_out_patches).unwrap().mean;
-    let (curved, plain) = (itp(&curved), itp(&plain));
-    eprintln!("held-out ΔE ITP: curved {curved:.3}, plain {plain:.3}");
+    let (curved_itp, plain_itp) = (itp(&curved), itp(&plain));
+    eprintln!("held-out ΔE ITP: curved {curved_itp:.3}, plain {plain_itp:.3}");
     assert!(
-        curved < 0.5 && curved < 0.5 * plain,
-        "{curved} against {plain}"
+        curved_itp < 0.5 && curved_itp < 0.5 * plain_itp,
+        "{curved_itp} against {plain_itp}"
     );
+    let parameters = curved.model.laws[0].parameters();
+    let get = |name: &str| {
+        parameters
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, v)| *v)
+            .unwrap()
+    };
+    [get("exponent"), get("curvature")]
 }
 
 /// Calibrate `config_text` in process and return the profile (published or not).

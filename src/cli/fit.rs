@@ -4,8 +4,8 @@ use std::path::{Path, PathBuf};
 
 use clap::ValueEnum;
 
-use chromacal::config::{config_search_paths, load_config_searching};
-use chromacal::measurement_file::read_measurements;
+use chromacal::config::{config_search_paths, fit_options_for_signal, load_config_searching};
+use chromacal::measurement_file::read_measurements_and_signal;
 use chromacal::profile::{Cost, Profile, Provenance, SCHEMA_VERSION};
 use chromacal::report;
 use chromacal_model::fit::fit_monitor;
@@ -64,6 +64,8 @@ pub enum LawArg {
     PqCowan,
     /// The HLG law, for a display sent HLG signals.
     Hlg,
+    /// The HLG law with Cowan's log-quadratic term (docs/hdr.md).
+    HlgCowan,
 }
 
 impl From<LawArg> for LawKind {
@@ -77,6 +79,7 @@ impl From<LawArg> for LawKind {
             LawArg::Pq => LawKind::Pq,
             LawArg::PqCowan => LawKind::PqCowan,
             LawArg::Hlg => LawKind::Hlg,
+            LawArg::HlgCowan => LawKind::HlgCowan,
         }
     }
 }
@@ -89,13 +92,12 @@ fn fit(
     json: bool,
     report_path: Option<&Path>,
 ) -> Result<(), Failure> {
-    let mut options = load_config_searching(config, &config_search_paths())?
-        .config
-        .fit;
+    let (set, signal) = read_measurements_and_signal(measurements)?;
+    let config = load_config_searching(config, &config_search_paths())?.config;
+    let mut options = fit_options_for_signal(config, signal);
     if let Some(laws) = laws {
         options.laws = laws.into_iter().map(LawKind::from).collect();
     }
-    let set = read_measurements(measurements)?;
     let started = std::time::Instant::now();
     let fitted = fit_monitor(&set, &options)?;
     let fit_seconds = started.elapsed().as_secs_f64();

@@ -392,6 +392,18 @@ pub fn parse_config_unchecked(text: &str, origin: &str) -> Result<Config, Config
     Ok(config)
 }
 
+/// The fit options for readings taken with `signal` (a journal's, when it says; the
+/// config's tone's otherwise): the config's, with what an HDR signal asks of a fit
+/// ([`hdr_defaults`]), so that `fit` of an HLG run's journal models the OOTF as the run
+/// did.
+pub fn fit_options_for_signal(mut config: Config, signal: Option<Signal>) -> FitOptions {
+    if signal.is_some() {
+        config.plan.signal = signal;
+    }
+    hdr_defaults(&mut config);
+    config.fit
+}
+
 /// What an HDR signal asks of the rest of a run, where the config does not say: the
 /// plan's signal is the target tone's (`pq`, `hlg`); a PQ display's law is among the
 /// candidates (when the laws are the default ones); and each patch is read until two

@@ -201,6 +201,13 @@ pub fn candidate_curve(
         }),
         LawKind::Hlg => TransferLaw::Hlg(Hlg {
             exponent: get("exponent")?,
+            curvature: 0.0,
+            toe: 0.0,
+        }),
+        LawKind::HlgCowan => TransferLaw::Hlg(Hlg {
+            exponent: get("exponent")?,
+            curvature: get("curvature")?,
+            toe: get("toe")?,
         }),
         LawKind::Table => return None,
     };

@@ -924,7 +924,13 @@ mod tests {
         let hlg = MonitorModel {
             matrix: Matrix3::from_fn(|j, c| bt2020[(j, c)] * w[c].powf(gamma - 1.0)),
             black: Xyz::zeros(),
-            laws: [0, 1, 2].map(|_| TransferLaw::Hlg(crate::transfer::Hlg { exponent: gamma })),
+            laws: [0, 1, 2].map(|_| {
+                TransferLaw::Hlg(crate::transfer::Hlg {
+                    exponent: gamma,
+                    curvature: 0.0,
+                    toe: 0.0,
+                })
+            }),
             ..m.clone()
         };
         for drive in [[0.3, 0.8, 0.5], [0.9, 0.1, 0.0], [0.6; 3], [0.05, 0.5, 1.0]] {

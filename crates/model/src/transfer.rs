@@ -10,7 +10,7 @@
 //! | [`GainOffsetGamma`] | E = (a·v + (1 − a))^γ, 0 below the cut-off | Berns 1996 |
 //! | [`Table`] | monotone cubic through the measured ramp | Fritsch & Carlson 1980 |
 //! | [`Pq`] | E = (L(v) / peak)^a, or ln E = a ln x + b ln²x of x = L(v) / peak | SMPTE ST 2084, BT.2390; Cowan 1983 for b |
-//! | [`Hlg`] | E = E_s(v)^p of BT.2100's scene light | ITU-R BT.2100 |
+//! | [`Hlg`] | E = E_s(v)^p of BT.2100's scene light, or ln E = p ln E_s + b ln²E_s | ITU-R BT.2100; Cowan 1983 for b |
 //!
 //! The log laws are undefined at v = 0 and, with B > 0, turn back near it: ln²v grows
 //! faster than ln v falls, so E rises again as v → 0. They therefore carry a *toe*, the
@@ -213,6 +213,75 @@ impl GainOffsetGamma {
     }
 }
 
+/// E of a relative light x ∈ [0, 1] for the HDR laws: x^a, or, with a curvature
+/// b ≠ 0, Cowan's log-quadratic ln E = a ln x + b ln²x (Cowan 1983) above `toe` and
+/// the power of x with the slope it has there below it, so that it never turns back.
+#[derive(Debug, Clone, Copy)]
+struct CurvedPower {
+    exponent: f64,
+    curvature: f64,
+    toe: f64,
+}
+
+impl CurvedPower {
+    /// ln E at ln x (b ≠ 0): log-quadratic above the toe, log-linear below it.
+    fn log_excitation(&self, ln_x: f64) -> f64 {
+        let (a, b, ln_toe) = (self.exponent, self.curvature, self.toe.ln());
+        if ln_x >= ln_toe {
+            (a + b * ln_x) * ln_x
+        } else {
+            (a + b * ln_toe) * ln_toe + (a + 2.0 * b * ln_toe) * (ln_x - ln_toe)
+        }
+    }
+
+    /// E at the relative light x.
+    fn of(&self, x: f64) -> f64 {
+        if self.curvature == 0.0 {
+            x.powf(self.exponent)
+        } else if x > 0.0 {
+            self.log_excitation(x.ln()).exp()
+        } else {
+            0.0
+        }
+    }
+
+    /// The relative light x of excitation `e` in (0, 1): the root of b L² + a L = ln e
+    /// that goes to ln e / a as b does, 2 ln e / (a + √(a² + 4 b ln e)), above the toe
+    /// (where a² + 4 b ln e is the slope's square, (a + 2 b ln x)², so never negative).
+    fn inverse(&self, e: f64) -> f64 {
+        let (a, b) = (self.exponent, self.curvature);
+        if b == 0.0 {
+            return e.powf(1.0 / a);
+        }
+        let (ln_e, ln_toe) = (e.ln(), self.toe.ln());
+        let at_toe = (a + b * ln_toe) * ln_toe;
+        let ln_x = if ln_e < at_toe {
+            ln_toe + (ln_e - at_toe) / (a + 2.0 * b * ln_toe)
+        } else {
+            2.0 * ln_e / (a + (a * a + 4.0 * b * ln_e).max(0.0).sqrt())
+        };
+        ln_x.exp()
+    }
+
+    /// `Ok` for a plain curve, or a curved one whose toe lies in (0, 1) with a
+    /// positive slope there, a + 2 b ln toe (the slope a + 2 b ln x is then positive
+    /// from the toe to x = 1, where it is a).
+    fn check(&self, law: &'static str) -> Result<(), TransferError> {
+        if self.curvature == 0.0
+            || (self.curvature.is_finite()
+                && self.toe > 0.0
+                && self.toe < 1.0
+                && self.exponent + 2.0 * self.curvature * self.toe.ln() > 0.0)
+        {
+            return Ok(());
+        }
+        Err(TransferError::InvalidParameter {
+            law,
+            what: "toe must lie in (0, 1) and the slope there, exponent + 2 curvature ln toe, be positive".into(),
+        })
+    }
+}
+
 /// A display in its HDR mode decoding a PQ signal (SMPTE ST 2084): the channel's
 /// light is the PQ's absolute luminance L(v), clipped at the display's `peak` or
 /// rolled off to it from `rolloff_from` by BT.2390's EETF, and E = (L(v) / peak)^a,
@@ -260,47 +329,17 @@ impl Pq {
         (light / self.peak).clamp(0.0, 1.0)
     }
 
-    /// ln E at ln x (b ≠ 0): log-quadratic above the toe, log-linear below it.
-    fn log_excitation(&self, ln_x: f64) -> f64 {
-        let (a, b, ln_toe) = (self.exponent, self.curvature, self.toe.ln());
-        if ln_x >= ln_toe {
-            (a + b * ln_x) * ln_x
-        } else {
-            (a + b * ln_toe) * ln_toe + (a + 2.0 * b * ln_toe) * (ln_x - ln_toe)
+    /// The exponent, curvature and toe as one log-quadratic curve.
+    fn curve(&self) -> CurvedPower {
+        CurvedPower {
+            exponent: self.exponent,
+            curvature: self.curvature,
+            toe: self.toe,
         }
-    }
-
-    /// E as a function of the relative light x.
-    fn of_relative(&self, x: f64) -> f64 {
-        if self.curvature == 0.0 {
-            x.powf(self.exponent)
-        } else if x > 0.0 {
-            self.log_excitation(x.ln()).exp()
-        } else {
-            0.0
-        }
-    }
-
-    /// The relative light x of excitation `e` in (0, 1): the root of b L² + a L = ln e
-    /// that goes to ln e / a as b does, 2 ln e / (a + √(a² + 4 b ln e)), above the toe
-    /// (where a² + 4 b ln e is the slope's square, (a + 2 b ln x)², so never negative).
-    fn relative_of(&self, e: f64) -> f64 {
-        let (a, b) = (self.exponent, self.curvature);
-        if b == 0.0 {
-            return e.powf(1.0 / a);
-        }
-        let (ln_e, ln_toe) = (e.ln(), self.toe.ln());
-        let at_toe = (a + b * ln_toe) * ln_toe;
-        let ln_x = if ln_e < at_toe {
-            ln_toe + (ln_e - at_toe) / (a + 2.0 * b * ln_toe)
-        } else {
-            2.0 * ln_e / (a + (a * a + 4.0 * b * ln_e).max(0.0).sqrt())
-        };
-        ln_x.exp()
     }
 
     pub fn excitation(&self, v: f64) -> f64 {
-        self.of_relative(self.relative_light(v))
+        self.curve().of(self.relative_light(v))
     }
 
     /// The smallest drive of excitation `e`: the PQ's inverse below the roll-off's knee,
@@ -313,7 +352,7 @@ impl Pq {
         if e >= 1.0 {
             return top;
         }
-        let want = self.relative_of(e);
+        let want = self.curve().inverse(e);
         let exact = pq_inverse_eotf(want * self.peak);
         if self.rolloff_from <= self.peak || (self.relative_light(exact) - want).abs() < 1e-12 {
             return exact;
@@ -337,15 +376,37 @@ impl Pq {
 /// the system gamma γ_S where the panel tracks the gamma its processing inverts, and
 /// departs from it where the panel does. What the channel gives beside the others is
 /// the OOTF's (`AdditivityTerms::hlg_ootf`).
+///
+/// With a `curvature` b ≠ 0 (the `hlg-cowan` candidate), ln E = p ln E_s + b ln²E_s:
+/// Cowan's log-quadratic law on the scene light, as `pq-cowan` is on PQ's light, for a
+/// panel whose own law bends away from the gamma the processing inverts. Alone, the
+/// channel's light is a power of E_s (the OOTF's γ_S), so a Cowan panel (A, B) behind
+/// a gamma g gives b = B γ_S² / g² exactly. Below `toe` (the least scene light fitted)
+/// it is a power of E_s.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Hlg {
     /// p.
     pub exponent: f64,
+    /// b: the log-quadratic term (0: the plain HLG law).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub curvature: f64,
+    /// The scene light below which the curved law is a power of it (with b ≠ 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub toe: f64,
 }
 
 impl Hlg {
+    /// The exponent, curvature and toe as one log-quadratic curve.
+    fn curve(&self) -> CurvedPower {
+        CurvedPower {
+            exponent: self.exponent,
+            curvature: self.curvature,
+            toe: self.toe,
+        }
+    }
+
     pub fn excitation(&self, v: f64) -> f64 {
-        hlg_scene_light(v.clamp(0.0, 1.0)).powf(self.exponent)
+        self.curve().of(hlg_scene_light(v.clamp(0.0, 1.0)))
     }
 
     /// The drive of excitation `e`: the OETF of e^(1/p).
@@ -357,7 +418,7 @@ impl Hlg {
         if e >= 1.0 {
             return 1.0;
         }
-        let scene = e.powf(1.0 / self.exponent) * hlg_inverse_oetf(1.0);
+        let scene = self.curve().inverse(e) * hlg_inverse_oetf(1.0);
         hlg_oetf(scene).clamp(0.0, 1.0)
     }
 }
@@ -534,6 +595,9 @@ pub enum LawKind {
     PqCowan,
     /// Tried only for a display sent HLG signals (not in `ALL`).
     Hlg,
+    /// The HLG law with Cowan's log-quadratic term (`Hlg::curvature`); tried only when
+    /// `[fit] laws` names it (not in `ALL`, not added for HLG signals).
+    HlgCowan,
 }
 
 impl LawKind {
@@ -555,6 +619,7 @@ impl LawKind {
             LawKind::Pq => "pq",
             LawKind::PqCowan => "pq-cowan",
             LawKind::Hlg => "hlg",
+            LawKind::HlgCowan => "hlg-cowan",
         }
     }
 
@@ -563,7 +628,7 @@ impl LawKind {
     pub fn parameter_count(self, levels: usize) -> usize {
         match self {
             LawKind::Power | LawKind::Hlg => 1,
-            LawKind::GainOffsetGamma | LawKind::Cowan | LawKind::Pq => 2,
+            LawKind::GainOffsetGamma | LawKind::Cowan | LawKind::Pq | LawKind::HlgCowan => 2,
             LawKind::ThreeTerm | LawKind::PqCowan => 3,
             LawKind::Table => levels,
         }
@@ -599,6 +664,7 @@ impl TransferLaw {
             TransferLaw::Table(_) => LawKind::Table,
             TransferLaw::Pq(l) if l.curvature != 0.0 => LawKind::PqCowan,
             TransferLaw::Pq(_) => LawKind::Pq,
+            TransferLaw::Hlg(l) if l.curvature != 0.0 => LawKind::HlgCowan,
             TransferLaw::Hlg(_) => LawKind::Hlg,
         }
     }
@@ -657,6 +723,11 @@ impl TransferLaw {
                 ("rolloff_from", l.rolloff_from),
                 ("exponent", l.exponent),
             ],
+            TransferLaw::Hlg(l) if l.curvature != 0.0 => vec![
+                ("exponent", l.exponent),
+                ("curvature", l.curvature),
+                ("toe", l.toe),
+            ],
             TransferLaw::Hlg(l) => vec![("exponent", l.exponent)],
         }
     }
@@ -696,21 +767,11 @@ impl TransferLaw {
                     "peak must be in (0, 10000], rolloff_from from the peak to 10000, exponent positive",
                 )
             }
-            TransferLaw::Pq(l)
-                if l.curvature != 0.0
-                    && !(l.curvature.is_finite()
-                        && l.toe > 0.0
-                        && l.toe < 1.0
-                        && l.exponent + 2.0 * l.curvature * l.toe.ln() > 0.0) =>
-            {
-                invalid(
-                    "pq-cowan",
-                    "toe must lie in (0, 1) and the slope there, exponent + 2 curvature ln toe, be positive",
-                )
-            }
+            TransferLaw::Pq(l) => l.curve().check("pq-cowan"),
             TransferLaw::Hlg(l) if !(l.exponent > 0.0 && l.exponent.is_finite()) => {
                 invalid("hlg", "exponent must be positive")
             }
+            TransferLaw::Hlg(l) => l.curve().check("hlg-cowan"),
             _ => Ok(()),
         }
     }
@@ -793,6 +854,77 @@ mod tests {
     /// toe it goes on as a power of x, continuous in value and slope, and it inverts
     /// everywhere; a curvature that would turn it back is refused.
     #[test]
+    fn the_curved_hlg_law_is_a_cowan_panel_behind_the_hlg_decoding() {
+        // Alone, a channel's light through the OOTF is (w E_s)^(γ − 1) E_s of the
+        // peak; the display re-encodes it with gamma g for a Cowan panel (A, B).
+        let (big_a, big_b, g, gamma, w) = (2.25, 0.03, 2.2, 1.2, 0.2627);
+        let panel = Cowan {
+            a: big_a,
+            b: big_b,
+            toe: 1e-9,
+        };
+        let shown = |scene: f64| {
+            let light = (w * scene).powf(gamma - 1.0) * scene;
+            panel.excitation(light.powf(1.0 / g))
+        };
+        let k = (w.powf(gamma - 1.0)).ln() / g;
+        let curved = Hlg {
+            exponent: gamma / g * (big_a + 2.0 * big_b * k),
+            curvature: big_b * (gamma / g).powi(2),
+            toe: 1e-4,
+        };
+        let mut worst: f64 = 0.0;
+        for code in (40..=1000).step_by(20) {
+            let v = code as f64 / 1023.0;
+            let want = shown(hlg_scene_light(v)) / shown(1.0);
+            worst = worst.max((curved.excitation(v) / want - 1.0).abs());
+        }
+        assert!(worst < 1e-9, "{worst}");
+        // The plain law with the same exponent misses the dark end by more than 10 %.
+        let plain = Hlg {
+            curvature: 0.0,
+            toe: 0.0,
+            ..curved.clone()
+        };
+        let dark = 100.0 / 1023.0;
+        assert!(curved.excitation(dark) / plain.excitation(dark) > 1.1);
+        assert_eq!(TransferLaw::Hlg(curved.clone()).kind(), LawKind::HlgCowan);
+        let turning = Hlg {
+            curvature: 0.2,
+            toe: 1e-4,
+            ..curved.clone()
+        };
+        assert_curved_law_holds(
+            TransferLaw::Hlg(curved),
+            TransferLaw::Hlg(turning),
+            TransferLaw::Hlg(plain),
+        );
+    }
+
+    /// What every curved HDR law must do: invert at every 10-bit code (below its toe
+    /// too) and be monotone, while the same law curved so that its slope at the toe is
+    /// not positive is refused; its plain form is its own kind and is written as before,
+    /// without a curvature or a toe.
+    fn assert_curved_law_holds(curved: TransferLaw, turning: TransferLaw, plain: TransferLaw) {
+        for code in 1..=1023 {
+            let v = code as f64 / 1023.0;
+            let e = curved.excitation(v);
+            if e > 0.0 && e < 1.0 {
+                let back = curved.drive(e);
+                assert!((back - v).abs() < 1e-9, "code {code}: {back} for {v}");
+            }
+        }
+        assert!(curved.monotonicity().is_ok());
+        assert!(turning.monotonicity().is_err());
+        assert_ne!(curved.kind(), plain.kind());
+        let written = toml::to_string(&plain).unwrap();
+        assert!(
+            !written.contains("curvature") && !written.contains("toe"),
+            "{written}"
+        );
+    }
+
+    #[test]
     fn the_curved_pq_law_is_a_cowan_panel_behind_the_pq_decoding() {
         let (big_a, big_b, g) = (2.25, 0.03, 2.2);
         let panel = TransferLaw::Cowan(Cowan {
@@ -834,29 +966,16 @@ mod tests {
         };
         let (s_below, s_above) = (slope(toe_code * 0.97), slope(toe_code * 1.03));
         assert!((s_below - s_above).abs() < 1e-3, "{s_below} {s_above}");
-        // It inverts at every code, below the toe too.
-        for code in 1..=1023 {
-            let v = code as f64 / 1023.0;
-            let e = curved.excitation(v);
-            if e > 0.0 && e < 1.0 {
-                let back = curved.drive(e);
-                assert!((back - v).abs() < 1e-9, "code {code}: {back} for {v}");
-            }
-        }
-        // A curvature whose slope at the toe is not positive turns the law back.
-        let turning = TransferLaw::Pq(Pq {
+        let turning = Pq {
             curvature: 0.2,
             toe: 1e-4,
             ..curved.clone()
-        });
-        assert!(turning.monotonicity().is_err());
-        assert!(TransferLaw::Pq(curved).monotonicity().is_ok());
+        };
         assert_eq!(TransferLaw::Pq(plain.clone()).kind(), LawKind::Pq);
-        // A plain law is written as before: no curvature, no toe.
-        let written = toml::to_string(&TransferLaw::Pq(plain)).unwrap();
-        assert!(
-            !written.contains("curvature") && !written.contains("toe"),
-            "{written}"
+        assert_curved_law_holds(
+            TransferLaw::Pq(curved),
+            TransferLaw::Pq(turning),
+            TransferLaw::Pq(plain),
         );
     }
 

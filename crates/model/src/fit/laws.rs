@@ -19,6 +19,7 @@ use super::primaries::ChannelRamp;
 use crate::transfer::{
     Cowan, GainOffsetGamma, Hlg, LawKind, Power, Pq, Table, ThreeTerm, TransferError, TransferLaw,
 };
+use chromacal_color::hdr::hlg_scene_light;
 use chromacal_color::ictcp::{PQ_PEAK, pq_eotf};
 use nalgebra::DMatrix;
 
@@ -161,6 +162,8 @@ pub fn fit_law(kind: LawKind, ramp: &ChannelRamp, toe: f64) -> Result<LawFit, La
         LawKind::PqCowan => fit_pq_cowan(ramp),
         LawKind::Hlg if !pinned => Err(LawFitError::NeedsFullDrive { law: kind }),
         LawKind::Hlg => fit_hlg(ramp),
+        LawKind::HlgCowan if !pinned => Err(LawFitError::NeedsFullDrive { law: kind }),
+        LawKind::HlgCowan => fit_hlg_cowan(ramp),
     }
 }
 
@@ -399,13 +402,7 @@ fn fit_pq_cowan(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     let TransferLaw::Pq(start) = &plain.law else {
         unreachable!("fit_pq gives a PQ law");
     };
-    let least_light = points
-        .drive
-        .iter()
-        .zip(&points.excitation)
-        .filter(|(v, e)| **v > 0.0 && **e > 0.0)
-        .map(|(v, _)| pq_eotf(*v))
-        .fold(f64::INFINITY, f64::min);
+    let least_light = least_lit(&points, pq_eotf);
     let law_of = |t: &[f64], rolloff: Option<f64>| {
         let pq = pq_law(&t[..2], rolloff);
         let toe = (least_light / pq.peak).clamp(1e-9, 0.5);
@@ -521,7 +518,7 @@ fn fit_hlg(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     let points = Points::from_ramp(ramp, false);
     need_levels(kind, &points, 1)?;
     let curve = |t: &[f64], v: f64, g: &mut [f64]| {
-        let ln_e = chromacal_color::hdr::hlg_scene_light(v.clamp(0.0, 1.0))
+        let ln_e = hlg_scene_light(v.clamp(0.0, 1.0))
             .max(f64::MIN_POSITIVE)
             .ln();
         let f = (t[0] * ln_e).exp();
@@ -531,6 +528,8 @@ fn fit_hlg(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
     let fit = points.fit(kind, &curve, &[1.2])?;
     let law = TransferLaw::Hlg(Hlg {
         exponent: fit.params[0],
+        curvature: 0.0,
+        toe: 0.0,
     });
     law.monotonicity()
         .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
@@ -894,6 +893,62 @@ fn fit_table(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
         chi2: 0.0,
         dof: 0,
         free_parameters: drive.len(),
+        notes,
+    })
+}
+
+/// The least `light` (of a drive) among the readings that show any: where a curved HDR
+/// law's toe goes (infinite when none does).
+fn least_lit(points: &Points, light: impl Fn(f64) -> f64) -> f64 {
+    points
+        .drive
+        .iter()
+        .zip(&points.excitation)
+        .filter(|(v, e)| **v > 0.0 && **e > 0.0)
+        .map(|(v, _)| light(*v))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The HLG law with Cowan's log-quadratic term, ln E = p ln E_s + b ln²E_s of the
+/// scene light E_s (`Hlg::curvature`), a power of E_s below the least scene light
+/// fitted. Started from the plain HLG law's exponent and no curvature.
+fn fit_hlg_cowan(ramp: &ChannelRamp) -> Result<LawFit, LawFitError> {
+    let kind = LawKind::HlgCowan;
+    let points = Points::from_ramp(ramp, false);
+    need_levels(kind, &points, 2)?;
+    let plain = fit_hlg(ramp)?;
+    let TransferLaw::Hlg(start) = &plain.law else {
+        unreachable!("fit_hlg gives an HLG law");
+    };
+    let toe = least_lit(&points, |v| hlg_scene_light(v.min(1.0))).clamp(1e-9, 0.5);
+    let law_of = |t: &[f64]| Hlg {
+        exponent: t[0],
+        curvature: t[1].clamp(-1.0, 1.0),
+        toe,
+    };
+    let curve =
+        |t: &[f64], v: f64, g: &mut [f64]| central_differences(|t| law_of(t).excitation(v), t, g);
+    let fit = points.fit(kind, &curve, &[start.exponent, 0.0])?;
+    let hlg = law_of(&fit.params);
+    let notes = vec![format!(
+        "ln E = {:.4} ln E_s + {:.5} ln² E_s of the scene light E_s, a power of it below {:.2e}",
+        hlg.exponent, hlg.curvature, hlg.toe
+    )];
+    let law = TransferLaw::Hlg(hlg.clone());
+    law.monotonicity()
+        .map_err(|source| LawFitError::NotMonotone { law: kind, source })?;
+    let ses = standard_errors_with_pin(&fit, &points, ramp);
+    Ok(LawFit {
+        law,
+        amplitude: 1.0,
+        parameters: vec![
+            parameter("exponent", hlg.exponent, ses[0]),
+            parameter("curvature", hlg.curvature, ses[1]),
+            parameter("toe", hlg.toe, None),
+        ],
+        chi2: fit.chi2,
+        dof: fit.dof,
+        free_parameters: 2,
         notes,
     })
 }
