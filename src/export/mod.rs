@@ -186,8 +186,13 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
         );
     }
     if let Some(gamma) = terms.hlg_ootf.filter(|_| !carries_terms) {
+        let gain = if terms.hlg_ootf_through_laws {
+            "what its law gives at the code whose OOTF output alone is the same"
+        } else {
+            "its light alone times (Y_S / (w_c E_c))^(γ − 1)"
+        };
         notes.push(format!(
-            "the model's HLG OOTF (BT.2100, system gamma {gamma:.3}): each channel's light in a mixture is its light alone times (Y_S / (w_c E_c))^(γ − 1), a grey's more than its channels' sum; the curves and matrix are each channel's alone"
+            "the model's HLG OOTF (BT.2100, system gamma {gamma:.3}): each channel's light in a mixture is {gain}, a grey's more than its channels' sum; the curves and matrix are each channel's alone"
         ));
     }
     if !terms.is_empty() && carries_terms {

@@ -351,9 +351,9 @@ impl<'a> ColourReproduction<'a> {
     /// The gamut where the spatial map's gains are `k`.
     fn gamut_with_gains(&self, k: [f64; 3]) -> Option<GamutAt> {
         let mut primaries = self.model.matrix;
-        let ootf = self.model.terms.hlg_ootf.map_or([1.0; 3], |gamma| {
-            chromacal_color::hdr::BT2020_LUMINANCE.map(|w| w.powf(1.0 - gamma).max(1.0))
-        });
+        // A channel's gain in white, (1 / w_c)^(γ − 1) from the shares (or what its
+        // law gives there, through the laws), where it is more than alone.
+        let ootf = self.model.ootf_gains(&[1.0; 3]).map(|g| g.max(1.0));
         for (c, ((gain, full), in_white)) in k.iter().zip(self.full).zip(ootf).enumerate() {
             let scale = gain * full * in_white;
             if !(scale > 0.0 && scale.is_finite()) {

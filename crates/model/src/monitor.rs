@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use super::spatial::{ScreenPosition, SpatialMap};
 use super::transfer::{TransferError, TransferLaw};
 use chromacal_color::Xyz;
+use chromacal_color::hdr::{hlg_inverse_oetf, hlg_oetf, hlg_scene_light};
 
 /// Drive values of R, G, B, each normalised to [0, 1].
 pub type Drive = [f64; 3];
@@ -99,6 +100,17 @@ pub struct MonitorModel {
 /// ê_c = E_c^γ_S, so its gain in a mixture is (Y_S / (w_c E_c))^(γ_S − 1) with
 /// E_k = ê_k^(1/γ_S) (`ootf_gains`): a red in a white gives 1 / 0.2627^0.2 = 1.31
 /// times its light alone at γ_S = 1.2. The gain multiplies the others'.
+///
+/// That gain is the light's, and it holds where the panel after the OOTF follows the
+/// gamma the display's processing inverts. Through the laws instead
+/// (`hlg_ootf_through_laws`), the OOTF acts on the signal, before the panel, as
+/// BT.2100's display model has it: E_k is the scene light of each channel's code (its
+/// law inverted), and channel c in a mixture shows what it shows alone at the code u
+/// whose OOTF output is the same, E_s(u)^γ_S = (Y_S / w_c)^(γ_S − 1) E_c: its own
+/// law at u, whatever the panel's transfer, so the gain is E(u) / E(v)
+/// (`MonitorModel::ootf_gains`). Above full signal (a channel in a bright mixture is
+/// driven harder than alone ever) the law goes on as the power of E_s it has at the
+/// top.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AdditivityTerms {
@@ -117,6 +129,10 @@ pub struct AdditivityTerms {
     /// γ_S, the system gamma of BT.2100's HLG OOTF.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hlg_ootf: Option<f64>,
+    /// The OOTF's gains taken through the laws, from each channel's code, rather than
+    /// from its share of light (see above).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub hlg_ootf_through_laws: bool,
     /// The brightness limiter (`fit::limiter`): not a term of a patch's colour (the
     /// model is defined for the plan's patch on black, which it does not dim) but of a
     /// whole screen's, its light scaled by g(p) of the screen's mean light p
@@ -141,14 +157,12 @@ impl AdditivityTerms {
     }
 
     /// Each channel's gain at light shares `shares` and drives `drives`:
-    /// 1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c, times the HLG OOTF's.
-    pub fn gains(&self, shares: &[f64; 3], drives: &[f64; 3]) -> [f64; 3] {
+    /// 1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c, times the HLG OOTF's,
+    /// `ootf` (`MonitorModel::ootf_gains`).
+    pub fn gains(&self, shares: &[f64; 3], drives: &[f64; 3], ootf: &[f64; 3]) -> [f64; 3] {
         let s = interaction_basis(shares);
         let x = crosstalk_basis(shares);
         let y = crosstalk_basis(drives);
-        let ootf = self
-            .hlg_ootf
-            .map_or([1.0; 3], |gamma| ootf_gains(shares, gamma));
         [0, 1, 2].map(|c| {
             (1.0 + self.interaction.map_or(0.0, |g| g[c] * s[c])
                 + self.crosstalk.map_or(0.0, |k| k[c] * x[c])
@@ -172,7 +186,9 @@ impl AdditivityTerms {
         if self.chromaticity_shift.is_some() {
             names.push("drive-dependent primary chromaticity");
         }
-        if self.hlg_ootf.is_some() {
+        if self.hlg_ootf.is_some() && self.hlg_ootf_through_laws {
+            names.push("the HLG OOTF (BT.2100) through the laws");
+        } else if self.hlg_ootf.is_some() {
             names.push("the HLG OOTF (BT.2100)");
         }
         names
@@ -280,6 +296,15 @@ pub fn ootf_gains(shares: &[f64; 3], gamma: f64) -> [f64; 3] {
     })
 }
 
+/// d ln E / d ln E_s of an HLG channel's law over its top, from 95 % of full scene
+/// light to full: the power it goes on with beyond full signal. `None` where the law
+/// gives no light there.
+fn top_exponent(law: &TransferLaw) -> Option<f64> {
+    let below = law.excitation(hlg_oetf(0.95 * hlg_inverse_oetf(1.0)));
+    let exponent = (law.excitation(1.0) / below).ln() / (1.0f64 / 0.95).ln();
+    (exponent.is_finite() && exponent > 0.0).then_some(exponent)
+}
+
 /// ê_c (1 − ê_c): the weight of u_c.
 pub fn chromaticity_shift_basis(shares: &[f64; 3]) -> [f64; 3] {
     shares.map(|s| s * (1.0 - s))
@@ -317,6 +342,49 @@ impl MonitorModel {
         })
     }
 
+    /// The HLG OOTF's gain on each channel at light shares `shares` (1 without the
+    /// term): from the shares (`ootf_gains`), or through the laws
+    /// (`AdditivityTerms::hlg_ootf_through_laws`): E_k the scene light of channel k's
+    /// code, Y_S = Σ w_k E_k, and channel c's gain E_c(u) / E_c(v) at the code u of
+    /// scene light ((Y_S / w_c)^(γ − 1) E_c)^(1/γ). Beyond full signal an HLG law goes
+    /// on as its formula does, another law as E_c(1) times that scene light to the
+    /// power it has between 95 % and full scene light.
+    pub fn ootf_gains(&self, shares: &[f64; 3]) -> [f64; 3] {
+        let Some(gamma) = self.terms.hlg_ootf else {
+            return [1.0; 3];
+        };
+        if !self.terms.hlg_ootf_through_laws {
+            return ootf_gains(shares, gamma);
+        }
+        let full = self.full_drive_excitations();
+        // Scene light of a channel's code (beyond full drive, as its share's excess
+        // goes on: the extended inverse's).
+        let scene = [0, 1, 2].map(|c| {
+            let share = shares[c].max(0.0);
+            if share > 1.0 {
+                return share.powf(1.0 / gamma);
+            }
+            hlg_scene_light(self.laws[c].drive(share * full[c]).clamp(0.0, 1.0))
+        });
+        let w = chromacal_color::hdr::BT2020_LUMINANCE;
+        let luminance: f64 = (0..3).map(|k| w[k] * scene[k]).sum();
+        [0, 1, 2].map(|c| {
+            let (law, alone) = (&self.laws[c], shares[c].min(1.0) * full[c]);
+            if !(scene[c] > 0.0 && alone > 0.0) {
+                return 1.0;
+            }
+            let at = ((luminance / w[c]).powf(gamma - 1.0) * scene[c]).powf(1.0 / gamma);
+            let mixed = match law {
+                TransferLaw::Hlg(hlg) => hlg.of_scene_light(at),
+                _ if at <= 1.0 => {
+                    law.excitation(hlg_oetf(at * hlg_inverse_oetf(1.0)).clamp(0.0, 1.0))
+                }
+                _ => full[c] * at.powf(top_exponent(law).unwrap_or(gamma)),
+            };
+            mixed / alone
+        })
+    }
+
     /// [`Self::drives_of_shares`] where the crosstalk in drive needs them, zeros without
     /// it (the only term that uses them; a law's inverse is not free).
     fn term_drives(&self, shares: &[f64; 3]) -> [f64; 3] {
@@ -341,7 +409,9 @@ impl MonitorModel {
     /// are `shares`, terms included: m_c l_c (1 + γ_c s_c + κ_c (1 − ê_c) s_c + λ_c (1 − δ_c) t_c)
     /// + u_c ê_c (1 − ê_c), one column a channel.
     fn channel_contributions(&self, light: &Vector3<f64>, shares: &[f64; 3]) -> Matrix3<f64> {
-        let gains = self.terms.gains(shares, &self.term_drives(shares));
+        let gains = self
+            .terms
+            .gains(shares, &self.term_drives(shares), &self.ootf_gains(shares));
         let w = chromaticity_shift_basis(shares);
         let mut contributions = Matrix3::zeros();
         for c in 0..3 {
@@ -407,7 +477,13 @@ impl MonitorModel {
             }
             let mut next = inverse * target;
             let drives = self.term_drives(&shares);
-            for (c, gain) in self.terms.gains(&shares, &drives).into_iter().enumerate() {
+            let ootf = self.ootf_gains(&shares);
+            for (c, gain) in self
+                .terms
+                .gains(&shares, &drives, &ootf)
+                .into_iter()
+                .enumerate()
+            {
                 next[c] /= gain.max(1e-3);
             }
             let step = (next - light).abs().max();
@@ -879,6 +955,7 @@ mod tests {
                 drive_crosstalk: None,
                 chromaticity_shift: Some([[0.0, 0.5, 1.5], [0.8, 0.0, -0.4], [-1.0, 1.2, 0.0]]),
                 hlg_ootf: None,
+                hlg_ootf_through_laws: false,
                 limiter: None,
             },
             ..srgb_like()
@@ -889,6 +966,100 @@ mod tests {
     /// mixture is what the OOTF makes of the channels' scene light, and the inverse
     /// finds the drive of every colour the model makes, near white too, where the
     /// gains are largest (blue 1/0.0593^0.2 = 1.76 at γ 1.2).
+    /// A display that is BT.2100's HLG processing (OOTF on the signal, then the light
+    /// re-encoded with gamma 2.2) in front of Cowan panels, which do not follow 2.2,
+    /// modelled by each channel's HLG law with Cowan's term (exact for it alone): the
+    /// OOTF through the laws is that display at every mixture, white included, and
+    /// inverts; from the shares it misses by more than 1 %. With laws that are the
+    /// nominal E_s^γ, the two forms are one.
+    #[test]
+    fn the_hlg_ootf_through_the_laws_follows_a_panel_that_departs_from_the_gamma() {
+        let (gamma, g) = (1.2, 2.2);
+        let w = chromacal_color::hdr::BT2020_LUMINANCE;
+        let panels = [(2.25, 0.03), (2.20, 0.025), (2.15, 0.02)];
+        let panel = |c: usize, d: f64| {
+            let (a, b) = panels[c];
+            let ln_d = d.ln();
+            (a * ln_d + b * ln_d * ln_d).exp()
+        };
+        // Channel c's light, 1 at its full signal alone, at the scene lights `scene`.
+        let shown = |c: usize, scene: [f64; 3]| {
+            if scene[c] <= 0.0 {
+                return 0.0;
+            }
+            let y: f64 = (0..3).map(|k| w[k] * scene[k]).sum();
+            let alone_full = panel(c, w[c].powf((gamma - 1.0) / g));
+            panel(c, (y.powf(gamma - 1.0) * scene[c]).powf(1.0 / g)) / alone_full
+        };
+        let laws = [0, 1, 2].map(|c| {
+            let (a, b) = panels[c];
+            let k = w[c].powf(gamma - 1.0).ln() / g;
+            TransferLaw::Hlg(crate::transfer::Hlg {
+                exponent: gamma / g * (a + 2.0 * b * k),
+                curvature: b * (gamma / g).powi(2),
+                toe: 1e-6,
+            })
+        });
+        let model = |through_laws: bool| MonitorModel {
+            matrix: Matrix3::identity(),
+            black: Xyz::zeros(),
+            laws: laws.clone(),
+            terms: AdditivityTerms {
+                hlg_ootf: Some(gamma),
+                hlg_ootf_through_laws: through_laws,
+                ..AdditivityTerms::default()
+            },
+            spatial: SpatialMap::Uniform,
+        };
+        let (through, shares) = (model(true), model(false));
+        let p = ScreenPosition::CENTRE;
+        let (mut worst_through, mut worst_shares): (f64, f64) = (0.0, 0.0);
+        for drive in [
+            [0.3, 0.8, 0.5],
+            [0.9, 0.1, 0.0],
+            [0.6; 3],
+            [0.05, 0.5, 1.0],
+            [1.0; 3],
+        ] {
+            let scene = drive.map(hlg_scene_light);
+            let want = Xyz::from([0, 1, 2].map(|c| shown(c, scene)));
+            let miss = |m: &MonitorModel| (m.forward(drive, p) - want).norm() / want.norm();
+            worst_through = worst_through.max(miss(&through));
+            worst_shares = worst_shares.max(miss(&shares));
+            let back = through.inverse(&want, p).unwrap();
+            assert!(back.converged, "{drive:?}: {back:?}");
+            let again = through.forward(back.drive, p);
+            assert!((again - want).norm() < 1e-9 * want.norm(), "{drive:?}");
+        }
+        assert!(worst_through < 1e-9, "{worst_through}");
+        assert!(worst_shares > 0.01, "{worst_shares}");
+        // The nominal laws, E_s^γ: both forms give the same gains, beyond full
+        // signal too (red in white).
+        let nominal = |through_laws: bool| MonitorModel {
+            laws: [0, 1, 2].map(|_| {
+                TransferLaw::Hlg(crate::transfer::Hlg {
+                    exponent: gamma,
+                    curvature: 0.0,
+                    toe: 0.0,
+                })
+            }),
+            ..model(through_laws)
+        };
+        for shares in [[1.0; 3], [0.2, 0.7, 0.05], [0.0, 0.4, 0.9]] {
+            let (a, b) = (
+                nominal(true).ootf_gains(&shares),
+                nominal(false).ootf_gains(&shares),
+            );
+            assert!((0..3).all(|c| (a[c] - b[c]).abs() < 1e-9), "{a:?} {b:?}");
+        }
+        // It survives the model file.
+        let text = toml::to_string(&through).unwrap();
+        assert!(text.contains("hlg_ootf_through_laws = true"), "{text}");
+        let back: MonitorModel = toml::from_str(&text).unwrap();
+        assert_eq!(back.terms, through.terms);
+        assert!(!toml::to_string(&shares).unwrap().contains("through_laws"));
+    }
+
     #[test]
     fn the_hlg_ootf_scales_each_channel_by_the_scene_luminance_and_inverts() {
         let plain = srgb_like();

@@ -406,7 +406,14 @@ impl Hlg {
     }
 
     pub fn excitation(&self, v: f64) -> f64 {
-        self.curve().of(hlg_scene_light(v.clamp(0.0, 1.0)))
+        self.of_scene_light(hlg_scene_light(v.clamp(0.0, 1.0)))
+    }
+
+    /// E at scene light `scene` (1 at full signal), beyond full signal too: the light
+    /// a channel gives where the OOTF drives it harder than its full signal alone
+    /// (`AdditivityTerms::hlg_ootf_through_laws`).
+    pub fn of_scene_light(&self, scene: f64) -> f64 {
+        self.curve().of(scene)
     }
 
     /// The drive of excitation `e`: the OETF of e^(1/p).

@@ -74,10 +74,14 @@ pub enum TermSet {
     InteractionAndDriveCrosstalk,
     /// BT.2100's HLG OOTF: tried only for a display decoding HLG.
     HlgOotf,
+    /// The same OOTF with its gains taken through the laws, from each channel's code
+    /// (`AdditivityTerms::hlg_ootf_through_laws`): exact whatever the panel's
+    /// transfer after the OOTF, as far as the laws are; tried only for HLG.
+    HlgOotfThroughLaws,
 }
 
 impl TermSet {
-    pub const ALL: [TermSet; 10] = [
+    pub const ALL: [TermSet; 11] = [
         TermSet::None,
         TermSet::Interaction,
         TermSet::Crosstalk,
@@ -88,6 +92,7 @@ impl TermSet {
         TermSet::DriveCrosstalkAndShift,
         TermSet::InteractionAndDriveCrosstalk,
         TermSet::HlgOotf,
+        TermSet::HlgOotfThroughLaws,
     ];
 
     pub fn name(self) -> &'static str {
@@ -102,6 +107,7 @@ impl TermSet {
             TermSet::DriveCrosstalkAndShift => "crosstalk in drive and chromaticity",
             TermSet::InteractionAndDriveCrosstalk => "interaction and crosstalk in drive",
             TermSet::HlgOotf => "the HLG OOTF (BT.2100)",
+            TermSet::HlgOotfThroughLaws => "the HLG OOTF through the laws",
         }
     }
 
@@ -133,6 +139,11 @@ impl TermSet {
                 | TermSet::CrosstalkAndShift
                 | TermSet::DriveCrosstalkAndShift
         )
+    }
+
+    /// Either form of the HLG OOTF.
+    pub fn ootf(self) -> bool {
+        matches!(self, TermSet::HlgOotf | TermSet::HlgOotfThroughLaws)
     }
 
     /// The set with the chromaticity shift added to a gain term (`None` for what has
@@ -379,7 +390,8 @@ pub fn fit_terms(
         terms: AdditivityTerms::default(),
         ..model.clone()
     };
-    if set == TermSet::HlgOotf {
+    if set.ootf() {
+        fitted.terms.hlg_ootf_through_laws = set == TermSet::HlgOotfThroughLaws;
         fitted.terms.hlg_ootf = Some(fit_ootf(&fitted, readings, noise)?);
         return Some(fitted);
     }
@@ -511,6 +523,7 @@ fn forward_selection(scores: &[Option<Vec<f64>>], tolerance: f64) -> TermSet {
         TermSet::DriveCrosstalk,
         TermSet::ChromaticityShift,
         TermSet::HlgOotf,
+        TermSet::HlgOotfThroughLaws,
     ];
     let gain_pair = TermSet::InteractionAndDriveCrosstalk;
     // The pair against none only where it is also below every single term: where a
@@ -626,7 +639,7 @@ pub fn choose_terms(
 ) -> TermChoice {
     let folds = level_folds(readings.iter().map(|r| r.level).collect(), MAX_FOLDS);
     let n = folds.len();
-    let tried = |set: &TermSet| hlg || *set != TermSet::HlgOotf;
+    let tried = |set: &TermSet| hlg || !set.ootf();
     let scores: Vec<Option<Vec<f64>>> = TermSet::ALL
         .iter()
         .map(|set| {
