@@ -30,8 +30,8 @@ pub fn read_measurements(path: &Path) -> Result<MeasurementSet, ReadMeasurements
 }
 
 /// The same, with the signal the display was sent when the file says (a journal's
-/// plan does; a `.ti3` does not): a fit of HDR readings needs it to know the HLG OOTF
-/// couples the channels and which HDR law to try.
+/// plan does, none there meaning SDR; a `.ti3` does not): a fit of HDR readings needs
+/// it to know the HLG OOTF couples the channels and which HDR law to try.
 pub fn read_measurements_and_signal(
     path: &Path,
 ) -> Result<(MeasurementSet, Option<Signal>), ReadMeasurementsError> {
@@ -47,7 +47,7 @@ pub fn read_measurements_and_signal(
         if let Some((line, _)) = recovery.dropped_tail {
             tracing::warn!(line, "the journal's last line was cut short and is ignored");
         }
-        let signal = header.plan.signal;
+        let signal = Some(header.plan.signal.unwrap_or_default());
         Ok((to_measurement_set(path, &header, entries), signal))
     } else {
         Ok((ti3_from_text(&text, &path.display().to_string())?, None))

@@ -45,12 +45,7 @@ fn assert_calibrated_to_pq(label: &str, profile: &Profile) {
     assert_eq!(profile.report.chosen_law(), Some(LawKind::Pq), "{label}");
     // The HLG OOTF is no candidate for a display decoding PQ.
     assert!(
-        profile.report.terms.len() >= 2
-            && profile
-                .report
-                .terms
-                .iter()
-                .all(|t| t.terms != TermSet::HlgOotf),
+        profile.report.terms.len() >= 2 && profile.report.terms.iter().all(|t| !t.terms.ootf()),
         "{label}: {:?}",
         profile.report.terms
     );
@@ -273,7 +268,7 @@ fn a_cowan_panel_behind_hlg_is_followed_by_the_curved_hlg_law_where_it_is_asked_
 /// Calibrate `hdr-lcd` to `target` with the table and the plain law of `laws[0]`, and
 /// with the curved one, `laws[1]`, too: each keeps its own law in every channel, a
 /// refit of the plain run's readings with the curved law named on `fit --laws` keeps
-/// the curved one, and the curved law's held-out ΔE ITP is under 0.5 and under half
+/// the curved one (and says the run's signal), and the curved law's held-out ΔE ITP is under 0.5 and under half
 /// the plain one's. Returns the curved law's red exponent and curvature.
 fn curved_law_against_plain(
     plan: &str,
@@ -311,6 +306,9 @@ fn curved_law_against_plain(
     );
     let refit = Profile::read(&refit).unwrap();
     assert_eq!(refit.report.chosen_law(), Some(kinds[1]));
+    // The refitted profile says the signal the readings were taken with, as the run's.
+    assert!(plain.provenance.signal.is_some_and(|s| s.is_hdr()));
+    assert_eq!(refit.provenance.signal, plain.provenance.signal);
     let itp = |p: &Profile| held_out_itp(&p.report.held_out_patches).unwrap().mean;
     let (curved_itp, plain_itp) = (itp(&curved), itp(&plain));
     eprintln!("held-out ΔE ITP: curved {curved_itp:.3}, plain {plain_itp:.3}");

@@ -124,7 +124,7 @@ fn fit(
             edid: None,
             correction: None,
             uncorrected: None,
-            signal: None,
+            signal: signal.filter(|s| s.is_hdr()),
         },
         report: fitted.report.clone(),
         calibration: None,

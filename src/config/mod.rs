@@ -392,15 +392,30 @@ pub fn parse_config_unchecked(text: &str, origin: &str) -> Result<Config, Config
     Ok(config)
 }
 
-/// The fit options for readings taken with `signal` (a journal's, when it says; the
-/// config's tone's otherwise): the config's, with what an HDR signal asks of a fit
-/// ([`hdr_defaults`]), so that `fit` of an HLG run's journal models the OOTF as the run
-/// did.
+/// The fit options for readings taken with `signal` (a journal's, which says, SDR
+/// included; `None` for a file that does not, a `.ti3`): the config's, with what the
+/// readings' signal asks of a fit instead of what the config's own asked
+/// ([`hdr_defaults`]): `fit` of an HLG run's journal models the OOTF and tries the HLG
+/// law as the run did, whatever the config found says, and a PQ or SDR journal is not
+/// fitted as HLG because the config is. The readings' signal wins over the config's:
+/// it is a fact about them.
 pub fn fit_options_for_signal(mut config: Config, signal: Option<Signal>) -> FitOptions {
-    if signal.is_some() {
-        config.plan.signal = signal;
+    let Some(signal) = signal else {
+        return config.fit;
+    };
+    if config.plan.signal.unwrap_or_default() != signal {
+        // Undo what the config's own signal added, then add the readings'.
+        let added = [LawKind::Pq, LawKind::Hlg];
+        if config.fit.laws.len() == LawKind::ALL.len() + 1
+            && config.fit.laws[..LawKind::ALL.len()] == LawKind::ALL
+            && config.fit.laws.last().is_some_and(|l| added.contains(l))
+        {
+            config.fit.laws.pop();
+        }
+        config.fit.hlg_ootf = false;
+        config.plan.signal = Some(signal);
+        hdr_defaults(&mut config);
     }
-    hdr_defaults(&mut config);
     config.fit
 }
 
@@ -793,6 +808,55 @@ mod tests {
         for other in [sdr, parse_config(pq, "c.toml").unwrap()] {
             assert!(!other.fit.hlg_ootf && !other.fit.laws.contains(&LawKind::Hlg));
         }
+    }
+
+    /// A fit takes what the readings' signal asks, not what the config's did: an HLG
+    /// journal fitted with a PQ config tries the HLG law and its OOTF and not the PQ
+    /// law; a PQ or SDR journal with an HLG config is not fitted as HLG; a listed set
+    /// of laws is left as listed; a file that does not say (a `.ti3`) keeps the
+    /// config's.
+    #[test]
+    fn a_fit_follows_the_signal_its_readings_were_taken_with() {
+        let pq = parse_config(
+            "[target]\ntone = \"pq\"\n[plan]\nbit_depth = 10\n",
+            "c.toml",
+        )
+        .unwrap();
+        let hlg = parse_config(
+            "[target]\ntone = \"hlg\"\npeak = 1000\n[plan]\nbit_depth = 10\n",
+            "c.toml",
+        )
+        .unwrap();
+        let sdr = parse_config("[target]\ntone = \"srgb\"\n", "c.toml").unwrap();
+        let with = |kind: LawKind| [LawKind::ALL.as_slice(), &[kind]].concat();
+        let options = fit_options_for_signal(pq.clone(), Some(Signal::Hlg));
+        assert_eq!(options.laws, with(LawKind::Hlg));
+        assert!(options.hlg_ootf);
+        let options = fit_options_for_signal(hlg.clone(), Some(Signal::Pq));
+        assert_eq!(options.laws, with(LawKind::Pq));
+        assert!(!options.hlg_ootf);
+        let options = fit_options_for_signal(hlg.clone(), Some(Signal::Sdr));
+        assert_eq!(options.laws, LawKind::ALL);
+        assert!(!options.hlg_ootf);
+        let options = fit_options_for_signal(sdr.clone(), Some(Signal::Hlg));
+        assert_eq!(options.laws, with(LawKind::Hlg));
+        assert!(options.hlg_ootf);
+        // The same signal, or none said: the config's own.
+        assert_eq!(
+            fit_options_for_signal(hlg.clone(), Some(Signal::Hlg)),
+            hlg.fit
+        );
+        assert_eq!(fit_options_for_signal(hlg.clone(), None), hlg.fit);
+        assert_eq!(
+            fit_options_for_signal(sdr.clone(), Some(Signal::Sdr)),
+            sdr.fit
+        );
+        // Laws the user listed stay as listed.
+        let mut listed = pq.clone();
+        listed.fit.laws = vec![LawKind::Table, LawKind::Pq, LawKind::PqCowan];
+        let options = fit_options_for_signal(listed.clone(), Some(Signal::Hlg));
+        assert_eq!(options.laws, listed.fit.laws);
+        assert!(options.hlg_ootf);
     }
 
     #[test]

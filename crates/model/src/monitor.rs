@@ -109,8 +109,11 @@ pub struct MonitorModel {
 /// whose OOTF output is the same, E_s(u)^γ_S = (Y_S / w_c)^(γ_S − 1) E_c: its own
 /// law at u, whatever the panel's transfer, so the gain is E(u) / E(v)
 /// (`MonitorModel::ootf_gains`). Above full signal (a channel in a bright mixture is
-/// driven harder than alone ever) the law goes on as the power of E_s it has at the
-/// top.
+/// driven harder than alone ever) an HLG law goes on as its formula does, another law
+/// as the power of E_s it has over its top. The spatial map's gain is part of the
+/// share a channel's code is taken from, so away from the centre the code is off by
+/// what the map takes (a few per cent of light); the shares' form depends on their
+/// ratios only.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AdditivityTerms {
@@ -296,6 +299,43 @@ pub fn ootf_gains(shares: &[f64; 3], gamma: f64) -> [f64; 3] {
     })
 }
 
+/// The scene light E_s of the code at which `law` gives `share` of its full light
+/// `full` (its law inverted). Beyond full light (the extended inverse's shares above
+/// one) it is the scene light at which the law carried on beyond full signal
+/// ([`light_at_scene_light`]) gives it, so that a channel alone keeps a gain of 1
+/// there. At share 0 the code is taken as 0. For a law whose light starts above code
+/// zero (a gain-offset-gamma cut-off, a table's flat start) a share just above 0 is
+/// its start's code, so the other channels' Y_S steps there by that code's scene
+/// light (what the display's processing sees), and the channel's own light by what
+/// the law gives at the code the OOTF moves it to (0.2 % of full red at a cut-off of
+/// 0.1 in full green).
+fn scene_light_of_share(law: &TransferLaw, share: f64, full: f64) -> f64 {
+    if share <= 0.0 {
+        0.0
+    } else if share <= 1.0 {
+        hlg_scene_light(law.drive(share * full).clamp(0.0, 1.0))
+    } else if let TransferLaw::Hlg(hlg) = law {
+        hlg.scene_light_of(share)
+    } else {
+        share.powf(1.0 / top_exponent(law).unwrap_or(1.0))
+    }
+}
+
+/// The light of `law` at scene light `scene` (1 at full signal): the law at the code
+/// of that scene light; beyond full signal, an HLG law carried on as its formula goes
+/// (`Hlg::of_scene_light`), another as its full light `full` times the scene light to
+/// the power the law has over its top ([`top_exponent`], a secant, so its slope steps
+/// at full signal).
+fn light_at_scene_light(law: &TransferLaw, scene: f64, full: f64) -> f64 {
+    match law {
+        TransferLaw::Hlg(hlg) => hlg.of_scene_light(scene),
+        _ if scene <= 1.0 => {
+            law.excitation(hlg_oetf(scene * hlg_inverse_oetf(1.0)).clamp(0.0, 1.0))
+        }
+        _ => full * scene.powf(top_exponent(law).unwrap_or(1.0)),
+    }
+}
+
 /// d ln E / d ln E_s of an HLG channel's law over its top, from 95 % of full scene
 /// light to full: the power it goes on with beyond full signal. `None` where the law
 /// gives no light there.
@@ -346,9 +386,8 @@ impl MonitorModel {
     /// term): from the shares (`ootf_gains`), or through the laws
     /// (`AdditivityTerms::hlg_ootf_through_laws`): E_k the scene light of channel k's
     /// code, Y_S = Σ w_k E_k, and channel c's gain E_c(u) / E_c(v) at the code u of
-    /// scene light ((Y_S / w_c)^(γ − 1) E_c)^(1/γ). Beyond full signal an HLG law goes
-    /// on as its formula does, another law as E_c(1) times that scene light to the
-    /// power it has between 95 % and full scene light.
+    /// scene light ((Y_S / w_c)^(γ − 1) E_c)^(1/γ) ([`light_at_scene_light`],
+    /// [`scene_light_of_share`] for what goes beyond full signal).
     pub fn ootf_gains(&self, shares: &[f64; 3]) -> [f64; 3] {
         let Some(gamma) = self.terms.hlg_ootf else {
             return [1.0; 3];
@@ -357,31 +396,16 @@ impl MonitorModel {
             return ootf_gains(shares, gamma);
         }
         let full = self.full_drive_excitations();
-        // Scene light of a channel's code (beyond full drive, as its share's excess
-        // goes on: the extended inverse's).
-        let scene = [0, 1, 2].map(|c| {
-            let share = shares[c].max(0.0);
-            if share > 1.0 {
-                return share.powf(1.0 / gamma);
-            }
-            hlg_scene_light(self.laws[c].drive(share * full[c]).clamp(0.0, 1.0))
-        });
+        let scene = [0, 1, 2].map(|c| scene_light_of_share(&self.laws[c], shares[c], full[c]));
         let w = chromacal_color::hdr::BT2020_LUMINANCE;
         let luminance: f64 = (0..3).map(|k| w[k] * scene[k]).sum();
         [0, 1, 2].map(|c| {
-            let (law, alone) = (&self.laws[c], shares[c].min(1.0) * full[c]);
+            let (law, alone) = (&self.laws[c], shares[c] * full[c]);
             if !(scene[c] > 0.0 && alone > 0.0) {
                 return 1.0;
             }
             let at = ((luminance / w[c]).powf(gamma - 1.0) * scene[c]).powf(1.0 / gamma);
-            let mixed = match law {
-                TransferLaw::Hlg(hlg) => hlg.of_scene_light(at),
-                _ if at <= 1.0 => {
-                    law.excitation(hlg_oetf(at * hlg_inverse_oetf(1.0)).clamp(0.0, 1.0))
-                }
-                _ => full[c] * at.powf(top_exponent(law).unwrap_or(gamma)),
-            };
-            mixed / alone
+            light_at_scene_light(law, at, full[c]) / alone
         })
     }
 
@@ -962,10 +986,6 @@ mod tests {
         }
     }
 
-    /// The HLG OOTF (BT.2100 Table 5) as a term: a channel alone is its law's, a
-    /// mixture is what the OOTF makes of the channels' scene light, and the inverse
-    /// finds the drive of every colour the model makes, near white too, where the
-    /// gains are largest (blue 1/0.0593^0.2 = 1.76 at γ 1.2).
     /// A display that is BT.2100's HLG processing (OOTF on the signal, then the light
     /// re-encoded with gamma 2.2) in front of Cowan panels, which do not follow 2.2,
     /// modelled by each channel's HLG law with Cowan's term (exact for it alone): the
@@ -1034,7 +1054,8 @@ mod tests {
         assert!(worst_through < 1e-9, "{worst_through}");
         assert!(worst_shares > 0.01, "{worst_shares}");
         // The nominal laws, E_s^γ: both forms give the same gains, beyond full
-        // signal too (red in white).
+        // signal too (red in white, where the OOTF drives it past its full signal
+        // alone; a share above 1, as the extended inverse carries the shares on).
         let nominal = |through_laws: bool| MonitorModel {
             laws: [0, 1, 2].map(|_| {
                 TransferLaw::Hlg(crate::transfer::Hlg {
@@ -1045,7 +1066,7 @@ mod tests {
             }),
             ..model(through_laws)
         };
-        for shares in [[1.0; 3], [0.2, 0.7, 0.05], [0.0, 0.4, 0.9]] {
+        for shares in [[1.0; 3], [0.2, 0.7, 0.05], [0.0, 0.4, 0.9], [1.1, 0.3, 0.0]] {
             let (a, b) = (
                 nominal(true).ootf_gains(&shares),
                 nominal(false).ootf_gains(&shares),
@@ -1055,11 +1076,18 @@ mod tests {
         // It survives the model file.
         let text = toml::to_string(&through).unwrap();
         assert!(text.contains("hlg_ootf_through_laws = true"), "{text}");
+        // A channel alone keeps a gain of 1 beyond full light too.
+        let alone = through.ootf_gains(&[1.2, 0.0, 0.0]);
+        assert!((alone[0] - 1.0).abs() < 1e-9, "{alone:?}");
         let back: MonitorModel = toml::from_str(&text).unwrap();
         assert_eq!(back.terms, through.terms);
         assert!(!toml::to_string(&shares).unwrap().contains("through_laws"));
     }
 
+    /// The HLG OOTF (BT.2100 Table 5) as a term: a channel alone is its law's, a
+    /// mixture is what the OOTF makes of the channels' scene light, and the inverse
+    /// finds the drive of every colour the model makes, near white too, where the
+    /// gains are largest (blue 1/0.0593^0.2 = 1.76 at γ 1.2).
     #[test]
     fn the_hlg_ootf_scales_each_channel_by_the_scene_luminance_and_inverts() {
         let plain = srgb_like();

@@ -411,9 +411,33 @@ impl Hlg {
 
     /// E at scene light `scene` (1 at full signal), beyond full signal too: the light
     /// a channel gives where the OOTF drives it harder than its full signal alone
-    /// (`AdditivityTerms::hlg_ootf_through_laws`).
+    /// (`AdditivityTerms::hlg_ootf_through_laws`). Beyond it the formula goes on (a
+    /// Cowan panel's light rises ever faster, b > 0); with b < 0 it would turn back at
+    /// e^(−p / 2b), so from where its log-log slope has fallen to p / 2,
+    /// e^(−p / 4b), it goes on as the power of that slope instead.
     pub fn of_scene_light(&self, scene: f64) -> f64 {
-        self.curve().of(scene)
+        match self.beyond_knee() {
+            Some(knee) if scene > knee => {
+                self.curve().of(knee) * (scene / knee).powf(0.5 * self.exponent)
+            }
+            _ => self.curve().of(scene),
+        }
+    }
+
+    /// The scene light of excitation `e`, above 1 too: the inverse of
+    /// [`Self::of_scene_light`].
+    pub fn scene_light_of(&self, e: f64) -> f64 {
+        match self.beyond_knee() {
+            Some(knee) if e > self.curve().of(knee) => {
+                knee * (e / self.curve().of(knee)).powf(2.0 / self.exponent)
+            }
+            _ => self.curve().inverse(e),
+        }
+    }
+
+    /// Where a curvature below 0 has halved the law's log-log slope, e^(−p / 4b) > 1.
+    fn beyond_knee(&self) -> Option<f64> {
+        (self.curvature < 0.0).then(|| (-self.exponent / (4.0 * self.curvature)).exp())
     }
 
     /// The drive of excitation `e`: the OETF of e^(1/p).
@@ -855,11 +879,10 @@ mod tests {
         ]
     }
 
-    /// The curved PQ law is what a display shows that decodes PQ, re-encodes the light
-    /// for its panel with a gamma g and drives a panel of Cowan's law (A, B in the
-    /// panel's drive): Cowan's law of x^(1/g) is a = A / g, b = B / g² in x. Below the
-    /// toe it goes on as a power of x, continuous in value and slope, and it inverts
-    /// everywhere; a curvature that would turn it back is refused.
+    /// The curved HLG law is what a display shows, channel alone, that decodes HLG
+    /// (OOTF gain (w E_s)^(γ − 1)), re-encodes the light with a gamma g and drives a
+    /// Cowan panel: p = (γ / g)(A + 2 B k), b = B (γ / g)² with k = ln(w^(γ − 1)) / g,
+    /// within 10⁻⁹; the plain law misses its dark end by more than 10 %.
     #[test]
     fn the_curved_hlg_law_is_a_cowan_panel_behind_the_hlg_decoding() {
         // Alone, a channel's light through the OOTF is (w E_s)^(γ − 1) E_s of the
@@ -931,6 +954,11 @@ mod tests {
         );
     }
 
+    /// The curved PQ law is what a display shows that decodes PQ, re-encodes the light
+    /// for its panel with a gamma g and drives a panel of Cowan's law (A, B in the
+    /// panel's drive): Cowan's law of x^(1/g) is a = A / g, b = B / g² in x. Below the
+    /// toe it goes on as a power of x, continuous in value and slope, and it inverts
+    /// everywhere; a curvature that would turn it back is refused.
     #[test]
     fn the_curved_pq_law_is_a_cowan_panel_behind_the_pq_decoding() {
         let (big_a, big_b, g) = (2.25, 0.03, 2.2);

@@ -107,7 +107,7 @@ impl TermSet {
             TermSet::DriveCrosstalkAndShift => "crosstalk in drive and chromaticity",
             TermSet::InteractionAndDriveCrosstalk => "interaction and crosstalk in drive",
             TermSet::HlgOotf => "the HLG OOTF (BT.2100)",
-            TermSet::HlgOotfThroughLaws => "the HLG OOTF through the laws",
+            TermSet::HlgOotfThroughLaws => "the HLG OOTF (BT.2100) through the laws",
         }
     }
 
