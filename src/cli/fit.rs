@@ -94,6 +94,15 @@ fn fit(
 ) -> Result<(), Failure> {
     let (set, signal) = read_measurements_and_signal(measurements)?;
     let config = load_config_searching(config, &config_search_paths())?.config;
+    if let (Some(said), Some(taken)) = (config.plan.signal, signal)
+        && said != taken
+    {
+        eprintln!(
+            "chromacal: the readings were taken with {} signals; the config's plan.signal ({}) is not what this fit follows",
+            taken.name(),
+            said.name()
+        );
+    }
     let mut options = fit_options_for_signal(config, signal);
     if let Some(laws) = laws {
         options.laws = laws.into_iter().map(LawKind::from).collect();
