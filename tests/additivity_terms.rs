@@ -364,15 +364,7 @@ fn crosstalk_through_the_drives_gets_the_drive_term_and_predicts_better() {
             "seed {seed}: λ = {lambda:?}"
         );
         // What the crosstalk in light scored in the same cross-validation: worse.
-        let score = |set: TermSet| {
-            with.report
-                .terms
-                .iter()
-                .find(|t| t.terms == set)
-                .and_then(|t| t.cross_validation.as_ref())
-                .map(|s| s.mean)
-                .unwrap()
-        };
+        let score = |set: TermSet| with.report.term_score(set).unwrap();
         assert!(
             score(TermSet::DriveCrosstalk) < score(TermSet::Crosstalk),
             "seed {seed}: in drive {}, in light {}",

@@ -436,16 +436,7 @@ fn an_hlg_display_is_calibrated_through_its_ootf() {
         (gamma - truth).abs() < 0.01,
         "γ {gamma}, the display's {truth}"
     );
-    let score = |set: TermSet| {
-        profile
-            .report
-            .terms
-            .iter()
-            .find(|t| t.terms == set)
-            .and_then(|t| t.cross_validation.as_ref())
-            .map(|s| s.mean)
-            .unwrap()
-    };
+    let score = |set: TermSet| profile.report.term_score(set).unwrap();
     assert!(
         score(TermSet::None) > 10.0 * score(TermSet::HlgOotf),
         "{:?}",
@@ -485,16 +476,7 @@ fn the_hlg_ootf_is_taken_through_the_laws_where_the_panel_departs_from_the_gamma
          [instrument.simulated]\nseed = 1\n[target]\nwhite = \"D65\"\ntone = \"hlg\"\n\
          peak = 1000.0\n",
     );
-    let score = |set: TermSet| {
-        profile
-            .report
-            .terms
-            .iter()
-            .find(|t| t.terms == set)
-            .and_then(|t| t.cross_validation.as_ref())
-            .map(|s| s.mean)
-            .unwrap()
-    };
+    let score = |set: TermSet| profile.report.term_score(set).unwrap();
     assert!(
         profile.model.terms.hlg_ootf_through_laws
             && score(TermSet::HlgOotfThroughLaws) < 0.5 * score(TermSet::HlgOotf),

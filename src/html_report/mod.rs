@@ -166,6 +166,11 @@ pub fn candidate_curve(
 ) -> Option<Curve> {
     let get = |name: &str| parameters.iter().find(|p| p.name == name).map(|p| p.value);
     let amplitude = get("amplitude").unwrap_or(1.0);
+    // The curved HDR laws' curvature and toe (the plain ones have neither).
+    let curved = || match kind {
+        LawKind::PqCowan | LawKind::HlgCowan => Some((get("curvature")?, get("toe")?)),
+        _ => Some((0.0, 0.0)),
+    };
     let law = match kind {
         LawKind::Power => TransferLaw::Power(Power {
             gamma: get("gamma")?,
@@ -185,30 +190,24 @@ pub fn candidate_curve(
             c: get("C")?,
             toe,
         }),
-        LawKind::Pq => TransferLaw::Pq(Pq {
-            peak: get("peak")?,
-            rolloff_from: get("rolloff_from")?,
-            exponent: get("exponent")?,
-            curvature: 0.0,
-            toe: 0.0,
-        }),
-        LawKind::PqCowan => TransferLaw::Pq(Pq {
-            peak: get("peak")?,
-            rolloff_from: get("rolloff_from")?,
-            exponent: get("exponent")?,
-            curvature: get("curvature")?,
-            toe: get("toe")?,
-        }),
-        LawKind::Hlg => TransferLaw::Hlg(Hlg {
-            exponent: get("exponent")?,
-            curvature: 0.0,
-            toe: 0.0,
-        }),
-        LawKind::HlgCowan => TransferLaw::Hlg(Hlg {
-            exponent: get("exponent")?,
-            curvature: get("curvature")?,
-            toe: get("toe")?,
-        }),
+        LawKind::Pq | LawKind::PqCowan => {
+            let (curvature, toe) = curved()?;
+            TransferLaw::Pq(Pq {
+                peak: get("peak")?,
+                rolloff_from: get("rolloff_from")?,
+                exponent: get("exponent")?,
+                curvature,
+                toe,
+            })
+        }
+        LawKind::Hlg | LawKind::HlgCowan => {
+            let (curvature, toe) = curved()?;
+            TransferLaw::Hlg(Hlg {
+                exponent: get("exponent")?,
+                curvature,
+                toe,
+            })
+        }
         LawKind::Table => return None,
     };
     law.monotonicity().ok()?;

@@ -300,6 +300,16 @@ impl FitReport {
     pub fn chosen_law(&self) -> Option<LawKind> {
         self.laws.iter().find(|l| l.chosen).map(|l| l.law)
     }
+
+    /// The cross-validated mean ΔE00 of a set of additivity terms, where it was tried
+    /// and could be scored.
+    pub fn term_score(&self, set: terms::TermSet) -> Option<f64> {
+        self.terms
+            .iter()
+            .find(|t| t.terms == set)
+            .and_then(|t| t.cross_validation.as_ref())
+            .map(|s| s.mean)
+    }
 }
 
 /// A fitted model and its report.
