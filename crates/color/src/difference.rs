@@ -215,6 +215,12 @@ impl LocalDeltaE2000 {
     /// ΔE00 from the colour to the one `delta` (ΔL*, Δa*, Δb*) away, to first order.
     #[inline]
     pub fn delta_e(&self, delta: [f64; 3]) -> f64 {
+        self.delta_e_squared(delta).sqrt()
+    }
+
+    /// [`Self::delta_e`] squared: without the square root, for comparing steps.
+    #[inline]
+    pub fn delta_e_squared(&self, delta: [f64; 3]) -> f64 {
         let da_prime = self.one_plus_g * delta[1];
         // ΔC′ and ΔH′: the step along the chroma's direction and across it.
         let dc = self.along[0] * da_prime + self.along[1] * delta[2];
@@ -222,9 +228,7 @@ impl LocalDeltaE2000 {
         let tl = delta[0] * self.inverse_weights[0];
         let tc = dc * self.inverse_weights[1];
         let th = dh * self.inverse_weights[2];
-        (tl * tl + tc * tc + th * th + self.rotation * tc * th)
-            .max(0.0)
-            .sqrt()
+        (tl * tl + tc * tc + th * th + self.rotation * tc * th).max(0.0)
     }
 
     /// The bound on |ΔE00 − [`Self::delta_e`]| / ΔE00 for differences up to `size`

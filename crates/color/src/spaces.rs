@@ -255,36 +255,52 @@ impl LabTangent {
     }
 
     /// ΔL*, Δa*, Δb* for the XYZ change `step` to second order, with a bound on what
-    /// that leaves out in the largest coordinate: a sixth of f‴'s largest over the
-    /// step, times the step cubed, where the step stays on the cube root within half
-    /// of t; where it may cross onto L*'s linear part, [`Self::error`]'s bound plus
-    /// the second-order term's size (both parts are then bounds on their own); 0 on
-    /// the linear part; infinite where [`Self::error`] is. A code step of an 8-bit
-    /// display is about 1 % of t, where this bound is about a hundredth of the first
-    /// order's ((10/9) dt / t of it).
+    /// that leaves out in the largest coordinate ([`Self::second_order_error`] of the
+    /// step's own size). A code step of an 8-bit display is about 1 % of t, where
+    /// this bound is about a hundredth of the first order's ((10/9) dt / t of it).
     #[inline]
     pub fn delta_to_second_order(&self, step: [f64; 3]) -> ([f64; 3], f64) {
+        (
+            self.second_order_delta(step),
+            self.second_order_error(step.map(f64::abs)),
+        )
+    }
+
+    /// ΔL*, Δa*, Δb* for the XYZ change `step` to second order, without a bound: a few
+    /// multiplications, for many steps whose bound [`Self::second_order_error`] takes
+    /// once at their largest size in each coordinate.
+    #[inline]
+    pub fn second_order_delta(&self, step: [f64; 3]) -> [f64; 3] {
         let df = [0, 1, 2].map(|c| (self.slope[c] + self.half_second[c] * step[c]) * step[c]);
+        [
+            116.0 * df[1],
+            500.0 * (df[0] - df[1]),
+            200.0 * (df[1] - df[2]),
+        ]
+    }
+
+    /// A bound on what [`Self::second_order_delta`] leaves out, in the largest
+    /// coordinate, for every step no larger in X, Y and Z than `reach`: a sixth of
+    /// f‴'s largest over the step, times the step cubed, where the step stays on the
+    /// cube root within half of t; where it may cross onto L*'s linear part,
+    /// [`Self::error`]'s bound plus the second-order term's size (both parts are then
+    /// bounds on their own); 0 on the linear part; infinite where [`Self::error`] is.
+    /// It grows with each coordinate of `reach`, so one bound at the largest of many
+    /// steps holds for each of them.
+    #[inline]
+    pub fn second_order_error(&self, reach: [f64; 3]) -> f64 {
         let remainder_of = |c: usize| {
-            let dt = step[c].abs() * self.inverse_white[c];
+            let dt = reach[c] * self.inverse_white[c];
             let first = self.first_order_remainder(c, dt);
             if first == 0.0 || first == f64::INFINITY {
                 first
             } else if self.relative[c] - dt > LAB_EPSILON {
                 self.third[c] * dt * dt * dt
             } else {
-                first + (self.half_second[c] * step[c] * step[c]).abs()
+                first + (self.half_second[c] * reach[c] * reach[c]).abs()
             }
         };
-        let remainder = [remainder_of(0), remainder_of(1), remainder_of(2)];
-        (
-            [
-                116.0 * df[1],
-                500.0 * (df[0] - df[1]),
-                200.0 * (df[1] - df[2]),
-            ],
-            in_lab(remainder),
-        )
+        in_lab([remainder_of(0), remainder_of(1), remainder_of(2)])
     }
 }
 

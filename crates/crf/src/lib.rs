@@ -59,6 +59,13 @@ fn per_channel<T>(mut f: impl FnMut(usize) -> T) -> [T; 3] {
     [f(0), f(1), f(2)]
 }
 
+/// The largest code from which the nearest codes are first screened with every
+/// candidate's bounds at the largest step's size (`nearest::Neighbourhood::nearest`):
+/// 12 bits and more, where the steps are alike and that decides nearly every pixel
+/// (a 2048² render at 12 and 16 bits took a fifth less time, one at 8 and 10 bits no
+/// less, the screen then leaving several candidates to be bounded again).
+const SCREENED_FROM: f64 = 4095.0;
+
 /// Pixels whose inversion ΔE00 `render_codes` measures, about (every pixel of a
 /// smaller scene): a 2048² image is measured on one pixel in 64.
 pub const INVERSION_SAMPLE: usize = 1 << 16;
@@ -755,8 +762,8 @@ impl<'a> ColourReproduction<'a> {
     /// display shows for them and its ΔE00 from `mapped`. For the nearest codes each
     /// channel's light at the code below and above the drive comes from the quantiser,
     /// once each; every corner's ΔE00 is bounded from its step from `mapped`
-    /// ([`nearest::ranges_of_steps`]) and [`nearest::choose`] measures only the
-    /// corners that could be nearest.
+    /// ([`nearest::Neighbourhood::nearest`]) and only the corners that could be
+    /// nearest are measured.
     fn codes_for(
         &self,
         drive: Drive,
@@ -832,7 +839,6 @@ impl<'a> ColourReproduction<'a> {
             let shown: [Xyz; 8] = std::array::from_fn(|corner| shows(corner_codes(corner)));
             per_channel(|axis| std::array::from_fn(|corner| shown[corner][axis] - mapped[axis]))
         };
-        let corner_ranges = nearest::ranges_of_steps(&steps, mapped, mapped_lab, &self.white);
         // The rounded codes first, then the corners in order: the literal search's.
         // (Each channel's rounded code is its low or high one.) A corner whose codes
         // an earlier one has is left out: with the same ΔE00 it cannot be strictly
@@ -841,22 +847,27 @@ impl<'a> ColourReproduction<'a> {
         let rounded_corner = (0..3).fold(0, |k, c| k | usize::from(rounded[c] != low[c]) << c);
         let on_a_code = (0..3).fold(0, |k, c| k | usize::from(high[c] == low[c]) << c);
         let mut corners = [rounded_corner; 9];
-        let mut ranges = [corner_ranges[rounded_corner]; 9];
         let mut count = 1;
-        for (corner, range) in corner_ranges.into_iter().enumerate() {
+        for corner in 0..8 {
             if corner & on_a_code == 0 && corner_codes(corner) != rounded {
                 corners[count] = corner;
-                ranges[count] = range;
                 count += 1;
             }
         }
+        let neighbourhood = nearest::Neighbourhood::at(mapped, mapped_lab, &self.white);
         // The ΔE00 of a candidate that must be measured: from what its codes show,
         // as `MonitorModel::forward` gives it.
         let exact = |k: usize| {
             let shown = shows(corner_codes(corners[k]));
             delta_e_2000(mapped_lab, &xyz_to_lab(&shown, &self.white))
         };
-        let (k, error) = nearest::choose(&ranges[..count], exact, measured);
+        let (k, error) = neighbourhood.nearest(
+            &steps,
+            &corners[..count],
+            exact,
+            measured,
+            top >= SCREENED_FROM,
+        );
         let codes = corner_codes(corners[k]);
         (codes, error.filter(|_| measured).map(|e| (shows(codes), e)))
     }

@@ -15,13 +15,15 @@
 //! the candidates as steps from the colour asked, which for a profile without
 //! additivity terms are the low corner's step and the box's three edges added: no
 //! matrix product a candidate until one is measured.
+//! From 12 bits the candidates are screened first with one bound for all of them
+//! ([`Neighbourhood::sole_candidate`]), which compares their forms squared.
 
 use chromacal_color::Xyz;
 use chromacal_color::difference::LocalDeltaE2000;
 use chromacal_color::spaces::{Lab, LabTangent};
 
 /// Of candidates whose ΔE00 to the colour asked lies in `ranges` (from
-/// [`ranges_of_steps`]), and is `exact(k)` when measured, the index of the first whose
+/// [`Neighbourhood::ranges`]), and is `exact(k)` when measured, the index of the first whose
 /// ΔE00 is least: the same index as measuring each and keeping the first strictly
 /// smaller. With it, the winner's ΔE00 when `error_wanted` or when it had to be
 /// measured anyway.
@@ -30,9 +32,9 @@ pub fn choose(
     exact: impl Fn(usize) -> f64,
     error_wanted: bool,
 ) -> (usize, Option<f64>) {
-    let least_upper = ranges.iter().fold(f64::INFINITY, |m, r| m.min(r.1));
+    let least_upper = least_upper(ranges);
     let possible = |k: usize| ranges[k].0 <= least_upper;
-    let survivors = (0..ranges.len()).filter(|&k| possible(k)).count();
+    let survivors = survivors(ranges);
     let mut best: Option<(usize, f64)> = None;
     for k in (0..ranges.len()).filter(|&k| possible(k)) {
         if survivors == 1 {
@@ -50,52 +52,150 @@ pub fn choose(
     }
 }
 
-/// The ΔE00 from `asked` (its L*a*b* against `white` `asked_lab`) to each colour
-/// `steps[k]` away in XYZ, bounded below and above, (0, ∞) where it cannot be: the
-/// step to second order and what that leaves out
-/// ([`LabTangent::delta_to_second_order`]: at 8 bits the first order's remainder was
-/// most of a range's width, and kept three candidates in four to be measured), and the
-/// form's error for its size
-/// ([`LocalDeltaE2000::bound`]). The form about `asked_lab` is d(δ); the true step is
-/// within `e` of δ in each coordinate, which moves d by at most 4 e (the form's weights
-/// are at most 1, 1 + G at most 1.5 and R_T at most 2 in size: 2.1 measured); and the
-/// exact ΔE00 E has |d − E| ≤ r E at the true step. So E lies in
-/// [(d − 4e) / (1 + r), (d + 4e) / (1 − r)], widened by 10⁻⁹ for the rounding of the
-/// exact formula itself, which a real-number bound does not see.
-pub fn ranges_of_steps<const N: usize>(
-    steps: &[[f64; N]; 3],
-    asked: &Xyz,
-    asked_lab: &Lab,
-    white: &Xyz,
-) -> [(f64, f64); N] {
-    let mut ranges = [(0.0, f64::INFINITY); N];
-    let Some(local) = LocalDeltaE2000::at(asked_lab) else {
-        return ranges;
-    };
-    let tangent = LabTangent::at(asked, white, asked_lab);
-    // The steps' X, Y and Z each in one array: the same arithmetic for every step,
-    // so that the compiler takes several steps at a time through the vector lanes.
-    let (mut least, mut most) = ([0.0; N], [0.0; N]);
-    for k in 0..N {
-        let step = [steps[0][k], steps[1][k], steps[2][k]];
-        let (delta, lab_error) = tangent.delta_to_second_order(step);
-        let slack = 4.0 * lab_error;
-        let size = delta[0].abs().max(delta[1].abs()).max(delta[2].abs()) + lab_error;
-        let relative = local.bound(size);
-        let d = local.delta_e(delta);
-        least[k] = (d - slack) / (1.0 + relative) - ROUNDING;
-        most[k] = if relative < 1.0 {
-            (d + slack) / (1.0 - relative) + ROUNDING
-        } else {
-            f64::INFINITY
-        };
-    }
-    for (range, (least, most)) in ranges.iter_mut().zip(least.into_iter().zip(most)) {
-        if least.is_finite() && most.is_finite() {
-            *range = (least, most);
+/// The least of the ranges' upper ends: no candidate whose lower end lies above it
+/// can be nearest.
+fn least_upper(ranges: &[(f64, f64)]) -> f64 {
+    ranges.iter().fold(f64::INFINITY, |m, r| m.min(r.1))
+}
+
+/// How many of the candidates whose ΔE00 lies in `ranges` could be nearest.
+fn survivors(ranges: &[(f64, f64)]) -> usize {
+    let least_upper = least_upper(ranges);
+    ranges.iter().filter(|r| r.0 <= least_upper).count()
+}
+
+/// The colour asked for, prepared for bounding the ΔE00 of steps from it: its
+/// L*a*b* tangent and its local CIEDE2000 form (none on the neutral axis).
+pub struct Neighbourhood {
+    tangent: LabTangent,
+    local: Option<LocalDeltaE2000>,
+}
+
+impl Neighbourhood {
+    pub fn at(asked: &Xyz, asked_lab: &Lab, white: &Xyz) -> Neighbourhood {
+        Neighbourhood {
+            tangent: LabTangent::at(asked, white, asked_lab),
+            local: LocalDeltaE2000::at(asked_lab),
         }
     }
-    ranges
+
+    /// The ΔE00 from the colour asked to each colour `steps[k]` away in XYZ, bounded
+    /// below and above, (0, ∞) where it cannot be: the step to second order and what
+    /// that leaves out ([`LabTangent::delta_to_second_order`]: at 8 bits the first
+    /// order's remainder was most of a range's width, and kept three candidates in
+    /// four to be measured), and the form's error for its size
+    /// ([`LocalDeltaE2000::bound`]). The form about the colour is d(δ); the true step
+    /// is within `e` of δ in each coordinate, which moves d by at most 4 e (the form's
+    /// weights are at most 1, 1 + G at most 1.5 and R_T at most 2 in size: 2.1
+    /// measured); and the exact ΔE00 E has |d − E| ≤ r E at the true step. So E lies
+    /// in [(d − 4e) / (1 + r), (d + 4e) / (1 − r)], widened by 10⁻⁹ for the rounding
+    /// of the exact formula itself, which a real-number bound does not see.
+    pub fn ranges<const N: usize>(&self, steps: &[[f64; N]; 3]) -> [(f64, f64); N] {
+        let mut ranges = [(0.0, f64::INFINITY); N];
+        let Some(local) = &self.local else {
+            return ranges;
+        };
+        // The steps' X, Y and Z each in one array: the same arithmetic for every step,
+        // so that the compiler takes several steps at a time through the vector lanes.
+        for (k, range) in ranges.iter_mut().enumerate() {
+            let step = [steps[0][k], steps[1][k], steps[2][k]];
+            let (delta, lab_error) = self.tangent.delta_to_second_order(step);
+            let size = delta[0].abs().max(delta[1].abs()).max(delta[2].abs()) + lab_error;
+            *range = range_of(local.delta_e(delta), 4.0 * lab_error, local.bound(size));
+        }
+        ranges
+    }
+
+    /// Of the candidates `steps[candidates[i]]`, in the literal search's order, the
+    /// index `i` of the nearest (the first of least ΔE00) and its ΔE00 as [`choose`]
+    /// gives them, `exact(i)` measuring candidate `i`: screened first by
+    /// [`Self::sole_candidate`] when `screen_first`, then each candidate bounded at
+    /// its own step's size ([`Self::ranges`]).
+    pub fn nearest<const N: usize>(
+        &self,
+        steps: &[[f64; N]; 3],
+        candidates: &[usize],
+        exact: impl Fn(usize) -> f64,
+        error_wanted: bool,
+        screen_first: bool,
+    ) -> (usize, Option<f64>) {
+        if let Some(i) = screen_first
+            .then(|| self.sole_candidate(steps, candidates))
+            .flatten()
+        {
+            return (i, error_wanted.then(|| exact(i)));
+        }
+        let ranges = self.ranges(steps);
+        let mut chosen = [(0.0, f64::INFINITY); N];
+        for (range, &k) in chosen.iter_mut().zip(candidates) {
+            *range = ranges[k];
+        }
+        choose(&chosen[..candidates.len()], exact, error_wanted)
+    }
+
+    /// Of the candidates `steps[candidates[i]]`, the one nearest, when it is the only
+    /// one that can be: every step's range as [`Self::ranges`] makes it, but with the
+    /// bounds taken at the largest step's size, one L*a*b* remainder and one form
+    /// bound for all of them rather than one each (both grow with the step, so each
+    /// range holds what the step's own would). A range is then a function of its
+    /// step's form alone, in the form's order, so the candidates are compared by
+    /// their forms squared, and one square root a pixel is taken rather than one a
+    /// candidate (in a render those square roots, one after another, were a fifth of
+    /// the time). At 16 bits, where the steps are alike and the bounds tiny, this
+    /// decides nearly every pixel; `None` where more than one candidate remains.
+    pub fn sole_candidate<const N: usize>(
+        &self,
+        steps: &[[f64; N]; 3],
+        candidates: &[usize],
+    ) -> Option<usize> {
+        let local = self.local.as_ref()?;
+        let (mut squares, mut size, mut reach) = ([0.0; N], 0.0f64, [0.0f64; 3]);
+        for (square, &k) in squares.iter_mut().zip(candidates) {
+            let step = [steps[0][k], steps[1][k], steps[2][k]];
+            let delta = self.tangent.second_order_delta(step);
+            *square = local.delta_e_squared(delta);
+            size = size.max(delta[0].abs().max(delta[1].abs()).max(delta[2].abs()));
+            for (r, s) in reach.iter_mut().zip(step) {
+                *r = r.max(s.abs());
+            }
+        }
+        let squares = &squares[..candidates.len()];
+        let lab_error = self.tangent.second_order_error(reach);
+        let relative = local.bound(size + lab_error);
+        let (least, least_square) = squares.iter().enumerate().fold(
+            (0, f64::INFINITY),
+            |m, (i, &q)| if q < m.1 { (i, q) } else { m },
+        );
+        let (_, least_upper) = range_of(least_square.sqrt(), 4.0 * lab_error, relative);
+        // A candidate whose lower end, (d − 4e) / (1 + r) − 10⁻⁹, lies above the least
+        // upper end cannot be nearest: d above (least_upper + 10⁻⁹)(1 + r) + 4e.
+        let over = (least_upper + ROUNDING) * (1.0 + relative) + 4.0 * lab_error;
+        let beyond = over * over;
+        let alone = over.is_finite()
+            && squares
+                .iter()
+                .enumerate()
+                .all(|(i, &q)| i == least || q > beyond);
+        alone.then_some(least)
+    }
+}
+
+/// The range of an exact ΔE00 whose form gives `form`, within `slack` of it from the
+/// L*a*b* step's remainder and `relative` of it from the form's own error (see
+/// [`Neighbourhood::ranges`]); (0, ∞) where either is not finite or the form's error may
+/// be all of it.
+#[inline]
+fn range_of(form: f64, slack: f64, relative: f64) -> (f64, f64) {
+    if !(relative < 1.0 && slack.is_finite()) {
+        return (0.0, f64::INFINITY);
+    }
+    let least = (form - slack) / (1.0 + relative) - ROUNDING;
+    let most = (form + slack) / (1.0 - relative) + ROUNDING;
+    if least.is_finite() && most.is_finite() {
+        (least, most)
+    } else {
+        (0.0, f64::INFINITY)
+    }
 }
 
 /// What the exact formula's own rounding may add to or take from a ΔE00 (its L*a*b*
@@ -112,34 +212,46 @@ mod tests {
     /// The most candidates a pixel has: its rounded codes, then the 8 corners.
     const MOST: usize = 9;
 
-    /// `choose` over candidates given by their colours, as a render's codes are.
+    /// The nearest of candidates given by their colours, as a render's codes are,
+    /// screened first or not.
     fn nearest(
         candidates: &[([u32; 3], Xyz)],
         asked: &Xyz,
         asked_lab: &Lab,
         white: &Xyz,
         error_wanted: bool,
+        screen_first: bool,
     ) -> (usize, Option<f64>) {
-        let ranges = ranges(candidates, asked, asked_lab, white);
         let exact = |k: usize| delta_e_2000(asked_lab, &xyz_to_lab(&candidates[k].1, white));
-        choose(&ranges[..candidates.len()], exact, error_wanted)
+        let order: Vec<usize> = (0..candidates.len()).collect();
+        Neighbourhood::at(asked, asked_lab, white).nearest(
+            &steps(candidates, asked),
+            &order,
+            exact,
+            error_wanted,
+            screen_first,
+        )
     }
 
-    /// [`ranges_of_steps`] of candidates given by their colours.
+    /// The candidates' steps from the colour asked, X, Y and Z each in one array.
+    fn steps(candidates: &[([u32; 3], Xyz)], asked: &Xyz) -> [[f64; MOST]; 3] {
+        // Unused places step as far as the last candidate, bounded as it is.
+        let shown = |k: usize| candidates[k.min(candidates.len() - 1)].1;
+        [
+            std::array::from_fn(|k| shown(k).x - asked.x),
+            std::array::from_fn(|k| shown(k).y - asked.y),
+            std::array::from_fn(|k| shown(k).z - asked.z),
+        ]
+    }
+
+    /// [`Neighbourhood::ranges`] of candidates given by their colours.
     fn ranges(
         candidates: &[([u32; 3], Xyz)],
         asked: &Xyz,
         asked_lab: &Lab,
         white: &Xyz,
     ) -> [(f64, f64); MOST] {
-        // Unused places step as far as the last candidate, bounded as it is.
-        let shown = |k: usize| candidates[k.min(candidates.len() - 1)].1;
-        let steps: [[f64; MOST]; 3] = [
-            std::array::from_fn(|k| shown(k).x - asked.x),
-            std::array::from_fn(|k| shown(k).y - asked.y),
-            std::array::from_fn(|k| shown(k).z - asked.z),
-        ];
-        ranges_of_steps(&steps, asked, asked_lab, white)
+        Neighbourhood::at(asked, asked_lab, white).ranges(&steps(candidates, asked))
     }
 
     /// The literal search: every candidate measured, the first strictly smaller kept.
@@ -235,7 +347,7 @@ mod tests {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x1234_5678_9ABC_DEF1);
         let mut uniform = move || rng.random::<f64>();
-        let mut measured = 0;
+        let (mut measured, mut screened) = (0, 0);
         for i in 0..100_000 {
             let y = 100.0 * uniform().powi(3);
             // One in four near the neutral axis (within 10⁻³ of the white's
@@ -260,15 +372,29 @@ mod tests {
                 candidates[3] = candidates[1];
             }
             let asked_lab = xyz_to_lab(&asked, &white);
-            let (k, error) = nearest(&candidates, &asked, &asked_lab, &white, true);
             let (want, want_error) = literal(&candidates, &asked_lab, &white);
-            assert_eq!(k, want, "{asked:?}, step {step}: {candidates:?}");
-            assert_eq!(error, Some(want_error));
-            let (k, error) = nearest(&candidates, &asked, &asked_lab, &white, false);
-            assert_eq!(k, want);
-            measured += usize::from(error.is_some());
+            for screen_first in [false, true] {
+                let (k, error) =
+                    nearest(&candidates, &asked, &asked_lab, &white, true, screen_first);
+                assert_eq!(k, want, "{asked:?}, step {step}: {candidates:?}");
+                assert_eq!(error, Some(want_error));
+                let (k, error) =
+                    nearest(&candidates, &asked, &asked_lab, &white, false, screen_first);
+                assert_eq!(k, want);
+                if !screen_first {
+                    measured += usize::from(error.is_some());
+                }
+            }
+            let neighbourhood = Neighbourhood::at(&asked, &asked_lab, &white);
+            let order: Vec<usize> = (0..MOST).collect();
+            if let Some(k) = neighbourhood.sole_candidate(&steps(&candidates, &asked), &order) {
+                assert_eq!(k, want);
+                screened += 1;
+            }
         }
-        // Most pixels are decided without a ΔE00.
+        // Most pixels are decided without a ΔE00, and most by the screen alone.
         assert!(measured < 50_000, "{measured} of 100000 measured");
+        assert!(screened > 50_000, "{screened} of 100000 screened");
+        eprintln!("{measured} measured, {screened} screened");
     }
 }
