@@ -1341,6 +1341,78 @@ mod tests {
         assert!(err.contains("red law"), "{err}");
     }
 
+    /// A field this program does not know, in a law or a spatial surface (what a later
+    /// version would add, as `curvature` and `toe` were added to the PQ and HLG laws),
+    /// is refused by name rather than dropped: a law read without it would show other
+    /// light than the profile says. Every law and the surface, plain and with a field
+    /// added; the plain forms still read.
+    #[test]
+    fn a_field_a_law_or_a_surface_does_not_know_is_refused_by_name() {
+        use crate::transfer::{Cowan, GainOffsetGamma, Hlg, Pq, ThreeTerm};
+        let laws = [
+            TransferLaw::Power(crate::transfer::Power { gamma: 2.2 }),
+            TransferLaw::Cowan(Cowan {
+                a: 2.2,
+                b: 0.0,
+                toe: 0.01,
+            }),
+            TransferLaw::ThreeTerm(ThreeTerm {
+                a: 2.2,
+                b: 0.0,
+                c: 0.0,
+                toe: 0.01,
+            }),
+            TransferLaw::GainOffsetGamma(GainOffsetGamma {
+                gain: 1.0,
+                gamma: 2.2,
+            }),
+            TransferLaw::Table(
+                crate::transfer::Table::new(vec![0.0, 0.5, 1.0], vec![0.0, 0.2, 1.0]).unwrap(),
+            ),
+            TransferLaw::Pq(Pq {
+                peak: 600.0,
+                rolloff_from: 600.0,
+                exponent: 1.0,
+                curvature: 0.0,
+                toe: 0.0,
+            }),
+            TransferLaw::Hlg(Hlg {
+                exponent: 1.0,
+                curvature: 0.0,
+                toe: 0.0,
+            }),
+        ];
+        for law in laws {
+            let m = MonitorModel {
+                laws: [law.clone(), law.clone(), law],
+                spatial: crate::spatial::SpatialMap::Scalar {
+                    surface: crate::spatial::Surface {
+                        degree: 1,
+                        coefficients: vec![0.01, -0.02],
+                    },
+                },
+                ..srgb_like()
+            };
+            let text = toml::to_string(&m).unwrap();
+            assert_eq!(toml::from_str::<MonitorModel>(&text).unwrap(), m, "{text}");
+            for (table, what) in [
+                ("[laws.green]\n", "a law"),
+                ("[spatial.surface]\n", "a surface"),
+            ] {
+                assert!(text.contains(table), "{text}");
+                let later =
+                    text.replace(table, &format!("{table}knee_from_a_later_version = 0.3\n"));
+                let err = toml::from_str::<MonitorModel>(&later)
+                    .unwrap_err()
+                    .to_string();
+                assert!(
+                    err.contains("knee_from_a_later_version"),
+                    "{what}: {err}\n{later}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn singular_primaries_are_an_error_not_a_panic() {
         let mut m = srgb_like();

@@ -59,6 +59,7 @@ pub fn surface_term_count(degree: u32) -> usize {
 
 /// K(p) = 1 + Σ c_k φ_k(p).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Surface {
     pub degree: u32,
     pub coefficients: Vec<f64>,

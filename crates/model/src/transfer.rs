@@ -33,6 +33,7 @@ pub enum TransferError {
 
 /// E = v^γ.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Power {
     pub gamma: f64,
 }
@@ -117,6 +118,7 @@ impl LogQuadratic {
 /// Cowan's law, ln E = A ln v + B ln²v (Cowan 1983, as given in Rougeron & Péroche,
 /// §4.3.1), linear below `toe`. It passes through E(1) = 1.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Cowan {
     pub a: f64,
     pub b: f64,
@@ -146,6 +148,7 @@ impl Cowan {
 /// The three-term law, ln E = A ln v + B ln²v + C (Rougeron & Péroche, §4.3.1): Cowan's
 /// law that is not forced through the full-drive reading, E(1) = e^C.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ThreeTerm {
     pub a: f64,
     pub b: f64,
@@ -176,6 +179,7 @@ impl ThreeTerm {
 /// (Berns 1996, the GOG model of CRTs). With the black taken off, the offset 1 − a is
 /// not positive (a ≥ 1), so light starts at the cut-off v₀ = (a − 1)/a.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct GainOffsetGamma {
     pub gain: f64,
     pub gamma: f64,
@@ -299,6 +303,7 @@ impl CurvedPower {
 /// law was fitted on) it goes on as a power of x with the slope it has there, so it
 /// never turns back.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Pq {
     /// cd/m² at full excitation.
     pub peak: f64,
@@ -384,6 +389,7 @@ impl Pq {
 /// a gamma g gives b = B γ_S² / g² exactly. Below `toe` (the least scene light fitted)
 /// it is a power of E_s.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Hlg {
     /// p.
     pub exponent: f64,
@@ -469,6 +475,7 @@ pub struct Table {
 
 /// A table as written in a profile: the knots only; reading one checks it again.
 #[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct TableKnots {
     drive: Vec<f64>,
     excitation: Vec<f64>,
