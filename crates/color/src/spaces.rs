@@ -269,7 +269,7 @@ impl LabTangent {
     /// ΔL*, Δa*, Δb* for the XYZ change `step` to second order, without a bound: a few
     /// multiplications, for many steps whose bound [`Self::second_order_error`] takes
     /// once at their largest size in each coordinate.
-    #[inline]
+    #[inline(always)]
     pub fn second_order_delta(&self, step: [f64; 3]) -> [f64; 3] {
         let df = [0, 1, 2].map(|c| (self.slope[c] + self.half_second[c] * step[c]) * step[c]);
         [
@@ -287,7 +287,7 @@ impl LabTangent {
     /// bounds on their own); 0 on the linear part; infinite where [`Self::error`] is.
     /// It grows with each coordinate of `reach`, so one bound at the largest of many
     /// steps holds for each of them.
-    #[inline]
+    #[inline(always)]
     pub fn second_order_error(&self, reach: [f64; 3]) -> f64 {
         let remainder_of = |c: usize| {
             let dt = reach[c] * self.inverse_white[c];

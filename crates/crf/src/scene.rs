@@ -535,7 +535,7 @@ pub fn write_png16_codes(
     let mut data = Vec::with_capacity(rendered.len() * 6);
     for codes in rendered {
         for &c in codes {
-            let v = (c as f64 * 65535.0 / top).round() as u16;
+            let v = crate::round_code(f64::from(c) * 65535.0 / top) as u16;
             data.extend_from_slice(&v.to_be_bytes());
         }
     }
