@@ -1133,7 +1133,7 @@ fn spectra_and_a_spectral_image_render_as_their_xyz_would() {
 /// the corners that could be nearest: they are the literal search's, which measures all
 /// 8 in the same order and keeps the first strictly nearer, on every pixel of a scene
 /// from below the display's black to beyond its white, neutral and saturated, all over
-/// the screen, at 8, 10, 12 and 16 bits (screened from 12); for the profile as fitted
+/// the screen, at 8, 10, 12 and 16 bits (screened from 10); for the profile as fitted
 /// (additive: the corners' steps from its box's edges) and with additivity terms (each
 /// corner's shown colour).
 #[test]

@@ -15,7 +15,7 @@
 //! the candidates as steps from the colour asked, which for a profile without
 //! additivity terms are the low corner's step and the box's three edges added: no
 //! matrix product a candidate until one is measured.
-//! From 12 bits the candidates are screened first with one bound for all of them
+//! From 10 bits the candidates are screened first with one bound for all of them
 //! ([`Neighbourhood::sole_candidate`]), which compares their forms squared.
 
 use chromacal_color::Xyz;
@@ -153,7 +153,7 @@ impl Neighbourhood {
     /// one that can be: every step's range as [`Self::ranges`] makes it, but with the
     /// bounds taken at the largest step's size, one L*a*b* remainder and one form
     /// bound for all of them rather than one each (both grow with the step, so each
-    /// range holds what the step's own would). A range is then a function of its
+    /// range still holds the step's exact ΔE00). A range is then a function of its
     /// step's form alone, in the form's order, so the candidates are compared by
     /// their forms squared, and one square root a pixel is taken rather than one a
     /// candidate (in a render those square roots, one after another, were a fifth of

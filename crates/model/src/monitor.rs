@@ -1341,11 +1341,11 @@ mod tests {
         assert!(err.contains("red law"), "{err}");
     }
 
-    /// A field this program does not know, in a law or a spatial surface (what a later
+    /// A field this program does not know, in a law or the spatial map (what a later
     /// version would add, as `curvature` and `toe` were added to the PQ and HLG laws),
     /// is refused by name rather than dropped: a law read without it would show other
-    /// light than the profile says. Every law and the surface, plain and with a field
-    /// added; the plain forms still read.
+    /// light than the profile says. Every law, and the map with one surface and with
+    /// one a channel, plain and with a field added; the plain forms still read.
     #[test]
     fn a_field_a_law_or_a_surface_does_not_know_is_refused_by_name() {
         use crate::transfer::{Cowan, GainOffsetGamma, Hlg, Pq, ThreeTerm};
@@ -1382,15 +1382,23 @@ mod tests {
                 toe: 0.0,
             }),
         ];
-        for law in laws {
+        let surface = crate::spatial::Surface {
+            degree: 1,
+            coefficients: vec![0.01, -0.02],
+        };
+        let maps = [
+            crate::spatial::SpatialMap::Scalar {
+                surface: surface.clone(),
+            },
+            crate::spatial::SpatialMap::PerChannel {
+                surfaces: [surface.clone(), surface.clone(), surface],
+            },
+        ];
+        let mut judged = 0;
+        for (k, law) in laws.into_iter().enumerate() {
             let m = MonitorModel {
                 laws: [law.clone(), law.clone(), law],
-                spatial: crate::spatial::SpatialMap::Scalar {
-                    surface: crate::spatial::Surface {
-                        degree: 1,
-                        coefficients: vec![0.01, -0.02],
-                    },
-                },
+                spatial: maps[k % 2].clone(),
                 ..srgb_like()
             };
             let text = toml::to_string(&m).unwrap();
@@ -1398,8 +1406,13 @@ mod tests {
             for (table, what) in [
                 ("[laws.green]\n", "a law"),
                 ("[spatial.surface]\n", "a surface"),
+                ("[[spatial.surfaces]]\n", "a channel's surface"),
+                ("[spatial]\n", "the map"),
             ] {
-                assert!(text.contains(table), "{text}");
+                if !text.contains(table) {
+                    continue;
+                }
+                judged += 1;
                 let later =
                     text.replace(table, &format!("{table}knee_from_a_later_version = 0.3\n"));
                 let err = toml::from_str::<MonitorModel>(&later)
@@ -1411,6 +1424,8 @@ mod tests {
                 );
             }
         }
+        // A law and a surface (or a channel's) for each of the 7 laws, the map 7 times.
+        assert_eq!(judged, 21, "a table looked for was not written");
     }
 
     #[test]

@@ -94,7 +94,7 @@ impl Surface {
 
 /// The spatial part of the monitor model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-#[serde(tag = "kind", rename_all = "kebab-case")]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum SpatialMap {
     /// K = 1 everywhere: no map was needed, or none was measured.
     #[default]
