@@ -156,8 +156,8 @@ impl Neighbourhood {
     /// range still holds the step's exact ΔE00). A range is then a function of its
     /// step's form alone, in the form's order, so the candidates are compared by
     /// their forms squared, and one square root a pixel is taken rather than one a
-    /// candidate (in a render those square roots, one after another, were a fifth of
-    /// the time). At 16 bits, where the steps are alike and the bounds tiny, this
+    /// candidate (in a 16-bit render the eight ranges, their square roots one after
+    /// another, were a fifth of the time). At 16 bits, where the steps are alike and the bounds tiny, this
     /// decides nearly every pixel; `None` where more than one candidate remains.
     pub fn sole_candidate<const N: usize>(
         &self,
