@@ -535,7 +535,8 @@ pub fn write_png16_codes(
     let mut data = Vec::with_capacity(rendered.len() * 6);
     for codes in rendered {
         for &c in codes {
-            let v = crate::round_code(f64::from(c) * 65535.0 / top) as u16;
+            // Held at 65535, as `as u16` held a code above `bits`' top before.
+            let v = crate::round_code((f64::from(c) * 65535.0 / top).min(65535.0)) as u16;
             data.extend_from_slice(&v.to_be_bytes());
         }
     }
