@@ -337,6 +337,9 @@ pub struct ColourReproduction<'a> {
     matrix_inverse: Matrix3<f64>,
     /// E_c(1) of each channel.
     full: [f64; 3],
+    /// Each channel's gain in white through the HLG OOTF where it is more than alone
+    /// (`gamut_with_gains`), 1 without the OOTF: made once, not at every pixel.
+    ootf_in_white: [f64; 3],
     /// Each law's inverse, tabulated.
     tables: [InverseTable; 3],
     /// The display's centre white: the reference white of every ΔE00 here.
@@ -350,6 +353,7 @@ impl<'a> ColourReproduction<'a> {
             model,
             matrix_inverse,
             full: [0, 1, 2].map(|c| model.laws[c].full_drive_excitation()),
+            ootf_in_white: model.ootf_gains(&[1.0; 3]).map(|g| g.max(1.0)),
             tables: [0, 1, 2].map(|c| InverseTable::of(&model.laws[c])),
             white: model.white(),
         })
@@ -380,8 +384,8 @@ impl<'a> ColourReproduction<'a> {
         let mut primaries = self.model.matrix;
         // A channel's gain in white, (1 / w_c)^(γ − 1) from the shares (or what its
         // law gives there, through the laws), where it is more than alone.
-        let ootf = self.model.ootf_gains(&[1.0; 3]).map(|g| g.max(1.0));
-        for (c, ((gain, full), in_white)) in k.iter().zip(self.full).zip(ootf).enumerate() {
+        let in_white = self.ootf_in_white;
+        for (c, ((gain, full), in_white)) in k.iter().zip(self.full).zip(in_white).enumerate() {
             let scale = gain * full * in_white;
             if !(scale > 0.0 && scale.is_finite()) {
                 return None;
