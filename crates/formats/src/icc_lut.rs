@@ -474,22 +474,12 @@ mod tests {
         let white_y = m.white().y;
         let luts = ModelLuts::of(m, None, white_y, &Matrix3::identity()).unwrap();
         for &rgb in colours {
-            let pcs = m.forward_centre(rgb) / white_y;
-            // Each input table's entry i stands for XYZ PCS_MAX · i / (N − 1).
-            let t = through_inputs(&luts.b2a0, [0, 1, 2].map(|j| pcs[j] / PCS_MAX));
-            let shares = lookup(&luts.b2a0, t).map(|v| v / 65535.0);
+            let device = b2a0_device(&luts, &(m.forward_centre(rgb) / white_y));
             for c in 0..3 {
-                let table = &luts.b2a0.output[c];
-                let device = interpolate(
-                    &table
-                        .iter()
-                        .map(|v| *v as f64 / 65535.0)
-                        .collect::<Vec<_>>(),
-                    shares[c],
-                );
                 assert!(
-                    (device - rgb[c]).abs() < tolerance,
-                    "{rgb:?} channel {c}: {device}"
+                    (device[c] - rgb[c]).abs() < tolerance,
+                    "{rgb:?} channel {c}: {}",
+                    device[c]
                 );
             }
         }
@@ -571,7 +561,8 @@ mod tests {
         inverse_gives_back_the_device_values(m, &[[0.1; 3]], 0.02);
     }
 
-    /// The device values B2A0 gives for PCS XYZ `pcs` (relative to white).
+    /// The device values B2A0 gives for PCS XYZ `pcs` (relative to white): each input
+    /// table's entry i stands for XYZ PCS_MAX · i / (N − 1).
     fn b2a0_device(luts: &ModelLuts, pcs: &Xyz) -> [f64; 3] {
         let t = through_inputs(&luts.b2a0, [0, 1, 2].map(|j| pcs[j] / PCS_MAX));
         let shares = lookup(&luts.b2a0, t).map(|v| v / 65535.0);
