@@ -93,8 +93,8 @@ fn fit(
     report_path: Option<&Path>,
 ) -> Result<(), Failure> {
     let (set, signal) = read_measurements_and_signal(measurements)?;
-    let config = load_config_searching(config, &config_search_paths())?.config;
-    if let (Some(said), Some(taken)) = (config.plan.signal, signal)
+    let loaded = load_config_searching(config, &config_search_paths())?;
+    if let (Some(said), Some(taken)) = (loaded.config.plan.signal, signal)
         && said != taken
     {
         eprintln!(
@@ -103,7 +103,7 @@ fn fit(
             said.name()
         );
     }
-    let mut options = fit_options_for_signal(config, signal);
+    let mut options = fit_options_for_signal(&loaded, signal);
     if let Some(laws) = laws {
         options.laws = laws.into_iter().map(LawKind::from).collect();
     }

@@ -398,25 +398,24 @@ pub fn parse_config_unchecked(text: &str, origin: &str) -> Result<Config, Config
 /// ([`hdr_defaults`]): `fit` of an HLG run's journal models the OOTF and tries the HLG
 /// law as the run did, whatever the config found says, and a PQ or SDR journal is not
 /// fitted as HLG because the config is. The readings' signal wins over the config's:
-/// it is a fact about them.
-pub fn fit_options_for_signal(mut config: Config, signal: Option<Signal>) -> FitOptions {
+/// it is a fact about them. What the signal adds is added to the config as written
+/// (`loaded.text`), not taken back from the config as read: a list of laws the user
+/// wrote stays as written, whatever it holds.
+pub fn fit_options_for_signal(loaded: &LoadedConfig, signal: Option<Signal>) -> FitOptions {
+    let config = &loaded.config;
     let Some(signal) = signal else {
-        return config.fit;
+        return config.fit.clone();
     };
-    if config.plan.signal.unwrap_or_default() != signal {
-        // Undo what the config's own signal added, then add the readings'.
-        let added = [LawKind::Pq, LawKind::Hlg];
-        if config.fit.laws.len() == LawKind::ALL.len() + 1
-            && config.fit.laws[..LawKind::ALL.len()] == LawKind::ALL
-            && config.fit.laws.last().is_some_and(|l| added.contains(l))
-        {
-            config.fit.laws.pop();
-        }
-        config.fit.hlg_ootf = false;
-        config.plan.signal = Some(signal);
-        hdr_defaults(&mut config);
+    if config.plan.signal.unwrap_or_default() == signal {
+        return config.fit.clone();
     }
-    config.fit
+    // The text was read into `config` already, so it reads again.
+    let Ok(mut written) = toml::from_str::<Config>(&loaded.text) else {
+        return config.fit.clone();
+    };
+    written.plan.signal = Some(signal);
+    hdr_defaults(&mut written);
+    written.fit
 }
 
 /// What an HDR signal asks of the rest of a run, where the config does not say: the
@@ -817,46 +816,63 @@ mod tests {
     /// config's.
     #[test]
     fn a_fit_follows_the_signal_its_readings_were_taken_with() {
-        let pq = parse_config(
-            "[target]\ntone = \"pq\"\n[plan]\nbit_depth = 10\n",
-            "c.toml",
-        )
-        .unwrap();
-        let hlg = parse_config(
-            "[target]\ntone = \"hlg\"\npeak = 1000\n[plan]\nbit_depth = 10\n",
-            "c.toml",
-        )
-        .unwrap();
-        let sdr = parse_config("[target]\ntone = \"srgb\"\n", "c.toml").unwrap();
+        let loaded = |text: &str| LoadedConfig {
+            config: parse_config(text, "c.toml").unwrap(),
+            text: text.into(),
+            origin: "c.toml".into(),
+            base_dir: PathBuf::from("."),
+        };
+        let pq = loaded("[target]\ntone = \"pq\"\n[plan]\nbit_depth = 10\n");
+        let hlg = loaded("[target]\ntone = \"hlg\"\npeak = 1000\n[plan]\nbit_depth = 10\n");
+        let sdr = loaded("[target]\ntone = \"srgb\"\n");
         let with = |kind: LawKind| [LawKind::ALL.as_slice(), &[kind]].concat();
-        let options = fit_options_for_signal(pq.clone(), Some(Signal::Hlg));
+        let options = fit_options_for_signal(&pq, Some(Signal::Hlg));
         assert_eq!(options.laws, with(LawKind::Hlg));
         assert!(options.hlg_ootf);
-        let options = fit_options_for_signal(hlg.clone(), Some(Signal::Pq));
+        let options = fit_options_for_signal(&hlg, Some(Signal::Pq));
         assert_eq!(options.laws, with(LawKind::Pq));
         assert!(!options.hlg_ootf);
-        let options = fit_options_for_signal(hlg.clone(), Some(Signal::Sdr));
+        let options = fit_options_for_signal(&hlg, Some(Signal::Sdr));
         assert_eq!(options.laws, LawKind::ALL);
         assert!(!options.hlg_ootf);
-        let options = fit_options_for_signal(sdr.clone(), Some(Signal::Hlg));
+        let options = fit_options_for_signal(&sdr, Some(Signal::Hlg));
         assert_eq!(options.laws, with(LawKind::Hlg));
         assert!(options.hlg_ootf);
         // The same signal, or none said: the config's own.
         assert_eq!(
-            fit_options_for_signal(hlg.clone(), Some(Signal::Hlg)),
-            hlg.fit
+            fit_options_for_signal(&hlg, Some(Signal::Hlg)),
+            hlg.config.fit
         );
-        assert_eq!(fit_options_for_signal(hlg.clone(), None), hlg.fit);
+        assert_eq!(fit_options_for_signal(&hlg, None), hlg.config.fit);
         assert_eq!(
-            fit_options_for_signal(sdr.clone(), Some(Signal::Sdr)),
-            sdr.fit
+            fit_options_for_signal(&sdr, Some(Signal::Sdr)),
+            sdr.config.fit
         );
-        // Laws the user listed stay as listed.
-        let mut listed = pq.clone();
-        listed.fit.laws = vec![LawKind::Table, LawKind::Pq, LawKind::PqCowan];
-        let options = fit_options_for_signal(listed.clone(), Some(Signal::Hlg));
-        assert_eq!(options.laws, listed.fit.laws);
-        assert!(options.hlg_ootf);
+        // Laws the user listed stay as listed, whatever they are: the default ones
+        // with the PQ law among them too (which the config's PQ signal would have
+        // added, and so were once taken back for an HLG journal).
+        let names = |laws: &[LawKind]| {
+            laws.iter()
+                .map(|l| format!("\"{}\"", l.name()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        for laws in [
+            vec![LawKind::Table, LawKind::Pq, LawKind::PqCowan],
+            with(LawKind::Pq),
+        ] {
+            let listed = loaded(&format!(
+                "[target]\ntone = \"pq\"\n[plan]\nbit_depth = 10\n[fit]\nlaws = [{}]\n",
+                names(&laws)
+            ));
+            assert_eq!(listed.config.fit.laws, laws);
+            let options = fit_options_for_signal(&listed, Some(Signal::Hlg));
+            assert_eq!(options.laws, laws);
+            assert!(options.hlg_ootf);
+        }
+        // The OOTF the user asked for in an SDR config stays asked for.
+        let asked = loaded("[target]\ntone = \"srgb\"\n[fit]\nhlg_ootf = true\n");
+        assert!(fit_options_for_signal(&asked, Some(Signal::Pq)).hlg_ootf);
     }
 
     #[test]
