@@ -109,8 +109,12 @@ pub struct MonitorModel {
 /// whose OOTF output is the same, E_s(u)^γ_S = (Y_S / w_c)^(γ_S − 1) E_c: its own
 /// law at u, whatever the panel's transfer, so the gain is E(u) / E(v)
 /// (`MonitorModel::ootf_gains`). Above full signal (a channel in a bright mixture is
-/// driven harder than alone ever) an HLG law goes on as its formula does, another law
-/// as the power of E_s it has over its top. The spatial map's gain is part of the
+/// driven harder than alone ever: blue in a white at γ_S 1.2 is at 1.6 times its full
+/// scene light, and alone never passes 0.57 of the OOTF output it has there) the
+/// light is a power of
+/// E_s measured on the greys and whites (`hlg_ootf_beyond`), which reach there; without
+/// them an HLG law goes on as its formula does, another law as the power of E_s it has
+/// over its top. The spatial map's gain is part of the
 /// share a channel's code is taken from, so away from the centre the code is off by
 /// what the map takes (a few per cent of light); the shares' form depends on their
 /// ratios only.
@@ -136,6 +140,11 @@ pub struct AdditivityTerms {
     /// from its share of light (see above).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub hlg_ootf_through_laws: bool,
+    /// Through the laws, each channel's light beyond full signal as a power of its
+    /// scene light, measured on the greys and whites (see above). Unset: as the law
+    /// goes on.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hlg_ootf_beyond: Option<[f64; 3]>,
     /// The brightness limiter (`fit::limiter`): not a term of a patch's colour (the
     /// model is defined for the plan's patch on black, which it does not dim) but of a
     /// whole screen's, its light scaled by g(p) of the screen's mean light p
@@ -309,15 +318,15 @@ pub fn ootf_gains(shares: &[f64; 3], gamma: f64) -> [f64; 3] {
 /// light (what the display's processing sees), and the channel's own light by what
 /// the law gives at the code the OOTF moves it to (0.2 % of full red at a cut-off of
 /// 0.1 in full green).
-fn scene_light_of_share(law: &TransferLaw, share: f64, full: f64) -> f64 {
+fn scene_light_of_share(law: &TransferLaw, share: f64, full: f64, beyond: Option<f64>) -> f64 {
     if share <= 0.0 {
         0.0
     } else if share <= 1.0 {
         hlg_scene_light(law.drive(share * full).clamp(0.0, 1.0))
-    } else if let TransferLaw::Hlg(hlg) = law {
+    } else if let (TransferLaw::Hlg(hlg), None) = (law, beyond) {
         hlg.scene_light_of(share)
     } else {
-        share.powf(1.0 / top_exponent(law).unwrap_or(1.0))
+        share.powf(1.0 / beyond.or_else(|| top_exponent(law)).unwrap_or(1.0))
     }
 }
 
@@ -326,20 +335,20 @@ fn scene_light_of_share(law: &TransferLaw, share: f64, full: f64) -> f64 {
 /// (`Hlg::of_scene_light`), another as its full light `full` times the scene light to
 /// the power the law has over its top ([`top_exponent`], a secant, so its slope steps
 /// at full signal).
-fn light_at_scene_light(law: &TransferLaw, scene: f64, full: f64) -> f64 {
-    match law {
-        TransferLaw::Hlg(hlg) => hlg.of_scene_light(scene),
+fn light_at_scene_light(law: &TransferLaw, scene: f64, full: f64, beyond: Option<f64>) -> f64 {
+    match (law, beyond) {
+        (TransferLaw::Hlg(hlg), None) => hlg.of_scene_light(scene),
         _ if scene <= 1.0 => {
             law.excitation(hlg_oetf(scene * hlg_inverse_oetf(1.0)).clamp(0.0, 1.0))
         }
-        _ => full * scene.powf(top_exponent(law).unwrap_or(1.0)),
+        _ => full * scene.powf(beyond.or_else(|| top_exponent(law)).unwrap_or(1.0)),
     }
 }
 
 /// d ln E / d ln E_s of an HLG channel's law over its top, from 95 % of full scene
 /// light to full: the power it goes on with beyond full signal. `None` where the law
 /// gives no light there.
-fn top_exponent(law: &TransferLaw) -> Option<f64> {
+pub(crate) fn top_exponent(law: &TransferLaw) -> Option<f64> {
     let below = law.excitation(hlg_oetf(0.95 * hlg_inverse_oetf(1.0)));
     let exponent = (law.excitation(1.0) / below).ln() / (1.0f64 / 0.95).ln();
     (exponent.is_finite() && exponent > 0.0).then_some(exponent)
@@ -396,7 +405,9 @@ impl MonitorModel {
             return ootf_gains(shares, gamma);
         }
         let full = self.full_drive_excitations();
-        let scene = [0, 1, 2].map(|c| scene_light_of_share(&self.laws[c], shares[c], full[c]));
+        let beyond = |c: usize| self.terms.hlg_ootf_beyond.map(|p| p[c]);
+        let scene =
+            [0, 1, 2].map(|c| scene_light_of_share(&self.laws[c], shares[c], full[c], beyond(c)));
         let w = chromacal_color::hdr::BT2020_LUMINANCE;
         let luminance: f64 = (0..3).map(|k| w[k] * scene[k]).sum();
         [0, 1, 2].map(|c| {
@@ -405,7 +416,7 @@ impl MonitorModel {
                 return 1.0;
             }
             let at = ((luminance / w[c]).powf(gamma - 1.0) * scene[c]).powf(1.0 / gamma);
-            light_at_scene_light(law, at, full[c]) / alone
+            light_at_scene_light(law, at, full[c], beyond(c)) / alone
         })
     }
 
@@ -980,6 +991,7 @@ mod tests {
                 chromaticity_shift: Some([[0.0, 0.5, 1.5], [0.8, 0.0, -0.4], [-1.0, 1.2, 0.0]]),
                 hlg_ootf: None,
                 hlg_ootf_through_laws: false,
+                hlg_ootf_beyond: None,
                 limiter: None,
             },
             ..srgb_like()
