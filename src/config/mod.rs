@@ -399,8 +399,10 @@ pub fn parse_config_unchecked(text: &str, origin: &str) -> Result<Config, Config
 /// law as the run did, whatever the config found says, and a PQ or SDR journal is not
 /// fitted as HLG because the config is. The readings' signal wins over the config's:
 /// it is a fact about them. What the signal adds is added to the config as written
-/// (`loaded.text`), not taken back from the config as read: a list of laws the user
-/// wrote stays as written, whatever it holds.
+/// (`loaded.text`), not taken back from the config as read: what the user wrote stays
+/// as written, a list of laws whatever it holds, and `hlg_ootf = true` on any signal.
+/// A `LoadedConfig` whose text does not read back into its config (one made in
+/// code) keeps its own options, as they are.
 pub fn fit_options_for_signal(loaded: &LoadedConfig, signal: Option<Signal>) -> FitOptions {
     let config = &loaded.config;
     let Some(signal) = signal else {
@@ -409,13 +411,18 @@ pub fn fit_options_for_signal(loaded: &LoadedConfig, signal: Option<Signal>) -> 
     if config.plan.signal.unwrap_or_default() == signal {
         return config.fit.clone();
     }
-    // The text was read into `config` already, so it reads again.
-    let Ok(mut written) = toml::from_str::<Config>(&loaded.text) else {
-        return config.fit.clone();
+    let written = |signal: Option<Signal>| {
+        let mut written = toml::from_str::<Config>(&loaded.text).ok()?;
+        if signal.is_some() {
+            written.plan.signal = signal;
+        }
+        hdr_defaults(&mut written);
+        Some(written.fit)
     };
-    written.plan.signal = Some(signal);
-    hdr_defaults(&mut written);
-    written.fit
+    match (written(None), written(Some(signal))) {
+        (Some(as_read), Some(options)) if as_read == config.fit => options,
+        _ => config.fit.clone(),
+    }
 }
 
 /// What an HDR signal asks of the rest of a run, where the config does not say: the
@@ -873,6 +880,15 @@ mod tests {
         // The OOTF the user asked for in an SDR config stays asked for.
         let asked = loaded("[target]\ntone = \"srgb\"\n[fit]\nhlg_ootf = true\n");
         assert!(fit_options_for_signal(&asked, Some(Signal::Pq)).hlg_ootf);
+        // A config whose text is not what it was read from keeps its own options.
+        let made = LoadedConfig {
+            text: String::new(),
+            ..loaded("[target]\ntone = \"pq\"\n[plan]\nbit_depth = 10\n")
+        };
+        assert_eq!(
+            fit_options_for_signal(&made, Some(Signal::Hlg)),
+            made.config.fit
+        );
     }
 
     #[test]

@@ -186,8 +186,10 @@ pub fn limitations(profile: &Profile, carries_terms: bool) -> Vec<String> {
         );
     }
     if let Some(gamma) = terms.hlg_ootf.filter(|_| !carries_terms) {
-        let gain = if terms.hlg_ootf_through_laws {
+        let gain = if terms.hlg_ootf_through_laws && terms.hlg_ootf_beyond.is_some() {
             "what its law gives at the code whose OOTF output alone is the same (beyond full signal, a power of its scene light measured on the greys and whites)"
+        } else if terms.hlg_ootf_through_laws {
+            "what its law gives at the code whose OOTF output alone is the same"
         } else {
             "its light alone times (Y_S / (w_c E_c))^(γ − 1)"
         };

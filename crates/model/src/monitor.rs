@@ -141,8 +141,9 @@ pub struct AdditivityTerms {
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub hlg_ootf_through_laws: bool,
     /// Through the laws, each channel's light beyond full signal as a power of its
-    /// scene light, measured on the greys and whites (see above). Unset: as the law
-    /// goes on.
+    /// scene light, measured on the greys and whites (see above), within
+    /// [`BEYOND_POWERS`]; 0 for a channel no reading took there, which goes on as its
+    /// law does, as every channel does when this is unset.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hlg_ootf_beyond: Option<[f64; 3]>,
     /// The brightness limiter (`fit::limiter`): not a term of a patch's colour (the
@@ -206,7 +207,8 @@ impl AdditivityTerms {
         names
     }
 
-    /// Every coefficient is a finite number.
+    /// Every coefficient is a finite number (and the powers beyond full signal in
+    /// their range, with the OOTF through the laws they belong to).
     fn is_finite(&self) -> bool {
         self.interaction.iter().flatten().all(|v| v.is_finite())
             && self.crosstalk.iter().flatten().all(|v| v.is_finite())
@@ -218,6 +220,11 @@ impl AdditivityTerms {
                 .flatten()
                 .all(|v| v.is_finite())
             && self.hlg_ootf.is_none_or(|g| g.is_finite() && g > 0.0)
+            && self.hlg_ootf_beyond.is_none_or(|p| {
+                self.hlg_ootf.is_some()
+                    && self.hlg_ootf_through_laws
+                    && p.iter().all(|&p| p == 0.0 || BEYOND_POWERS.contains(&p))
+            })
             && self.limiter.is_none_or(|l| {
                 l.full_field > 0.0
                     && l.full_field.is_finite()
@@ -226,6 +233,13 @@ impl AdditivityTerms {
             })
     }
 }
+
+/// The powers of scene light a channel's light beyond full signal may have
+/// (`AdditivityTerms::hlg_ootf_beyond`): a panel's gamma behind an OOTF of system gamma
+/// 0.8–1.8 gives 1–2.5 where it follows a law, less where its table flattens (0.54
+/// for a panel that goes from gamma 2.2 to 0.8 at 80 % of its drive); 1 / p is taken
+/// in the inverse, so p near 0 is refused.
+pub const BEYOND_POWERS: std::ops::RangeInclusive<f64> = 0.2..=5.0;
 
 /// The brightness limiter g(p) = (1 + (p / F)^k)^(−1/k) of a screen's mean light p
 /// (fitted by `fit::limiter`, whose documentation says why this family).
@@ -310,8 +324,9 @@ pub fn ootf_gains(shares: &[f64; 3], gamma: f64) -> [f64; 3] {
 
 /// The scene light E_s of the code at which `law` gives `share` of its full light
 /// `full` (its law inverted). Beyond full light (the extended inverse's shares above
-/// one) it is the scene light at which the law carried on beyond full signal
-/// ([`light_at_scene_light`]) gives it, so that a channel alone keeps a gain of 1
+/// one) it is the scene light at which the light carried on beyond full signal
+/// ([`light_at_scene_light`], with the measured power `beyond` where there is one)
+/// gives it, so that a channel alone keeps a gain of 1
 /// there. At share 0 the code is taken as 0. For a law whose light starts above code
 /// zero (a gain-offset-gamma cut-off, a table's flat start) a share just above 0 is
 /// its start's code, so the other channels' Y_S steps there by that code's scene
@@ -331,10 +346,11 @@ fn scene_light_of_share(law: &TransferLaw, share: f64, full: f64, beyond: Option
 }
 
 /// The light of `law` at scene light `scene` (1 at full signal): the law at the code
-/// of that scene light; beyond full signal, an HLG law carried on as its formula goes
-/// (`Hlg::of_scene_light`), another as its full light `full` times the scene light to
-/// the power the law has over its top ([`top_exponent`], a secant, so its slope steps
-/// at full signal).
+/// of that scene light; beyond full signal, its full light `full` times the scene
+/// light to the power `beyond` measured on the greys and whites, and without one an
+/// HLG law carried on as its formula goes (`Hlg::of_scene_light`), another to the
+/// power the law has over its top ([`top_exponent`], a secant, so its slope steps at
+/// full signal).
 fn light_at_scene_light(law: &TransferLaw, scene: f64, full: f64, beyond: Option<f64>) -> f64 {
     match (law, beyond) {
         (TransferLaw::Hlg(hlg), None) => hlg.of_scene_light(scene),
@@ -348,7 +364,7 @@ fn light_at_scene_light(law: &TransferLaw, scene: f64, full: f64, beyond: Option
 /// d ln E / d ln E_s of an HLG channel's law over its top, from 95 % of full scene
 /// light to full: the power it goes on with beyond full signal. `None` where the law
 /// gives no light there.
-pub(crate) fn top_exponent(law: &TransferLaw) -> Option<f64> {
+fn top_exponent(law: &TransferLaw) -> Option<f64> {
     let below = law.excitation(hlg_oetf(0.95 * hlg_inverse_oetf(1.0)));
     let exponent = (law.excitation(1.0) / below).ln() / (1.0f64 / 0.95).ln();
     (exponent.is_finite() && exponent > 0.0).then_some(exponent)
@@ -405,7 +421,12 @@ impl MonitorModel {
             return ootf_gains(shares, gamma);
         }
         let full = self.full_drive_excitations();
-        let beyond = |c: usize| self.terms.hlg_ootf_beyond.map(|p| p[c]);
+        let beyond = |c: usize| {
+            self.terms
+                .hlg_ootf_beyond
+                .map(|p| p[c])
+                .filter(|&p| p > 0.0)
+        };
         let scene =
             [0, 1, 2].map(|c| scene_light_of_share(&self.laws[c], shares[c], full[c], beyond(c)));
         let w = chromacal_color::hdr::BT2020_LUMINANCE;
@@ -1094,6 +1115,29 @@ mod tests {
         let back: MonitorModel = toml::from_str(&text).unwrap();
         assert_eq!(back.terms, through.terms);
         assert!(!toml::to_string(&shares).unwrap().contains("through_laws"));
+        // Powers measured beyond full signal (0: blue was not measured there) are
+        // kept in the file, and a channel alone beyond full light still keeps a gain
+        // of 1; a power out of its range, or one without the OOTF through the laws,
+        // is refused when read.
+        let mut measured = through.clone();
+        measured.terms.hlg_ootf_beyond = Some([1.1, 1.3, 0.0]);
+        let text = toml::to_string(&measured).unwrap();
+        let back: MonitorModel = toml::from_str(&text).unwrap();
+        assert_eq!(back.terms, measured.terms);
+        for share in [[1.2, 0.0, 0.0], [0.0, 1.1, 0.0], [0.0, 0.0, 1.3]] {
+            let alone = measured.ootf_gains(&share);
+            assert!(alone.iter().all(|g| (g - 1.0).abs() < 1e-9), "{alone:?}");
+        }
+        let beyond = measured.ootf_gains(&[1.0, 1.0, 1.0]);
+        assert!(beyond != through.ootf_gains(&[1.0, 1.0, 1.0]), "{beyond:?}");
+        for bad in ["[0.1, 1.2, 1.2]", "[1.2, nan, 1.2]", "[-1.0, 1.2, 1.2]"] {
+            let text = text.replace("[1.1, 1.3, 0.0]", bad);
+            assert!(toml::from_str::<MonitorModel>(&text).is_err(), "{bad}");
+        }
+        let mut orphan = shares.clone();
+        orphan.terms.hlg_ootf_beyond = Some([1.2; 3]);
+        let text = toml::to_string(&orphan).unwrap();
+        assert!(toml::from_str::<MonitorModel>(&text).is_err(), "{text}");
     }
 
     /// The HLG OOTF (BT.2100 Table 5) as a term: a channel alone is its law's, a

@@ -26,7 +26,10 @@
 //!
 //! For a display decoding HLG (`FitOptions::hlg_ootf`) one more single candidate:
 //! BT.2100's OOTF, whose system gamma is not linear in anything, found by argmin's
-//! golden-section search on the greys and whites (`fit_ootf`), kept as the others are.
+//! golden-section search on the greys and whites (`fit_ootf`), in two forms: from the
+//! light's shares, and through the laws (BT.2100's display model, with each channel's
+//! light beyond full signal measured on the greys and whites), which is kept over the
+//! shares' form unless that is clearly better (`forward_selection`).
 
 use nalgebra::{DMatrix, DVector, Matrix3};
 use serde::{Deserialize, Serialize};
@@ -399,14 +402,18 @@ fn with_ootf(model: &MonitorModel, gamma: f64, mixed: &[&TermReading]) -> Monito
 /// a = ((Y_S / w_c)^(γ − 1) E_c)^(1/γ) of a code alone (`MonitorModel::ootf_gains`),
 /// above 1 in a bright one, and the display is additive after its OOTF, so its light
 /// there is [M⁻¹ (XYZ − black)]_c = full_c · a^p: p by least squares on ln a, through
-/// full signal (a = 1). A channel no reading takes beyond full signal keeps the power
-/// its law has over its top. `None` when no channel has such a reading.
+/// full signal (a = 1). A channel whose readings reach less than 1 % beyond full
+/// signal (Σ ln²a below `MIN_LEVER`), or whose p falls outside
+/// [`BEYOND_POWERS`](crate::monitor::BEYOND_POWERS), gets 0: it goes on as its law
+/// does. `None` when no channel is measured there.
 fn beyond_full_signal(
     model: &MonitorModel,
     gamma: f64,
     mixed: &[&TermReading],
 ) -> Option<[f64; 3]> {
     use chromacal_color::hdr::{BT2020_LUMINANCE, hlg_scene_light};
+    /// Σ ln²a of one reading 1 % beyond full signal.
+    const MIN_LEVER: f64 = 1e-4;
     let inverse = model.matrix.try_inverse()?;
     let full = model.laws.each_ref().map(|l| l.full_drive_excitation());
     let mut sums = [(0.0, 0.0); 3];
@@ -417,24 +424,22 @@ fn beyond_full_signal(
         for c in 0..3 {
             let w = BT2020_LUMINANCE[c];
             let at = ((luminance / w).powf(gamma - 1.0) * scene[c]).powf(1.0 / gamma);
-            if at > 1.001 && light[c] > 0.0 && full[c] > 0.0 {
+            if at > 1.0 && light[c] > 0.0 && full[c] > 0.0 {
                 let (x, y) = (at.ln(), (light[c] / full[c]).ln());
                 sums[c].0 += x * y;
                 sums[c].1 += x * x;
             }
         }
     }
-    if sums.iter().all(|s| s.1 == 0.0) {
-        return None;
-    }
-    Some([0, 1, 2].map(|c| {
-        let measured = sums[c].0 / sums[c].1;
-        if sums[c].1 > 0.0 && measured.is_finite() && measured > 0.0 {
-            measured
+    let powers = sums.map(|(xy, xx)| {
+        let p = xy / xx;
+        if xx >= MIN_LEVER && crate::monitor::BEYOND_POWERS.contains(&p) {
+            p
         } else {
-            crate::monitor::top_exponent(&model.laws[c]).unwrap_or(1.0)
+            0.0
         }
-    }))
+    });
+    powers.iter().any(|&p| p > 0.0).then_some(powers)
 }
 
 /// `model` (its additive part) with the terms of `set` fitted to `readings`: the shift
@@ -543,7 +548,8 @@ fn cross_validate(
 /// each term is kept only if it lowers the error of the model without it, paired, by
 /// more than `STANDARD_ERRORS` standard errors and than `tolerance` (`select::improves_on`).
 /// First the single terms against the additive model (of those that pass, the one with
-/// the lower error); then a pair against what was kept (the gain term kept with the
+/// the lower error, but the HLG OOTF through the laws over its shares' form unless
+/// that, or another single term, is better by the same test); then a pair against what was kept (the gain term kept with the
 /// shift, or with the other of γ and λ; the shift kept with any gain term; the better
 /// of those that pass). A term is never kept because
 /// a third candidate was best: on a fresh TN set the former rule (the simplest within
@@ -596,12 +602,14 @@ fn forward_selection(scores: &[Option<Vec<f64>>], tolerance: f64) -> TermSet {
         })
         .unwrap_or(TermSet::None);
     // BT.2100's display model takes the OOTF on the signal, before the panel: the
-    // shares' form is its special case, kept over it only when clearly better.
+    // shares' form is its special case, kept over it only when clearly better (and
+    // no other single term that passed is clearly better either).
     let through_laws = TermSet::HlgOotfThroughLaws;
     let kept = if kept == TermSet::HlgOotf
         && improves(through_laws, TermSet::None)
-        && !improves(kept, through_laws)
-    {
+        && singles.iter().all(|s| {
+            *s == through_laws || !(improves(*s, TermSet::None) && improves(*s, through_laws))
+        }) {
         through_laws
     } else {
         kept
@@ -764,7 +772,7 @@ pub fn choose_terms(
         .collect();
     let mut rule = if n >= 2 {
         format!(
-            "a term is kept only if it lowers the ΔE00 on ramp readings, greys and whites left out by level ({n} folds) of the model without it by more than {STANDARD_ERRORS} standard errors (paired) and than noise alone ({:.3}): single terms against the additive model (the interaction with the crosstalk in drive too, where no single term passes and it is below each), then a pair against what was kept (the chromaticity shift with a gain term, or the interaction with the crosstalk in drive)",
+            "a term is kept only if it lowers the ΔE00 on ramp readings, greys and whites left out by level ({n} folds) of the model without it by more than {STANDARD_ERRORS} standard errors (paired) and than noise alone ({:.3}): single terms against the additive model (the interaction with the crosstalk in drive too, where no single term passes and it is below each; of the HLG OOTF's two forms the one through the laws unless the shares' form beats it by the same test), then a pair against what was kept (the chromaticity shift with a gain term, or the interaction with the crosstalk in drive)",
             tolerance * TOLERANCE_SHARE
         )
     } else {
@@ -919,6 +927,12 @@ mod tests {
         // Through the laws no better than none: the shares' form.
         let none = scores(errors(-0.6, 0.0), errors(0.0, 0.3));
         assert_eq!(forward_selection(&none, 0.05), TermSet::HlgOotf);
+        // Another single term clearly better than the laws' form, though not than
+        // the shares': the shares' form stays.
+        let mut other = scores(errors(-0.6, 0.0), errors(-0.55, 0.3));
+        assert_eq!(forward_selection(&other, 0.01), TermSet::HlgOotfThroughLaws);
+        other[1] = Some(errors(-0.59, 0.3));
+        assert_eq!(forward_selection(&other, 0.01), TermSet::HlgOotf);
     }
 
     #[test]
