@@ -110,14 +110,12 @@ pub struct MonitorModel {
 /// law at u, whatever the panel's transfer, so the gain is E(u) / E(v)
 /// (`MonitorModel::ootf_gains`). Above full signal (a channel in a bright mixture is
 /// driven harder than alone ever: blue in a white at γ_S 1.2 is at 1.6 times its full
-/// scene light, and alone never passes 0.57 of the OOTF output it has there) the
-/// light is a power of
-/// E_s measured on the greys and whites (`hlg_ootf_beyond`), which reach there; without
-/// them an HLG law goes on as its formula does, another law as the power of E_s it has
-/// over its top. The spatial map's gain is part of the
-/// share a channel's code is taken from, so away from the centre the code is off by
-/// what the map takes (a few per cent of light); the shares' form depends on their
-/// ratios only.
+/// scene light, and alone never passes 0.57 of the OOTF output it has there) the light
+/// is a power of E_s measured on the greys and whites (`hlg_ootf_beyond`), which reach
+/// there; without them an HLG law goes on as its formula does, another law as the
+/// power of E_s it has over its top. The spatial map's gain is part of the share a
+/// channel's code is taken from, so away from the centre the code is off by what the
+/// map takes (a few per cent of light); the shares' form depends on their ratios only.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AdditivityTerms {
@@ -326,13 +324,12 @@ pub fn ootf_gains(shares: &[f64; 3], gamma: f64) -> [f64; 3] {
 /// `full` (its law inverted). Beyond full light (the extended inverse's shares above
 /// one) it is the scene light at which the light carried on beyond full signal
 /// ([`light_at_scene_light`], with the measured power `beyond` where there is one)
-/// gives it, so that a channel alone keeps a gain of 1
-/// there. At share 0 the code is taken as 0. For a law whose light starts above code
-/// zero (a gain-offset-gamma cut-off, a table's flat start) a share just above 0 is
-/// its start's code, so the other channels' Y_S steps there by that code's scene
-/// light (what the display's processing sees), and the channel's own light by what
-/// the law gives at the code the OOTF moves it to (0.2 % of full red at a cut-off of
-/// 0.1 in full green).
+/// gives it, so that a channel alone keeps a gain of 1 there. At share 0 the code is
+/// taken as 0. For a law whose light starts above code zero (a gain-offset-gamma
+/// cut-off, a table's flat start) a share just above 0 is its start's code, so the
+/// other channels' Y_S steps there by that code's scene light (what the display's
+/// processing sees), and the channel's own light by what the law gives at the code
+/// the OOTF moves it to (0.2 % of full red at a cut-off of 0.1 in full green).
 fn scene_light_of_share(law: &TransferLaw, share: f64, full: f64, beyond: Option<f64>) -> f64 {
     if share <= 0.0 {
         0.0

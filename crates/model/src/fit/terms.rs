@@ -549,9 +549,10 @@ fn cross_validate(
 /// more than `STANDARD_ERRORS` standard errors and than `tolerance` (`select::improves_on`).
 /// First the single terms against the additive model (of those that pass, the one with
 /// the lower error, but the HLG OOTF through the laws over its shares' form unless
-/// that, or another single term, is better by the same test); then a pair against what was kept (the gain term kept with the
-/// shift, or with the other of γ and λ; the shift kept with any gain term; the better
-/// of those that pass). A term is never kept because
+/// that, or another single term, is better by the same test); then a pair against
+/// what was kept (the gain term kept with the shift, or with the other of γ and λ; the
+/// shift kept with any gain term; the better of those that pass). A term is never
+/// kept because
 /// a third candidate was best: on a fresh TN set the former rule (the simplest within
 /// two standard errors of the best) kept an interaction whose cross-validated mean
 /// (1.224) and max (3.04) were worse than the additive model's (1.155, 2.62), because
