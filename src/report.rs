@@ -148,6 +148,28 @@ pub fn hdr_summary(profile: &Profile) -> String {
     out
 }
 
+/// Held-out error a profile of an HLG signal should stay under, ΔE ITP: DisplayCAL's
+/// recommended mean for HDR.
+const HLG_HINT_ABOVE: f64 = 1.0;
+
+/// After a sequential run of an HLG signal whose held-out mixtures miss by more than
+/// `HLG_HINT_ABOVE`: what to measure instead. The OOTF through the laws is as right as
+/// each channel's law, and a sequential plan spends its patches on greys, leaving a
+/// table law a few ramp levels to follow a panel's knees with (docs/hdr.md, HDR LCDs of
+/// measured tables); empty otherwise.
+fn hlg_plan_hint(outcome: &crate::calibrate::session::CalibrationOutcome) -> String {
+    let hlg = outcome.profile.provenance.signal == Some(chromacal_model::plan::Signal::Hlg);
+    let missed =
+        held_out_itp(&outcome.profile.report.held_out_patches).filter(|s| s.mean > HLG_HINT_ABOVE);
+    match missed {
+        Some(s) if hlg && outcome.plan.sequential.is_some() => format!(
+            "HLG: the held-out mixtures miss by {:.2} ΔE ITP on average. An HLG panel that is not a smooth law needs more ramp levels than a sequential plan measures: [plan] strategy = \"fixed\" with budget = 120 (33 levels a channel) took virtual LCDs of ISETBio's HP and Dell tables from 5.6 and 9.2 to 0.37 and 0.33 ΔE ITP (docs/hdr.md)\n",
+            s.mean
+        ),
+        _ => String::new(),
+    }
+}
+
 /// ΔE ITP (BT.2124) of each held-out patch, measured against predicted, in cd/m².
 pub fn held_out_itp(patches: &[chromacal_model::fit::validate::PatchError]) -> Option<ErrorStats> {
     let values: Vec<f64> = patches
@@ -779,6 +801,7 @@ pub fn calibration_outcome(outcome: &crate::calibrate::session::CalibrationOutco
     out += &correction_summary(&outcome.profile);
     out += &fit_summary(&outcome.fitted.report);
     out += &hdr_summary(&outcome.profile);
+    out += &hlg_plan_hint(outcome);
     if let Some(c) = &outcome.profile.calibration {
         out += &calibration_summary(c);
     }

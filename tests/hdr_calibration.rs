@@ -426,6 +426,10 @@ fn an_hlg_display_is_calibrated_through_its_ootf() {
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("HLG (BT.2100)"), "{stdout}");
+    assert!(
+        !stdout.contains("HLG: the held-out mixtures miss"),
+        "{stdout}"
+    );
     let profile = Profile::read(&state.join("current.toml")).unwrap();
     assert_eq!(profile.provenance.signal, Some(Signal::Hlg));
     assert_eq!(profile.report.chosen_law(), Some(LawKind::Hlg));
@@ -494,6 +498,31 @@ fn hlg_lcds_of_measured_tables_are_modelled_from_dense_ramps() {
             "{stem}: held-out {itp:?} ΔE ITP"
         );
     }
+    // The default (sequential) plan leaves the HP's laws four ramp levels: the run
+    // misses (whether or not the profile is published) and says what to measure
+    // instead.
+    let config = dir.path().join("default.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "{}[plan]\nbit_depth = 10\n[target]\nwhite = \"D65\"\ntone = \"hlg\"\n",
+            isetbio_monitor("isetbio_lcd_hp", "preset = \"hdr-lcd\""),
+        ),
+    )
+    .unwrap();
+    let out = chromacal()
+        .args(["calibrate", "--config"])
+        .arg(&config)
+        .arg("--state-dir")
+        .arg(dir.path().join("default"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("HLG: the held-out mixtures miss by")
+            && stdout.contains("strategy = \"fixed\" with budget = 120"),
+        "{stdout}"
+    );
 }
 
 /// The simulated `hdr-oled` in HLG mode: BT.2100's processing re-encodes the light for
