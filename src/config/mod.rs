@@ -411,18 +411,19 @@ pub fn fit_options_for_signal(loaded: &LoadedConfig, signal: Option<Signal>) -> 
     if config.plan.signal.unwrap_or_default() == signal {
         return config.fit.clone();
     }
-    let written = |signal: Option<Signal>| {
-        let mut written = toml::from_str::<Config>(&loaded.text).ok()?;
-        if signal.is_some() {
-            written.plan.signal = signal;
-        }
-        hdr_defaults(&mut written);
-        Some(written.fit)
+    let Ok(written) = toml::from_str::<Config>(&loaded.text) else {
+        return config.fit.clone();
     };
-    match (written(None), written(Some(signal))) {
-        (Some(as_read), Some(options)) if as_read == config.fit => options,
-        _ => config.fit.clone(),
+    let with_defaults = |mut c: Config| {
+        hdr_defaults(&mut c);
+        c.fit
+    };
+    if with_defaults(written.clone()) != config.fit {
+        return config.fit.clone();
     }
+    let mut for_signal = written;
+    for_signal.plan.signal = Some(signal);
+    with_defaults(for_signal)
 }
 
 /// What an HDR signal asks of the rest of a run, where the config does not say: the

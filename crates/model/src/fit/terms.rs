@@ -340,14 +340,14 @@ fn fit_ootf(
     /// χ² of the mixed readings with the OOTF of a given γ.
     struct Misfit<'a> {
         model: &'a MonitorModel,
-        mixed: Vec<&'a TermReading>,
+        mixed: &'a [&'a TermReading],
         noise: &'a NoiseModel,
     }
     impl CostFunction for Misfit<'_> {
         type Param = f64;
         type Output = f64;
         fn cost(&self, gamma: &f64) -> Result<f64, Error> {
-            let trial = with_ootf(self.model, *gamma, &self.mixed);
+            let trial = with_ootf(self.model, *gamma, self.mixed);
             Ok(self
                 .mixed
                 .iter()
@@ -370,10 +370,9 @@ fn fit_ootf(
     let solver = GoldenSectionSearch::new(low, high)
         .and_then(|s| s.with_tolerance(1e-6))
         .ok()?;
-    let kept = mixed.clone();
     let problem = Misfit {
         model,
-        mixed,
+        mixed: &mixed,
         noise,
     };
     let result = Executor::new(problem, solver)
@@ -382,7 +381,7 @@ fn fit_ootf(
         .ok()?;
     let gamma = result.state().best_param?;
     let inside = low + 1e-3 < gamma && gamma < high - 1e-3;
-    (inside && gamma.is_finite()).then(|| with_ootf(model, gamma, &kept))
+    (inside && gamma.is_finite()).then(|| with_ootf(model, gamma, &mixed))
 }
 
 /// `model` with the HLG OOTF of system gamma `gamma`; through the laws, with each
