@@ -171,13 +171,7 @@ fn hlg_plan_hint(outcome: &crate::calibrate::session::CalibrationOutcome) -> Str
 }
 
 /// ΔE ITP (BT.2124) of each held-out patch, measured against predicted, in cd/m².
-pub fn held_out_itp(patches: &[chromacal_model::fit::validate::PatchError]) -> Option<ErrorStats> {
-    let values: Vec<f64> = patches
-        .iter()
-        .map(|p| chromacal_color::ictcp::delta_e_itp(&p.measured, &p.predicted))
-        .collect();
-    ErrorStats::of(&values)
-}
+pub use chromacal_model::fit::validate::delta_e_itp_stats as held_out_itp;
 
 /// The brightness limiter: each window measured, as the additive model and as the
 /// limiter fitted without it predict it, and whether the term was kept.

@@ -335,7 +335,12 @@ fn count_fit_failure(journal: &Path) {
 /// Does the fitted profile meet the publishing limits? `None` if it does. A white
 /// with a component that is not positive is never light, however small the held-out
 /// error (a correction that negated X and Z once published such a white with 0.145).
-pub fn publish_rejection(fitted: &FittedModel, limits: &PublishConfig) -> Option<String> {
+/// A profile of an HDR `signal` must also meet the ΔE ITP limit.
+pub fn publish_rejection(
+    fitted: &FittedModel,
+    limits: &PublishConfig,
+    signal: Option<chromacal_model::plan::Signal>,
+) -> Option<String> {
     let white = fitted.model.white();
     if !white.iter().all(|v| *v > 0.0 && v.is_finite()) {
         return Some(format!(
@@ -343,7 +348,15 @@ pub fn publish_rejection(fitted: &FittedModel, limits: &PublishConfig) -> Option
             white.x, white.y, white.z
         ));
     }
-    limits.rejection(fitted.report.held_out.as_ref(), "held-out")
+    limits
+        .rejection(fitted.report.held_out.as_ref(), "held-out")
+        .or_else(|| {
+            let itp =
+                chromacal_model::fit::validate::delta_e_itp_stats(&fitted.report.held_out_patches);
+            signal
+                .filter(|s| s.is_hdr())
+                .and_then(|_| limits.itp_rejection(itp.as_ref()))
+        })
 }
 
 /// Measure every patch of the journal's plan that is missing, on any display and
@@ -695,7 +708,7 @@ pub async fn finish_run(
             .map(|c| c.record(&header.config_dir)),
     );
     let text = profile.to_toml()?;
-    let rejection = publish_rejection(&fitted, &config.publish);
+    let rejection = publish_rejection(&fitted, &config.publish, profile.provenance.signal);
     let store_error = |source| CalibrateError::Store {
         path: store.root().to_path_buf(),
         source,

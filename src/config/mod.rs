@@ -240,6 +240,10 @@ pub struct PublishConfig {
     pub max_mean_de00: f64,
     /// Largest 95th-percentile held-out ΔE00.
     pub max_p95_de00: f64,
+    /// Largest mean held-out ΔE ITP (ITU-R BT.2124), for a profile of an HDR signal
+    /// only: its light is absolute, and ΔE00 against an 800 cd/m² white passes a
+    /// 10 % miss at 0.5 cd/m². 1 is DisplayCAL's recommended HDR limit.
+    pub max_mean_itp: f64,
 }
 
 impl PublishConfig {
@@ -248,6 +252,7 @@ impl PublishConfig {
         for (key, value) in [
             ("publish.max_mean_de00", self.max_mean_de00),
             ("publish.max_p95_de00", self.max_p95_de00),
+            ("publish.max_mean_itp", self.max_mean_itp),
         ] {
             if !(value.is_finite() && value > 0.0) {
                 return Err(format!("{key} must be a positive number, not {value}"));
@@ -286,6 +291,25 @@ impl PublishConfig {
         }
         None
     }
+
+    /// The HDR half of the gate: why a profile of an HDR signal whose held-out ΔE ITP
+    /// is `stats` may not replace the current one, or `None` when it may. Applied on
+    /// top of [`PublishConfig::rejection`], never instead of it.
+    pub fn itp_rejection(&self, stats: Option<&ErrorStats>) -> Option<String> {
+        let Some(s) = stats else {
+            return Some(
+                "no held-out ΔE ITP (no patches to score), so the HDR profile's error is unknown"
+                    .to_string(),
+            );
+        };
+        if !(s.mean <= self.max_mean_itp) {
+            return Some(format!(
+                "held-out mean ΔE ITP {:.3} is above the limit {} (publish.max_mean_itp: an HDR signal's light is absolute, and ΔE00 relative to the white passes misses near black)",
+                s.mean, self.max_mean_itp
+            ));
+        }
+        None
+    }
 }
 
 impl Default for PublishConfig {
@@ -293,6 +317,7 @@ impl Default for PublishConfig {
         PublishConfig {
             max_mean_de00: 1.0,
             max_p95_de00: 2.0,
+            max_mean_itp: 1.0,
         }
     }
 }
@@ -957,6 +982,16 @@ mod tests {
                 .unwrap()
                 .contains("unknown")
         );
+        // The HDR half: the mean ΔE ITP alone, a NaN refused, no patches unknown.
+        assert_eq!(limits.itp_rejection(Some(&stats(0.9, 3.0))), None);
+        for mean in [1.2, f64::NAN] {
+            let why = limits.itp_rejection(Some(&stats(mean, 1.0))).unwrap();
+            assert!(
+                why.contains("mean ΔE ITP") && why.contains("limit 1"),
+                "{why}"
+            );
+        }
+        assert!(limits.itp_rejection(None).unwrap().contains("unknown"));
     }
 
     #[test]

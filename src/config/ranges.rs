@@ -87,6 +87,7 @@ pub const RANGES: &[Range] = &[
     // [publish]
     r("publish.max_mean_de00", 1e-6, 1000.0),
     r("publish.max_p95_de00", 1e-6, 1000.0),
+    r("publish.max_mean_itp", 1e-6, 1000.0),
     // [daemon]
     r("daemon.stop_timeout_s", 0.0, 3600.0),
     r("daemon.simulated_time_scale", 1e-6, 1000.0),
