@@ -15,6 +15,12 @@
 //! luminance (a cost-weighted sequential design: each step buys the most variance
 //! removed per unit cost, the rule of thumb of budgeted experimental design).
 //!
+//! For an HDR signal the spreads and the estimate are told in ΔE ITP (BT.2124) on
+//! absolute light, and `target_de00` is read as ΔE ITP: ΔE00 against an 800 cd/m²
+//! white does not see where the curves are unsure near black. On virtual HLG LCDs of
+//! ISETBio's Dell and Apple tables this took the held-out mixtures from 6.8–9.5 and
+//! 11.8–23 ΔE ITP to 2.4–4.1 and 2.7–6.3 with the same 40 patches (docs/hdr.md).
+//!
 //! The choice depends on nothing but the journal, so a resumed run (`--resume`) goes
 //! on exactly as the run it resumes would have: the same next patch from the same
 //! readings.
@@ -28,7 +34,9 @@ use chromacal_color::Xyz;
 use chromacal_display::PatchDisplay;
 use chromacal_instruments::Instrument;
 use chromacal_model::Drive;
-use chromacal_model::fit::uncertainty::{FoldModels, fold_models, prediction_spread};
+use chromacal_model::fit::uncertainty::{
+    FoldModels, SpreadMetric, fold_models, prediction_spread_in,
+};
 use chromacal_model::fit::{FitError, FittedModel, fit_monitor};
 use chromacal_model::measurement::{MeasurementSet, Role};
 use chromacal_model::plan::{Plan, PlannedPatch};
@@ -37,15 +45,30 @@ use chromacal_model::screen::{Codes, Geometry, Patch};
 /// Candidate levels: k / `GRID` for k = 1 … GRID − 1.
 const GRID: usize = 32;
 
+/// The estimated held-out mean error, in the run's metric.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    pub value: f64,
+    /// ΔE ITP (an HDR signal) rather than ΔE00.
+    pub itp: bool,
+}
+
+impl std::fmt::Display for Estimate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let metric = if self.itp { "ΔE ITP" } else { "ΔE00" };
+        write!(f, "{:.3} {metric}", self.value)
+    }
+}
+
 /// Why a sequential run stopped adding patches.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Stop {
-    /// The estimated held-out mean ΔE00 met the target.
-    TargetMet { estimate: f64 },
+    /// The estimated held-out mean ΔE00 (ΔE ITP for an HDR signal) met the target.
+    TargetMet { estimate: Estimate },
     /// The counted patches reached the budget.
-    BudgetSpent { estimate: Option<f64> },
+    BudgetSpent { estimate: Option<Estimate> },
     /// Every candidate has been measured.
-    NoCandidate { estimate: Option<f64> },
+    NoCandidate { estimate: Option<Estimate> },
     /// The readings so far could not be fitted; the run goes on to the fit, which says
     /// why.
     Unfitted(FitError),
@@ -53,10 +76,10 @@ pub enum Stop {
 
 impl std::fmt::Display for Stop {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let said = |e: &Option<f64>| e.map_or(String::new(), |e| format!(" (estimate {e:.3})"));
+        let said = |e: &Option<Estimate>| e.map_or(String::new(), |e| format!(" (estimate {e})"));
         match self {
             Stop::TargetMet { estimate } => {
-                write!(f, "estimated held-out ΔE00 {estimate:.3} met the target")
+                write!(f, "estimated held-out error {estimate} met the target")
             }
             Stop::BudgetSpent { estimate } => write!(f, "budget spent{}", said(estimate)),
             Stop::NoCandidate { estimate } => {
@@ -72,9 +95,9 @@ impl std::fmt::Display for Stop {
 pub enum Step {
     Measure {
         patch: PlannedPatch,
-        /// Its prediction spread, ΔE00.
+        /// Its prediction spread, in the estimate's metric.
         spread: f64,
-        estimate: Option<f64>,
+        estimate: Option<Estimate>,
     },
     Stop(Stop),
 }
@@ -104,14 +127,15 @@ pub fn counted(set: &MeasurementSet) -> usize {
 
 /// The estimate of held-out error a sequential run stops on, the larger of two: the
 /// chosen law's cross-validated mean ΔE00 over ramps and greys left out by level, and
-/// the mean prediction spread (`fit::uncertainty`) at the drives of the plan's
-/// verification patches (their drives only: their readings are never looked at). The
-/// first alone is optimistic where mixtures sit between the levels measured.
+/// the mean prediction spread (`fit::uncertainty`) in `metric` at the drives of the
+/// plan's verification patches (their drives only: their readings are never looked
+/// at). The first alone is optimistic where mixtures sit between the levels measured,
+/// and blind, for an HDR signal, to misses near black that ΔE ITP sees.
 pub fn estimated_error(
     fitted: &FittedModel,
     folds: &FoldModels,
     plan: &Plan,
-    white: &Xyz,
+    metric: &SpreadMetric,
 ) -> Option<f64> {
     let cross_validated = fitted
         .report
@@ -128,7 +152,7 @@ pub fn estimated_error(
         .collect();
     let spread = drives
         .iter()
-        .map(|d| prediction_spread(folds, *d, white))
+        .map(|d| prediction_spread_in(folds, *d, metric))
         .sum::<f64>()
         / drives.len().max(1) as f64;
     Some(cross_validated.max(spread))
@@ -245,9 +269,19 @@ fn next_step_for(header: &JournalHeader, set: &MeasurementSet, config: &Config) 
         ))));
     };
     let white: Xyz = set.mean_white().unwrap_or_else(|| fitted.model.white());
-    let estimate = estimated_error(&fitted, &folds, &header.plan, &white);
+    // An HDR signal's light is absolute: its patches are chosen, and its estimate
+    // told, in ΔE ITP, and `target_de00` is read as ΔE ITP (as the run's own
+    // verification criteria are).
+    let itp = header.plan.signal.is_some_and(|s| s.is_hdr());
+    let metric = if itp {
+        SpreadMetric::Itp
+    } else {
+        SpreadMetric::De00(white)
+    };
+    let estimate = estimated_error(&fitted, &folds, &header.plan, &metric)
+        .map(|value| Estimate { value, itp });
     if let Some(e) = estimate
-        && e <= limits.target_de00
+        && e.value <= limits.target_de00
     {
         return Step::Stop(Stop::TargetMet { estimate: e });
     }
@@ -264,7 +298,7 @@ fn next_step_for(header: &JournalHeader, set: &MeasurementSet, config: &Config) 
     let best = candidates(set, bit_depth)
         .into_iter()
         .map(|codes| {
-            let spread = prediction_spread(&folds, codes.drive(), &white);
+            let spread = prediction_spread_in(&folds, codes.drive(), &metric);
             let y = fitted.model.forward_centre(codes.drive()).y;
             let seconds = expected_seconds(&durations, y) + config.display.settle_s;
             (codes, spread, spread * spread / seconds.max(1e-3))
@@ -346,7 +380,8 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
                     index = patch.index,
                     drive = ?patch.patch.codes.drive(),
                     spread,
-                    estimate,
+                    estimate = estimate.map(|e| e.value),
+                    itp = estimate.is_some_and(|e| e.itp),
                     "sequential plan: next patch"
                 );
                 patch
