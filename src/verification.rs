@@ -31,6 +31,10 @@ pub struct Criteria {
     pub max_p95: f64,
     /// Largest ΔE00 of any one patch: a patch above it fails.
     pub max_patch: f64,
+    /// Largest mean ΔE ITP (BT.2124) over the judged patches: the `[publish]` limits
+    /// of a profile of an HDR signal, whose light is absolute.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_mean_itp: Option<f64>,
 }
 
 /// The named presets of `--criteria`: (name, mean, p95, any one patch).
@@ -58,6 +62,19 @@ impl Criteria {
             max_mean: publish.max_mean_de00,
             max_p95: publish.max_p95_de00,
             max_patch: 2.0 * publish.max_p95_de00,
+            max_mean_itp: None,
+        }
+    }
+
+    /// [`Criteria::from_publish`] for a profile of `signal`: an HDR one is held to
+    /// `max_mean_itp` as well, as `calibrate` publishes it.
+    pub fn from_publish_for(
+        publish: &PublishConfig,
+        signal: Option<chromacal_model::plan::Signal>,
+    ) -> Criteria {
+        Criteria {
+            max_mean_itp: signal.filter(|s| s.is_hdr()).map(|_| publish.max_mean_itp),
+            ..Criteria::from_publish(publish)
         }
     }
 
@@ -71,6 +88,7 @@ impl Criteria {
         .iter()
         .filter(|(_, limit)| limit.is_finite())
         .map(|(what, limit)| format!("{what} ≤ {limit}"))
+        .chain(self.max_mean_itp.map(|l| format!("mean ΔE ITP ≤ {l}")))
         .collect();
         format!("{}: {}", self.name, limits.join(", "))
     }
@@ -83,6 +101,7 @@ impl Criteria {
             max_mean: threshold,
             max_p95: f64::INFINITY,
             max_patch: f64::INFINITY,
+            max_mean_itp: None,
         }
     }
 }
@@ -99,6 +118,7 @@ impl std::str::FromStr for Criteria {
                 max_mean: *mean,
                 max_p95: *p95,
                 max_patch: *patch,
+                max_mean_itp: None,
             });
         }
         let names: Vec<&str> = CRITERIA_PRESETS.iter().map(|p| p.0).collect();
@@ -132,6 +152,7 @@ impl std::str::FromStr for Criteria {
             max_mean,
             max_p95,
             max_patch,
+            max_mean_itp: None,
         })
     }
 }
@@ -184,6 +205,9 @@ pub struct PatchRow {
 pub struct Judgement {
     pub criteria: Criteria,
     pub stats: Option<ErrorStats>,
+    /// ΔE ITP of the judged patches, where the criteria have a limit on it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub itp: Option<ErrorStats>,
     pub failing_patches: usize,
     pub passes: bool,
 }
@@ -325,9 +349,22 @@ pub fn verify(
         .collect();
     let stats = ErrorStats::of(&judged);
     let failing_patches = patches.iter().filter(|p| p.judged && !p.passes).count();
-    let passes = stats.as_ref().is_some_and(|s| {
-        s.mean <= criteria.max_mean && s.p95 <= criteria.max_p95 && failing_patches == 0
+    let itp = criteria.max_mean_itp.and_then(|_| {
+        let values: Vec<f64> = patches
+            .iter()
+            .filter(|p| p.judged)
+            .map(|p| chromacal_color::ictcp::delta_e_itp(&p.measured, &p.nominal))
+            .collect();
+        ErrorStats::of(&values)
     });
+    let itp_passes = match criteria.max_mean_itp {
+        Some(limit) => itp.as_ref().is_some_and(|s| s.mean <= limit),
+        None => true,
+    };
+    let passes = itp_passes
+        && stats.as_ref().is_some_and(|s| {
+            s.mean <= criteria.max_mean && s.p95 <= criteria.max_p95 && failing_patches == 0
+        });
     let gamut_solid = AdditiveGamut::of_display(&model.matrix, &model.black);
     Verification {
         patches,
@@ -335,6 +372,7 @@ pub fn verify(
         judgement: Judgement {
             criteria: criteria.clone(),
             stats,
+            itp,
             failing_patches,
             passes,
         },

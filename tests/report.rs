@@ -402,6 +402,10 @@ fn an_hdr_calibration_s_report_draws_its_pq_tracking_and_its_limiter() {
             .arg("--report")
             .arg(&page),
     );
+    // Judged by the limits it was published by, the HDR half included.
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(html.contains("mean ΔE ITP ≤ 1"), "{html:.2000}");
+    assert!(html.contains("id=\"judged-itp\""), "{html:.2000}");
     let profile = chromacal::profile::Profile::read(&state.join("current.toml")).unwrap();
     let levels = profile.calibration.as_ref().unwrap().levels.len() as u64;
     let limiter = profile.report.limiter.as_ref().unwrap();

@@ -350,13 +350,7 @@ pub fn publish_rejection(
     }
     limits
         .rejection(fitted.report.held_out.as_ref(), "held-out")
-        .or_else(|| {
-            let itp =
-                chromacal_model::fit::validate::delta_e_itp_stats(&fitted.report.held_out_patches);
-            signal
-                .filter(|s| s.is_hdr())
-                .and_then(|_| limits.itp_rejection(itp.as_ref()))
-        })
+        .or_else(|| limits.hdr_rejection(signal, &fitted.report.held_out_patches))
 }
 
 /// Measure every patch of the journal's plan that is missing, on any display and

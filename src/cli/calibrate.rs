@@ -180,7 +180,10 @@ fn calibrate(
     if let Some(path) = report_path {
         let readings = chromacal::measurement_file::read_measurements(&outcome.journal_path)?;
         // Judged by the limits the run publishes by.
-        let criteria = chromacal::verification::Criteria::from_publish(&loaded.config.publish);
+        let criteria = chromacal::verification::Criteria::from_publish_for(
+            &loaded.config.publish,
+            outcome.profile.provenance.signal,
+        );
         super::report::write_for(
             &outcome.profile,
             Some(&readings),

@@ -261,8 +261,9 @@ impl PublishConfig {
         Ok(())
     }
 
-    /// The one gate every publishing path goes through: why a profile whose error (on
-    /// held-out patches, or the spatial map's cross-validation) is `stats` may not
+    /// The one gate every publishing path goes through (with
+    /// [`PublishConfig::hdr_rejection`] for a profile of an HDR signal): why a profile
+    /// whose error (on held-out patches, or the spatial map's cross-validation) is `stats` may not
     /// replace the current one, or `None` when it may. A figure that is not a finite
     /// number is refused: an error that cannot be told is not within any limit.
     pub fn rejection(&self, stats: Option<&ErrorStats>, what: &str) -> Option<String> {
@@ -292,9 +293,20 @@ impl PublishConfig {
         None
     }
 
-    /// The HDR half of the gate: why a profile of an HDR signal whose held-out ΔE ITP
-    /// is `stats` may not replace the current one, or `None` when it may. Applied on
-    /// top of [`PublishConfig::rejection`], never instead of it.
+    /// The HDR half of the gate: why a profile of `signal` whose held-out patches are
+    /// `patches` may not replace the current one, or `None` when it may (always for
+    /// an SDR signal). Applied on top of [`PublishConfig::rejection`], never instead of
+    /// it, by every path that publishes.
+    pub fn hdr_rejection(
+        &self,
+        signal: Option<chromacal_model::plan::Signal>,
+        patches: &[chromacal_model::fit::validate::PatchError],
+    ) -> Option<String> {
+        signal.filter(|s| s.is_hdr())?;
+        self.itp_rejection(chromacal_model::fit::validate::delta_e_itp_stats(patches).as_ref())
+    }
+
+    /// Why a held-out ΔE ITP of `stats` misses `max_mean_itp`, or `None`.
     pub fn itp_rejection(&self, stats: Option<&ErrorStats>) -> Option<String> {
         let Some(s) = stats else {
             return Some(
@@ -302,6 +314,9 @@ impl PublishConfig {
                     .to_string(),
             );
         };
+        if !s.mean.is_finite() {
+            return Some(format!("held-out mean ΔE ITP {} is not a number", s.mean));
+        }
         if !(s.mean <= self.max_mean_itp) {
             return Some(format!(
                 "held-out mean ΔE ITP {:.3} is above the limit {} (publish.max_mean_itp: an HDR signal's light is absolute, and ΔE00 relative to the white passes misses near black)",
@@ -984,13 +999,13 @@ mod tests {
         );
         // The HDR half: the mean ΔE ITP alone, a NaN refused, no patches unknown.
         assert_eq!(limits.itp_rejection(Some(&stats(0.9, 3.0))), None);
-        for mean in [1.2, f64::NAN] {
-            let why = limits.itp_rejection(Some(&stats(mean, 1.0))).unwrap();
-            assert!(
-                why.contains("mean ΔE ITP") && why.contains("limit 1"),
-                "{why}"
-            );
-        }
+        let why = limits.itp_rejection(Some(&stats(1.2, 1.0))).unwrap();
+        assert!(
+            why.contains("mean ΔE ITP 1.200") && why.contains("limit 1"),
+            "{why}"
+        );
+        let why = limits.itp_rejection(Some(&stats(f64::NAN, 1.0))).unwrap();
+        assert!(why.contains("is not a number"), "{why}");
         assert!(limits.itp_rejection(None).unwrap().contains("unknown"));
     }
 

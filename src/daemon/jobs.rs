@@ -808,7 +808,13 @@ async fn uniformity(
     updated.schema_version = SCHEMA_VERSION;
     let text = updated.to_toml().map_err(|e| e.to_string())?;
     let limits = &config.publish;
-    let rejection = limits.rejection(chosen.as_ref(), "the spatial map's cross-validated");
+    // The profile it replaces was held to the HDR half of the gate when published; a
+    // profile published before that limit is held to it here.
+    let rejection = limits
+        .rejection(chosen.as_ref(), "the spatial map's cross-validated")
+        .or_else(|| {
+            limits.hdr_rejection(profile.provenance.signal, &profile.report.held_out_patches)
+        });
     let passes = rejection.is_none();
     let store_error = |e: std::io::Error| format!("profile store: {e}");
     if passes {

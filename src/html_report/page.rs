@@ -249,8 +249,11 @@ fn summary(profile: &Profile, verified: Option<(&Verification, &str)>) -> Markup
                     (judged) " patches judged: mean ΔE00 "
                     span #judged-mean { (format!("{:.3}", s.mean)) }
                     ", 95th percentile " (format!("{:.3}", s.p95))
-                    ", max " (format!("{:.3}", s.max)) "; "
-                    (j.failing_patches) " above the patch limit. "
+                    ", max " (format!("{:.3}", s.max))
+                    @if let Some(i) = &j.itp {
+                        "; mean ΔE ITP " span #judged-itp { (format!("{:.3}", i.mean)) }
+                    }
+                    "; " (j.failing_patches) " above the patch limit. "
                     @if j.passes { span.passes #verdict { "Passes." } }
                     @else { span.fails #verdict { "Fails." } }
                 },
