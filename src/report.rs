@@ -163,7 +163,7 @@ fn hlg_plan_hint(outcome: &crate::calibrate::session::CalibrationOutcome) -> Str
         held_out_itp(&outcome.profile.report.held_out_patches).filter(|s| s.mean > HLG_HINT_ABOVE);
     match missed {
         Some(s) if hlg && outcome.plan.sequential.is_some() => format!(
-            "HLG: the held-out mixtures miss by {:.2} ΔE ITP on average. An HLG panel that is not a smooth law needs more ramp levels than a sequential plan measures: [plan] strategy = \"fixed\" with budget = 120 (33 levels a channel) took virtual LCDs of ISETBio's HP and Dell tables from 4.5 and 4.3 to 0.24–0.37 and 0.25–0.33 ΔE ITP (docs/hdr.md)\n",
+            "HLG: the held-out mixtures miss by {:.2} ΔE ITP on average. An HLG panel that is not a smooth law needs more ramp levels than a sequential plan measures: [plan] strategy = \"fixed\" with budget = 120 (33 levels a channel) took virtual LCDs of ISETBio's HP and Dell tables from 5.6 and 9.2 to 0.24–0.37 and 0.25–0.33 ΔE ITP (docs/hdr.md)\n",
             s.mean
         ),
         _ => String::new(),

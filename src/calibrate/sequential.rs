@@ -15,13 +15,6 @@
 //! luminance (a cost-weighted sequential design: each step buys the most variance
 //! removed per unit cost, the rule of thumb of budgeted experimental design).
 //!
-//! For an HDR signal the spreads are told in ΔE ITP (BT.2124) on absolute light:
-//! ΔE00 against an 800 cd/m² white does not see where the curves are unsure near
-//! black. The estimate is then the larger of a ΔE00 and a ΔE ITP figure, and the run
-//! says both. On virtual HLG LCDs of
-//! ISETBio's Dell and Apple tables this took the held-out mixtures from 6.8–9.5 and
-//! 11.8–23 ΔE ITP to 2.4–4.1 and 2.7–6.3 with the same 40 patches (docs/hdr.md).
-//!
 //! The choice depends on nothing but the journal, so a resumed run (`--resume`) goes
 //! on exactly as the run it resumes would have: the same next patch from the same
 //! readings.
@@ -35,9 +28,7 @@ use chromacal_color::Xyz;
 use chromacal_display::PatchDisplay;
 use chromacal_instruments::Instrument;
 use chromacal_model::Drive;
-use chromacal_model::fit::uncertainty::{
-    FoldModels, SpreadMetric, fold_models, prediction_spread_in,
-};
+use chromacal_model::fit::uncertainty::{FoldModels, fold_models, prediction_spread};
 use chromacal_model::fit::{FitError, FittedModel, fit_monitor};
 use chromacal_model::measurement::{MeasurementSet, Role};
 use chromacal_model::plan::{Plan, PlannedPatch};
@@ -46,53 +37,15 @@ use chromacal_model::screen::{Codes, Geometry, Patch};
 /// Candidate levels: k / `GRID` for k = 1 … GRID − 1.
 const GRID: usize = 32;
 
-/// The estimated held-out mean error ([`estimated_error`]) and its two parts. For an
-/// HDR signal the spread is in ΔE ITP while the law's cross-validation stays in
-/// ΔE00 (told in ΔE ITP it was tried and not kept: docs/hdr.md), so the estimate is
-/// said with both.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Estimate {
-    /// The chosen law's cross-validated mean ΔE00.
-    pub cross_validated: f64,
-    /// The mean prediction spread at the verification patches' drives: ΔE ITP for
-    /// an HDR signal, ΔE00 otherwise.
-    pub spread: f64,
-    /// The spread is in ΔE ITP (an HDR signal).
-    pub itp: bool,
-}
-
-impl Estimate {
-    /// What the run stops on: the larger part.
-    pub fn value(&self) -> f64 {
-        self.cross_validated.max(self.spread)
-    }
-}
-
-impl std::fmt::Display for Estimate {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if self.itp {
-            write!(
-                f,
-                "{:.3}: prediction spread {:.3} ΔE ITP, the law's cross-validation {:.3} ΔE00",
-                self.value(),
-                self.spread,
-                self.cross_validated
-            )
-        } else {
-            write!(f, "{:.3}", self.value())
-        }
-    }
-}
-
 /// Why a sequential run stopped adding patches.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Stop {
-    /// The estimated held-out mean ΔE00 (ΔE ITP for an HDR signal) met the target.
-    TargetMet { estimate: Estimate },
+    /// The estimated held-out mean ΔE00 met the target.
+    TargetMet { estimate: f64 },
     /// The counted patches reached the budget.
-    BudgetSpent { estimate: Option<Estimate> },
+    BudgetSpent { estimate: Option<f64> },
     /// Every candidate has been measured.
-    NoCandidate { estimate: Option<Estimate> },
+    NoCandidate { estimate: Option<f64> },
     /// The readings so far could not be fitted; the run goes on to the fit, which says
     /// why.
     Unfitted(FitError),
@@ -100,13 +53,10 @@ pub enum Stop {
 
 impl std::fmt::Display for Stop {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let said = |e: &Option<Estimate>| e.map_or(String::new(), |e| format!(" (estimate {e})"));
+        let said = |e: &Option<f64>| e.map_or(String::new(), |e| format!(" (estimate {e:.3})"));
         match self {
-            Stop::TargetMet { estimate } if !estimate.itp => {
-                write!(f, "estimated held-out ΔE00 {estimate} met the target")
-            }
             Stop::TargetMet { estimate } => {
-                write!(f, "estimated held-out error {estimate} met the target")
+                write!(f, "estimated held-out ΔE00 {estimate:.3} met the target")
             }
             Stop::BudgetSpent { estimate } => write!(f, "budget spent{}", said(estimate)),
             Stop::NoCandidate { estimate } => {
@@ -122,9 +72,9 @@ impl std::fmt::Display for Stop {
 pub enum Step {
     Measure {
         patch: PlannedPatch,
-        /// Its prediction spread, in the estimate's metric.
+        /// Its prediction spread, ΔE00.
         spread: f64,
-        estimate: Option<Estimate>,
+        estimate: Option<f64>,
     },
     Stop(Stop),
 }
@@ -154,17 +104,15 @@ pub fn counted(set: &MeasurementSet) -> usize {
 
 /// The estimate of held-out error a sequential run stops on, the larger of two: the
 /// chosen law's cross-validated mean ΔE00 over ramps and greys left out by level, and
-/// the mean prediction spread (`fit::uncertainty`) in `metric` at the drives of the
-/// plan's verification patches (their drives only: their readings are never looked
-/// at). The first alone is optimistic where mixtures sit between the levels measured;
-/// for an HDR signal the second, in ΔE ITP, sees the curves' doubt near black, which
-/// ΔE00 against the white does not.
+/// the mean prediction spread (`fit::uncertainty`) at the drives of the plan's
+/// verification patches (their drives only: their readings are never looked at). The
+/// first alone is optimistic where mixtures sit between the levels measured.
 pub fn estimated_error(
     fitted: &FittedModel,
     folds: &FoldModels,
     plan: &Plan,
-    metric: &SpreadMetric,
-) -> Option<Estimate> {
+    white: &Xyz,
+) -> Option<f64> {
     let cross_validated = fitted
         .report
         .laws
@@ -180,14 +128,10 @@ pub fn estimated_error(
         .collect();
     let spread = drives
         .iter()
-        .map(|d| prediction_spread_in(folds, *d, metric))
+        .map(|d| prediction_spread(folds, *d, white))
         .sum::<f64>()
         / drives.len().max(1) as f64;
-    Some(Estimate {
-        cross_validated,
-        spread,
-        itp: matches!(metric, SpreadMetric::Itp),
-    })
+    Some(cross_validated.max(spread))
 }
 
 /// Each usable reading's luminance (log10 cd/m², in the set's units) and the seconds
@@ -301,16 +245,9 @@ fn next_step_for(header: &JournalHeader, set: &MeasurementSet, config: &Config) 
         ))));
     };
     let white: Xyz = set.mean_white().unwrap_or_else(|| fitted.model.white());
-    // An HDR signal's light is absolute: its patches are chosen by their spread in
-    // ΔE ITP, and the estimate's spread is told in it.
-    let metric = if header.plan.signal.is_some_and(|s| s.is_hdr()) {
-        SpreadMetric::Itp
-    } else {
-        SpreadMetric::De00(white)
-    };
-    let estimate = estimated_error(&fitted, &folds, &header.plan, &metric);
+    let estimate = estimated_error(&fitted, &folds, &header.plan, &white);
     if let Some(e) = estimate
-        && e.value() <= limits.target_de00
+        && e <= limits.target_de00
     {
         return Step::Stop(Stop::TargetMet { estimate: e });
     }
@@ -327,7 +264,7 @@ fn next_step_for(header: &JournalHeader, set: &MeasurementSet, config: &Config) 
     let best = candidates(set, bit_depth)
         .into_iter()
         .map(|codes| {
-            let spread = prediction_spread_in(&folds, codes.drive(), &metric);
+            let spread = prediction_spread(&folds, codes.drive(), &white);
             let y = fitted.model.forward_centre(codes.drive()).y;
             let seconds = expected_seconds(&durations, y) + config.display.settle_s;
             (codes, spread, spread * spread / seconds.max(1e-3))
@@ -409,8 +346,7 @@ pub async fn run_sequential<D: PatchDisplay, I: Instrument>(
                     index = patch.index,
                     drive = ?patch.patch.codes.drive(),
                     spread,
-                    estimate = estimate.map(|e| e.value()),
-                    itp = estimate.is_some_and(|e| e.itp),
+                    estimate,
                     "sequential plan: next patch"
                 );
                 patch

@@ -67,34 +67,9 @@ pub fn fold_models(set: &MeasurementSet, options: &FitOptions, law: LawKind) -> 
     Some(FoldModels { reference, folds })
 }
 
-/// The colour difference a prediction spread is told in.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum SpreadMetric {
-    /// CIEDE2000 against this white (relative light: an SDR signal).
-    De00(Xyz),
-    /// ΔE ITP (ITU-R BT.2124) on absolute light in cd/m² (an HDR signal, whose
-    /// near-black misses ΔE00 against an 800 cd/m² white does not see).
-    Itp,
-}
-
-impl SpreadMetric {
-    /// The difference between two predictions.
-    pub fn between(&self, a: &Xyz, b: &Xyz) -> f64 {
-        match self {
-            SpreadMetric::De00(white) => delta_e00_xyz(a, b, white),
-            SpreadMetric::Itp => chromacal_color::ictcp::delta_e_itp(a, b),
-        }
-    }
-}
-
 /// Root-mean-square ΔE00 between the fold models' predictions of `drive` and the
 /// reference's, against `white`; 0 without fold models.
 pub fn prediction_spread(models: &FoldModels, drive: Drive, white: &Xyz) -> f64 {
-    prediction_spread_in(models, drive, &SpreadMetric::De00(*white))
-}
-
-/// [`prediction_spread`] told in `metric`.
-pub fn prediction_spread_in(models: &FoldModels, drive: Drive, metric: &SpreadMetric) -> f64 {
     let folds = &models.folds;
     if folds.is_empty() {
         return 0.0;
@@ -102,7 +77,7 @@ pub fn prediction_spread_in(models: &FoldModels, drive: Drive, metric: &SpreadMe
     let centre = models.reference.forward_centre(drive);
     let squares: f64 = folds
         .iter()
-        .map(|m| metric.between(&m.forward_centre(drive), &centre).powi(2))
+        .map(|m| delta_e00_xyz(&m.forward_centre(drive), &centre, white).powi(2))
         .sum();
     (squares / folds.len() as f64).sqrt()
 }
