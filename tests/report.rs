@@ -406,6 +406,15 @@ fn an_hdr_calibration_s_report_draws_its_pq_tracking_and_its_limiter() {
     let html = std::fs::read_to_string(&page).unwrap();
     assert!(html.contains("mean ΔE ITP ≤ 1"), "{html:.2000}");
     assert!(html.contains("id=\"judged-itp\""), "{html:.2000}");
+    // `report` of the profile alone judges it the same way.
+    let out = chromacal()
+        .arg("report")
+        .arg(state.join("current.toml"))
+        .args(["-o", "-"])
+        .output()
+        .unwrap();
+    let alone = String::from_utf8_lossy(&out.stdout);
+    assert!(alone.contains("mean ΔE ITP ≤ 1"), "{alone:.2000}");
     let profile = chromacal::profile::Profile::read(&state.join("current.toml")).unwrap();
     let levels = profile.calibration.as_ref().unwrap().levels.len() as u64;
     let limiter = profile.report.limiter.as_ref().unwrap();

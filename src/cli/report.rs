@@ -55,10 +55,19 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
             history: None,
             device: None,
             checked: None,
-            criteria: args.criteria.unwrap_or_default(),
+            criteria: args.criteria.unwrap_or_else(|| default_criteria(&profile)),
             verified: verified.as_ref(),
         },
         &args.output,
+    )
+}
+
+/// The criteria a page is judged by unless given: the default `[publish]` limits, with
+/// the ΔE ITP one for a profile of an HDR signal, as `calibrate` publishes it.
+fn default_criteria(profile: &Profile) -> Criteria {
+    Criteria::from_publish_for(
+        &chromacal::config::PublishConfig::default(),
+        profile.provenance.signal,
     )
 }
 
@@ -128,7 +137,7 @@ pub fn write_verification(outcome: &VerifyOutcome, output: &Path) -> Result<(), 
             history: None,
             device: None,
             checked: None,
-            criteria: Criteria::default(),
+            criteria: default_criteria(profile),
             verified: Some(&outcome.report),
         },
         output,
