@@ -415,6 +415,20 @@ fn an_hdr_calibration_s_report_draws_its_pq_tracking_and_its_limiter() {
         .unwrap();
     let alone = String::from_utf8_lossy(&out.stdout);
     assert!(alone.contains("mean ΔE ITP ≤ 1"), "{alone:.2000}");
+    // So does the page of a refit of its journal.
+    let refit_page = dir.path().join("refit.html");
+    let current = chromacal::profile::Profile::read(&state.join("current.toml")).unwrap();
+    succeed(
+        chromacal()
+            .arg("fit")
+            .arg(&current.provenance.source)
+            .arg("-o")
+            .arg(dir.path().join("refit.toml"))
+            .arg("--report")
+            .arg(&refit_page),
+    );
+    let refit = std::fs::read_to_string(&refit_page).unwrap();
+    assert!(refit.contains("mean ΔE ITP ≤ 1"), "{refit:.2000}");
     let profile = chromacal::profile::Profile::read(&state.join("current.toml")).unwrap();
     let levels = profile.calibration.as_ref().unwrap().levels.len() as u64;
     let limiter = profile.report.limiter.as_ref().unwrap();

@@ -131,13 +131,16 @@ fn check(args: &CheckArgs) -> Result<(), Failure> {
                 "--json and --report - both want standard output: write the report to a file",
             ));
         }
-        let criteria = args.criteria.clone().unwrap_or_default();
         // The page shows the profile as it was compared: scaled to the readings' units.
         let compared = Profile {
             model: model.clone(),
             units: set.units,
             ..profile.clone()
         };
+        let criteria = args
+            .criteria
+            .clone()
+            .unwrap_or_else(|| super::report::default_criteria(&compared));
         let (readings, readings_note) = match readings_of(&profile) {
             Ok(_) if note.is_some() => (
                 None,

@@ -149,7 +149,8 @@ fn fit(
         profile.write(output)?;
     }
     if let Some(path) = report_path {
-        super::report::write_for(&profile, Some(&set), Default::default(), None, path)?;
+        let criteria = super::report::default_criteria(&profile);
+        super::report::write_for(&profile, Some(&set), criteria, None, path)?;
     }
     if json && to_stdout {
         eprintln!("{}", serde_json::to_string_pretty(&fitted.report)?);

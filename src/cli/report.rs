@@ -63,11 +63,13 @@ pub fn run(args: ReportArgs) -> Result<(), Failure> {
 }
 
 /// The criteria a page is judged by unless given: the default `[publish]` limits, with
-/// the ΔE ITP one for a profile of an HDR signal, as `calibrate` publishes it.
-fn default_criteria(profile: &Profile) -> Criteria {
+/// the ΔE ITP one for a profile of an HDR signal in cd/m², as `calibrate` publishes it
+/// (ΔE ITP of relative light, white at 100, would judge nothing).
+pub fn default_criteria(profile: &Profile) -> Criteria {
+    let absolute = profile.units == chromacal_model::measurement::Units::Absolute;
     Criteria::from_publish_for(
         &chromacal::config::PublishConfig::default(),
-        profile.provenance.signal,
+        profile.provenance.signal.filter(|_| absolute),
     )
 }
 

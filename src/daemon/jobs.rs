@@ -841,9 +841,9 @@ async fn uniformity(
     Ok(JobSuccess {
         message: match &rejection {
             None => format!("published {new_id}: a new spatial map ({cv})"),
-            Some(why) => format!(
-                "kept {new_id} but not published: the new map misses the [publish] limits ({why})"
-            ),
+            Some(why) => {
+                format!("kept {new_id} but not published: it misses the [publish] limits ({why})")
+            }
         },
         profile_id: Some(new_id),
         published: passes,
