@@ -7,7 +7,7 @@ use crate::profile::Profile;
 use chromacal_color::spaces::xyz_to_xyy;
 use chromacal_model::fit::checks::Verdict;
 use chromacal_model::fit::stats::ErrorStats;
-use chromacal_model::fit::validate::Evaluation;
+use chromacal_model::fit::validate::{Evaluation, delta_e_itp_stats};
 use chromacal_model::fit::{FitReport, WhiteAnchor};
 use chromacal_model::plan::BudgetBreakdown;
 use chromacal_model::spatial::SpatialMap;
@@ -135,7 +135,7 @@ pub fn hdr_summary(profile: &Profile) -> String {
         profile.model.white().y,
         profile.model.black.y
     );
-    match held_out_itp(&profile.report.held_out_patches) {
+    match delta_e_itp_stats(&profile.report.held_out_patches) {
         Some(s) => {
             let _ = writeln!(
                 out,
@@ -148,19 +148,16 @@ pub fn hdr_summary(profile: &Profile) -> String {
     out
 }
 
-/// Held-out error a profile of an HLG signal should stay under, ΔE ITP: DisplayCAL's
-/// recommended mean for HDR.
-const HLG_HINT_ABOVE: f64 = 1.0;
-
 /// After a sequential run of an HLG signal whose held-out mixtures miss by more than
-/// `HLG_HINT_ABOVE`: what to measure instead. The OOTF through the laws is as right as
-/// each channel's law, and a sequential plan spends its patches on greys, leaving a
-/// table law a few ramp levels to follow a panel's knees with (docs/hdr.md, HDR LCDs of
-/// measured tables); empty otherwise.
+/// the default `[publish] max_mean_itp` (DisplayCAL's recommended mean for HDR): what
+/// to measure instead. The OOTF through the laws is as right as each channel's law,
+/// and a sequential plan spends its patches on greys, leaving a table law a few ramp
+/// levels to follow a panel's knees with (docs/hdr.md, HDR LCDs of measured tables);
+/// empty otherwise.
 fn hlg_plan_hint(outcome: &crate::calibrate::session::CalibrationOutcome) -> String {
     let hlg = outcome.profile.provenance.signal == Some(chromacal_model::plan::Signal::Hlg);
-    let missed =
-        held_out_itp(&outcome.profile.report.held_out_patches).filter(|s| s.mean > HLG_HINT_ABOVE);
+    let missed = delta_e_itp_stats(&outcome.profile.report.held_out_patches)
+        .filter(|s| s.mean > crate::config::PublishConfig::default().max_mean_itp);
     match missed {
         Some(s) if hlg && outcome.plan.sequential.is_some() => format!(
             "HLG: the held-out mixtures miss by {:.2} ΔE ITP on average. An HLG panel that is not a smooth law needs more ramp levels than a sequential plan measures: [plan] strategy = \"fixed\" with budget = 120 (33 levels a channel) took virtual LCDs of ISETBio's HP and Dell tables from 5.6 and 9.2 to 0.24–0.37 and 0.25–0.33 ΔE ITP (docs/hdr.md)\n",
@@ -169,9 +166,6 @@ fn hlg_plan_hint(outcome: &crate::calibrate::session::CalibrationOutcome) -> Str
         _ => String::new(),
     }
 }
-
-/// ΔE ITP (BT.2124) of each held-out patch, measured against predicted, in cd/m².
-pub use chromacal_model::fit::validate::delta_e_itp_stats as held_out_itp;
 
 /// The brightness limiter: each window measured, as the additive model and as the
 /// limiter fitted without it predict it, and whether the term was kept.

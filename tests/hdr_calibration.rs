@@ -8,8 +8,8 @@
 
 use chromacal::journal::Journal;
 use chromacal::profile::Profile;
-use chromacal::report::held_out_itp;
 use chromacal_model::fit::terms::TermSet;
+use chromacal_model::fit::validate::delta_e_itp_stats;
 use chromacal_model::plan::Signal;
 use chromacal_model::transfer::LawKind;
 
@@ -49,7 +49,7 @@ fn assert_calibrated_to_pq(label: &str, profile: &Profile) {
         "{label}: {:?}",
         profile.report.terms
     );
-    let itp = held_out_itp(&profile.report.held_out_patches).unwrap();
+    let itp = delta_e_itp_stats(&profile.report.held_out_patches).unwrap();
     assert!(
         itp.n >= 12 && itp.mean <= 1.0,
         "{label}: held-out {itp:?} ΔE ITP"
@@ -165,6 +165,7 @@ fn calibrate_json(
     dir: &std::path::Path,
     name: &str,
     config_text: &str,
+    extra: &[&std::ffi::OsStr],
 ) -> (i32, serde_json::Value) {
     let config = dir.join(format!("{name}.toml"));
     std::fs::write(&config, config_text).unwrap();
@@ -173,6 +174,7 @@ fn calibrate_json(
         .arg(&config)
         .arg("--state-dir")
         .arg(dir.join(name))
+        .args(extra)
         .output()
         .unwrap();
     let summary = serde_json::from_slice(&out.stdout)
@@ -189,24 +191,14 @@ fn an_hdr_profile_is_published_only_within_the_itp_limit() {
     let dir = tempfile::tempdir().unwrap();
     let sony = isetbio_monitor("isetbio_oled_sony", "preset = \"hdr-oled\"");
     let pq = "[plan]\nbit_depth = 10\n[target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\n";
-    let strict = dir.path().join("strict.toml");
-    std::fs::write(
-        &strict,
-        format!("{sony}{pq}[publish]\nmax_mean_itp = 0.05\n"),
-    )
-    .unwrap();
     let page = dir.path().join("strict.html");
-    let out = chromacal()
-        .args(["calibrate", "--json", "--config"])
-        .arg(&strict)
-        .arg("--state-dir")
-        .arg(dir.path().join("strict"))
-        .arg("--report")
-        .arg(&page)
-        .output()
-        .unwrap();
-    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(out.status.code(), Some(3), "{summary}");
+    let (code, summary) = calibrate_json(
+        dir.path(),
+        "strict",
+        &format!("{sony}{pq}[publish]\nmax_mean_itp = 0.05\n"),
+        &["--report".as_ref(), page.as_os_str()],
+    );
+    assert_eq!(code, 3, "{summary}");
     // Its report judges it by the same limits: it fails there too.
     let html = std::fs::read_to_string(&page).unwrap();
     assert!(html.contains("mean ΔE ITP ≤ 0.05"), "{html:.2000}");
@@ -216,7 +208,7 @@ fn an_hdr_profile_is_published_only_within_the_itp_limit() {
     let why = summary["not_published_because"].as_str().unwrap();
     assert!(why.contains("mean ΔE ITP") && why.contains("0.05"), "{why}");
     // The same run within the default limit is published.
-    let (code, summary) = calibrate_json(dir.path(), "default", &format!("{sony}{pq}"));
+    let (code, summary) = calibrate_json(dir.path(), "default", &format!("{sony}{pq}"), &[]);
     assert_eq!(
         (code, &summary["published"]),
         (0, &serde_json::json!(true)),
@@ -229,12 +221,15 @@ fn an_hdr_profile_is_published_only_within_the_itp_limit() {
         "hlg-lcd",
         "[monitor]\npreset = \"hdr-lcd\"\n[plan]\nbit_depth = 10\nseed = 1\n\
          [instrument.simulated]\nseed = 1\n[target]\nwhite = \"D65\"\ntone = \"hlg\"\n",
+        &[],
     );
     let profile = Profile::read(std::path::Path::new(
         summary["profile_path"].as_str().unwrap(),
     ))
     .unwrap();
-    let itp = held_out_itp(&profile.report.held_out_patches).unwrap().mean;
+    let itp = delta_e_itp_stats(&profile.report.held_out_patches)
+        .unwrap()
+        .mean;
     assert!(
         summary["report"]["held_out"]["mean"].as_f64().unwrap() < 0.5,
         "{summary}"
@@ -246,6 +241,7 @@ fn an_hdr_profile_is_published_only_within_the_itp_limit() {
         dir.path(),
         "sdr",
         "[monitor]\npreset = \"crt\"\n[publish]\nmax_mean_itp = 0.000001\n",
+        &[],
     );
     assert_eq!(
         (code, &summary["published"]),
@@ -404,7 +400,7 @@ fn curved_law_against_plain(
     // The refitted profile says the signal the readings were taken with, as the run's.
     assert!(plain.provenance.signal.is_some_and(|s| s.is_hdr()));
     assert_eq!(refit.provenance.signal, plain.provenance.signal);
-    let itp = |p: &Profile| held_out_itp(&p.report.held_out_patches).unwrap().mean;
+    let itp = |p: &Profile| delta_e_itp_stats(&p.report.held_out_patches).unwrap().mean;
     let (curved_itp, plain_itp) = (itp(&curved), itp(&plain));
     eprintln!("held-out ΔE ITP: curved {curved_itp:.3}, plain {plain_itp:.3}");
     assert!(
@@ -437,7 +433,7 @@ fn calibrate_profile(
     config_text: &str,
     publish: Publish,
 ) -> Profile {
-    let (code, summary) = calibrate_json(dir, name, config_text);
+    let (code, summary) = calibrate_json(dir, name, config_text, &[]);
     let allowed = code == 0 || (code == 3 && publish == Publish::May);
     assert!(allowed, "{name}: exit {code}: {summary}");
     Profile::read(std::path::Path::new(
@@ -547,7 +543,7 @@ fn an_hlg_display_is_calibrated_through_its_ootf() {
         "{:?}",
         profile.report.terms
     );
-    let itp = held_out_itp(&profile.report.held_out_patches).unwrap();
+    let itp = delta_e_itp_stats(&profile.report.held_out_patches).unwrap();
     assert!(itp.n >= 12 && itp.mean <= 1.0, "held-out {itp:?} ΔE ITP");
     // The greys track the HLG tone through the curves, and the run's own
     // verification (the SDR chart: there is no HLG one) passes, greys near white
@@ -594,7 +590,7 @@ fn hlg_lcds_of_measured_tables_are_modelled_from_dense_ramps() {
             beyond.iter().all(|p| (0.3..3.0).contains(p)),
             "{stem}: {beyond:?}"
         );
-        let itp = held_out_itp(&profile.report.held_out_patches).unwrap();
+        let itp = delta_e_itp_stats(&profile.report.held_out_patches).unwrap();
         assert!(
             itp.n >= 12 && itp.mean <= 1.0,
             "{stem}: held-out {itp:?} ΔE ITP"
@@ -651,7 +647,7 @@ fn the_hlg_ootf_is_taken_through_the_laws_where_the_panel_departs_from_the_gamma
         "{:?}",
         profile.report.terms
     );
-    let itp = held_out_itp(&profile.report.held_out_patches).unwrap();
+    let itp = delta_e_itp_stats(&profile.report.held_out_patches).unwrap();
     eprintln!("held-out {itp:?} ΔE ITP");
     assert!(itp.n >= 12 && itp.mean <= 0.25, "held-out {itp:?} ΔE ITP");
 }

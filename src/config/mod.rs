@@ -263,8 +263,8 @@ impl PublishConfig {
 
     /// The one gate every publishing path goes through (with
     /// [`PublishConfig::hdr_rejection`] for a profile of an HDR signal): why a profile
-    /// whose error (on held-out patches, or the spatial map's cross-validation) is `stats` may not
-    /// replace the current one, or `None` when it may. A figure that is not a finite
+    /// whose error (on held-out patches, or the spatial map's cross-validation) is
+    /// `stats` may not replace the current one, or `None` when it may. A figure that is not a finite
     /// number is refused: an error that cannot be told is not within any limit.
     pub fn rejection(&self, stats: Option<&ErrorStats>, what: &str) -> Option<String> {
         let Some(s) = stats else {
