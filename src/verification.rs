@@ -104,6 +104,25 @@ impl Criteria {
             max_mean_itp: None,
         }
     }
+
+    /// The pass mark of the daemon's `verify` jobs for a profile of `signal`: an HDR
+    /// one is judged by its mean ΔE ITP against `[schedule] threshold_itp` alone (as
+    /// the job judges it), any other by [`Criteria::verification_threshold`].
+    pub fn verification_threshold_for(
+        schedule: &crate::config::ScheduleConfig,
+        signal: Option<chromacal_model::plan::Signal>,
+    ) -> Criteria {
+        match signal.filter(|s| s.is_hdr()) {
+            Some(_) => Criteria {
+                name: "the verification threshold ([schedule] threshold_itp)".into(),
+                max_mean: f64::INFINITY,
+                max_p95: f64::INFINITY,
+                max_patch: f64::INFINITY,
+                max_mean_itp: Some(schedule.threshold_itp),
+            },
+            None => Criteria::verification_threshold(schedule.threshold_de00),
+        }
+    }
 }
 
 impl std::str::FromStr for Criteria {

@@ -141,7 +141,7 @@ async fn history_rollback_and_a_verification_are_recorded() {
         })
         .expect("a verification event");
     assert_eq!(record.profile_id, ids[1]);
-    assert_eq!(record.delta_e00.len(), 8);
+    assert_eq!(record.delta_e.len(), 8);
     let mean = record.stats.unwrap().mean;
     assert!(mean < 0.5, "a fresh profile verifies well: {mean}");
     let phases: Vec<String> = seen

@@ -346,3 +346,77 @@ async fn a_verify_job_on_a_calibrated_display_judges_it_through_its_curves() {
         .collect();
     assert!(verdicts.contains(&"pass"), "{history}");
 }
+
+/// A verify job on a profile of an HDR signal judges it in ΔE ITP on absolute light,
+/// as it was published, against `[schedule] threshold_itp`: not in ΔE00 relative to
+/// its white, where a miss near black does not show. The record, its event, the
+/// metrics, the fleet page and the device's report all say ΔE ITP.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_verify_job_on_an_hdr_profile_judges_it_in_delta_e_itp() {
+    let dir = tempfile::tempdir().unwrap();
+    // A ΔE00 threshold nothing could miss, and a ΔE ITP one any reading misses: the
+    // job fails exactly when it judges in ΔE ITP.
+    let config = format!(
+        "{}[plan]\nbit_depth = 10\n\
+         [target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\nlevels = 17\n\
+         [daemon]\nsimulated_time_scale = 0.001\n\
+         [schedule]\nthreshold_de00 = 1000.0\nthreshold_itp = 0.01\nescalate = false\n",
+        common::isetbio_monitor("isetbio_oled_sony", "preset = \"hdr-oled\""),
+    );
+    let daemon = start_daemon(dir.path(), &config);
+    let api = daemon.endpoint();
+    let mut events = subscribe(&api);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let first = start_job(&api, "calibrate").await;
+    let (_, outcome) = events_of_job(&mut events, &first, Duration::from_secs(120)).await;
+    assert!(outcome.published, "{outcome:?}");
+    let profile = outcome.profile_id.clone().unwrap();
+
+    let job = start_job(&api, "verify").await;
+    let (seen, outcome) = events_of_job(&mut events, &job, Duration::from_secs(120)).await;
+    assert_eq!(outcome.result, "ok", "{outcome:?}");
+    let record = seen
+        .iter()
+        .find_map(|e| match e {
+            Event::Verification { record } => Some(record.clone()),
+            _ => None,
+        })
+        .expect("a verification event");
+    eprintln!("{}", outcome.message);
+    assert_eq!(record.profile_id, profile);
+    assert_eq!(record.metric, chromacal::verify::Metric::Itp);
+    assert_eq!(record.threshold, 0.01);
+    let mean = record.stats.unwrap().mean;
+    // The profile is as good as it was published: within DisplayCAL's HDR limit.
+    assert!(mean > 0.01 && mean < 1.0, "{record:?}");
+    assert!(!record.passed() && !record.escalated, "{record:?}");
+    assert!(
+        outcome.message.contains("mean ΔE ITP")
+            && outcome.message.contains("past the threshold")
+            // Through its curves, the BT.2100 chart in ΔE ITP.
+            && outcome.message.contains("ΔE ITP from the target"),
+        "{}",
+        outcome.message
+    );
+    let metrics = get(&api, "/metrics").await.text();
+    assert!(
+        metrics.contains("chromacal_verification_delta_e_itp{device=\"default\",stat=\"mean\"}")
+            && metrics
+                .contains("chromacal_verification_threshold_delta_e_itp{device=\"default\"} 0.01")
+            && !metrics.contains("chromacal_verification_delta_e00{"),
+        "{metrics}"
+    );
+    let fleet = get(&api, "/").await.text();
+    assert!(
+        fleet.contains(&format!(
+            "class=\"fail\">fail</span> {mean:.3} ΔE ITP against 0.01 "
+        )),
+        "{fleet}"
+    );
+    let report = get(&api, "/report").await.text();
+    assert!(
+        report.contains("threshold_itp") && report.contains("mean ΔE ITP ≤ 0.01"),
+        "{report}"
+    );
+    assert!(report.contains("fig-history-itp"), "{report}");
+}

@@ -318,7 +318,7 @@ async fn the_daemon_serves_the_report_with_its_history() {
         said.as_str().unwrap().contains("measured to verify it"),
         "{said}"
     );
-    let recorded = history["verifications"].as_array().unwrap().last().unwrap()["delta_e00"]
+    let recorded = history["verifications"].as_array().unwrap().last().unwrap()["delta_e"]
         .as_array()
         .unwrap()
         .iter()

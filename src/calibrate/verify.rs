@@ -319,8 +319,9 @@ fn keep(
     store.append_verification(&VerificationRecord {
         at: chromacal_formats::time::now_rfc3339(),
         profile_id: profile.id.clone(),
+        metric: report.metric,
         stats: ErrorStats::of(&delta_e),
-        delta_e00: delta_e,
+        delta_e,
         threshold: report
             .results
             .iter()

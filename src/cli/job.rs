@@ -89,8 +89,9 @@ async fn watch_job(
                 ))?;
             }
             Event::Verification { record } => progress.line(format!(
-                "verification of {}: mean ΔE00 {:.3} (threshold {})",
+                "verification of {}: mean {} {:.3} (threshold {})",
                 record.profile_id,
+                record.metric.name(),
                 record.stats.map_or(f64::NAN, |s| s.mean),
                 record.threshold
             ))?,

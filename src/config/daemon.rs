@@ -144,6 +144,11 @@ pub struct ScheduleConfig {
     pub verify_patches: usize,
     /// Mean ΔE00 past which a verification starts a recalibration.
     pub threshold_de00: f64,
+    /// Mean ΔE ITP (BT.2124) past which a verification of a profile of an HDR
+    /// signal (PQ, HLG) starts a recalibration: such a profile is judged in ΔE ITP
+    /// on absolute light, as it was published (`publish.max_mean_itp`), not in ΔE00
+    /// relative to its white. 1 is DisplayCAL's recommended HDR limit.
+    pub threshold_itp: f64,
     /// Start the recalibration (false: only record and report).
     pub escalate: bool,
 }
@@ -154,6 +159,7 @@ impl Default for ScheduleConfig {
             verify_every_s: None,
             verify_patches: 8,
             threshold_de00: 1.0,
+            threshold_itp: 1.0,
             escalate: true,
         }
     }
@@ -169,6 +175,9 @@ impl ScheduleConfig {
         }
         if !(self.threshold_de00 > 0.0) {
             return Err("schedule.threshold_de00 must be positive".into());
+        }
+        if !(self.threshold_itp > 0.0) {
+            return Err("schedule.threshold_itp must be positive".into());
         }
         Ok(())
     }

@@ -108,6 +108,7 @@ pub const RANGES: &[Range] = &[
     r("schedule.verify_every_s", 0.01, 1e8),
     r("schedule.verify_patches", 5.0, 1000.0),
     r("schedule.threshold_de00", 1e-6, 1000.0),
+    r("schedule.threshold_itp", 1e-6, 1000.0),
     // [warmup]
     r("warmup.interval_s", 0.1, 3600.0),
     r("warmup.window", 3.0, 1000.0),

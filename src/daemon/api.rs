@@ -772,8 +772,9 @@ async fn report(Dev(device): Dev) -> Response {
             device: Some(device.name.clone()),
             checked: checked.as_ref(),
             // Judged as its verify jobs and the fleet page judge it.
-            criteria: Criteria::verification_threshold(
-                device.loaded.config.schedule.threshold_de00,
+            criteria: Criteria::verification_threshold_for(
+                &device.loaded.config.schedule,
+                profile.provenance.signal,
             ),
         })
     })

@@ -186,6 +186,7 @@ pub async fn fleet_page(daemon: &Daemon, logout: bool) -> Response {
             .and_then(|p| device.last_verification_of(&p.id))
             .map(|v| FleetVerification {
                 at: v.at,
+                metric: v.metric,
                 mean: v.stats.map(|s| s.mean),
                 threshold: v.threshold,
             });

@@ -18,6 +18,8 @@ use crate::calibrate::warmup::wait_for_warmup;
 use crate::journal::{JOURNAL_FORMAT, JOURNAL_VERSION, Journal, JournalHeader};
 use crate::profile::store::VerificationRecord;
 use crate::profile::{Profile, Provenance, SCHEMA_VERSION};
+use crate::verify::Metric;
+use chromacal_color::ictcp::delta_e_itp;
 use chromacal_color::spaces::xyz_to_xyy;
 use chromacal_display::PatchDisplay;
 use chromacal_formats::time::TimeSource;
@@ -581,8 +583,9 @@ async fn verify(
     let config = &device.loaded.config;
     let profile = current_profile(device)
         .ok_or_else(|| "there is no current profile to verify: calibrate first".to_string())?;
-    let plan = make_verification_plan(&config.plan, config.schedule.verify_patches)
+    let mut plan = make_verification_plan(&config.plan, config.schedule.verify_patches)
         .map_err(|e| e.to_string())?;
+    plan.signal = config.plan.signal.filter(|s| s.is_hdr());
     let journal = measure_plan(
         device,
         id,
@@ -600,8 +603,27 @@ async fn verify(
         .filter_map(|m| m.reading.xyz.map(|xyz| (m, xyz)))
         .collect();
     let evaluation = evaluate(&profile.model, usable);
-    let threshold = config.schedule.threshold_de00;
-    let past = evaluation.stats.is_some_and(|s| s.mean > threshold);
+    // A profile of an HDR signal is judged in ΔE ITP on absolute light, as it was
+    // published: ΔE00 relative to an 800 cd/m² white does not see a 10 % change at
+    // 0.5 cd/m².
+    let (metric, delta_e, threshold): (_, Vec<f64>, _) = match profile.provenance.signal {
+        Some(signal) if signal.is_hdr() => (
+            Metric::Itp,
+            evaluation
+                .patches
+                .iter()
+                .map(|p| delta_e_itp(&p.measured, &p.predicted))
+                .collect(),
+            config.schedule.threshold_itp,
+        ),
+        _ => (
+            Metric::De00,
+            evaluation.patches.iter().map(|p| p.delta_e00).collect(),
+            config.schedule.threshold_de00,
+        ),
+    };
+    let stats = ErrorStats::of(&delta_e);
+    let past = stats.is_some_and(|s| s.mean > threshold);
     // A profile with curves: the display as its user sees it, through them, judged
     // as `chromacal verify` judges it (and kept beside the profile).
     let through = match &profile.calibration {
@@ -615,8 +637,9 @@ async fn verify(
     let record = VerificationRecord {
         at: now_rfc3339(),
         profile_id: profile.id.clone(),
-        stats: evaluation.stats,
-        delta_e00: evaluation.patches.iter().map(|p| p.delta_e00).collect(),
+        metric,
+        stats,
+        delta_e,
         threshold,
         escalated: (past || failed) && config.schedule.escalate,
         journal: Some(crate::journal::stored_path(journal.path())),
@@ -633,19 +656,21 @@ async fn verify(
     let calibrated = match &through {
         None => String::new(),
         Some(Ok(report)) => format!(
-            "; through the curves: {} under {} (white {:.2} ΔE00 from the target, grey balance {:.2})",
+            "; through the curves: {} under {} (white {:.2} {} from the target, grey balance {:.2})",
             report.verdict.name(),
             report.criteria,
             report.state.white_delta_e,
+            report.metric.name(),
             report.state.grey_balance_mean
         ),
         Some(Err(e)) => format!("; not verified through the curves: {e}"),
     };
     Ok(JobSuccess {
         message: format!(
-            "profile {}: mean ΔE00 {mean:.3} over {} patches (threshold {threshold}){calibrated}{}",
+            "profile {}: mean {} {mean:.3} over {} patches (threshold {threshold}){calibrated}{}",
             profile.id,
-            record.delta_e00.len(),
+            metric.name(),
+            record.delta_e.len(),
             if record.escalated {
                 "; recalibrating"
             } else if past || failed {

@@ -19,6 +19,8 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::Registry;
 
 use super::events::Event;
+use crate::profile::store::VerificationRecord;
+use crate::verify::Metric;
 use chromacal_instruments::ReadingStatus;
 use chromacal_model::fit::stats::ErrorStats;
 
@@ -150,6 +152,8 @@ pub struct Metrics {
     up: Family<DeviceLabel, Gauge>,
     verification: Family<StatLabels, FloatGauge>,
     threshold: Family<DeviceLabel, FloatGauge>,
+    verification_itp: Family<StatLabels, FloatGauge>,
+    threshold_itp: Family<DeviceLabel, FloatGauge>,
     held_out: Family<StatLabels, FloatGauge>,
     white: Family<DeviceLabel, FloatGauge>,
     drift: Family<DeviceLabel, FloatGauge>,
@@ -252,6 +256,8 @@ impl Metrics {
             up: Family::default(),
             verification: Family::default(),
             threshold: Family::default(),
+            verification_itp: Family::default(),
+            threshold_itp: Family::default(),
             held_out: Family::default(),
             white: Family::default(),
             drift: Family::default(),
@@ -288,6 +294,16 @@ impl Metrics {
             "verification_threshold_delta_e00",
             "The mean ΔE00 past which a verification fails (schedule.threshold_de00)",
             metrics.threshold.clone(),
+        );
+        r.register(
+            "verification_delta_e_itp",
+            "The last verification's ΔE ITP (BT.2124) between readings and the current profile, for a profile of an HDR signal, which is judged in it (stat: mean, max)",
+            metrics.verification_itp.clone(),
+        );
+        r.register(
+            "verification_threshold_delta_e_itp",
+            "The mean ΔE ITP past which a verification of a profile of an HDR signal fails (schedule.threshold_itp)",
+            metrics.threshold_itp.clone(),
         );
         r.register(
             "held_out_delta_e00",
@@ -453,6 +469,7 @@ impl Metrics {
         }
         for family in [
             &self.threshold,
+            &self.threshold_itp,
             &self.white,
             &self.drift,
             &self.drift_error,
@@ -463,7 +480,7 @@ impl Metrics {
             family.remove(&label(device));
         }
         self.lut_overwritten.remove(&label(device));
-        set_stats(&self.verification, device, None);
+        self.set_verification(device, None);
         set_stats(&self.held_out, device, None);
         for kind in JOB_KINDS {
             for outcome in JOB_OUTCOMES {
@@ -506,13 +523,18 @@ impl Metrics {
         device: &str,
         held_out: Option<ErrorStats>,
         calibrated: Option<SystemTime>,
-        verification: Option<(SystemTime, Option<ErrorStats>)>,
-        threshold: f64,
+        verification: Option<(SystemTime, &VerificationRecord)>,
+        schedule: &crate::config::ScheduleConfig,
     ) {
-        self.threshold.get_or_create(&label(device)).set(threshold);
+        self.threshold
+            .get_or_create(&label(device))
+            .set(schedule.threshold_de00);
+        self.threshold_itp
+            .get_or_create(&label(device))
+            .set(schedule.threshold_itp);
         self.set_held_out(device, held_out);
-        if let Some((at, stats)) = verification {
-            self.set_verification(device, stats);
+        if let Some((at, record)) = verification {
+            self.set_verification(device, Some(record));
             self.with_times(device, |t| t.verified = Some(at));
         }
         self.with_times(device, |t| t.calibrated = calibrated);
@@ -522,8 +544,12 @@ impl Metrics {
         set_stats(&self.held_out, device, held_out);
     }
 
-    fn set_verification(&self, device: &str, stats: Option<ErrorStats>) {
-        set_stats(&self.verification, device, stats);
+    /// The last verification's error, in the family of its metric (the other one
+    /// cleared); `None`: no verification of the current profile.
+    fn set_verification(&self, device: &str, record: Option<&VerificationRecord>) {
+        let in_metric = |metric| record.filter(|r| r.metric == metric).and_then(|r| r.stats);
+        set_stats(&self.verification, device, in_metric(Metric::De00));
+        set_stats(&self.verification_itp, device, in_metric(Metric::Itp));
     }
 
     /// Count an event of `device` and update what it tells.
@@ -571,10 +597,13 @@ impl Metrics {
                 self.set_verification(device, None);
             }
             Event::Verification { record } => {
-                self.set_verification(device, record.stats);
-                self.threshold
-                    .get_or_create(&label(device))
-                    .set(record.threshold);
+                self.set_verification(device, Some(record));
+                match record.metric {
+                    Metric::De00 => &self.threshold,
+                    Metric::Itp => &self.threshold_itp,
+                }
+                .get_or_create(&label(device))
+                .set(record.threshold);
                 self.with_times(device, |t| t.verified = Some(SystemTime::now()));
             }
             Event::LutLoaded { .. } => {
@@ -801,8 +830,9 @@ mod tests {
                 record: crate::profile::store::VerificationRecord {
                     at: String::new(),
                     profile_id: "p".into(),
+                    metric: Metric::De00,
                     stats,
-                    delta_e00: vec![0.5, 1.5],
+                    delta_e: vec![0.5, 1.5],
                     threshold: 1.0,
                     escalated: false,
                     journal: None,

@@ -331,8 +331,8 @@ impl Device {
             calibrated,
             verification
                 .as_ref()
-                .and_then(|v| Some((chromacal_formats::time::parse_rfc3339(&v.at)?, v.stats))),
-            self.loaded.config.schedule.threshold_de00,
+                .and_then(|v| Some((chromacal_formats::time::parse_rfc3339(&v.at)?, v))),
+            &self.loaded.config.schedule,
         );
         if let Some(mqtt) = self.bus.mqtt.get() {
             mqtt.restore(

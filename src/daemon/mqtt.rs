@@ -593,9 +593,10 @@ fn verification_state(record: &VerificationRecord) -> Value {
     json!({
         "at": record.at,
         "profile_id": record.profile_id,
+        "metric": record.metric,
         "stats": record.stats,
         "threshold": record.threshold,
-        "passed": record.stats.is_some_and(|s| s.mean <= record.threshold),
+        "passed": record.passed(),
         "escalated": record.escalated,
     })
 }
@@ -691,8 +692,9 @@ mod tests {
         let record = VerificationRecord {
             at: "t".into(),
             profile_id: "p".into(),
+            metric: crate::verify::Metric::Itp,
             stats: ErrorStats::of(&[2.0]),
-            delta_e00: vec![2.0],
+            delta_e: vec![2.0],
             threshold: 1.0,
             escalated: false,
             journal: None,
@@ -704,6 +706,7 @@ mod tests {
             "t1"
         ));
         assert_eq!(state["last_verification"]["passed"], false);
+        assert_eq!(state["last_verification"]["metric"], "itp");
         let lost = Event::DeviceLost {
             fault: "instrument".into(),
             message: "timeout".into(),

@@ -32,12 +32,15 @@ pub struct FleetDevice {
 pub struct FleetVerification {
     /// RFC 3339.
     pub at: String,
+    /// What `mean` and `threshold` measure: ΔE00, or ΔE ITP for a profile of an HDR
+    /// signal.
+    pub metric: crate::verify::Metric,
     pub mean: Option<f64>,
     pub threshold: f64,
 }
 
 impl FleetVerification {
-    /// Passed: its mean ΔE00 within the threshold.
+    /// Passed: its mean within the threshold.
     pub fn passed(&self) -> bool {
         self.mean.is_some_and(|m| m <= self.threshold)
     }
@@ -115,7 +118,7 @@ fn row(d: &FleetDevice) -> Markup {
                     Some(v) => {
                         @let word = if v.passed() { "pass" } else { "fail" };
                         span class=(word) { (word) }
-                        " " (v.mean.map_or("–".to_string(), |m| format!("{m:.3}"))) " against " (v.threshold) " "
+                        " " (v.mean.map_or("–".to_string(), |m| format!("{m:.3}"))) " " (v.metric.name()) " against " (v.threshold) " "
                         span.muted { (v.at) }
                     },
                     None => span.muted { "none of this profile" },
@@ -232,6 +235,7 @@ mod tests {
                 profile: Some(("p1".into(), Some(0.1234))),
                 verification: Some(FleetVerification {
                     at: "2026-12-03T10:00:00Z".into(),
+                    metric: crate::verify::Metric::De00,
                     mean: Some(1.5),
                     threshold: 1.0,
                 }),
@@ -251,7 +255,7 @@ mod tests {
         assert!(page.contains("<tr data-device=\"crt\">"));
         assert!(page.contains("href=\"/devices/crt/report\""));
         assert!(
-            page.contains("class=\"fail\">fail</span> 1.500 against 1 "),
+            page.contains("class=\"fail\">fail</span> 1.500 ΔE00 against 1 "),
             "{page}"
         );
         assert!(page.contains("p1 (0.123)"));

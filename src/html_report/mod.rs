@@ -346,8 +346,11 @@ pub struct HistoryPoint {
 #[derive(Debug, Clone, Default)]
 pub struct HistoryView {
     pub profiles: Vec<HistoryPoint>,
-    /// (seconds since the epoch, mean ΔE00) of each verification.
+    /// (seconds since the epoch, mean ΔE00) of each verification judged in ΔE00.
     pub verifications: Vec<(f64, f64)>,
+    /// (seconds since the epoch, mean ΔE ITP) of each verification of a profile of
+    /// an HDR signal, judged in ΔE ITP: drawn apart, in its own unit.
+    pub verifications_itp: Vec<(f64, f64)>,
 }
 
 fn epoch_seconds(rfc3339: &str) -> Option<f64> {
@@ -381,15 +384,18 @@ impl HistoryView {
                 })
             })
             .collect();
-        let verifications = store
-            .verifications()
-            .unwrap_or_default()
-            .iter()
-            .filter_map(|v| Some((epoch_seconds(&v.at)?, v.stats.as_ref()?.mean)))
-            .collect();
+        let records = store.verifications().unwrap_or_default();
+        let means = |metric| {
+            records
+                .iter()
+                .filter(|v| v.metric == metric)
+                .filter_map(|v| Some((epoch_seconds(&v.at)?, v.stats.as_ref()?.mean)))
+                .collect()
+        };
         HistoryView {
             profiles,
-            verifications,
+            verifications: means(crate::verify::Metric::De00),
+            verifications_itp: means(crate::verify::Metric::Itp),
         }
     }
 

@@ -942,7 +942,10 @@ fn history(input: &ReportInput) -> Result<Markup, ReportError> {
     let Some(history) = &input.history else {
         return Ok(html! {});
     };
-    if history.profiles.is_empty() && history.verifications.is_empty() {
+    if history.profiles.is_empty()
+        && history.verifications.is_empty()
+        && history.verifications_itp.is_empty()
+    {
         return Ok(html! {
             section #history { h2 { "History" } (note("The daemon has no history yet.")) }
         });
@@ -950,6 +953,17 @@ fn history(input: &ReportInput) -> Result<Markup, ReportError> {
     let (errors, white) = history.series();
     let error_svg = figures::over_time("ΔE00 over time", "mean ΔE00", &errors)?;
     let white_svg = figures::over_time("White luminance over time", "Y", &white)?;
+    let itp_svg = match history.verifications_itp.is_empty() {
+        true => None,
+        false => Some(figures::over_time(
+            "ΔE ITP over time",
+            "mean ΔE ITP",
+            &[figures::TimeSeries {
+                name: "verification mean (HDR)".into(),
+                points: history.verifications_itp.clone(),
+            }],
+        )?),
+    };
     let rows: Vec<Vec<String>> = history
         .profiles
         .iter()
@@ -966,6 +980,9 @@ fn history(input: &ReportInput) -> Result<Markup, ReportError> {
         section #history {
             h2 { "History" }
             (figure("fig-history-error", &error_svg, "Each profile's held-out mean ΔE00 when it was made, and each verification's mean ΔE00 against the profile current then."))
+            @if let Some(svg) = &itp_svg {
+                (figure("fig-history-itp", svg, "Each verification of a profile of an HDR signal: its mean ΔE ITP (BT.2124, on absolute light) against the profile current then, the error it is judged by."))
+            }
             (figure("fig-history-white", &white_svg, "The white luminance of each profile in the history (the profile's units)."))
             (table(&["profile", "how", "held-out mean", "white Y"], &rows))
         }

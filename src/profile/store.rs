@@ -22,6 +22,8 @@ use serde::{Deserialize, Serialize};
 use chromacal_formats::durable::{Lock, write_atomic};
 use chromacal_model::fit::stats::ErrorStats;
 
+use crate::verify::Metric;
+
 /// Why the store could not do what was asked.
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
@@ -103,11 +105,18 @@ pub struct VerificationRecord {
     pub at: String,
     /// The profile verified.
     pub profile_id: String,
-    /// ΔE00 over the patches.
+    /// What `stats`, `delta_e` and `threshold` measure: ΔE00, or ΔE ITP (BT.2124)
+    /// for a profile of an HDR signal, whose light is absolute and whose error near
+    /// black ΔE00 relative to the white does not see. Records written before HDR
+    /// profiles were judged in ΔE ITP read as ΔE00.
+    #[serde(default = "de00")]
+    pub metric: Metric,
+    /// The error over the patches, in `metric`.
     pub stats: Option<ErrorStats>,
-    /// Each patch's ΔE00, in the order measured.
-    pub delta_e00: Vec<f64>,
-    /// The mean ΔE00 past which a recalibration is started.
+    /// Each patch's error in `metric`, in the order measured.
+    #[serde(alias = "delta_e00")]
+    pub delta_e: Vec<f64>,
+    /// The mean error (in `metric`) past which a recalibration is started.
     pub threshold: f64,
     /// A recalibration was started because of it.
     pub escalated: bool,
@@ -120,6 +129,17 @@ pub struct VerificationRecord {
     /// criteria, pass, fail or undecided. None for the profile's own check.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verdict: Option<String>,
+}
+
+impl VerificationRecord {
+    /// Its mean within its threshold (no patches read: not passed).
+    pub fn passed(&self) -> bool {
+        self.stats.is_some_and(|s| s.mean <= self.threshold)
+    }
+}
+
+fn de00() -> Metric {
+    Metric::De00
 }
 
 fn now_rfc3339() -> String {
@@ -690,8 +710,9 @@ mod tests {
         let record = VerificationRecord {
             at: "2026-11-23T12:00:00Z".into(),
             profile_id: "a".into(),
+            metric: Metric::Itp,
             stats: ErrorStats::of(&[0.5, 1.5]),
-            delta_e00: vec![0.5, 1.5],
+            delta_e: vec![0.5, 1.5],
             threshold: 1.0,
             escalated: true,
             journal: None,
@@ -704,6 +725,16 @@ mod tests {
             .open(store.verifications_path())
             .unwrap();
         f.write_all(b"{\"at\": \"2026").unwrap();
-        assert_eq!(store.verifications().unwrap(), vec![record]);
+        assert_eq!(store.verifications().unwrap(), vec![record.clone()]);
+        assert!(record.passed(), "a mean of 1.0 is within 1.0");
+    }
+
+    #[test]
+    fn a_verification_written_before_hdr_reads_as_de00() {
+        let line = r#"{"at":"2026-11-23T12:00:00Z","profile_id":"a","stats":null,"delta_e00":[0.5],"threshold":1.0,"escalated":false}"#;
+        let record: VerificationRecord = serde_json::from_str(line).unwrap();
+        assert_eq!(record.metric, Metric::De00);
+        assert_eq!(record.delta_e, vec![0.5]);
+        assert!(!record.passed(), "no stats");
     }
 }
