@@ -388,7 +388,25 @@ async fn a_verify_job_on_an_hdr_profile_judges_it_in_delta_e_itp() {
     assert_eq!(record.threshold, 0.01);
     let mean = record.stats.unwrap().mean;
     // The profile is as good as it was published: within DisplayCAL's HDR limit.
-    assert!(mean > 0.01 && mean < 1.0, "{record:?}");
+    assert!(mean > 0.01 && mean < 0.8, "{record:?}");
+    // The figures are ΔE ITP of the job's own readings against the profile, not
+    // ΔE00 under another name.
+    let current = Profile::read(&daemon.state.join("current.toml")).unwrap();
+    let (_, entries, _) =
+        Journal::read(std::path::Path::new(record.journal.as_ref().unwrap())).unwrap();
+    let usable: Vec<_> = entries
+        .iter()
+        .filter_map(|m| m.reading.xyz.map(|xyz| (m, xyz)))
+        .collect();
+    assert_eq!(usable.len(), record.delta_e.len());
+    let evaluation = chromacal_model::fit::validate::evaluate(&current.model, usable);
+    let itp = chromacal_model::fit::validate::delta_e_itp_stats(&evaluation.patches).unwrap();
+    let de00 = evaluation.stats.unwrap();
+    assert!((itp.mean - mean).abs() < 1e-9, "{itp:?} against {record:?}");
+    assert!(
+        (de00.mean - mean).abs() > 0.05,
+        "ΔE00 {de00:?} and ΔE ITP {itp:?} are too alike to tell apart"
+    );
     assert!(!record.passed() && !record.escalated, "{record:?}");
     assert!(
         outcome.message.contains("mean ΔE ITP")
@@ -413,10 +431,50 @@ async fn a_verify_job_on_an_hdr_profile_judges_it_in_delta_e_itp() {
         )),
         "{fleet}"
     );
+    // The device's report judges the same readings by the same threshold.
     let report = get(&api, "/report").await.text();
     assert!(
-        report.contains("threshold_itp") && report.contains("mean ΔE ITP ≤ 0.01"),
+        report.contains("threshold_itp")
+            && report.contains("mean ΔE ITP ≤ 0.01")
+            && report.contains(&format!("<span id=\"judged-itp\">{mean:.3}</span>"))
+            && report.contains("Fails."),
         "{report}"
     );
     assert!(report.contains("fig-history-itp"), "{report}");
+
+    // Reloaded to drive the display as HLG, the PQ profile cannot be compared with
+    // what it shows: the job says so and measures nothing.
+    std::fs::write(
+        daemon.dir.join("config.toml"),
+        config.replace(
+            "tone = \"pq\"\npeak = 600.0",
+            "tone = \"hlg\"\npeak = 600.0",
+        ),
+    )
+    .unwrap();
+    common::succeed(common::chromacal().args([
+        "daemon",
+        "reload",
+        "--socket",
+        &daemon.socket.display().to_string(),
+    ]));
+    // The changed device takes jobs once the old one has left.
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let job = loop {
+        let reply = common::daemon::post(&api, "/jobs", r#"{"kind": "verify"}"#).await;
+        if reply.status == 202 {
+            break reply.json().unwrap()["id"].as_str().unwrap().to_string();
+        }
+        assert!(std::time::Instant::now() < deadline, "{}", reply.text());
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    let (_, outcome) = events_of_job(&mut events, &job, Duration::from_secs(60)).await;
+    assert_eq!(outcome.result, "failed", "{outcome:?}");
+    assert!(
+        outcome.message.contains("is of a PQ (SMPTE ST 2084)")
+            && outcome.message.contains("as HLG (BT.2100)")
+            && outcome.message.contains("calibrate again"),
+        "{}",
+        outcome.message
+    );
 }

@@ -322,11 +322,13 @@ fn keep(
         metric: report.metric,
         stats: ErrorStats::of(&delta_e),
         delta_e,
+        // Criteria without a mean limit: none to be past (a number JSON can carry
+        // and read back, which NaN and infinity are not).
         threshold: report
             .results
             .iter()
             .find(|r| r.statistic == Statistic::Mean)
-            .map_or(f64::NAN, |r| r.limit),
+            .map_or(f64::MAX, |r| r.limit),
         escalated: false,
         journal: None,
         verdict: Some(report.verdict.name().to_string()),

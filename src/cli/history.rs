@@ -64,8 +64,13 @@ pub fn history(api: &ApiArgs, json: bool) -> Result<(), Failure> {
             .unwrap_or_default();
         outln!("verifications ({}):", verifications.len())?;
         for v in verifications {
+            // Records before HDR verifications had no metric: ΔE00.
+            let metric = match v["metric"].as_str() {
+                Some("itp") => "ΔE ITP",
+                _ => "ΔE00",
+            };
             outln!(
-                "  {} {}  mean ΔE00 {}  max {}{}",
+                "  {} {}  mean {metric} {}  max {}{}",
                 v["at"].as_str().unwrap_or("?"),
                 v["profile_id"].as_str().unwrap_or("?"),
                 v["stats"]["mean"]

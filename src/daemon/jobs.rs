@@ -31,7 +31,7 @@ use chromacal_model::fit::spatial::choose_spatial_map;
 use chromacal_model::fit::stats::ErrorStats;
 use chromacal_model::fit::validate::{delta_e00_xyz, evaluate};
 use chromacal_model::measurement::{Role, Units};
-use chromacal_model::plan::{Plan, make_uniformity_plan, make_verification_plan};
+use chromacal_model::plan::{Plan, Signal, make_uniformity_plan, make_verification_plan};
 use chromacal_model::{MonitorModel, ScreenPosition};
 
 /// A job id: the kind and a run id.
@@ -583,9 +583,24 @@ async fn verify(
     let config = &device.loaded.config;
     let profile = current_profile(device)
         .ok_or_else(|| "there is no current profile to verify: calibrate first".to_string())?;
+    // The readings are taken in the signal the config drives the display in; a
+    // profile of another one (the config reloaded from PQ to HLG, say) cannot be
+    // compared with them.
+    let signal = config.plan.signal.filter(|s| s.is_hdr());
+    let profiled = profile.provenance.signal.filter(|s| s.is_hdr());
+    if signal != profiled {
+        let name = |s: Option<Signal>| s.unwrap_or(Signal::Sdr).describe();
+        return Err(format!(
+            "the current profile {} is of a {} signal and the config drives the display as {}: calibrate again in this mode",
+            profile.id,
+            name(profiled),
+            name(signal)
+        )
+        .into());
+    }
     let mut plan = make_verification_plan(&config.plan, config.schedule.verify_patches)
         .map_err(|e| e.to_string())?;
-    plan.signal = config.plan.signal.filter(|s| s.is_hdr());
+    plan.signal = signal;
     let journal = measure_plan(
         device,
         id,
@@ -623,7 +638,7 @@ async fn verify(
         ),
     };
     let stats = ErrorStats::of(&delta_e);
-    let past = stats.is_some_and(|s| s.mean > threshold);
+    let past = stats.is_some_and(|s| !(s.mean <= threshold));
     // A profile with curves: the display as its user sees it, through them, judged
     // as `chromacal verify` judges it (and kept beside the profile).
     let through = match &profile.calibration {

@@ -305,7 +305,11 @@ fn patches(verified: Option<&Verification>) -> Markup {
             p {
                 "Every usable reading against what the profile predicts for its drive (the nominal), in CIELAB against the model's white: "
                 "ΔL*, ΔC*ab and ΔH*ab (CIE 15:2004 §8.2.2, measured less nominal) and ΔE00. "
-                "Patches in the fit are shown grey and not judged; the result is against the patch limit of " (v.judgement.criteria.max_patch) "."
+                "Patches in the fit are shown grey and not judged"
+                @if v.judgement.criteria.max_patch.is_finite() {
+                    "; the result is against the patch limit of " (v.judgement.criteria.max_patch)
+                }
+                "."
             }
             table #patch-table {
                 tr {
@@ -981,7 +985,7 @@ fn history(input: &ReportInput) -> Result<Markup, ReportError> {
             h2 { "History" }
             (figure("fig-history-error", &error_svg, "Each profile's held-out mean ΔE00 when it was made, and each verification's mean ΔE00 against the profile current then."))
             @if let Some(svg) = &itp_svg {
-                (figure("fig-history-itp", svg, "Each verification of a profile of an HDR signal: its mean ΔE ITP (BT.2124, on absolute light) against the profile current then, the error it is judged by."))
+                (figure("fig-history-itp", svg, "Each verification of a profile of an HDR signal in the error it is judged by, mean ΔE ITP (BT.2124, on absolute light): the daemon's checks against the profile current then, and the charts measured through its curves against the signal's encoding."))
             }
             (figure("fig-history-white", &white_svg, "The white luminance of each profile in the history (the profile's units)."))
             (table(&["profile", "how", "held-out mean", "white Y"], &rows))

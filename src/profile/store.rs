@@ -132,9 +132,11 @@ pub struct VerificationRecord {
 }
 
 impl VerificationRecord {
-    /// Its mean within its threshold (no patches read: not passed).
+    /// Its mean within its threshold (no patches read, or a mean that is not a
+    /// number: not passed), and no failing verdict.
     pub fn passed(&self) -> bool {
         self.stats.is_some_and(|s| s.mean <= self.threshold)
+            && self.verdict.as_deref() != Some("fail")
     }
 }
 
