@@ -894,6 +894,9 @@ pub fn verification_summary(v: &crate::verify::VerifyReport) -> String {
     if let Some(warning) = &v.uncorrected {
         out += &format!("  WARNING: {warning}\n");
     }
+    if let Some(greys) = &v.greys {
+        out += &format!("  sent as lut3d sends: {greys}\n");
+    }
     out += &format!("criteria: {}\n", v.criteria);
     let rows: Vec<Vec<String>> = v
         .results

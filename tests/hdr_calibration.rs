@@ -128,6 +128,32 @@ fn an_hdr_oled_calibrated_to_pq_tracks_it_and_predicts_held_out_colours_within_o
     assert_eq!(report["against"], "BT.2100 PQ");
     assert_eq!(report["verdict"], "pass", "{:#}", report["results"]);
     assert_eq!(out.status.code(), Some(0));
+    // The chart is sent as `lut3d` sends it: through the calibration's measured greys.
+    assert!(
+        report["greys"]
+            .as_str()
+            .is_some_and(|g| g.contains("measured greys correct")),
+        "{}",
+        report["greys"]
+    );
+    let mean = |kind: &str| {
+        let values: Vec<f64> = report["patches"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|p| p["label"].as_str().unwrap().starts_with(kind))
+            .map(|p| p["delta_e"].as_f64().unwrap())
+            .collect();
+        values.iter().sum::<f64>() / values.len() as f64
+    };
+    eprintln!(
+        "bt2100 chart: PQ greys {:.3}, ColorChecker {:.3} ΔE ITP",
+        mean("PQ grey"),
+        mean("ColorChecker")
+    );
+    // Through the PQ law alone the PQ greys were 1.2 ΔE ITP on average on this panel
+    // (seeds 1 and 2 of the same config).
+    assert!(mean("PQ grey") < 0.8, "{}", mean("PQ grey"));
     let patches = report["patches"].as_array().unwrap();
     let labelled = |prefix: &str| {
         patches
@@ -767,6 +793,12 @@ fn a_pq_lut_through_ffmpeg_shows_a_1000_nit_master_on_the_oled_by_bt2390() {
     let said = String::from_utf8_lossy(&out.stderr);
     assert!(said.contains("BT.2390 EETF from a 1000 cd/m2"), "{said}");
     assert!(said.contains("full-field white"), "{said}");
+    // The calibration's greys, measured through its curves, predict the held-out
+    // patches better than the PQ law alone on this panel: the LUT goes through them.
+    assert!(
+        said.contains("measured greys correct the model's transfer laws: held-out mean ΔE ITP"),
+        "{said}"
+    );
     let text = std::fs::read_to_string(&cube).unwrap();
     assert!(text.contains("# Input: full-range"), "{text:.600}");
 
@@ -823,10 +855,13 @@ fn a_pq_lut_through_ffmpeg_shows_a_1000_nit_master_on_the_oled_by_bt2390() {
         above.len()
     );
     assert!(errors.len() >= 100, "{}", errors.len());
-    assert!(mean <= 1.0, "mean {mean} ΔE ITP");
-    // Single greys miss by up to a few ΔE ITP where the PQ law departs from the Sony
-    // panel's measured table (0.5 cd/m²: 10 %); a miss beyond that is a broken LUT.
-    assert!(worst.0 < 5.0, "worst {worst:?}");
+    // Through the PQ law alone the mean was 0.92 and the worst 3.6: the measured
+    // greys carry what the curves learnt into the LUT.
+    assert!(mean <= 0.7, "mean {mean} ΔE ITP");
+    // Single greys miss by up to a few ΔE ITP where the Sony panel's measured table
+    // swings between the calibration's levels (0.5 cd/m²: ±4 % every few codes); a
+    // miss beyond that is a broken LUT.
+    assert!(worst.0 < 3.2, "worst {worst:?}");
     assert!(
         above.len() >= 5 && above.windows(2).all(|w| w[1] >= w[0] * (1.0 - 1e-6)),
         "{above:?}"

@@ -419,6 +419,10 @@ pub async fn refine_curves<D: PatchDisplay, I: Instrument>(
             target_luminance: want(x, &white),
             measured_luminance: measured.y,
             measured_xyz: [measured.x, measured.y, measured.z],
+            drive: Some(match through {
+                Through::Codes(bits) => Codes::from_drive(curves.apply([x; 3]), bits).drive(),
+                Through::Lut(_) => curves.apply([x; 3]),
+            }),
         });
         if x == 1.0 {
             measured_white = measured;

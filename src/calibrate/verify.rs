@@ -369,6 +369,7 @@ async fn uniformity_on(
     let setting = Setting {
         model: &profile.model,
         curves: None,
+        correction: None,
         against: Against::Profile,
         bits,
     };
@@ -405,9 +406,16 @@ async fn verify_on(
 ) -> Result<(VerifyReport, Vec<PlannedPatch>, Readings), VerifyError> {
     let loaded = loaded_now(devices, profile)?;
     let curves = profile.calibration.as_ref().map(|c| &c.curves);
+    // Only where the chart asks for colours: judged against the profile, the
+    // correction's own greys would grade themselves.
+    let (correction, greys) = match options.against {
+        Against::Encoding(_) => profile.grey_correction_for_lut(),
+        Against::Profile => (None, None),
+    };
     let setting = Setting {
         model: &profile.model,
         curves,
+        correction: correction.as_ref(),
         against: options.against,
         bits,
     };
@@ -453,6 +461,7 @@ async fn verify_on(
         .await?;
         report = judge(&readings)?;
     }
+    report.greys = greys;
     Ok((report, planned, readings))
 }
 

@@ -84,9 +84,11 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
             "chromacal: warning: ffmpeg reads a .3dl as 17 points a side; this one has {size}"
         );
     }
+    let (correction, said_of_greys) = profile.grey_correction_for_lut();
     let lut = build_lut(
         &profile.model,
         profile.calibration.as_ref().map(|c| &c.curves),
+        correction.as_ref(),
         &LutOptions {
             source: args.source,
             size,
@@ -142,6 +144,9 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
     );
     for note in &lut.notes {
         eprintln!("chromacal: {note}");
+    }
+    if let Some(said) = said_of_greys {
+        eprintln!("chromacal: {said}");
     }
     Ok(())
 }

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use chromacal_instruments::InstrumentInfo;
 use chromacal_model::MonitorModel;
 use chromacal_model::fit::FitReport;
+use chromacal_model::grey_correction::{GreyCorrection, HeldOutMeans};
 use chromacal_model::measurement::Units;
 use chromacal_model::target::CalibrationCurves;
 
@@ -463,6 +464,86 @@ pub struct LevelCheck {
     pub measured_luminance: f64,
     /// The whole reading, in the profile's units.
     pub measured_xyz: [f64; 3],
+    /// The drive that reached the panel: the curves' output at the codes' depth
+    /// where chromacal sent the codes, the curves' output itself through a video LUT.
+    /// (None in files written before it was kept: the curves' output.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drive: Option<[f64; 3]>,
+}
+
+impl Profile {
+    /// The calibration's measured greys as a correction of the model for `lut3d` and
+    /// `verify`'s chart (the ICC export, `render` and `emulate` go through the model
+    /// alone), where it predicts the patches held out of the fit better than the
+    /// model alone by more than the standard error of the difference (in ΔE ITP for
+    /// an HDR signal's profile, ΔE00 otherwise), and a sentence saying whether it is
+    /// used and why.
+    pub fn grey_correction_for_lut(&self) -> (Option<GreyCorrection>, Option<String>) {
+        let Some(calibration) = &self.calibration else {
+            return (None, None);
+        };
+        let itp =
+            self.units == Units::Absolute && self.provenance.signal.is_some_and(|s| s.is_hdr());
+        let metric = if itp { "ΔE ITP" } else { "ΔE00" };
+        match calibration.grey_correction(&self.model, &self.report.held_out_patches, itp) {
+            Some((correction, means)) if means.lowers() => (
+                Some(correction),
+                Some(format!(
+                    "the calibration's {} measured greys correct the model's transfer laws: held-out mean {metric} {:.3} → {:.3} (± {:.3}) over {} patches",
+                    calibration.levels.len(),
+                    means.without,
+                    means.with,
+                    means.standard_error,
+                    means.patches
+                )),
+            ),
+            Some((_, means)) => (
+                None,
+                Some(format!(
+                    "the calibration's measured greys are not used: they do not lower the held-out mean {metric} by more than its standard error ({:.3} → {:.3}, ± {:.3}, over {} patches)",
+                    means.without, means.with, means.standard_error, means.patches
+                )),
+            ),
+            None => (None, None),
+        }
+    }
+}
+
+impl StoredCalibration {
+    /// The greys of the check as (drive, measured XYZ): readings the fit never saw,
+    /// for `GreyCorrection`.
+    /// A level from a file written before the drive was kept is left out where
+    /// chromacal sent the codes: their rounding is not known, and half a code near
+    /// black is several per cent of the light.
+    pub fn greys(&self) -> Vec<(chromacal_model::Drive, chromacal_color::Xyz)> {
+        self.levels
+            .iter()
+            .filter_map(|l| {
+                let [x, y, z] = l.measured_xyz;
+                let drive = match (l.drive, self.through_lut) {
+                    (Some(d), _) => d,
+                    (None, true) => self.curves.apply([l.input; 3]),
+                    (None, false) => return None,
+                };
+                Some((drive, chromacal_color::Xyz::new(x, y, z)))
+            })
+            .collect()
+    }
+
+    /// The calibration's measured greys as a correction of `model`'s transfer laws,
+    /// with the held-out means that decide whether it is used (`itp`: judged in ΔE
+    /// ITP, as a profile of an HDR signal is). None where there are too few greys
+    /// or no held-out patches.
+    pub fn grey_correction(
+        &self,
+        model: &chromacal_model::MonitorModel,
+        held_out: &[chromacal_model::fit::validate::PatchError],
+        itp: bool,
+    ) -> Option<(GreyCorrection, HeldOutMeans)> {
+        let correction = GreyCorrection::from_greys(model, &self.greys())?;
+        let means = correction.held_out_means(model, held_out, itp)?;
+        Some((correction, means))
+    }
 }
 
 /// Calibration curves and how well they did, measured.

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use chromacal_formats::durable::{Lock, write_atomic};
 use chromacal_model::fit::stats::ErrorStats;
 
-use crate::verify::Metric;
+use chromacal_color::difference::Metric;
 
 /// Why the store could not do what was asked.
 #[derive(Debug, thiserror::Error)]

@@ -147,6 +147,10 @@ pub struct VerifyReport {
     pub correction: Option<crate::profile::CorrectionRecord>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncorrected: Option<String>,
+    /// Whether the chart's colours went through the model corrected by the
+    /// calibration's measured greys, as `lut3d` sends them, and why (or why not).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub greys: Option<String>,
     pub readings: usize,
     pub instrument_s: f64,
     /// The screen's uniformity, where it was measured (`verify --uniformity`).
@@ -548,6 +552,7 @@ pub fn evaluate(
         instrument: None,
         correction: None,
         uncorrected: None,
+        greys: None,
         readings: readings.count(),
         instrument_s: readings.instrument_s,
         uniformity: None,

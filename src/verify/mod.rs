@@ -32,7 +32,7 @@ mod evaluate;
 mod measure;
 pub mod uniformity;
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use chromacal_color::Xyz;
 use chromacal_crf::gamut::GamutMapping;
@@ -40,6 +40,7 @@ use chromacal_crf::lut3d::{LutOptions, SourceSpace, curve_input, source_target};
 use chromacal_crf::tone::ToneOperator;
 use chromacal_crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
 use chromacal_display::x11::GammaRamp;
+use chromacal_model::grey_correction::GreyCorrection;
 use chromacal_model::screen::Codes;
 use chromacal_model::target::{CalibrationCurves, ToneCurve, target_luminance};
 use chromacal_model::{MonitorModel, ScreenPosition};
@@ -95,36 +96,8 @@ impl Serialize for Against {
     }
 }
 
-/// The colour difference the verdicts use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Metric {
-    /// CIEDE2000 in CIELAB against the calibrated white.
-    De00,
-    /// ITU-R BT.2124 ΔE ITP, on absolute light.
-    Itp,
-}
-
-impl std::str::FromStr for Metric {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s.to_ascii_lowercase().as_str() {
-            "de00" | "de2000" | "ciede2000" => Ok(Metric::De00),
-            "itp" | "ictcp" => Ok(Metric::Itp),
-            _ => Err(format!("no metric '{s}' (de00, itp)")),
-        }
-    }
-}
-
-impl Metric {
-    pub fn name(self) -> &'static str {
-        match self {
-            Metric::De00 => "ΔE00",
-            Metric::Itp => "ΔE ITP",
-        }
-    }
-}
+/// The colour difference the verdicts use (kept in the profile store's records too).
+pub use chromacal_color::difference::Metric;
 
 /// What the display holds between the codes sent and the panel.
 #[derive(Debug, Clone, PartialEq)]
@@ -172,6 +145,10 @@ pub struct PlannedPatch {
 pub struct Setting<'a> {
     pub model: &'a MonitorModel,
     pub curves: Option<&'a CalibrationCurves>,
+    /// The calibration's measured greys as a correction of the model, where the
+    /// profile's held-out patches say it predicts better
+    /// (`Profile::grey_correction_for_lut`): the chart is sent as `lut3d` sends.
+    pub correction: Option<&'a GreyCorrection>,
     pub against: Against,
     /// Bits of the codes sent.
     pub bits: u32,
@@ -277,6 +254,10 @@ pub fn plan(
             (Input::Display(rgb), _) | (Input::Encoded(rgb), None) => rgb,
             (_, _) => {
                 let drive = pixel.codes.map(|c| f64::from(c) / 65535.0);
+                let drive = match setting.correction {
+                    Some(k) => k.drive_for(setting.model, drive),
+                    None => drive,
+                };
                 match setting.curves {
                     Some(k) => [0, 1, 2].map(|c| curve_input(&k.curves[c], drive[c])),
                     None => drive,
@@ -292,7 +273,13 @@ pub fn plan(
             Loaded::Curves(_) => codes.drive(),
             _ => loaded.output(codes.drive()),
         };
-        let predicted = setting.model.forward(panel, ScreenPosition::CENTRE);
+        let predicted = setting.model.forward(
+            match setting.correction {
+                Some(k) => k.forward_drive(setting.model, panel),
+                None => panel,
+            },
+            ScreenPosition::CENTRE,
+        );
         // What colour management makes of the colour asked for: the colour itself,
         // or where the display cannot show it, the nearest it can (clipped).
         let reference = match (setting.against, patch.input, asked) {

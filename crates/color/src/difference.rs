@@ -7,6 +7,38 @@
 
 use super::spaces::{Lab, Luv};
 
+/// A colour difference a verification is judged in: ΔE00, or ΔE ITP where the
+/// light is absolute (an HDR signal).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Metric {
+    /// CIEDE2000 in CIELAB against the calibrated white.
+    De00,
+    /// ITU-R BT.2124 ΔE ITP, on absolute light.
+    Itp,
+}
+
+impl std::str::FromStr for Metric {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "de00" | "de2000" | "ciede2000" => Ok(Metric::De00),
+            "itp" | "ictcp" => Ok(Metric::Itp),
+            _ => Err(format!("no metric '{s}' (de00, itp)")),
+        }
+    }
+}
+
+impl Metric {
+    pub fn name(self) -> &'static str {
+        match self {
+            Metric::De00 => "ΔE00",
+            Metric::Itp => "ΔE ITP",
+        }
+    }
+}
+
 /// CIE 1976 colour difference ΔE*ab: the Euclidean distance in L*a*b*
 /// (CIE 15:2004 eq. 8.11).
 pub fn delta_e_1976(lab1: &Lab, lab2: &Lab) -> f64 {

@@ -7,6 +7,7 @@
 //! Plain data and functions: no I/O beyond what a caller hands in, no async runtime.
 
 pub mod fit;
+pub mod grey_correction;
 pub mod measurement;
 pub mod monitor;
 pub mod plan;

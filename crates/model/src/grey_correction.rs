@@ -1,0 +1,435 @@
+//! The calibration's measured greys as a correction of the model's transfer laws.
+//!
+//! A calibration measures its grey levels through the final curves (`LevelCheck`):
+//! readings the fit never saw, at the drives the curves send. Where the fitted law is
+//! a compromise over the range (one exponent for a panel whose own curve bends), or
+//! the panel's curve departs from any smooth law, the greys land a few per cent off
+//! what the model predicts, and the curves were measured into place for exactly that
+//! (ArgyllCMS's dispcal iterates the same way). A 3D LUT that goes through the
+//! model's inverse alone would undo what the curves learnt.
+//!
+//! The correction carries it over: each grey's light above black, measured over
+//! predicted, is a gain on the excitation of every channel at the drive that channel
+//! had in it (the assumption the curves' refinement makes: the greys' miss is the
+//! channels' laws', alike), interpolated linearly in drive between the greys and held
+//! at the ends. `forward_drive` is what the corrected display shows a drive as (for
+//! the model's forward), `drive_for` its inverse (for the model's inverse). It is a
+//! measured table, not a law: whether it is used is decided on patches held out of
+//! the fit, which it must predict better by more than the difference's standard
+//! error (`Profile::grey_correction_for_lut`).
+
+use chromacal_color::Xyz;
+
+use crate::fit::validate::{PatchError, delta_e00_xyz};
+use crate::{Drive, MonitorModel};
+
+/// Greys whose gain falls outside this range are left out: a grey measured at half or
+/// twice what the model predicts is not a law's miss but a reading the model cannot
+/// speak to (a grey at black, where what the display adds near black, such as a
+/// dimming backlight's floor, over a prediction of almost nothing is any ratio).
+const GAIN_RANGE: (f64, f64) = (0.5, 2.0);
+
+/// Bisection steps of the inverse: 2⁻⁴⁰ of the drive, far below any code.
+const INVERSE_STEPS: usize = 40;
+
+/// Drives at which a corrected law is checked to keep rising.
+const MONOTONE_SAMPLES: usize = 1024;
+
+/// Per channel, the gain on the law's excitation at the drives of the greys measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GreyCorrection {
+    /// Per channel: (drive, gain), drive strictly ascending.
+    points: [Vec<(f64, f64)>; 3],
+}
+
+impl GreyCorrection {
+    /// From greys shown at `drives` and measured as `measured` (the same order), on
+    /// `model`'s centre. None when fewer than two greys have light above black both
+    /// predicted and measured, when a law has no positive full-drive excitation, or
+    /// when the gains would make a channel's light fall as its drive rises (a LUT
+    /// through it would fold back).
+    pub fn from_greys(model: &MonitorModel, greys: &[(Drive, Xyz)]) -> Option<GreyCorrection> {
+        if !model.laws.iter().all(|l| {
+            let top = l.full_drive_excitation();
+            top.is_finite() && top > 0.0
+        }) {
+            return None;
+        }
+        let black = model.black.y;
+        let mut points: [Vec<(f64, f64)>; 3] = Default::default();
+        for (drive, measured) in greys {
+            if !drive.iter().all(|d| (0.0..=1.0).contains(d)) {
+                continue;
+            }
+            let predicted = model.forward_centre(*drive).y - black;
+            let seen = measured.y - black;
+            // A grey predicted at less than twice the black is mostly black: its
+            // reading's noise, and any change of the black since the fit, is most of
+            // its light above black (an LCD's 7 cd/m² black under a 0.04 cd/m² step).
+            // Judged on the prediction, so that noise does not choose which greys stay.
+            if !(predicted >= black && predicted > 0.0 && seen > 0.0) {
+                continue;
+            }
+            let gain = seen / predicted;
+            if !(GAIN_RANGE.0..=GAIN_RANGE.1).contains(&gain) {
+                continue;
+            }
+            for (c, channel) in points.iter_mut().enumerate() {
+                channel.push((drive[c], gain));
+            }
+        }
+        for channel in &mut points {
+            channel.sort_by(|a, b| a.0.total_cmp(&b.0));
+            // Two greys at one drive (a channel clipped at black or at full drive):
+            // their mean.
+            let mut merged: Vec<(f64, f64, usize)> = Vec::new();
+            for &(d, g) in channel.iter() {
+                match merged.last_mut() {
+                    Some(last) if last.0 == d => {
+                        last.1 += g;
+                        last.2 += 1;
+                    }
+                    _ => merged.push((d, g, 1)),
+                }
+            }
+            *channel = merged
+                .into_iter()
+                .map(|(d, g, n)| (d, g / n as f64))
+                .collect();
+        }
+        if !points.iter().all(|p| p.len() >= 2) {
+            return None;
+        }
+        let correction = GreyCorrection { points };
+        let rising = model.laws.iter().enumerate().all(|(c, law)| {
+            let mut last = 0.0;
+            (0..=MONOTONE_SAMPLES).all(|i| {
+                let e = correction.excitation(c, law, i as f64 / MONOTONE_SAMPLES as f64);
+                let rises = e >= last;
+                last = e;
+                rises
+            })
+        });
+        rising.then_some(correction)
+    }
+
+    /// Channel `c`'s corrected excitation at `drive`, at most its law's full drive's.
+    fn excitation(&self, c: usize, law: &crate::TransferLaw, drive: f64) -> f64 {
+        (law.excitation(drive) * self.gain(c, drive)).clamp(0.0, law.full_drive_excitation())
+    }
+
+    /// The gain on channel `c`'s excitation at `drive`.
+    pub fn gain(&self, c: usize, drive: f64) -> f64 {
+        let p = &self.points[c];
+        let i = p.partition_point(|q| q.0 < drive);
+        if i == 0 {
+            return p[0].1;
+        }
+        if i == p.len() {
+            return p[p.len() - 1].1;
+        }
+        let ((d0, g0), (d1, g1)) = (p[i - 1], p[i]);
+        g0 + (g1 - g0) * (drive - d0) / (d1 - d0)
+    }
+
+    /// The drive the model must be given to predict what `drive` shows on the
+    /// display: each channel's excitation times its gain there.
+    pub fn forward_drive(&self, model: &MonitorModel, drive: Drive) -> Drive {
+        let mut out = drive;
+        for (c, law) in model.laws.iter().enumerate() {
+            out[c] = law.drive(self.excitation(c, law, drive[c])).clamp(0.0, 1.0);
+        }
+        out
+    }
+
+    /// The drive that shows on the display what the model predicts for `wanted`: the
+    /// inverse of `forward_drive`, the least drive whose corrected excitation reaches
+    /// the law's at `wanted`, by bisection on each channel (the corrected excitation
+    /// rises with the drive: `from_greys` checks it).
+    pub fn drive_for(&self, model: &MonitorModel, wanted: Drive) -> Drive {
+        let mut out = wanted;
+        for (c, law) in model.laws.iter().enumerate() {
+            let target = law.excitation(wanted[c]);
+            let (mut lo, mut hi) = (0.0, 1.0);
+            if self.excitation(c, law, hi) < target {
+                out[c] = hi;
+                continue;
+            }
+            for _ in 0..INVERSE_STEPS {
+                let mid = 0.5 * (lo + hi);
+                if self.excitation(c, law, mid) < target {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            out[c] = hi;
+        }
+        out
+    }
+}
+
+/// Drive steps of [`InverseTable`]: a 16-bit code each.
+const TABLE_STEPS: usize = 65_535;
+
+/// [`GreyCorrection::drive_for`] tabulated for many drives (a 3D LUT's 274,625):
+/// `forward_drive` at every 16-bit code, inverted by interpolation between them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InverseTable {
+    /// Per channel, `forward_drive` at drive i / TABLE_STEPS: non-decreasing.
+    forward: [Vec<f64>; 3],
+}
+
+impl GreyCorrection {
+    /// The inverse tabulated for `model`.
+    pub fn inverse_table(&self, model: &MonitorModel) -> InverseTable {
+        let forward = [0, 1, 2].map(|c| {
+            let law = &model.laws[c];
+            (0..=TABLE_STEPS)
+                .map(|i| {
+                    let d = i as f64 / TABLE_STEPS as f64;
+                    law.drive(self.excitation(c, law, d)).clamp(0.0, 1.0)
+                })
+                .collect()
+        });
+        InverseTable { forward }
+    }
+}
+
+impl InverseTable {
+    /// As [`GreyCorrection::drive_for`], to within a small part of a 16-bit code
+    /// where the corrected law is smooth (linear between the codes on either side).
+    pub fn drive_for(&self, wanted: Drive) -> Drive {
+        [0, 1, 2].map(|c| {
+            let f = &self.forward[c];
+            let w = wanted[c];
+            let i = f.partition_point(|v| *v < w);
+            if i == 0 {
+                return 0.0;
+            }
+            if i == f.len() {
+                return 1.0;
+            }
+            let (lo, hi) = (f[i - 1], f[i]);
+            let t = if hi > lo { (w - lo) / (hi - lo) } else { 1.0 };
+            ((i - 1) as f64 + t) / TABLE_STEPS as f64
+        })
+    }
+}
+
+/// The held-out patches' mean error without and with a correction, and the standard
+/// error of the mean of their differences patch by patch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldOutMeans {
+    pub without: f64,
+    pub with: f64,
+    pub standard_error: f64,
+    pub patches: usize,
+}
+
+impl HeldOutMeans {
+    /// The correction predicts the held-out patches better than the model alone, by
+    /// more than one standard error of the difference: a gain of a thousandth over a
+    /// dozen patches is the patches' luck, not the greys'.
+    pub fn lowers(&self) -> bool {
+        self.with < self.without - self.standard_error
+    }
+}
+
+impl GreyCorrection {
+    /// The mean error of `model` on `held_out` (each patch predicted again at its
+    /// drive and place) without and with the correction: in ΔE ITP (BT.2124, on
+    /// absolute light) where `itp`, as an HDR profile is judged, else ΔE00 against
+    /// the model's white. None without held-out patches.
+    pub fn held_out_means(
+        &self,
+        model: &MonitorModel,
+        held_out: &[PatchError],
+        itp: bool,
+    ) -> Option<HeldOutMeans> {
+        if held_out.is_empty() {
+            return None;
+        }
+        let white = model.white();
+        let error = |a: &Xyz, b: &Xyz| match itp {
+            true => chromacal_color::ictcp::delta_e_itp(a, b),
+            false => delta_e00_xyz(a, b, &white),
+        };
+        let pairs: Vec<(f64, f64)> = held_out
+            .iter()
+            .map(|p| {
+                let corrected = model.forward(self.forward_drive(model, p.drive), p.position);
+                (
+                    error(&p.measured, &model.forward(p.drive, p.position)),
+                    error(&p.measured, &corrected),
+                )
+            })
+            .collect();
+        let n = pairs.len() as f64;
+        let without = pairs.iter().map(|p| p.0).sum::<f64>() / n;
+        let with = pairs.iter().map(|p| p.1).sum::<f64>() / n;
+        let difference = with - without;
+        let variance = match pairs.len() {
+            1 => 0.0,
+            _ => {
+                pairs
+                    .iter()
+                    .map(|p| (p.1 - p.0 - difference).powi(2))
+                    .sum::<f64>()
+                    / (n - 1.0)
+            }
+        };
+        Some(HeldOutMeans {
+            without,
+            with,
+            standard_error: (variance / n).sqrt(),
+            patches: pairs.len(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::monitor::AdditivityTerms;
+    use crate::spatial::SpatialMap;
+    use crate::transfer::{Power, TransferLaw};
+
+    fn model() -> MonitorModel {
+        MonitorModel {
+            matrix: nalgebra::Matrix3::new(
+                41.24, 35.76, 18.05, //
+                21.26, 71.52, 7.22, //
+                1.93, 11.92, 95.05,
+            ),
+            black: Xyz::new(0.1, 0.11, 0.12),
+            laws: [2.2, 2.3, 2.1].map(|gamma| TransferLaw::Power(Power { gamma })),
+            spatial: SpatialMap::default(),
+            terms: AdditivityTerms::default(),
+        }
+    }
+
+    #[test]
+    fn greys_that_read_brighter_are_corrected_and_inverted() {
+        let m = model();
+        // The display shows 10 % more above black at mid grey, as much as the model at
+        // the ends.
+        let greys: Vec<(Drive, Xyz)> = [0.1, 0.5, 1.0]
+            .iter()
+            .map(|&d| {
+                let p = m.forward_centre([d; 3]);
+                let gain = if d == 0.5 { 1.1 } else { 1.0 };
+                ([d; 3], m.black + (p - m.black) * gain)
+            })
+            .collect();
+        let k = GreyCorrection::from_greys(&m, &greys).unwrap();
+        assert!((k.gain(0, 0.5) - 1.1).abs() < 1e-9);
+        assert!((k.gain(1, 0.3) - 1.05).abs() < 1e-9);
+        assert_eq!(k.gain(2, 0.0), 1.0);
+        // The corrected model predicts the mid grey as measured.
+        let shown = m.forward_centre(k.forward_drive(&m, [0.5; 3]));
+        assert!((shown.y / greys[1].1.y - 1.0).abs() < 1e-9, "{shown:?}");
+        // And the inverse sends a lower drive for the model's mid grey, which the
+        // corrected display shows as the model's.
+        let wanted = [0.5, 0.6, 0.45];
+        let sent = k.drive_for(&m, wanted);
+        assert!(sent[0] < 0.5);
+        let back = k.forward_drive(&m, sent);
+        for c in 0..3 {
+            assert!((back[c] - wanted[c]).abs() < 1e-9, "{back:?} {wanted:?}");
+        }
+    }
+
+    #[test]
+    fn the_held_out_patches_decide_whether_it_is_used() {
+        let m = model();
+        let bumped = |d: f64| if (0.3..0.7).contains(&d) { 1.08 } else { 1.0 };
+        let greys: Vec<(Drive, Xyz)> = [0.2, 0.5, 0.8, 1.0]
+            .iter()
+            .map(|&d| {
+                let p = m.forward_centre([d; 3]);
+                ([d; 3], m.black + (p - m.black) * bumped(d))
+            })
+            .collect();
+        let k = GreyCorrection::from_greys(&m, &greys).unwrap();
+        let drives = [[0.5, 0.45, 0.55], [0.4, 0.6, 0.5], [0.9, 0.5, 0.1]];
+        let patch = |drive: Drive, measured: Xyz| PatchError {
+            index: 0,
+            role: crate::measurement::Role::Verification,
+            drive,
+            position: crate::ScreenPosition::CENTRE,
+            measured,
+            predicted: m.forward_centre(drive),
+            delta_e00: 0.0,
+        };
+        // A display whose channels have the greys' bump: the correction predicts it,
+        // by more than the difference's standard error.
+        let bumped_display: Vec<PatchError> = drives
+            .iter()
+            .map(|&d| patch(d, m.forward_centre(k.forward_drive(&m, d))))
+            .collect();
+        let means = k.held_out_means(&m, &bumped_display, false).unwrap();
+        assert!(means.lowers() && means.with < 1e-9, "{means:?}");
+        // One whose greys alone were off (the channels follow the model): it does not.
+        let model_display: Vec<PatchError> = drives
+            .iter()
+            .map(|&d| patch(d, m.forward_centre(d)))
+            .collect();
+        let means = k.held_out_means(&m, &model_display, true).unwrap();
+        assert!(!means.lowers() && means.without < 1e-9, "{means:?}");
+        assert!(k.held_out_means(&m, &[], false).is_none());
+    }
+
+    #[test]
+    fn a_grey_under_twice_the_black_is_left_out() {
+        let m = model();
+        // Predicted 0.02 above a 0.11 black, read 50 % high: noise on black, not the
+        // law.
+        let low = m.forward_centre([0.02; 3]);
+        let greys = [
+            ([0.02; 3], m.black + (low - m.black) * 1.5),
+            ([0.5; 3], m.forward_centre([0.5; 3])),
+            ([1.0; 3], m.forward_centre([1.0; 3])),
+        ];
+        let k = GreyCorrection::from_greys(&m, &greys).unwrap();
+        assert_eq!(k.gain(0, 0.02), 1.0);
+    }
+
+    #[test]
+    fn gains_that_fold_a_law_back_are_refused_and_a_steep_one_inverted() {
+        let m = model();
+        let grey = |d: f64, gain: f64| {
+            let p = m.forward_centre([d; 3]);
+            ([d; 3], m.black + (p - m.black) * gain)
+        };
+        // Light that falls from 0.6 to 0.61 would fold the LUT back.
+        let folded = [grey(0.6, 1.9), grey(0.61, 0.6), grey(1.0, 1.0)];
+        assert!(GreyCorrection::from_greys(&m, &folded).is_none());
+        // A steep but rising change, which fixed-point steps did not settle: the
+        // bisection lands where forward_drive gives back what was wanted.
+        let steep = [grey(0.3, 0.7), grey(0.36, 1.3), grey(1.0, 1.0)];
+        let k = GreyCorrection::from_greys(&m, &steep).unwrap();
+        let table = k.inverse_table(&m);
+        for wanted in [0.0, 0.001, 0.31, 0.33, 0.35, 0.5, 0.999, 1.0] {
+            let sent = k.drive_for(&m, [wanted; 3]);
+            let back = k.forward_drive(&m, sent);
+            assert!(
+                (back[0] - wanted).abs() < 1e-9,
+                "{wanted}: {sent:?} gives {back:?}"
+            );
+            // The table agrees with the bisection to a small part of a 16-bit code.
+            let tabled = table.drive_for([wanted; 3]);
+            assert!(
+                (tabled[0] - sent[0]).abs() < 0.01 / 65535.0,
+                "{wanted}: {tabled:?} against {sent:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn no_correction_without_two_greys_above_black() {
+        let m = model();
+        let black = [([0.0; 3], m.black), ([0.5; 3], m.forward_centre([0.5; 3]))];
+        assert!(GreyCorrection::from_greys(&m, &black).is_none());
+    }
+}
