@@ -486,17 +486,17 @@ impl Profile {
             self.units == Units::Absolute && self.provenance.signal.is_some_and(|s| s.is_hdr());
         let metric = if itp { "ΔE ITP" } else { "ΔE00" };
         match calibration.grey_correction(&self.model, &self.report.held_out_patches, itp) {
-            Some((correction, means)) if means.lowers() => (
-                Some(correction),
-                Some(format!(
+            Some((correction, means)) if means.lowers() => {
+                let said = format!(
                     "the calibration's {} measured greys correct the model's transfer laws: held-out mean {metric} {:.3} → {:.3} (± {:.3}) over {} patches",
-                    calibration.levels.len(),
+                    correction.greys(),
                     means.without,
                     means.with,
                     means.standard_error,
                     means.patches
-                )),
-            ),
+                );
+                (Some(correction), Some(said))
+            }
             Some((_, means)) => (
                 None,
                 Some(format!(

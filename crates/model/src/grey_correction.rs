@@ -32,8 +32,9 @@ const GAIN_RANGE: (f64, f64) = (0.5, 2.0);
 /// Bisection steps of the inverse: 2⁻⁴⁰ of the drive, far below any code.
 const INVERSE_STEPS: usize = 40;
 
-/// Drives at which a corrected law is checked to keep rising.
-const MONOTONE_SAMPLES: usize = 1024;
+/// Held-out patches fewer than this decide nothing: their standard error says
+/// little.
+const MIN_HELD_OUT: usize = 5;
 
 /// Per channel, the gain on the law's excitation at the drives of the greys measured.
 #[derive(Debug, Clone, PartialEq)]
@@ -101,16 +102,24 @@ impl GreyCorrection {
             return None;
         }
         let correction = GreyCorrection { points };
+        // Checked at every 16-bit code and at each grey's own drive (greys closer
+        // than a code apart can fold the light between codes).
         let rising = model.laws.iter().enumerate().all(|(c, law)| {
-            let mut last = 0.0;
-            (0..=MONOTONE_SAMPLES).all(|i| {
-                let e = correction.excitation(c, law, i as f64 / MONOTONE_SAMPLES as f64);
-                let rises = e >= last;
-                last = e;
-                rises
-            })
+            let mut drives: Vec<f64> = (0..=TABLE_STEPS)
+                .map(|i| i as f64 / TABLE_STEPS as f64)
+                .chain(correction.points[c].iter().map(|p| p.0))
+                .collect();
+            drives.sort_by(f64::total_cmp);
+            drives
+                .windows(2)
+                .all(|w| correction.excitation(c, law, w[1]) >= correction.excitation(c, law, w[0]))
         });
         rising.then_some(correction)
+    }
+
+    /// The greys the correction rests on (those left after the ones it leaves out).
+    pub fn greys(&self) -> usize {
+        self.points.iter().map(Vec::len).max().unwrap_or(0)
     }
 
     /// Channel `c`'s corrected excitation at `drive`, at most its law's full drive's.
@@ -197,8 +206,10 @@ impl GreyCorrection {
 }
 
 impl InverseTable {
-    /// As [`GreyCorrection::drive_for`], to within a small part of a 16-bit code
-    /// where the corrected law is smooth (linear between the codes on either side).
+    /// As [`GreyCorrection::drive_for`]: the same light, and where the corrected light
+    /// rises the same drive to within a small part of a 16-bit code (linear between
+    /// the codes on either side; where the light is flat, at the top or below a
+    /// law's cutoff, any drive of that light).
     pub fn drive_for(&self, wanted: Drive) -> Drive {
         [0, 1, 2].map(|c| {
             let f = &self.forward[c];
@@ -240,14 +251,14 @@ impl GreyCorrection {
     /// The mean error of `model` on `held_out` (each patch predicted again at its
     /// drive and place) without and with the correction: in ΔE ITP (BT.2124, on
     /// absolute light) where `itp`, as an HDR profile is judged, else ΔE00 against
-    /// the model's white. None without held-out patches.
+    /// the model's white. None with fewer than 5 held-out patches.
     pub fn held_out_means(
         &self,
         model: &MonitorModel,
         held_out: &[PatchError],
         itp: bool,
     ) -> Option<HeldOutMeans> {
-        if held_out.is_empty() {
+        if held_out.len() < MIN_HELD_OUT {
             return None;
         }
         let white = model.white();
@@ -352,7 +363,13 @@ mod tests {
             })
             .collect();
         let k = GreyCorrection::from_greys(&m, &greys).unwrap();
-        let drives = [[0.5, 0.45, 0.55], [0.4, 0.6, 0.5], [0.9, 0.5, 0.1]];
+        let drives = [
+            [0.5, 0.45, 0.55],
+            [0.4, 0.6, 0.5],
+            [0.9, 0.5, 0.1],
+            [0.35, 0.65, 0.6],
+            [0.55, 0.3, 0.45],
+        ];
         let patch = |drive: Drive, measured: Xyz| PatchError {
             index: 0,
             role: crate::measurement::Role::Verification,
@@ -377,7 +394,7 @@ mod tests {
             .collect();
         let means = k.held_out_means(&m, &model_display, true).unwrap();
         assert!(!means.lowers() && means.without < 1e-9, "{means:?}");
-        assert!(k.held_out_means(&m, &[], false).is_none());
+        assert!(k.held_out_means(&m, &model_display[..2], false).is_none());
     }
 
     #[test]
@@ -405,6 +422,14 @@ mod tests {
         // Light that falls from 0.6 to 0.61 would fold the LUT back.
         let folded = [grey(0.6, 1.9), grey(0.61, 0.6), grey(1.0, 1.0)];
         assert!(GreyCorrection::from_greys(&m, &folded).is_none());
+        // So would a fall of 3 % between greys closer than a 16-bit code.
+        let close = [
+            grey(0.5, 1.0),
+            grey(0.99991, 1.0),
+            grey(0.999_92, 0.97),
+            grey(1.0, 1.0),
+        ];
+        assert!(GreyCorrection::from_greys(&m, &close).is_none());
         // A steep but rising change, which fixed-point steps did not settle: the
         // bisection lands where forward_drive gives back what was wanted.
         let steep = [grey(0.3, 0.7), grey(0.36, 1.3), grey(1.0, 1.0)];
