@@ -356,12 +356,9 @@ async fn a_verify_job_on_an_hdr_profile_judges_it_in_delta_e_itp() {
     let dir = tempfile::tempdir().unwrap();
     // A ΔE00 threshold nothing could miss, and a ΔE ITP one any reading misses: the
     // job fails exactly when it judges in ΔE ITP.
-    let config = format!(
-        "{}[plan]\nbit_depth = 10\n\
-         [target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\nlevels = 17\n\
-         [daemon]\nsimulated_time_scale = 0.001\n\
+    let config = common::hdr_oled_pq_config(
+        "[daemon]\nsimulated_time_scale = 0.001\n\
          [schedule]\nthreshold_de00 = 1000.0\nthreshold_itp = 0.01\nescalate = false\n",
-        common::isetbio_monitor("isetbio_oled_sony", "preset = \"hdr-oled\""),
     );
     let daemon = start_daemon(dir.path(), &config);
     let api = daemon.endpoint();

@@ -20,12 +20,7 @@ fn hdr_oled_config(dir: &std::path::Path) -> std::path::PathBuf {
     let config = dir.join("config.toml");
     std::fs::write(
         &config,
-        format!(
-            "{}[plan]\nbit_depth = 10\n\
-             [target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\nlevels = 17\n\
-             [display.resolve]\nconnect_timeout_s = 60.0\n",
-            isetbio_monitor("isetbio_oled_sony", "preset = \"hdr-oled\""),
-        ),
+        common::hdr_oled_pq_config("[display.resolve]\nconnect_timeout_s = 60.0\n"),
     )
     .unwrap();
     config

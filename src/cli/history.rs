@@ -65,10 +65,11 @@ pub fn history(api: &ApiArgs, json: bool) -> Result<(), Failure> {
         outln!("verifications ({}):", verifications.len())?;
         for v in verifications {
             // Records before HDR verifications had no metric: ΔE00.
-            let metric = match v["metric"].as_str() {
-                Some("itp") => "ΔE ITP",
-                _ => "ΔE00",
-            };
+            let metric = v["metric"]
+                .as_str()
+                .and_then(|m| m.parse::<chromacal::verify::Metric>().ok())
+                .unwrap_or_default()
+                .name();
             outln!(
                 "  {} {}  mean {metric} {}  max {}{}",
                 v["at"].as_str().unwrap_or("?"),

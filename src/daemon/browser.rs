@@ -185,6 +185,7 @@ pub async fn fleet_page(daemon: &Daemon, logout: bool) -> Response {
             .as_ref()
             .and_then(|p| device.last_verification_of(&p.id))
             .map(|v| FleetVerification {
+                passed: v.passed(),
                 at: v.at,
                 metric: v.metric,
                 mean: v.stats.map(|s| s.mean),

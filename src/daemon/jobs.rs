@@ -621,9 +621,9 @@ async fn verify(
     // A profile of an HDR signal is judged in ΔE ITP on absolute light, as it was
     // published: ΔE00 relative to an 800 cd/m² white does not see a 10 % change at
     // 0.5 cd/m².
-    let (metric, delta_e, threshold): (_, Vec<f64>, _) = match profile.provenance.signal {
-        Some(signal) if signal.is_hdr() => (
-            Metric::Itp,
+    let metric = profile.judged_in();
+    let (delta_e, threshold): (Vec<f64>, _) = match metric {
+        Metric::Itp => (
             evaluation
                 .patches
                 .iter()
@@ -631,8 +631,7 @@ async fn verify(
                 .collect(),
             config.schedule.threshold_itp,
         ),
-        _ => (
-            Metric::De00,
+        Metric::De00 => (
             evaluation.patches.iter().map(|p| p.delta_e00).collect(),
             config.schedule.threshold_de00,
         ),

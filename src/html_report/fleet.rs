@@ -37,13 +37,8 @@ pub struct FleetVerification {
     pub metric: crate::verify::Metric,
     pub mean: Option<f64>,
     pub threshold: f64,
-}
-
-impl FleetVerification {
-    /// Passed: its mean within the threshold.
-    pub fn passed(&self) -> bool {
-        self.mean.is_some_and(|m| m <= self.threshold)
-    }
+    /// As the record says (`VerificationRecord::passed`).
+    pub passed: bool,
 }
 
 const STYLE: &str = "
@@ -116,7 +111,7 @@ fn row(d: &FleetDevice) -> Markup {
             td.verification {
                 @match &d.verification {
                     Some(v) => {
-                        @let word = if v.passed() { "pass" } else { "fail" };
+                        @let word = if v.passed { "pass" } else { "fail" };
                         span class=(word) { (word) }
                         " " (v.mean.map_or("–".to_string(), |m| format!("{m:.3}"))) " " (v.metric.name()) " against " (v.threshold) " "
                         span.muted { (v.at) }
@@ -238,6 +233,7 @@ mod tests {
                     metric: crate::verify::Metric::De00,
                     mean: Some(1.5),
                     threshold: 1.0,
+                    passed: false,
                 }),
                 whites: vec![(0.0, 100.0), (60.0, 101.0), (120.0, 102.0)],
                 drift: Some((1.0 / 60.0, 0.001)),

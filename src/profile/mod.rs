@@ -11,6 +11,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use chromacal_color::difference::Metric;
 use chromacal_instruments::InstrumentInfo;
 use chromacal_model::MonitorModel;
 use chromacal_model::fit::FitReport;
@@ -472,6 +473,15 @@ pub struct LevelCheck {
 }
 
 impl Profile {
+    /// The colour difference this profile is judged in: ΔE ITP (BT.2124) for a
+    /// profile of an HDR signal on absolute light, ΔE00 otherwise.
+    pub fn judged_in(&self) -> Metric {
+        match self.units == Units::Absolute && self.provenance.signal.is_some_and(|s| s.is_hdr()) {
+            true => Metric::Itp,
+            false => Metric::De00,
+        }
+    }
+
     /// The calibration's measured greys as a correction of the model for `lut3d` and
     /// `verify`'s chart (the ICC export, `render` and `emulate` go through the model
     /// alone), where it predicts the patches held out of the fit better than the
@@ -482,10 +492,9 @@ impl Profile {
         let Some(calibration) = &self.calibration else {
             return (None, None);
         };
-        let itp =
-            self.units == Units::Absolute && self.provenance.signal.is_some_and(|s| s.is_hdr());
-        let metric = if itp { "ΔE ITP" } else { "ΔE00" };
-        match calibration.grey_correction(&self.model, &self.report.held_out_patches, itp) {
+        let judged_in = self.judged_in();
+        let metric = judged_in.name();
+        match calibration.grey_correction(&self.model, &self.report.held_out_patches, judged_in) {
             Some((correction, means)) if means.lowers() => {
                 let said = format!(
                     "the calibration's {} measured greys correct the model's transfer laws: held-out mean {metric} {:.3} → {:.3} (± {:.3}) over {} patches",
@@ -531,17 +540,16 @@ impl StoredCalibration {
     }
 
     /// The calibration's measured greys as a correction of `model`'s transfer laws,
-    /// with the held-out means that decide whether it is used (`itp`: judged in ΔE
-    /// ITP, as a profile of an HDR signal is). None where there are too few greys
-    /// or no held-out patches.
+    /// with the held-out means in `metric` that decide whether it is used. None where
+    /// there are too few greys or held-out patches.
     pub fn grey_correction(
         &self,
         model: &chromacal_model::MonitorModel,
         held_out: &[chromacal_model::fit::validate::PatchError],
-        itp: bool,
+        metric: Metric,
     ) -> Option<(GreyCorrection, HeldOutMeans)> {
         let correction = GreyCorrection::from_greys(model, &self.greys())?;
-        let means = correction.held_out_means(model, held_out, itp)?;
+        let means = correction.held_out_means(model, held_out, metric)?;
         Some((correction, means))
     }
 }

@@ -109,7 +109,7 @@ pub struct VerificationRecord {
     /// for a profile of an HDR signal, whose light is absolute and whose error near
     /// black ΔE00 relative to the white does not see. Records written before HDR
     /// profiles were judged in ΔE ITP read as ΔE00.
-    #[serde(default = "de00")]
+    #[serde(default)]
     pub metric: Metric,
     /// The error over the patches, in `metric`.
     pub stats: Option<ErrorStats>,
@@ -138,10 +138,6 @@ impl VerificationRecord {
         self.stats.is_some_and(|s| s.mean <= self.threshold)
             && self.verdict.as_deref() != Some("fail")
     }
-}
-
-fn de00() -> Metric {
-    Metric::De00
 }
 
 fn now_rfc3339() -> String {

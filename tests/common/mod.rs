@@ -146,6 +146,17 @@ pub fn isetbio_monitor(stem: &str, extra: &str) -> String {
     )
 }
 
+/// The HDR runs' config: a virtual Sony OLED (ISETBio's spectra and measured table)
+/// in the `hdr-oled` preset, calibrated in 10 bits to PQ with a 600 cd/m² peak at 17
+/// levels; `extra` after it.
+pub fn hdr_oled_pq_config(extra: &str) -> String {
+    format!(
+        "{}[plan]\nbit_depth = 10\n\
+         [target]\nwhite = \"D65\"\ntone = \"pq\"\npeak = 600.0\nlevels = 17\n{extra}",
+        isetbio_monitor("isetbio_oled_sony", "preset = \"hdr-oled\""),
+    )
+}
+
 /// A virtual monitor of a preset on its own clock, showing `drive` at the centre.
 pub fn virtual_monitor(
     preset: &str,

@@ -9,10 +9,11 @@ use super::spaces::{Lab, Luv};
 
 /// A colour difference a verification is judged in: ΔE00, or ΔE ITP where the
 /// light is absolute (an HDR signal).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Metric {
     /// CIEDE2000 in CIELAB against the calibrated white.
+    #[default]
     De00,
     /// ITU-R BT.2124 ΔE ITP, on absolute light.
     Itp,

@@ -19,6 +19,7 @@
 //! error (`Profile::grey_correction_for_lut`).
 
 use chromacal_color::Xyz;
+use chromacal_color::difference::Metric;
 
 use crate::fit::validate::{PatchError, delta_e00_xyz};
 use crate::{Drive, MonitorModel};
@@ -110,9 +111,11 @@ impl GreyCorrection {
                 .chain(correction.points[c].iter().map(|p| p.0))
                 .collect();
             drives.sort_by(f64::total_cmp);
-            drives
-                .windows(2)
-                .all(|w| correction.excitation(c, law, w[1]) >= correction.excitation(c, law, w[0]))
+            let light: Vec<f64> = drives
+                .iter()
+                .map(|&d| correction.excitation(c, law, d))
+                .collect();
+            light.windows(2).all(|w| w[1] >= w[0])
         });
         rising.then_some(correction)
     }
@@ -249,22 +252,22 @@ impl HeldOutMeans {
 
 impl GreyCorrection {
     /// The mean error of `model` on `held_out` (each patch predicted again at its
-    /// drive and place) without and with the correction: in ΔE ITP (BT.2124, on
-    /// absolute light) where `itp`, as an HDR profile is judged, else ΔE00 against
+    /// drive and place) without and with the correction, in `metric`: ΔE ITP
+    /// (BT.2124, on absolute light), as an HDR profile is judged, or ΔE00 against
     /// the model's white. None with fewer than 5 held-out patches.
     pub fn held_out_means(
         &self,
         model: &MonitorModel,
         held_out: &[PatchError],
-        itp: bool,
+        metric: Metric,
     ) -> Option<HeldOutMeans> {
         if held_out.len() < MIN_HELD_OUT {
             return None;
         }
         let white = model.white();
-        let error = |a: &Xyz, b: &Xyz| match itp {
-            true => chromacal_color::ictcp::delta_e_itp(a, b),
-            false => delta_e00_xyz(a, b, &white),
+        let error = |a: &Xyz, b: &Xyz| match metric {
+            Metric::Itp => chromacal_color::ictcp::delta_e_itp(a, b),
+            Metric::De00 => delta_e00_xyz(a, b, &white),
         };
         let pairs: Vec<(f64, f64)> = held_out
             .iter()
@@ -385,16 +388,19 @@ mod tests {
             .iter()
             .map(|&d| patch(d, m.forward_centre(k.forward_drive(&m, d))))
             .collect();
-        let means = k.held_out_means(&m, &bumped_display, false).unwrap();
+        let means = k.held_out_means(&m, &bumped_display, Metric::De00).unwrap();
         assert!(means.lowers() && means.with < 1e-9, "{means:?}");
         // One whose greys alone were off (the channels follow the model): it does not.
         let model_display: Vec<PatchError> = drives
             .iter()
             .map(|&d| patch(d, m.forward_centre(d)))
             .collect();
-        let means = k.held_out_means(&m, &model_display, true).unwrap();
+        let means = k.held_out_means(&m, &model_display, Metric::Itp).unwrap();
         assert!(!means.lowers() && means.without < 1e-9, "{means:?}");
-        assert!(k.held_out_means(&m, &model_display[..2], false).is_none());
+        assert!(
+            k.held_out_means(&m, &model_display[..2], Metric::De00)
+                .is_none()
+        );
     }
 
     #[test]
