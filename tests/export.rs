@@ -1398,3 +1398,36 @@ fn a_calibrated_profile_exports_through_its_curves_and_native_without_them() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--native"));
 }
+
+/// Where the calibration's measured greys correct the profile's laws (the Sony OLED in
+/// PQ 600, whose mid-greys read 2–3 % darker than the PQ law fitted over the range:
+/// `lut3d`, `render` and `verify`'s charts go through them), the ICC export carries the
+/// corrected curves: Little CMS reads it as the corrected model, not the fitted one.
+#[test]
+fn the_icc_export_carries_the_calibrations_measured_greys() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("sony-pq.toml");
+    std::fs::write(&config, common::hdr_oled_pq_config("")).unwrap();
+    let state = dir.path().join("sony-pq");
+    let profile = in_process_profile(&config, &state);
+    let (corrected, why) = profile.output_model();
+    assert!(
+        matches!(corrected, std::borrow::Cow::Owned(_)),
+        "the greys are not used: {why:?}"
+    );
+    let icc = dir.path().join("sony-pq.icc");
+    let said = export(&state.join("current.toml"), "icc4", &icc, &["--native"]);
+    assert!(said.contains("measured greys correct"), "{said}");
+    let white = profile.report.white_anchor.as_ref().unwrap().measured;
+    let codes = test_codes();
+    let read = transicc_lab(&icc, &codes);
+    let (to_corrected, at) = worst_against_model(&corrected, &white, &codes, &read);
+    let (to_fitted, at_fitted) = worst_against_model(&profile.model, &white, &codes, &read);
+    eprintln!(
+        "Sony PQ icc4 via lcms: worst ΔE00 {to_corrected:.4} at {at:?} to the corrected model, {to_fitted:.4} at {at_fitted:?} to the fitted one"
+    );
+    assert!(
+        to_corrected < 0.1 && to_fitted > 5.0 * to_corrected,
+        "{to_corrected} at {at:?}, {to_fitted} at {at_fitted:?}"
+    );
+}

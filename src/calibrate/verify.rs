@@ -5,6 +5,7 @@
 //! (`verifications/<profile>.json`, which the report shows), a line in the store's
 //! verification log, and the readings as a `.ti3`.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use chromacal_display::PatchDisplay;
@@ -369,7 +370,6 @@ async fn uniformity_on(
     let setting = Setting {
         model: &profile.model,
         curves: None,
-        correction: None,
         against: Against::Profile,
         bits,
     };
@@ -406,16 +406,16 @@ async fn verify_on(
 ) -> Result<(VerifyReport, Vec<PlannedPatch>, Readings), VerifyError> {
     let loaded = loaded_now(devices, profile)?;
     let curves = profile.calibration.as_ref().map(|c| &c.curves);
-    // Only where the chart asks for colours: judged against the profile, the
+    // The model corrected by the calibration's greys only where the chart asks for
+    // colours (sent as `lut3d` sends them): judged against the profile, the
     // correction's own greys would grade themselves.
-    let (correction, greys) = match options.against {
-        Against::Encoding(_) => profile.grey_correction_for_lut(),
-        Against::Profile => (None, None),
+    let (model, greys) = match options.against {
+        Against::Encoding(_) => profile.output_model(),
+        Against::Profile => (Cow::Borrowed(&profile.model), None),
     };
     let setting = Setting {
-        model: &profile.model,
+        model: &model,
         curves,
-        correction: correction.as_ref(),
         against: options.against,
         bits,
     };

@@ -84,11 +84,10 @@ pub fn run(args: Lut3dArgs) -> Result<(), Failure> {
             "chromacal: warning: ffmpeg reads a .3dl as 17 points a side; this one has {size}"
         );
     }
-    let (correction, said_of_greys) = profile.grey_correction_for_lut();
+    let (model, said_of_greys) = profile.output_model();
     let lut = build_lut(
-        &profile.model,
+        &model,
         profile.calibration.as_ref().map(|c| &c.curves),
-        correction.as_ref(),
         &LutOptions {
             source: args.source,
             size,

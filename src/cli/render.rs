@@ -186,7 +186,13 @@ pub fn run(args: RenderArgs) -> Result<(), Failure> {
             CodesOutput::File(args.output)
         },
     };
-    let outcome = render(&profile.model, profile.units, &request)?;
+    // The model corrected by the calibration's measured greys where they predict
+    // the held-out patches better, as `lut3d` and `verify`'s charts go through it.
+    let (model, said_of_greys) = profile.output_model();
+    if let Some(said) = said_of_greys {
+        eprintln!("chromacal: {said}");
+    }
+    let outcome = render(&model, profile.units, &request)?;
     if let Some(csv) = &outcome.stdout {
         write_stdout(csv)?;
     }

@@ -11,6 +11,7 @@
 
 pub mod colord;
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use crate::measurement_file::read_measurements;
@@ -472,7 +473,14 @@ pub fn export(
                 None => profile.report.white_anchor.as_ref().map(|w| w.measured),
                 Some(_) => None,
             };
-            let matrix_trc = MatrixTrc::relative_to(&profile.model, calibration.as_ref(), measured);
+            // The curves and matrix of the model corrected by the calibration's
+            // measured greys, where they predict the held-out patches better (as
+            // `lut3d`, `render` and `verify`'s charts go through it).
+            let (model, said_of_greys) = profile.output_model();
+            if let (Cow::Owned(_), Some(said)) = (&model, said_of_greys) {
+                warnings.push(said);
+            }
+            let matrix_trc = MatrixTrc::relative_to(&model, calibration.as_ref(), measured);
             if matrix_trc.black_clipped && matrix_trc.luts.is_none() {
                 notes.push("the black's chromaticity (outside the primaries' triangle)".into());
             }

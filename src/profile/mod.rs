@@ -7,6 +7,7 @@
 
 pub mod store;
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -482,13 +483,22 @@ impl Profile {
         }
     }
 
-    /// The calibration's measured greys as a correction of the model for `lut3d` and
-    /// `verify`'s chart (the ICC export, `render` and `emulate` go through the model
-    /// alone), where it predicts the patches held out of the fit better than the
-    /// model alone by more than the standard error of the difference (in ΔE ITP for
-    /// an HDR signal's profile, ΔE00 otherwise), and a sentence saying whether it is
-    /// used and why.
-    pub fn grey_correction_for_lut(&self) -> (Option<GreyCorrection>, Option<String>) {
+    /// The model what the profile makes goes through (`lut3d`, `verify`'s charts,
+    /// `render`, the ICC export): the fitted model with its transfer laws corrected
+    /// by the calibration's measured greys ([`GreyCorrection`]) where that predicts
+    /// the patches held out of the fit better than the model alone by more than the
+    /// standard error of the difference (in ΔE ITP for an HDR signal's profile, ΔE00
+    /// otherwise), else the fitted model; and a sentence saying whether the greys
+    /// are used and why (none where there is nothing to decide).
+    pub fn output_model(&self) -> (Cow<'_, MonitorModel>, Option<String>) {
+        match self.grey_correction() {
+            (Some(correction), said) => (Cow::Owned(correction.into_model()), said),
+            (None, said) => (Cow::Borrowed(&self.model), said),
+        }
+    }
+
+    /// The greys' correction [`Profile::output_model`] uses, if any, and why.
+    fn grey_correction(&self) -> (Option<GreyCorrection>, Option<String>) {
         let Some(calibration) = &self.calibration else {
             return (None, None);
         };

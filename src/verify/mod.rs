@@ -40,7 +40,6 @@ use chromacal_crf::lut3d::{LutOptions, SourceSpace, curve_input, source_target};
 use chromacal_crf::tone::ToneOperator;
 use chromacal_crf::{CodeChoice, ColourReproduction, RenderSettings, Scene, ScenePixel};
 use chromacal_display::x11::GammaRamp;
-use chromacal_model::grey_correction::GreyCorrection;
 use chromacal_model::screen::Codes;
 use chromacal_model::target::{CalibrationCurves, ToneCurve, target_luminance};
 use chromacal_model::{MonitorModel, ScreenPosition};
@@ -145,10 +144,6 @@ pub struct PlannedPatch {
 pub struct Setting<'a> {
     pub model: &'a MonitorModel,
     pub curves: Option<&'a CalibrationCurves>,
-    /// The calibration's measured greys as a correction of the model, where the
-    /// profile's held-out patches say it predicts better
-    /// (`Profile::grey_correction_for_lut`): the chart is sent as `lut3d` sends.
-    pub correction: Option<&'a GreyCorrection>,
     pub against: Against,
     /// Bits of the codes sent.
     pub bits: u32,
@@ -254,10 +249,6 @@ pub fn plan(
             (Input::Display(rgb), _) | (Input::Encoded(rgb), None) => rgb,
             (_, _) => {
                 let drive = pixel.codes.map(|c| f64::from(c) / 65535.0);
-                let drive = match setting.correction {
-                    Some(k) => k.drive_for(setting.model, drive),
-                    None => drive,
-                };
                 match setting.curves {
                     Some(k) => [0, 1, 2].map(|c| curve_input(&k.curves[c], drive[c])),
                     None => drive,
@@ -273,13 +264,7 @@ pub fn plan(
             Loaded::Curves(_) => codes.drive(),
             _ => loaded.output(codes.drive()),
         };
-        let predicted = setting.model.forward(
-            match setting.correction {
-                Some(k) => k.forward_drive(setting.model, panel),
-                None => panel,
-            },
-            ScreenPosition::CENTRE,
-        );
+        let predicted = setting.model.forward(panel, ScreenPosition::CENTRE);
         // What colour management makes of the colour asked for: the colour itself,
         // or where the display cannot show it, the nearest it can (clipped).
         let reference = match (setting.against, patch.input, asked) {

@@ -23,7 +23,6 @@ use chromacal_color::hdr::{HLG_REFERENCE_AMBIENT, bt2390_eetf, hlg_eotf, hlg_sys
 use chromacal_color::ictcp::{pq_eotf, pq_inverse_eotf};
 use chromacal_color::spaces::{Xyy, xyy_to_xyz};
 use chromacal_model::fit::stats::ErrorStats;
-use chromacal_model::grey_correction::GreyCorrection;
 use chromacal_model::target::CalibrationCurves;
 use chromacal_model::{MonitorModel, ScreenPosition};
 
@@ -343,12 +342,10 @@ pub fn curve_input(curve: &[f64], drive: f64) -> f64 {
 }
 
 /// Build the LUT of `model` (and its calibration `curves` when the LUT is to run
-/// through them; with `correction`, the model's transfer laws corrected by the
-/// calibration's measured greys: `GreyCorrection`).
+/// through them).
 pub fn build_lut(
     model: &MonitorModel,
     curves: Option<&CalibrationCurves>,
-    correction: Option<&GreyCorrection>,
     options: &LutOptions,
 ) -> Result<Lut3d, LutError> {
     // 129³ is 2.1 million points, a 60 MB .cube: enough for any player.
@@ -401,16 +398,11 @@ pub fn build_lut(
             codes: CodeChoice::Rounded,
         },
     )?;
-    let inverse = correction.map(|k| k.inverse_table(model));
     let table = rendering
         .pixels
         .iter()
         .map(|p| {
             let drive = p.codes.map(|c| f64::from(c) / 65535.0);
-            let drive = match &inverse {
-                Some(k) => k.drive_for(drive),
-                None => drive,
-            };
             match curves {
                 Some(k) => [0, 1, 2].map(|c| curve_input(&k.curves[c], drive[c])),
                 None => drive,

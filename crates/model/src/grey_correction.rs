@@ -12,16 +12,20 @@
 //! predicted, is a gain on the excitation of every channel at the drive that channel
 //! had in it (the assumption the curves' refinement makes: the greys' miss is the
 //! channels' laws', alike), interpolated linearly in drive between the greys and held
-//! at the ends. `forward_drive` is what the corrected display shows a drive as (for
-//! the model's forward), `drive_for` its inverse (for the model's inverse). It is a
+//! at the ends. The corrected laws are written as [`Table`] laws through every 16-bit
+//! code and each grey's drive ([`GreyCorrection::model`]), as the law correction of
+//! the fit writes its own (`fit::law_correction`): the corrected model is then a model
+//! like any other, and `lut3d`, `verify`'s charts, `render` and the ICC export go
+//! through it by the paths they take for any model, forward and inverse. It is a
 //! measured table, not a law: whether it is used is decided on patches held out of
 //! the fit, which it must predict better by more than the difference's standard
-//! error (`Profile::grey_correction_for_lut`).
+//! error (`Profile::output_model`).
 
 use chromacal_color::Xyz;
 use chromacal_color::difference::Metric;
 
 use crate::fit::validate::{PatchError, delta_e00_xyz};
+use crate::transfer::{Table, TransferLaw};
 use crate::{Drive, MonitorModel};
 
 /// Greys whose gain falls outside this range are left out: a grey measured at half or
@@ -30,26 +34,32 @@ use crate::{Drive, MonitorModel};
 /// dimming backlight's floor, over a prediction of almost nothing is any ratio).
 const GAIN_RANGE: (f64, f64) = (0.5, 2.0);
 
-/// Bisection steps of the inverse: 2⁻⁴⁰ of the drive, far below any code.
-const INVERSE_STEPS: usize = 40;
-
 /// Held-out patches fewer than this decide nothing: their standard error says
 /// little.
 const MIN_HELD_OUT: usize = 5;
 
-/// Per channel, the gain on the law's excitation at the drives of the greys measured.
+/// Drive steps of the corrected laws' tables: a knot at every 16-bit code, where a
+/// LUT or a render sends its drives, so the table is the correction itself there.
+const TABLE_STEPS: usize = 65_535;
+
+/// Per channel, the gain on the law's excitation at the drives of the greys measured,
+/// and the model with its laws so corrected.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GreyCorrection {
     /// Per channel: (drive, gain), drive strictly ascending.
     points: [Vec<(f64, f64)>; 3],
+    /// The model the correction was made for, each law replaced by its corrected
+    /// excitation as a table.
+    model: MonitorModel,
 }
 
 impl GreyCorrection {
     /// From greys shown at `drives` and measured as `measured` (the same order), on
     /// `model`'s centre. None when fewer than two greys have light above black both
     /// predicted and measured, when a law has no positive full-drive excitation, or
-    /// when the gains would make a channel's light fall as its drive rises (a LUT
-    /// through it would fold back).
+    /// when the gains would make a channel's light fall as its drive rises between
+    /// two knots of its table (a 16-bit code or a grey's drive: a LUT through it would
+    /// fold back).
     pub fn from_greys(model: &MonitorModel, greys: &[(Drive, Xyz)]) -> Option<GreyCorrection> {
         if !model.laws.iter().all(|l| {
             let top = l.full_drive_excitation();
@@ -102,22 +112,39 @@ impl GreyCorrection {
         if !points.iter().all(|p| p.len() >= 2) {
             return None;
         }
-        let correction = GreyCorrection { points };
-        // Checked at every 16-bit code and at each grey's own drive (greys closer
-        // than a code apart can fold the light between codes).
-        let rising = model.laws.iter().enumerate().all(|(c, law)| {
+        let mut corrected = model.clone();
+        for (c, law) in model.laws.iter().enumerate() {
+            // Knots at every 16-bit code and at each grey's own drive, where the gain
+            // bends (greys closer than a code apart can fold the light between
+            // codes). `Table::new` refuses light that falls from one knot to the next.
             let mut drives: Vec<f64> = (0..=TABLE_STEPS)
                 .map(|i| i as f64 / TABLE_STEPS as f64)
-                .chain(correction.points[c].iter().map(|p| p.0))
+                .chain(points[c].iter().map(|p| p.0))
                 .collect();
             drives.sort_by(f64::total_cmp);
-            let light: Vec<f64> = drives
+            drives.dedup();
+            let excitation = drives
                 .iter()
-                .map(|&d| correction.excitation(c, law, d))
+                .map(|&d| corrected_excitation(&points[c], law, d))
                 .collect();
-            light.windows(2).all(|w| w[1] >= w[0])
-        });
-        rising.then_some(correction)
+            corrected.laws[c] = TransferLaw::Table(Table::new(drives, excitation).ok()?);
+        }
+        Some(GreyCorrection {
+            points,
+            model: corrected,
+        })
+    }
+
+    /// The model with its transfer laws corrected: what the display shows, forward,
+    /// and the drives to send, inverse, for `lut3d`, `verify`'s charts, `render` and
+    /// the ICC export.
+    pub fn model(&self) -> &MonitorModel {
+        &self.model
+    }
+
+    /// The corrected model, kept.
+    pub fn into_model(self) -> MonitorModel {
+        self.model
     }
 
     /// The greys the correction rests on (those left after the ones it leaves out).
@@ -125,110 +152,30 @@ impl GreyCorrection {
         self.points.iter().map(Vec::len).max().unwrap_or(0)
     }
 
-    /// Channel `c`'s corrected excitation at `drive`, at most its law's full drive's.
-    fn excitation(&self, c: usize, law: &crate::TransferLaw, drive: f64) -> f64 {
-        (law.excitation(drive) * self.gain(c, drive)).clamp(0.0, law.full_drive_excitation())
-    }
-
     /// The gain on channel `c`'s excitation at `drive`.
     pub fn gain(&self, c: usize, drive: f64) -> f64 {
-        let p = &self.points[c];
-        let i = p.partition_point(|q| q.0 < drive);
-        if i == 0 {
-            return p[0].1;
-        }
-        if i == p.len() {
-            return p[p.len() - 1].1;
-        }
-        let ((d0, g0), (d1, g1)) = (p[i - 1], p[i]);
-        g0 + (g1 - g0) * (drive - d0) / (d1 - d0)
-    }
-
-    /// The drive the model must be given to predict what `drive` shows on the
-    /// display: each channel's excitation times its gain there.
-    pub fn forward_drive(&self, model: &MonitorModel, drive: Drive) -> Drive {
-        let mut out = drive;
-        for (c, law) in model.laws.iter().enumerate() {
-            out[c] = law.drive(self.excitation(c, law, drive[c])).clamp(0.0, 1.0);
-        }
-        out
-    }
-
-    /// The drive that shows on the display what the model predicts for `wanted`: the
-    /// inverse of `forward_drive`, the least drive whose corrected excitation reaches
-    /// the law's at `wanted`, by bisection on each channel (the corrected excitation
-    /// rises with the drive: `from_greys` checks it).
-    pub fn drive_for(&self, model: &MonitorModel, wanted: Drive) -> Drive {
-        let mut out = wanted;
-        for (c, law) in model.laws.iter().enumerate() {
-            let target = law.excitation(wanted[c]);
-            let (mut lo, mut hi) = (0.0, 1.0);
-            if self.excitation(c, law, hi) < target {
-                out[c] = hi;
-                continue;
-            }
-            for _ in 0..INVERSE_STEPS {
-                let mid = 0.5 * (lo + hi);
-                if self.excitation(c, law, mid) < target {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            out[c] = hi;
-        }
-        out
+        gain_at(&self.points[c], drive)
     }
 }
 
-/// Drive steps of [`InverseTable`]: a 16-bit code each.
-const TABLE_STEPS: usize = 65_535;
-
-/// [`GreyCorrection::drive_for`] tabulated for many drives (a 3D LUT's 274,625):
-/// `forward_drive` at every 16-bit code, inverted by interpolation between them.
-#[derive(Debug, Clone, PartialEq)]
-pub struct InverseTable {
-    /// Per channel, `forward_drive` at drive i / TABLE_STEPS: non-decreasing.
-    forward: [Vec<f64>; 3],
+/// A channel's gain at `drive` from its greys' (drive, gain): linear between them,
+/// held at the ends.
+fn gain_at(points: &[(f64, f64)], drive: f64) -> f64 {
+    let i = points.partition_point(|q| q.0 < drive);
+    if i == 0 {
+        return points[0].1;
+    }
+    if i == points.len() {
+        return points[points.len() - 1].1;
+    }
+    let ((d0, g0), (d1, g1)) = (points[i - 1], points[i]);
+    g0 + (g1 - g0) * (drive - d0) / (d1 - d0)
 }
 
-impl GreyCorrection {
-    /// The inverse tabulated for `model`.
-    pub fn inverse_table(&self, model: &MonitorModel) -> InverseTable {
-        let forward = [0, 1, 2].map(|c| {
-            let law = &model.laws[c];
-            (0..=TABLE_STEPS)
-                .map(|i| {
-                    let d = i as f64 / TABLE_STEPS as f64;
-                    law.drive(self.excitation(c, law, d)).clamp(0.0, 1.0)
-                })
-                .collect()
-        });
-        InverseTable { forward }
-    }
-}
-
-impl InverseTable {
-    /// As [`GreyCorrection::drive_for`]: the same light, and where the corrected light
-    /// rises the same drive to within a small part of a 16-bit code (linear between
-    /// the codes on either side; where the light is flat, at the top or below a
-    /// law's cutoff, any drive of that light).
-    pub fn drive_for(&self, wanted: Drive) -> Drive {
-        [0, 1, 2].map(|c| {
-            let f = &self.forward[c];
-            let w = wanted[c];
-            let i = f.partition_point(|v| *v < w);
-            if i == 0 {
-                return 0.0;
-            }
-            if i == f.len() {
-                return 1.0;
-            }
-            let (lo, hi) = (f[i - 1], f[i]);
-            let t = if hi > lo { (w - lo) / (hi - lo) } else { 1.0 };
-            ((i - 1) as f64 + t) / TABLE_STEPS as f64
-        })
-    }
+/// A channel's corrected excitation at `drive`: its law's times the gain there, at
+/// most the law's at full drive.
+fn corrected_excitation(points: &[(f64, f64)], law: &TransferLaw, drive: f64) -> f64 {
+    (law.excitation(drive) * gain_at(points, drive)).clamp(0.0, law.full_drive_excitation())
 }
 
 /// The held-out patches' mean error without and with a correction, and the standard
@@ -251,8 +198,9 @@ impl HeldOutMeans {
 }
 
 impl GreyCorrection {
-    /// The mean error of `model` on `held_out` (each patch predicted again at its
-    /// drive and place) without and with the correction, in `metric`: ΔE ITP
+    /// The mean error of `model` (the one the correction was made for) on `held_out`
+    /// (each patch predicted again at its drive and place) without and with the
+    /// correction, in `metric`: ΔE ITP
     /// (BT.2124, on absolute light), as an HDR profile is judged, or ΔE00 against
     /// the model's white. None with fewer than 5 held-out patches.
     pub fn held_out_means(
@@ -272,7 +220,7 @@ impl GreyCorrection {
         let pairs: Vec<(f64, f64)> = held_out
             .iter()
             .map(|p| {
-                let corrected = model.forward(self.forward_drive(model, p.drive), p.position);
+                let corrected = self.model.forward(p.drive, p.position);
                 (
                     error(&p.measured, &model.forward(p.drive, p.position)),
                     error(&p.measured, &corrected),
@@ -341,16 +289,60 @@ mod tests {
         assert!((k.gain(1, 0.3) - 1.05).abs() < 1e-9);
         assert_eq!(k.gain(2, 0.0), 1.0);
         // The corrected model predicts the mid grey as measured.
-        let shown = m.forward_centre(k.forward_drive(&m, [0.5; 3]));
+        let shown = k.model().forward_centre([0.5; 3]);
         assert!((shown.y / greys[1].1.y - 1.0).abs() < 1e-9, "{shown:?}");
-        // And the inverse sends a lower drive for the model's mid grey, which the
-        // corrected display shows as the model's.
+        // And its inverse sends a lower drive for each channel's light at the
+        // model's drive, which the corrected display shows as the model's.
         let wanted = [0.5, 0.6, 0.45];
-        let sent = k.drive_for(&m, wanted);
-        assert!(sent[0] < 0.5);
-        let back = k.forward_drive(&m, sent);
+        for (c, wanted) in wanted.into_iter().enumerate() {
+            let light = m.laws[c].excitation(wanted);
+            let sent = k.model().laws[c].drive(light);
+            assert!(sent < wanted, "{c}: {sent}");
+            let back = k.model().laws[c].excitation(sent);
+            assert!((back / light - 1.0).abs() < 1e-9, "{c}: {back} {light}");
+        }
+    }
+
+    /// The table is the correction at every 16-bit code, and between codes within
+    /// what no drive can show, on a PQ law, whose light near black rises steeply from
+    /// nothing.
+    #[test]
+    fn the_corrected_laws_follow_the_correction_between_codes() {
+        use crate::transfer::Pq;
+        let mut m = model();
+        m.laws = [1.0, 0.95, 1.05].map(|exponent| {
+            TransferLaw::Pq(Pq {
+                peak: 600.0,
+                rolloff_from: 600.0,
+                exponent,
+                curvature: 0.0,
+                toe: 0.0,
+            })
+        });
+        let greys: Vec<(Drive, Xyz)> = [0.1, 0.3, 0.5, 0.75]
+            .iter()
+            .zip([0.9, 1.04, 0.97, 1.02])
+            .map(|(&d, gain)| {
+                let p = m.forward_centre([d; 3]);
+                ([d; 3], m.black + (p - m.black) * gain)
+            })
+            .collect();
+        let k = GreyCorrection::from_greys(&m, &greys).unwrap();
         for c in 0..3 {
-            assert!((back[c] - wanted[c]).abs() < 1e-9, "{back:?} {wanted:?}");
+            let (law, table) = (&m.laws[c], &k.model().laws[c]);
+            let exact = |d: f64| corrected_excitation(&k.points[c], law, d);
+            for i in (0..=TABLE_STEPS).step_by(97) {
+                let code = i as f64 / TABLE_STEPS as f64;
+                assert_eq!(table.excitation(code), exact(code), "{c} at code {i}");
+                let between = (i as f64 + 0.5) / TABLE_STEPS as f64;
+                let (t, e) = (table.excitation(between), exact(between));
+                // A millionth of the light, or a billionth of the peak (0.6 µcd/m²)
+                // near black.
+                assert!(
+                    (t - e).abs() <= 1e-6 * e + 1e-9,
+                    "{c} at {between}: {t} against {e}"
+                );
+            }
         }
     }
 
@@ -386,7 +378,7 @@ mod tests {
         // by more than the difference's standard error.
         let bumped_display: Vec<PatchError> = drives
             .iter()
-            .map(|&d| patch(d, m.forward_centre(k.forward_drive(&m, d))))
+            .map(|&d| patch(d, k.model().forward_centre(d)))
             .collect();
         let means = k.held_out_means(&m, &bumped_display, Metric::De00).unwrap();
         assert!(means.lowers() && means.with < 1e-9, "{means:?}");
@@ -437,24 +429,21 @@ mod tests {
         ];
         assert!(GreyCorrection::from_greys(&m, &close).is_none());
         // A steep but rising change, which fixed-point steps did not settle: the
-        // bisection lands where forward_drive gives back what was wanted.
+        // corrected law's inverse lands where its light is the model's at the drive
+        // wanted.
         let steep = [grey(0.3, 0.7), grey(0.36, 1.3), grey(1.0, 1.0)];
         let k = GreyCorrection::from_greys(&m, &steep).unwrap();
-        let table = k.inverse_table(&m);
-        for wanted in [0.0, 0.001, 0.31, 0.33, 0.35, 0.5, 0.999, 1.0] {
-            let sent = k.drive_for(&m, [wanted; 3]);
-            let back = k.forward_drive(&m, sent);
+        let (law, table) = (&m.laws[0], &k.model().laws[0]);
+        for wanted in [0.001, 0.31, 0.33, 0.35, 0.5, 0.999, 1.0] {
+            let light = law.excitation(wanted);
+            let sent = table.drive(light);
+            let back = table.excitation(sent);
             assert!(
-                (back[0] - wanted).abs() < 1e-9,
-                "{wanted}: {sent:?} gives {back:?}"
-            );
-            // The table agrees with the bisection to a small part of a 16-bit code.
-            let tabled = table.drive_for([wanted; 3]);
-            assert!(
-                (tabled[0] - sent[0]).abs() < 0.01 / 65535.0,
-                "{wanted}: {tabled:?} against {sent:?}"
+                (back / light - 1.0).abs() < 1e-9,
+                "{wanted}: {sent} shows {back} for {light}"
             );
         }
+        assert_eq!(table.drive(0.0), 0.0);
     }
 
     #[test]
