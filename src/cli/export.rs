@@ -131,6 +131,9 @@ fn export(args: &ExportArgs) -> Result<(), Failure> {
     for warning in &exported.warnings {
         eprintln!("warning: {warning}");
     }
+    for said in &exported.carried {
+        eprintln!("chromacal: {said}");
+    }
     if let Some(device) = register_colord {
         let runtime = tokio::runtime::Builder::new_current_thread()
             .enable_all()

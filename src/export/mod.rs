@@ -139,6 +139,9 @@ pub struct Exported {
     pub not_carried: Vec<String>,
     /// What else the user should know (a target that was not reachable, say).
     pub warnings: Vec<String>,
+    /// What the file carries beyond the fitted model (the calibration's measured
+    /// greys, where they correct its laws).
+    pub carried: Vec<String>,
     pub calibration: Option<CalibrationCurves>,
 }
 
@@ -365,7 +368,8 @@ pub fn calibration_for(
     target: Option<&Target>,
 ) -> Result<Option<CalibrationCurves>, TargetError> {
     Ok(match target {
-        Some(target) => Some(calibration_curves(&profile.model, target)?),
+        // Solved on the model the ICC's curves describe (`Profile::output_model`).
+        Some(target) => Some(calibration_curves(&profile.output_model().0, target)?),
         None => profile.calibration.as_ref().map(|c| c.curves.clone()),
     })
 }
@@ -443,6 +447,7 @@ pub fn export(
     };
     let mut notes = limitations(profile, matches!(format, Format::Icc4 | Format::Icc2));
     let mut warnings = Vec::new();
+    let mut carried = Vec::new();
     if let Some(k) = &calibration
         && k.luminance_limited
     {
@@ -478,7 +483,7 @@ pub fn export(
             // `lut3d`, `render` and `verify`'s charts go through it).
             let (model, said_of_greys) = profile.output_model();
             if let (Cow::Owned(_), Some(said)) = (&model, said_of_greys) {
-                warnings.push(said);
+                carried.push(said);
             }
             let matrix_trc = MatrixTrc::relative_to(&model, calibration.as_ref(), measured);
             if matrix_trc.black_clipped && matrix_trc.luts.is_none() {
@@ -566,6 +571,7 @@ pub fn export(
     Ok(Exported {
         bytes,
         not_carried: notes,
+        carried,
         warnings,
         calibration,
     })

@@ -59,8 +59,14 @@ impl GreyCorrection {
     /// predicted and measured, when a law has no positive full-drive excitation, or
     /// when the gains would make a channel's light fall as its drive rises between
     /// two knots of its table (a 16-bit code or a grey's drive: a LUT through it would
-    /// fold back).
+    /// fold back). None too for a model whose terms invert its laws inside their
+    /// fixed point (crosstalk in drive, the HLG OOTF through the laws): a table's
+    /// inverse is a bisection, hundreds of times a colour there, and an HLG law's
+    /// light beyond full signal goes on by its own form, which a table has not.
     pub fn from_greys(model: &MonitorModel, greys: &[(Drive, Xyz)]) -> Option<GreyCorrection> {
+        if model.terms.drive_crosstalk.is_some() || model.terms.hlg_ootf_through_laws {
+            return None;
+        }
         if !model.laws.iter().all(|l| {
             let top = l.full_drive_excitation();
             top.is_finite() && top > 0.0
@@ -122,7 +128,9 @@ impl GreyCorrection {
                 .chain(points[c].iter().map(|p| p.0))
                 .collect();
             drives.sort_by(f64::total_cmp);
-            drives.dedup();
+            // A grey's drive read back through a video LUT may lie within rounding of a
+            // code: one knot there.
+            drives.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
             let excitation = drives
                 .iter()
                 .map(|&d| corrected_excitation(&points[c], law, d))
@@ -343,7 +351,31 @@ mod tests {
                     "{c} at {between}: {t} against {e}"
                 );
             }
+            // The law is flat above its peak's code, and the top grey's gain (1.02)
+            // flattens the table below it: its full light is reached there, not at 1.
+            let full = table.full_drive_excitation();
+            let top = table.drive(full);
+            assert!(top < law.drive(law.full_drive_excitation()), "{c}: {top}");
+            assert_eq!(table.excitation(top), full, "{c}");
         }
+    }
+
+    /// Terms that invert the laws inside their fixed point keep the fitted laws.
+    #[test]
+    fn no_correction_under_crosstalk_in_drive() {
+        let mut m = model();
+        let greys: Vec<(Drive, Xyz)> = [0.2, 0.5, 1.0]
+            .iter()
+            .map(|&d| {
+                (
+                    [d; 3],
+                    m.black + (m.forward_centre([d; 3]) - m.black) * 1.05,
+                )
+            })
+            .collect();
+        assert!(GreyCorrection::from_greys(&m, &greys).is_some());
+        m.terms.drive_crosstalk = Some([0.01; 3]);
+        assert!(GreyCorrection::from_greys(&m, &greys).is_none());
     }
 
     #[test]
