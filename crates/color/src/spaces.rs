@@ -104,10 +104,31 @@ pub fn xy_to_uv_prime(x: f64, y: f64) -> UvPrime {
 /// f(t) of CIE 15:2004 eq. 8.4–8.5: the cube root above ε, its linear continuation below.
 fn lab_f(t: f64) -> f64 {
     if t > LAB_EPSILON {
-        t.cbrt()
+        cube_root(t)
     } else {
         (LAB_KAPPA * t + 16.0) / 116.0
     }
+}
+
+/// The cube root of a positive `t`, within one unit in the last place of the correctly
+/// rounded one (`f64::cbrt`, which this build links as a correctly rounded but slow
+/// routine: three of them a colour were a twelfth of a render's time; this takes
+/// two fifths of its time). A first guess from the bits (a third of the exponent,
+/// about 6 % off; Lomont 2003's trick for the cube root), two steps of Halley's
+/// method (cubic: 10⁻⁴, then 10⁻¹²) and one of Newton's (quadratic: to the rounding).
+/// Outside 10⁻¹⁰⁰…10¹⁰⁰, where a cube in the steps could leave the doubles' range,
+/// and for NaN, `f64::cbrt` itself.
+#[inline]
+pub fn cube_root(t: f64) -> f64 {
+    if !(1e-100..=1e100).contains(&t) {
+        return t.cbrt();
+    }
+    let mut y = f64::from_bits(t.to_bits() / 3 + 0x2A9F_7893_782D_A1CE);
+    for _ in 0..2 {
+        let y3 = y * y * y;
+        y *= (y3 + 2.0 * t) / (2.0 * y3 + t);
+    }
+    y - (y * y * y - t) / (3.0 * y * y)
 }
 
 /// Inverse of [`lab_f`].
@@ -398,6 +419,38 @@ mod tests {
 
     fn d65() -> Xyz {
         Xyz::new(95.047, 100.0, 108.883)
+    }
+
+    /// Units in the last place between two doubles of one sign.
+    fn ulps(a: f64, b: f64) -> u64 {
+        (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs()
+    }
+
+    #[test]
+    fn the_cube_root_is_the_correctly_rounded_one_within_an_ulp() {
+        // Every ten-millionth of ε…1 and beyond, evenly in the logarithm over
+        // 10⁻¹⁰⁰…10¹⁰⁰, and the ends.
+        let even = (0..1_000_000).map(|i| LAB_EPSILON + i as f64 * 1e-6);
+        let logarithmic = (0..200_001).map(|i| 10f64.powf(-100.0 + i as f64 * 1e-3));
+        let (mut worst, mut exact, mut n) = (0, 0, 0);
+        for t in even.chain(logarithmic) {
+            let d = ulps(cube_root(t), t.cbrt());
+            worst = worst.max(d);
+            exact += usize::from(d == 0);
+            n += 1;
+        }
+        assert!(worst <= 1, "{worst} ulps");
+        // Most are the same double: a bound of one ulp that is met by rounding
+        // alone would pass too, so this asks for it.
+        assert!(exact * 4 > n * 3, "{exact} of {n} exact");
+        for t in [1e-300, 1e-101, 1e101, 1e300, f64::MAX] {
+            assert_eq!(cube_root(t), t.cbrt(), "{t:e}");
+        }
+        for (cube, root) in [(1.0, 1.0), (8.0, 2.0), (27.0, 3.0), (0.125, 0.5)] {
+            assert_eq!(cube_root(cube), root);
+        }
+        assert_eq!(cube_root(f64::INFINITY), f64::INFINITY);
+        assert!(cube_root(f64::NAN).is_nan());
     }
 
     #[test]
