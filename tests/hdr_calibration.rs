@@ -109,6 +109,7 @@ fn an_hdr_oled_calibrated_to_pq_tracks_it_and_predicts_held_out_colours_within_o
         stdout.contains("verified against BT.2100 PQ with the bt2100 chart"),
         "{stdout}"
     );
+    let page = dir.path().join("verified.html");
     let out = chromacal()
         .args([
             "verify", "--chart", "bt2100", "--metric", "itp", "--json", "--config",
@@ -116,6 +117,8 @@ fn an_hdr_oled_calibrated_to_pq_tracks_it_and_predicts_held_out_colours_within_o
         .arg(&config)
         .arg("--state-dir")
         .arg(&state)
+        .arg("--report")
+        .arg(&page)
         .output()
         .unwrap();
     let report: serde_json::Value = serde_json::from_slice(&out.stdout)
@@ -130,6 +133,12 @@ fn an_hdr_oled_calibrated_to_pq_tracks_it_and_predicts_held_out_colours_within_o
             .is_some_and(|g| g.contains("measured greys correct")),
         "{}",
         report["greys"]
+    );
+    // The page says so too.
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(
+        html.contains("id=\"verify-greys\"") && html.contains("measured greys correct"),
+        "{html:.3000}"
     );
     let mean = |kind: &str| {
         let values: Vec<f64> = report["patches"]

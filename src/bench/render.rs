@@ -421,6 +421,8 @@ fn command_rows(
         .collect();
     let write =
         timed(&mut || write_png16_codes(&png, side, side, &codes, 16).map_err(|e| e.to_string()))?;
+    // The model the command renders through (`Profile::output_model`).
+    let (model, _) = profile.output_model();
     let mut rows = Vec::new();
     for (bits, choice, name) in [
         (16, CodeChoice::NearestInDeltaE00, "16 bits, nearest codes"),
@@ -451,7 +453,7 @@ fn command_rows(
             output: CodesOutput::File(png.clone()),
         };
         let whole = timed(&mut || {
-            render(&profile.model, profile.units, &request)
+            render(&model, profile.units, &request)
                 .map(|_| ())
                 .map_err(|e| e.to_string())
         })?;

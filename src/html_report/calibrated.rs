@@ -122,6 +122,9 @@ pub fn calibrated(profile: &Profile, v: &VerifyReport) -> Result<Markup, ReportE
                 (verdict_span(v.verdict, Some("calibrated-verdict"))) ". Every figure comes with its 95 % interval, from this session's repeats of the white and the black."
             }
             @if let Some(warning) = &v.uncorrected { p.note #verify-uncorrected { "Warning: " (warning) } }
+            // Whether the chart went through the calibration's measured greys, as
+            // `lut3d`, `render` and the ICC export do (`Profile::output_model`).
+            @if let Some(greys) = &v.greys { p.note #verify-greys { "The chart's codes as lut3d, render and the ICC export make them: " (greys) "." } }
             table #before-after {
                 tr { th { "" } th { "native (the profile)" } th { "calibrated (measured)" } th { "" } }
                 tr { th { "white luminance" } td { (format!("{:.2}", native_white.y)) } td #cal-luminance { (format!("{:.2}", s.luminance)) } td.text { (unit) } }
