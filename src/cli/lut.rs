@@ -177,6 +177,7 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
                     path.display()
                 )
             })?;
+            say_if_greys_correct(&profile, target.target()?.is_some());
             x.set_gamma(&output, &GammaRamp::from_curves(&curves, output.gamma_size))?;
             if let Some(loader) = desktop_lut_loader() {
                 eprintln!(
@@ -272,4 +273,16 @@ fn watch(args: &LutArgs, state_dir: &std::path::Path) -> Result<(), Failure> {
     }
     said?;
     Ok(())
+}
+
+/// Curves solved for a target given now go through the model corrected by the
+/// calibration's measured greys where they predict better (`Profile::output_model`,
+/// as `export`'s do): say so when they do.
+pub(super) fn say_if_greys_correct(profile: &Profile, solved_now: bool) {
+    if !solved_now {
+        return;
+    }
+    if let (std::borrow::Cow::Owned(_), Some(said)) = profile.output_model() {
+        eprintln!("chromacal: {said}");
+    }
 }

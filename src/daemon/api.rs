@@ -697,22 +697,31 @@ async fn profile(
     let exported = tokio::task::spawn_blocking(move || export(&profile, format, &options)).await;
     match exported {
         Ok(Ok(exported)) => {
-            let notes: String = exported
-                .not_carried
-                .iter()
-                .chain(&exported.warnings)
-                .cloned()
-                .collect::<Vec<_>>()
-                .join("; ")
-                .chars()
-                .map(|c| {
-                    if c.is_ascii() && !c.is_ascii_control() {
-                        c
-                    } else {
-                        '?'
-                    }
-                })
-                .collect();
+            // Header values are ASCII: anything else becomes '?'.
+            let header_text = |notes: Vec<&String>| -> String {
+                notes
+                    .into_iter()
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join("; ")
+                    .chars()
+                    .map(|c| {
+                        if c.is_ascii() && !c.is_ascii_control() {
+                            c
+                        } else {
+                            '?'
+                        }
+                    })
+                    .collect()
+            };
+            let notes = header_text(
+                exported
+                    .not_carried
+                    .iter()
+                    .chain(&exported.warnings)
+                    .collect(),
+            );
+            let carried = header_text(exported.carried.iter().collect());
             let disposition = format!("attachment; filename=\"{id}.{}\"", format.extension());
             let mut response = exported.bytes.into_response();
             let headers = response.headers_mut();
@@ -725,6 +734,9 @@ async fn profile(
             set("content-disposition", &disposition);
             if !notes.is_empty() {
                 set("x-chromacal-not-carried", &notes);
+            }
+            if !carried.is_empty() {
+                set("x-chromacal-carried", &carried);
             }
             response
         }

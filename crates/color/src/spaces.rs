@@ -111,11 +111,12 @@ fn lab_f(t: f64) -> f64 {
 }
 
 /// The cube root of a positive `t`, within one unit in the last place of the correctly
-/// rounded one (`f64::cbrt`, which this build links as a correctly rounded but slow
-/// routine: three of them a colour were a twelfth of a render's time; this takes
-/// two fifths of its time). A first guess from the bits (a third of the exponent,
-/// about 6 % off; Lomont 2003's trick for the cube root), two steps of Halley's
-/// method (cubic: 10⁻⁴, then 10⁻¹²) and one of Newton's (quadratic: to the rounding).
+/// rounded one (`f64::cbrt`, which this build links to Rust's libm, a port of
+/// CORE-MATH's correctly rounded cube root, and slow: three of them a colour were a
+/// twelfth of a render's time; this takes two fifths of its time). A first guess
+/// from the bits (a third of the exponent plus Kahan's constant, as fdlibm's `cbrt`
+/// starts, a few per cent off), two steps of Halley's method (cubic: 10⁻⁵, then
+/// 10⁻¹⁴) and one of Newton's (quadratic: to the rounding).
 /// Outside 10⁻¹⁰⁰…10¹⁰⁰, where a cube in the steps could leave the doubles' range,
 /// and for NaN, `f64::cbrt` itself.
 #[inline]
@@ -428,8 +429,8 @@ mod tests {
 
     #[test]
     fn the_cube_root_is_the_correctly_rounded_one_within_an_ulp() {
-        // Every ten-millionth of ε…1 and beyond, evenly in the logarithm over
-        // 10⁻¹⁰⁰…10¹⁰⁰, and the ends.
+        // Every millionth of ε…1, evenly in the logarithm over 10⁻¹⁰⁰…10¹⁰⁰, and
+        // the ends.
         let even = (0..1_000_000).map(|i| LAB_EPSILON + i as f64 * 1e-6);
         let logarithmic = (0..200_001).map(|i| 10f64.powf(-100.0 + i as f64 * 1e-3));
         let (mut worst, mut exact, mut n) = (0, 0, 0);

@@ -131,10 +131,18 @@ impl GreyCorrection {
             // A grey's drive read back through a video LUT may lie within rounding of a
             // code: one knot there.
             drives.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-            let excitation = drives
+            let mut excitation: Vec<f64> = drives
                 .iter()
                 .map(|&d| corrected_excitation(&points[c], law, d))
                 .collect();
+            // Where the light stops rising to the top (a PQ law above its peak's
+            // code, with the gain held beyond the top grey) the table ends: a table
+            // holds its last knot's light beyond it, and its inverse sends the top
+            // light at the drive that first reaches it rather than at full drive.
+            let top = excitation.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let end = excitation.iter().position(|&e| e >= top)? + 1;
+            drives.truncate(end);
+            excitation.truncate(end);
             corrected.laws[c] = TransferLaw::Table(Table::new(drives, excitation).ok()?);
         }
         Some(GreyCorrection {
@@ -180,10 +188,9 @@ fn gain_at(points: &[(f64, f64)], drive: f64) -> f64 {
     g0 + (g1 - g0) * (drive - d0) / (d1 - d0)
 }
 
-/// A channel's corrected excitation at `drive`: its law's times the gain there, at
-/// most the law's at full drive.
+/// A channel's corrected excitation at `drive`: its law's times the gain there.
 fn corrected_excitation(points: &[(f64, f64)], law: &TransferLaw, drive: f64) -> f64 {
-    (law.excitation(drive) * gain_at(points, drive)).clamp(0.0, law.full_drive_excitation())
+    (law.excitation(drive) * gain_at(points, drive)).max(0.0)
 }
 
 /// The held-out patches' mean error without and with a correction, and the standard
@@ -351,12 +358,17 @@ mod tests {
                     "{c} at {between}: {t} against {e}"
                 );
             }
-            // The law is flat above its peak's code, and the top grey's gain (1.02)
-            // flattens the table below it: its full light is reached there, not at 1.
+            // The law is flat above its peak's code (about 0.70), the gain rises to
+            // the top grey at 0.75 and is held beyond it: the table ends there, and
+            // its full light, the law's times 1.02, is sent at 0.75, not at 1.
             let full = table.full_drive_excitation();
-            let top = table.drive(full);
-            assert!(top < law.drive(law.full_drive_excitation()), "{c}: {top}");
-            assert_eq!(table.excitation(top), full, "{c}");
+            assert!(law.drive(law.full_drive_excitation()) < 0.72, "{c}");
+            assert!(
+                (full / law.full_drive_excitation() - 1.02).abs() < 1e-12,
+                "{c}"
+            );
+            assert!((table.drive(full) - 0.75).abs() < 1e-9, "{c}");
+            assert_eq!(table.excitation(0.9), full, "{c}");
         }
     }
 
@@ -375,6 +387,9 @@ mod tests {
             .collect();
         assert!(GreyCorrection::from_greys(&m, &greys).is_some());
         m.terms.drive_crosstalk = Some([0.01; 3]);
+        assert!(GreyCorrection::from_greys(&m, &greys).is_none());
+        m.terms.drive_crosstalk = None;
+        m.terms.hlg_ootf_through_laws = true;
         assert!(GreyCorrection::from_greys(&m, &greys).is_none());
     }
 

@@ -559,17 +559,14 @@ impl Table {
     }
 
     /// The smallest drive whose excitation reaches `e`, by bisection inside the
-    /// segment that brackets it (each segment is monotone). At or above the top, the
-    /// first knot at the top: a table flat over its top (a PQ law above its peak's
-    /// code, a correction held at the law's full light) reaches it there, not at 1.
+    /// segment that brackets it (each segment is monotone).
     pub fn drive(&self, e: f64) -> f64 {
         let n = self.excitation.len();
         if n == 1 || e <= self.excitation[0] {
             return self.drive[0];
         }
-        let top = self.excitation[n - 1];
-        if e >= top {
-            return self.drive[self.excitation.partition_point(|x| *x < top)];
+        if e >= self.excitation[n - 1] {
+            return self.drive[n - 1];
         }
         let k = self.excitation.partition_point(|x| *x < e).clamp(1, n - 1) - 1;
         let (mut lo, mut hi) = (self.drive[k], self.drive[k + 1]);
