@@ -438,6 +438,22 @@ async fn a_verify_job_on_an_hdr_profile_judges_it_in_delta_e_itp() {
         "{report}"
     );
     assert!(report.contains("fig-history-itp"), "{report}");
+    // Its ICC export carries the calibration's measured greys (they predict this
+    // profile's held-out patches better), and the API says so beside the file.
+    let icc = get(&api, "/profile?format=icc4").await;
+    assert_eq!(icc.status, 200, "{}", icc.text());
+    assert!(
+        icc.header("x-chromacal-carried")
+            .is_some_and(|h| h.contains("measured greys correct")),
+        "{:?}",
+        icc.headers
+    );
+    assert!(
+        icc.header("x-chromacal-not-carried")
+            .is_some_and(|h| !h.contains("measured greys")),
+        "{:?}",
+        icc.headers
+    );
 
     // Reloaded to drive the display as HLG, the PQ profile cannot be compared with
     // what it shows: the job says so and measures nothing.

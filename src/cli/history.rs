@@ -118,6 +118,7 @@ fn current_on_disk(
     Ok(chromacal::daemon::client::Reply {
         status: 200,
         body: body.into(),
+        headers: Vec::new(),
     })
 }
 

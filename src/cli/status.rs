@@ -71,6 +71,7 @@ pub fn status(api: &ApiArgs, json: bool) -> Result<(), Failure> {
                         Reply {
                             status: reply.status,
                             body: serde_json::to_vec(one).map_err(|e| e.to_string())?.into(),
+                            headers: reply.headers.clone(),
                         },
                         statuses,
                     ),

@@ -42,9 +42,19 @@ pub enum ClientError {
 pub struct Reply {
     pub status: u16,
     pub body: Bytes,
+    /// The answer's headers whose values are text (names in lower case).
+    pub headers: Vec<(String, String)>,
 }
 
 impl Reply {
+    /// The value of header `name` (lower case), if the answer has it.
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.headers
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
+    }
+
     pub fn text(&self) -> String {
         String::from_utf8_lossy(&self.body).into_owned()
     }
@@ -140,13 +150,22 @@ pub async fn request(
         .await
         .map_err(|e| http_error(e.to_string()))?;
     let status = response.status().as_u16();
+    let headers = response
+        .headers()
+        .iter()
+        .filter_map(|(n, v)| Some((n.as_str().to_string(), v.to_str().ok()?.to_string())))
+        .collect();
     let body = response
         .into_body()
         .collect()
         .await
         .map_err(|e| http_error(e.to_string()))?
         .to_bytes();
-    Ok(Reply { status, body })
+    Ok(Reply {
+        status,
+        body,
+        headers,
+    })
 }
 
 /// `GET /events` and call `on_event(name, data)` for each event until it returns
@@ -184,6 +203,7 @@ pub async fn follow_events_at(
         return Ok(Some(Reply {
             status,
             body: bytes,
+            headers: Vec::new(),
         }));
     }
     let mut parser = EventStreamParser::default();
