@@ -2,7 +2,7 @@
 //! profile's calibration curves into it, show it, reset it, save it as a `.cal`. On
 //! Wayland, where the compositor applies them (`lut_wayland`).
 
-use super::shared::{out, outln};
+use super::shared::{out, outln, say_if_greys_correct};
 use std::path::PathBuf;
 
 use clap::Subcommand;
@@ -273,16 +273,4 @@ fn watch(args: &LutArgs, state_dir: &std::path::Path) -> Result<(), Failure> {
     }
     said?;
     Ok(())
-}
-
-/// Curves solved for a target given now go through the model corrected by the
-/// calibration's measured greys where they predict better (`Profile::output_model`,
-/// as `export`'s do): say so when they do.
-pub(super) fn say_if_greys_correct(profile: &Profile, solved_now: bool) {
-    if !solved_now {
-        return;
-    }
-    if let (std::borrow::Cow::Owned(_), Some(said)) = profile.output_model() {
-        eprintln!("chromacal: {said}");
-    }
 }

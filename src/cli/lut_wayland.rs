@@ -63,7 +63,7 @@ pub fn run(
                             path.display()
                         )
                     })?;
-                    super::lut::say_if_greys_correct(&profile, target.is_some());
+                    super::shared::say_if_greys_correct(&profile, target.is_some());
                     if !hold {
                         return Err(Failure::from(
                             chromacal::calibrate::wayland_lut::WaylandLutError::NotHeld.to_string(),
