@@ -2,7 +2,8 @@
 //! profile's calibration curves into it, show it, reset it, save it as a `.cal`. On
 //! Wayland, where the compositor applies them (`lut_wayland`).
 
-use super::shared::{out, outln, say_if_greys_correct};
+use super::shared::{out, outln};
+use std::borrow::Cow;
 use std::path::PathBuf;
 
 use clap::Subcommand;
@@ -171,13 +172,18 @@ pub fn run(args: LutArgs) -> Result<(), Failure> {
             if let Some(why) = made_on_another_monitor(&profile, &output).filter(|_| current) {
                 return Err(Failure::from(why));
             }
-            let curves = calibration_for(&profile, target.target()?.as_ref())?.ok_or_else(|| {
+            let target = target.target()?;
+            let (model, said_of_greys) = profile.output_model();
+            let curves = calibration_for(&profile, &model, target.as_ref())?.ok_or_else(|| {
                 format!(
                     "{} carries no calibration curves: calibrate with a [target], or give --white/--tone to compute them from its model",
                     path.display()
                 )
             })?;
-            say_if_greys_correct(&profile, target.target()?.is_some());
+            // Curves solved now go through the greys where the model does.
+            if let (Some(_), Cow::Owned(_), Some(said)) = (&target, &model, &said_of_greys) {
+                eprintln!("chromacal: {said}");
+            }
             x.set_gamma(&output, &GammaRamp::from_curves(&curves, output.gamma_size))?;
             if let Some(loader) = desktop_lut_loader() {
                 eprintln!(

@@ -2,6 +2,7 @@
 //! (`calibrate::wayland_lut`): held through wlroots' gamma control, set as the
 //! output's profile through KDE's kscreen-doctor, or registered with colord for GNOME.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use super::shared::{Failure, outln};
@@ -57,13 +58,19 @@ pub fn run(
             let profile = Profile::read(&path)?;
             match via {
                 CurvesPath::Wlroots => {
-                    let curves = calibration_for(&profile, target.as_ref())?.ok_or_else(|| {
-                        format!(
-                            "{} carries no calibration curves: calibrate with a [target], or give --white/--tone",
-                            path.display()
-                        )
-                    })?;
-                    super::shared::say_if_greys_correct(&profile, target.is_some());
+                    let (model, said_of_greys) = profile.output_model();
+                    let curves = calibration_for(&profile, &model, target.as_ref())?
+                        .ok_or_else(|| {
+                            format!(
+                                "{} carries no calibration curves: calibrate with a [target], or give --white/--tone",
+                                path.display()
+                            )
+                        })?;
+                    // Curves solved now go through the greys where the model does.
+                    if let (Some(_), Cow::Owned(_), Some(said)) = (&target, &model, &said_of_greys)
+                    {
+                        eprintln!("chromacal: {said}");
+                    }
                     if !hold {
                         return Err(Failure::from(
                             chromacal::calibrate::wayland_lut::WaylandLutError::NotHeld.to_string(),

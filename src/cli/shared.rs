@@ -187,15 +187,3 @@ pub fn init_logging(service: bool, verbose: u8, quiet: bool) {
         .with_writer(std::io::stderr)
         .init();
 }
-
-/// Curves solved for a target given now go through the model corrected by the
-/// calibration's measured greys where they predict better (`Profile::output_model`,
-/// as `export`'s do): say so when they do.
-pub(super) fn say_if_greys_correct(profile: &chromacal::profile::Profile, solved_now: bool) {
-    if !solved_now {
-        return;
-    }
-    if let (std::borrow::Cow::Owned(_), Some(said)) = profile.output_model() {
-        eprintln!("chromacal: {said}");
-    }
-}

@@ -697,31 +697,8 @@ async fn profile(
     let exported = tokio::task::spawn_blocking(move || export(&profile, format, &options)).await;
     match exported {
         Ok(Ok(exported)) => {
-            // Header values are ASCII: anything else becomes '?'.
-            let header_text = |notes: Vec<&String>| -> String {
-                notes
-                    .into_iter()
-                    .cloned()
-                    .collect::<Vec<_>>()
-                    .join("; ")
-                    .chars()
-                    .map(|c| {
-                        if c.is_ascii() && !c.is_ascii_control() {
-                            c
-                        } else {
-                            '?'
-                        }
-                    })
-                    .collect()
-            };
-            let notes = header_text(
-                exported
-                    .not_carried
-                    .iter()
-                    .chain(&exported.warnings)
-                    .collect(),
-            );
-            let carried = header_text(exported.carried.iter().collect());
+            let notes = header_text(exported.not_carried.iter().chain(&exported.warnings));
+            let carried = header_text(&exported.carried);
             let disposition = format!("attachment; filename=\"{id}.{}\"", format.extension());
             let mut response = exported.bytes.into_response();
             let headers = response.headers_mut();
@@ -743,6 +720,24 @@ async fn profile(
         Ok(Err(e)) => refusal(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()),
         Err(e) => refusal(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
+}
+
+/// `notes` joined by "; " as a header value, which is ASCII: anything else becomes '?'.
+fn header_text<'a>(notes: impl IntoIterator<Item = &'a String>) -> String {
+    notes
+        .into_iter()
+        .map(String::as_str)
+        .collect::<Vec<_>>()
+        .join("; ")
+        .chars()
+        .map(|c| {
+            if c.is_ascii() && !c.is_ascii_control() {
+                c
+            } else {
+                '?'
+            }
+        })
+        .collect()
 }
 
 /// `GET /report`: the current profile's HTML report, with the readings of its run

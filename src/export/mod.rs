@@ -360,16 +360,16 @@ fn details(profile: &Profile, notes: &[String], calibration: Option<&Calibration
     text
 }
 
-/// The calibration curves of `profile` for `target`: computed now from its model when
-/// a target is given, otherwise the curves its calibration measured into place, if it
-/// made any.
+/// The calibration curves of `profile` for `target`: computed now from `model` (the
+/// profile's `output_model`, which an ICC's curves describe too) when a target is
+/// given, otherwise the curves its calibration measured into place, if it made any.
 pub fn calibration_for(
     profile: &Profile,
+    model: &chromacal_model::MonitorModel,
     target: Option<&Target>,
 ) -> Result<Option<CalibrationCurves>, TargetError> {
     Ok(match target {
-        // Solved on the model the ICC's curves describe (`Profile::output_model`).
-        Some(target) => Some(calibration_curves(&profile.output_model().0, target)?),
+        Some(target) => Some(calibration_curves(model, target)?),
         None => profile.calibration.as_ref().map(|c| c.curves.clone()),
     })
 }
@@ -441,9 +441,13 @@ pub fn export(
     if options.native && options.target.is_some() {
         return Err(ExportError::NativeWithTarget);
     }
+    // The model corrected by the calibration's measured greys, where they predict the
+    // held-out patches better (as `lut3d`, `render` and `verify`'s charts go through
+    // it): curves solved now and an ICC's curves and matrix describe it.
+    let (model, said_of_greys) = profile.output_model();
     let calibration = match options.native {
         true => None,
-        false => calibration_for(profile, options.target.as_ref())?,
+        false => calibration_for(profile, &model, options.target.as_ref())?,
     };
     let mut notes = limitations(profile, matches!(format, Format::Icc4 | Format::Icc2));
     let mut warnings = Vec::new();
@@ -478,12 +482,8 @@ pub fn export(
                 None => profile.report.white_anchor.as_ref().map(|w| w.measured),
                 Some(_) => None,
             };
-            // The curves and matrix of the model corrected by the calibration's
-            // measured greys, where they predict the held-out patches better (as
-            // `lut3d`, `render` and `verify`'s charts go through it).
-            let (model, said_of_greys) = profile.output_model();
-            if let (Cow::Owned(_), Some(said)) = (&model, said_of_greys) {
-                carried.push(said);
+            if let (Cow::Owned(_), Some(said)) = (&model, &said_of_greys) {
+                carried.push(said.clone());
             }
             let matrix_trc = MatrixTrc::relative_to(&model, calibration.as_ref(), measured);
             if matrix_trc.black_clipped && matrix_trc.luts.is_none() {
