@@ -267,13 +267,29 @@ impl LocalDeltaE2000 {
     /// [`Self::delta_e`] squared: without the square root, for comparing steps.
     #[inline]
     pub fn delta_e_squared(&self, delta: [f64; 3]) -> f64 {
+        self.squared(self.weighted(delta))
+    }
+
+    /// The step `delta` (ΔL*, Δa*, Δb*) weighted, ΔL′ / S_L, ΔC′ / S_C and ΔH′ / S_H
+    /// (eq. 22 without the rotation): linear in the step, so that the weighted steps
+    /// of sums of steps are sums of weighted steps.
+    #[inline(always)]
+    pub fn weighted(&self, delta: [f64; 3]) -> [f64; 3] {
         let da_prime = self.one_plus_g * delta[1];
         // ΔC′ and ΔH′: the step along the chroma's direction and across it.
         let dc = self.along[0] * da_prime + self.along[1] * delta[2];
         let dh = self.along[0] * delta[2] - self.along[1] * da_prime;
-        let tl = delta[0] * self.inverse_weights[0];
-        let tc = dc * self.inverse_weights[1];
-        let th = dh * self.inverse_weights[2];
+        [
+            delta[0] * self.inverse_weights[0],
+            dc * self.inverse_weights[1],
+            dh * self.inverse_weights[2],
+        ]
+    }
+
+    /// [`Self::delta_e_squared`] of a step weighted by [`Self::weighted`]: eq. 22 with
+    /// its rotation term.
+    #[inline(always)]
+    pub fn squared(&self, [tl, tc, th]: [f64; 3]) -> f64 {
         (tl * tl + tc * tc + th * th + self.rotation * tc * th).max(0.0)
     }
 

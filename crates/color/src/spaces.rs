@@ -215,12 +215,15 @@ impl LabTangent {
         for c in 0..3 {
             let t = relative[c];
             // f′ = f / 3t on the cube root, κ / 116 on the linear part; t^(−5/3) is
-            // 1 / (t f²) there, t^(−8/3) is f / t³.
+            // f / t² there (f³ = t), t^(−8/3) is f / t³: one division a coordinate,
+            // where four were most of the tangent's time.
             if t > LAB_EPSILON {
-                slope[c] = f[c] / (3.0 * t) * inverse_white[c];
-                curvature[c] = TWO_TO_THE_FIVE_THIRDS / (9.0 * t * f[c] * f[c]);
-                half_second[c] = -f[c] / (9.0 * t * t) * inverse_white[c] * inverse_white[c];
-                third[c] = THIRD_ORDER_REMAINDER * f[c] / (t * t * t);
+                let over_t = 1.0 / t;
+                let (f_over_t, f_over_t2) = (f[c] * over_t, f[c] * over_t * over_t);
+                slope[c] = f_over_t * (1.0 / 3.0) * inverse_white[c];
+                curvature[c] = TWO_TO_THE_FIVE_THIRDS / 9.0 * f_over_t2;
+                half_second[c] = -f_over_t2 * (1.0 / 9.0) * inverse_white[c] * inverse_white[c];
+                third[c] = THIRD_ORDER_REMAINDER * f_over_t2 * over_t;
             } else {
                 slope[c] = LAB_KAPPA / 116.0 * inverse_white[c];
                 curvature[c] = LINEAR_PART_CURVATURE;
@@ -253,11 +256,22 @@ impl LabTangent {
 
     /// A bound on what [`Self::delta`] leaves out, in the largest coordinate, for
     /// every step no larger in X, Y and Z than `reach`: infinite where such a step
-    /// could take a coordinate below half its value (too far for the tangent).
+    /// could take a coordinate below half its value (too far for the tangent). On the
+    /// cube root, the second-order term at the colour itself, |½ f″(t)| dt², and the
+    /// third order's bound ([`Self::second_order_error`]): about a third of half the
+    /// curvature's largest over the step times dt², which it is where the step may
+    /// cross onto L*'s linear part.
     #[inline]
     pub fn error(&self, reach: [f64; 3]) -> f64 {
-        let remainder_of =
-            |c: usize| self.first_order_remainder(c, reach[c].abs() * self.inverse_white[c]);
+        let remainder_of = |c: usize| {
+            let dt = reach[c].abs() * self.inverse_white[c];
+            let first = self.first_order_remainder(c, dt);
+            if first == 0.0 || first == f64::INFINITY || self.relative[c] - dt <= LAB_EPSILON {
+                first
+            } else {
+                (self.half_second[c] * reach[c] * reach[c]).abs() + self.third[c] * dt * dt * dt
+            }
+        };
         in_lab([remainder_of(0), remainder_of(1), remainder_of(2)])
     }
 

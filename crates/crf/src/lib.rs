@@ -66,6 +66,17 @@ fn per_channel<T>(mut f: impl FnMut(usize) -> T) -> [T; 3] {
 /// leaves several candidates to be bounded again, and cost 4 % more).
 const SCREENED_FROM: f64 = 1023.0;
 
+/// How far inside [0, 1] a cube coordinate must be for [`ColourReproduction::well_inside`]:
+/// far above what two ways of computing it differ by (10⁻¹⁵ of it), so that the colour
+/// is inside by `GamutAt::contains` too, and far below a code step.
+const WELL_INSIDE: f64 = 1e-6;
+
+/// The largest code from which the box's corners are screened to first order first
+/// ([`nearest::Neighbourhood::sole_corner`]), 12 bits: there it leaves about a fifth
+/// of pixels to the second-order screen, which then decides most, and it costs a
+/// third less; at 10 bits it left half, and a render took longer.
+const FIRST_ORDER_FROM: f64 = 4095.0;
+
 /// `v.round() as u32` for a code `v` from 0 to 65535 (a scaled drive, at most 16
 /// bits), −0 or NaN, without the call to `round` that a build for the baseline x86-64
 /// makes of it (no SSE4.1): the truncation is the floor there, and `v` less its floor
@@ -129,6 +140,10 @@ struct PixelPath<'s> {
     /// The gamut at the centre: every pixel's on a uniform screen.
     centre: GamutAt,
     uniform: bool,
+    /// The mapping leaves a colour inside the gamut as it is (all but SGCK's
+    /// compression and the mappings fitted to the whole scene), so a colour well
+    /// inside needs no gamut made at its place ([`ColourReproduction::well_inside`]).
+    keeps_inside: bool,
     transform: Option<SceneTransform>,
     mapping: GamutMapping,
     quantiser: Quantiser,
@@ -393,6 +408,23 @@ impl<'a> ColourReproduction<'a> {
             primaries.column_mut(c).scale_mut(scale);
         }
         GamutAt::new(self.model.black, primaries)
+    }
+
+    /// Whether `xyz` lies inside the gamut where the spatial map's gains are `k` by
+    /// more than rounding could move it: each cube coordinate, from M⁻¹ and each
+    /// channel's scale as [`Self::gamut_with_gains`] takes them (rather than from the
+    /// inverse of the scaled matrix, which `GamutAt::contains` uses), within
+    /// [`WELL_INSIDE`] of [0, 1] and inside. On a screen with a spatial map the gamut
+    /// at a pixel's place is a 3 × 3 inverse; for a colour inside it, that was the
+    /// most of what gamut mapping cost a render.
+    fn well_inside(&self, xyz: &Xyz, k: [f64; 3]) -> bool {
+        let light = self.matrix_inverse * (xyz - self.model.black);
+        (0..3).all(|c| {
+            let scale = k[c] * self.full[c] * self.ootf_in_white[c];
+            scale > 0.0
+                && scale.is_finite()
+                && (WELL_INSIDE..=1.0 - WELL_INSIDE).contains(&(light[c] / scale))
+        })
     }
 
     /// The drive that shows `xyz` (inside the gamut) at `position`: cube coordinates
@@ -694,6 +726,14 @@ impl<'a> ColourReproduction<'a> {
             gamuts,
             centre,
             uniform,
+            keeps_inside: matches!(
+                settings.gamut,
+                GamutMapping::Clip
+                    | GamutMapping::GreyAxis(_)
+                    | GamutMapping::Perpendicular
+                    | GamutMapping::PerpendicularLab
+                    | GamutMapping::Hpminde
+            ),
             transform,
             mapping: settings.gamut,
             quantiser: Quantiser::new(self.model, settings, scene.pixels.len()),
@@ -715,25 +755,34 @@ impl<'a> ColourReproduction<'a> {
         let gains = self.model.spatial.gains(pixel.position);
         let made;
         // Targets made beforehand are those of a mapping fitted to the whole scene.
+        // `None` for a colour well inside the gamut at its place, which a mapping
+        // that leaves such colours as they are does not need.
         let (target, gamut) = if path.targets.is_empty() {
             let xyz = path.adapted.pixels[index].xyz;
             let target = xyz * path.curve.factor(xyz.y);
             if path.uniform {
-                (target, &path.centre)
+                (target, Some(&path.centre))
+            } else if path.keeps_inside && self.well_inside(&target, gains) {
+                (target, None)
             } else {
                 // Made in place (a gamut is 168 bytes, and copies of it were a
                 // twelfth of a render's time).
                 made = self.gamut_with_gains(gains);
                 match &made {
-                    Some(gamut) => (target, gamut),
+                    Some(gamut) => (target, Some(gamut)),
                     None => return Err(no_gamut(index, pixel)),
                 }
             }
         } else {
-            (path.targets[index], &path.gamuts[index])
+            (path.targets[index], Some(&path.gamuts[index]))
         };
-        let mut outside = !gamut.contains(&target);
-        let mut mapped = self.map(path.mapping, path.transform.as_ref(), gamut, &target);
+        let (mut outside, mut mapped) = match gamut {
+            Some(gamut) => (
+                !gamut.contains(&target),
+                self.map(path.mapping, path.transform.as_ref(), gamut, &target),
+            ),
+            None => (false, target),
+        };
         let drive = match self.model.terms.hlg_ootf {
             // The HLG OOTF's box holds colours the display cannot show (`gamut_at`):
             // those the model's own inverse has to clip are outside too, and become
@@ -840,29 +889,6 @@ impl<'a> ColourReproduction<'a> {
                 }
             })
         };
-        // Each corner's step from the colour asked: without additivity terms, what
-        // the display shows is linear in the channels' light, so the low corner's step
-        // and the box's three edges, added, give every corner's.
-        let steps: [[f64; 8]; 3] = if self.model.terms.is_empty() {
-            let low_step = shows(low) - mapped;
-            let edges = per_channel(|c| {
-                self.model.matrix.column(c) * (gains[c] * (high_light[c] - low_light[c]))
-            });
-            per_channel(|axis| {
-                std::array::from_fn(|corner| {
-                    let mut step = low_step[axis];
-                    for (c, edge) in edges.iter().enumerate() {
-                        if corner >> c & 1 == 1 {
-                            step += edge[axis];
-                        }
-                    }
-                    step
-                })
-            })
-        } else {
-            let shown: [Xyz; 8] = std::array::from_fn(|corner| shows(corner_codes(corner)));
-            per_channel(|axis| std::array::from_fn(|corner| shown[corner][axis] - mapped[axis]))
-        };
         // The rounded codes first, then the corners in order: the literal search's.
         // (Each channel's rounded code is its low or high one.) A corner whose codes
         // an earlier one has is left out: with the same ΔE00 it cannot be strictly
@@ -884,6 +910,43 @@ impl<'a> ColourReproduction<'a> {
         let exact = |k: usize| {
             let shown = shows(corner_codes(corners[k]));
             delta_e_2000(mapped_lab, &xyz_to_lab(&shown, &self.white))
+        };
+        // Each corner's step from the colour asked: without additivity terms, what
+        // the display shows is linear in the channels' light, so the low corner's step
+        // and the box's three edges, added, give every corner's.
+        let box_steps = || {
+            let low_step = shows(low) - mapped;
+            let edges = per_channel(|c| {
+                self.model.matrix.column(c) * (gains[c] * (high_light[c] - low_light[c]))
+            });
+            (low_step, edges)
+        };
+        // From 12 bits, the box's corners screened from those four steps first.
+        if top >= FIRST_ORDER_FROM && self.model.terms.is_empty() {
+            let (low_step, edges) = box_steps();
+            let edges = edges.map(|e| [e[0], e[1], e[2]]);
+            let low_step = [low_step[0], low_step[1], low_step[2]];
+            if let Some(k) = neighbourhood.sole_corner(low_step, &edges, &corners[..count]) {
+                let codes = corner_codes(corners[k]);
+                return (codes, measured.then(|| (shows(codes), exact(k))));
+            }
+        }
+        let steps: [[f64; 8]; 3] = if self.model.terms.is_empty() {
+            let (low_step, edges) = box_steps();
+            per_channel(|axis| {
+                std::array::from_fn(|corner| {
+                    let mut step = low_step[axis];
+                    for (c, edge) in edges.iter().enumerate() {
+                        if corner >> c & 1 == 1 {
+                            step += edge[axis];
+                        }
+                    }
+                    step
+                })
+            })
+        } else {
+            let shown: [Xyz; 8] = std::array::from_fn(|corner| shows(corner_codes(corner)));
+            per_channel(|axis| std::array::from_fn(|corner| shown[corner][axis] - mapped[axis]))
         };
         let (k, error) = neighbourhood.nearest(
             &steps,
