@@ -1158,6 +1158,81 @@ mod tests {
         }
     }
 
+    /// A colour taken as well inside the gamut without the gamut at its place is
+    /// inside by the gamut there, and a render leaves it as the mapping would: on a
+    /// screen whose channels dim by different amounts towards the edges, colours
+    /// inside, outside and within 10⁻⁹ to 10⁻³ of the gamut's faces, every pixel's
+    /// `outside` and mapped colour are the gamut's own test and clip.
+    #[test]
+    fn a_colour_well_inside_is_inside_and_left_as_it_is() {
+        use rand::{Rng, SeedableRng};
+        let surface = |a: f64| Surface {
+            degree: 2,
+            coefficients: vec![0.0, 0.0, a, 0.0, a],
+        };
+        let model = model(SpatialMap::PerChannel {
+            surfaces: [surface(-0.1), surface(-0.2), surface(-0.05)],
+        });
+        let crf = ColourReproduction::new(&model).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x0DD_BA11);
+        let mut pixels = Vec::new();
+        for i in 0..20_000 {
+            let position = ScreenPosition {
+                x: rng.random::<f64>(),
+                y: rng.random::<f64>(),
+            };
+            let gamut = crf.gamut_at(position).unwrap();
+            // Cube coordinates inside, outside, or a hair from a face either way.
+            let mut a: [f64; 3] = std::array::from_fn(|_| rng.random::<f64>());
+            match i % 3 {
+                0 => {}
+                1 => a[i % 2] = -0.2 + 1.4 * rng.random::<f64>(),
+                _ => {
+                    let hair = 10f64.powf(-9.0 + 6.0 * rng.random::<f64>());
+                    a[i % 3] = if i % 2 == 0 { hair } else { 1.0 - hair };
+                    if i % 4 == 0 {
+                        a[i % 3] = if i % 2 == 0 { -hair } else { 1.0 + hair };
+                    }
+                }
+            }
+            let xyz = gamut.from_cube(&Vector3::from(a));
+            pixels.push(ScenePixel { xyz, position });
+        }
+        let scene = Scene {
+            pixels,
+            white: None,
+        };
+        let settings = RenderSettings {
+            adaptation: None,
+            tone: ToneOperator::Colorimetric,
+            gamut: GamutMapping::Clip,
+            bits: 16,
+            codes: CodeChoice::Rounded,
+        };
+        let rendering = crf.render(&scene, &settings).unwrap();
+        let (mut inside, mut outside) = (0, 0);
+        for (pixel, asked) in rendering.pixels.iter().zip(&scene.pixels) {
+            let gamut = crf.gamut_at(asked.position).unwrap();
+            assert_eq!(pixel.outside, !gamut.contains(&asked.xyz), "{asked:?}");
+            assert_eq!(
+                Xyz::from(pixel.mapped),
+                gamut::clip(&gamut, &asked.xyz),
+                "{asked:?}"
+            );
+            if pixel.outside {
+                outside += 1;
+            } else {
+                inside += 1;
+            }
+            let well = crf.well_inside(&asked.xyz, model.spatial.gains(asked.position));
+            assert!(!well || gamut.contains(&asked.xyz), "{asked:?}");
+        }
+        assert!(
+            inside > 10_000 && outside > 2_000,
+            "{inside} inside, {outside} outside"
+        );
+    }
+
     /// The codes rounded and raised without `round` and `ceil` are theirs: on every
     /// quarter code from 0 to 16 bits' top and their neighbouring doubles either way
     /// (where a sum with a half would round up wrongly), random values, and NaN.
