@@ -71,7 +71,7 @@ const SCREENED_FROM: f64 = 1023.0;
 /// is inside by `GamutAt::contains` too, and far below a code step.
 const WELL_INSIDE: f64 = 1e-6;
 
-/// The largest code from which the box's corners are screened to first order first
+/// The top code from which the box's corners are screened to first order first
 /// ([`nearest::Neighbourhood::sole_corner`]), 12 bits: there it leaves about a fifth
 /// of pixels to the second-order screen, which then decides most, and it costs a
 /// third less; at 10 bits it left half, and a render took longer.
@@ -172,6 +172,8 @@ struct Quantiser {
     top: f64,
     nearest: bool,
     lights: Option<[Vec<f64>; 3]>,
+    /// The instructions the first-order screen is run with (`pulp`).
+    arch: pulp::Arch,
 }
 
 impl Quantiser {
@@ -189,6 +191,7 @@ impl Quantiser {
             top,
             nearest,
             lights,
+            arch: pulp::Arch::new(),
         }
     }
 
@@ -926,7 +929,9 @@ impl<'a> ColourReproduction<'a> {
             let (low_step, edges) = box_steps();
             let edges = edges.map(|e| [e[0], e[1], e[2]]);
             let low_step = [low_step[0], low_step[1], low_step[2]];
-            if let Some(k) = neighbourhood.sole_corner(low_step, &edges, &corners[..count]) {
+            if let Some(k) =
+                neighbourhood.sole_corner(low_step, &edges, &corners[..count], quantiser.arch)
+            {
                 let codes = corner_codes(corners[k]);
                 return (codes, measured.then(|| (shows(codes), exact(k))));
             }
@@ -1210,7 +1215,7 @@ mod tests {
             codes: CodeChoice::Rounded,
         };
         let rendering = crf.render(&scene, &settings).unwrap();
-        let (mut inside, mut outside) = (0, 0);
+        let (mut inside, mut outside, mut wells) = (0, 0, 0);
         for (pixel, asked) in rendering.pixels.iter().zip(&scene.pixels) {
             let gamut = crf.gamut_at(asked.position).unwrap();
             assert_eq!(pixel.outside, !gamut.contains(&asked.xyz), "{asked:?}");
@@ -1226,11 +1231,29 @@ mod tests {
             }
             let well = crf.well_inside(&asked.xyz, model.spatial.gains(asked.position));
             assert!(!well || gamut.contains(&asked.xyz), "{asked:?}");
+            wells += usize::from(well);
         }
         assert!(
-            inside > 10_000 && outside > 2_000,
-            "{inside} inside, {outside} outside"
+            inside > 10_000 && outside > 2_000 && wells > 5_000,
+            "{inside} inside, {outside} outside, {wells} well inside"
         );
+        // Through the HLG OOTF the gamut's channels are scaled by their gains in
+        // white: so is the test.
+        let mut hlg = model.clone();
+        hlg.terms.hlg_ootf = Some(1.2);
+        let through = ColourReproduction::new(&hlg).unwrap();
+        let mut wells = 0;
+        for asked in &scene.pixels {
+            // The same cube coordinates in the gamut through the OOTF.
+            let a = crf.gamut_at(asked.position).unwrap().to_cube(&asked.xyz);
+            let gamut = through.gamut_at(asked.position).unwrap();
+            let xyz = gamut.from_cube(&a);
+            if through.well_inside(&xyz, hlg.spatial.gains(asked.position)) {
+                assert!(gamut.contains(&xyz), "{asked:?}");
+                wells += 1;
+            }
+        }
+        assert!(wells > 5_000, "{wells} well inside through the OOTF");
     }
 
     /// The codes rounded and raised without `round` and `ceil` are theirs: on every
