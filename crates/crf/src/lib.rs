@@ -1193,10 +1193,11 @@ mod tests {
                 0 => {}
                 1 => a[i % 2] = -0.2 + 1.4 * rng.random::<f64>(),
                 _ => {
-                    let hair = 10f64.powf(-9.0 + 6.0 * rng.random::<f64>());
-                    a[i % 3] = if i % 2 == 0 { hair } else { 1.0 - hair };
+                    // Each channel's face in turn, from inside or outside.
+                    let (c, hair) = ((i / 3) % 3, 10f64.powf(-9.0 + 6.0 * rng.random::<f64>()));
+                    a[c] = if i % 2 == 0 { hair } else { 1.0 - hair };
                     if i % 4 == 0 {
-                        a[i % 3] = if i % 2 == 0 { -hair } else { 1.0 + hair };
+                        a[c] = if i % 2 == 0 { -hair } else { 1.0 + hair };
                     }
                 }
             }

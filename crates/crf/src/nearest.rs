@@ -210,6 +210,7 @@ impl Neighbourhood {
         })
     }
 
+    /// [`Self::sole_corner`] in the instructions it is compiled for.
     #[inline(always)]
     fn sole_corner_here(
         &self,
