@@ -1163,6 +1163,17 @@ mod tests {
         }
     }
 
+    /// Colours as asked, clipped to the gamut, each channel's 16-bit code rounded.
+    fn clipped_and_rounded() -> RenderSettings {
+        RenderSettings {
+            adaptation: None,
+            tone: ToneOperator::Colorimetric,
+            gamut: GamutMapping::Clip,
+            bits: 16,
+            codes: CodeChoice::Rounded,
+        }
+    }
+
     /// A colour taken as well inside the gamut without the gamut at its place is
     /// inside by the gamut there, and a render leaves it as the mapping would: on a
     /// screen whose channels dim by different amounts towards the edges, colours
@@ -1208,13 +1219,7 @@ mod tests {
             pixels,
             white: None,
         };
-        let settings = RenderSettings {
-            adaptation: None,
-            tone: ToneOperator::Colorimetric,
-            gamut: GamutMapping::Clip,
-            bits: 16,
-            codes: CodeChoice::Rounded,
-        };
+        let settings = clipped_and_rounded();
         let rendering = crf.render(&scene, &settings).unwrap();
         let (mut inside, mut outside, mut wells) = (0, 0, 0);
         for (pixel, asked) in rendering.pixels.iter().zip(&scene.pixels) {
@@ -1289,13 +1294,7 @@ mod tests {
     /// what its clipped drive shows.
     #[test]
     fn an_hlg_ootf_model_renders_its_greys_and_clips_what_it_cannot_show() {
-        let settings = RenderSettings {
-            adaptation: None,
-            tone: ToneOperator::Colorimetric,
-            gamut: GamutMapping::Clip,
-            bits: 16,
-            codes: CodeChoice::Rounded,
-        };
+        let settings = clipped_and_rounded();
         for gamma in [0.9, 1.2] {
             let m = MonitorModel {
                 terms: AdditivityTerms {
